@@ -1,0 +1,2 @@
+//! aptscope-capture: placeholder, filled by its issue.
+#![forbid(unsafe_code)]

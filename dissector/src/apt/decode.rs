@@ -1,0 +1,359 @@
+//! Decoding a framed APT message against the table: message, form, sub-message, typed fields.
+
+use super::header::{Addr, Header, HEADER_LEN};
+use crate::diag::{Diag, DiagKind, Diags, Which};
+use crate::table::{Field, Form, FormKind, MsgDef, Prim, SubDef, Table, Ty};
+
+/// A frame decoded against the table. Borrows the frame bytes and the table; no allocation.
+#[derive(Debug, Clone, Copy)]
+pub struct AptFrame<'a, 't> {
+    /// Stream offset of the first byte.
+    pub offset: u64,
+    /// The bytes (at least the 6 header bytes).
+    pub bytes: &'a [u8],
+    /// The message definition, when the id is known.
+    pub msg: Option<&'t MsgDef>,
+    /// The message form that matched (for sub-messages: the msg's `sub` or `hdr` form).
+    pub msg_form: Option<&'t Form>,
+    /// The sub-message, for messages with sub-message ids.
+    pub sub: Option<&'t SubDef>,
+    /// The form whose fields apply (the sub's form for sub-message data packets).
+    pub form: Option<&'t Form>,
+    /// Problems found.
+    pub diags: Diags,
+    table: &'t Table,
+}
+
+/// A field's value, read from the frame bytes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Value<'a> {
+    /// Unsigned integer.
+    U(u64),
+    /// Signed integer.
+    I(i64),
+    /// Float.
+    F(f64),
+    /// Text (zero-padded; the bytes up to the first NUL).
+    Str(&'a [u8]),
+    /// Opaque or reserved bytes.
+    Bytes(&'a [u8]),
+    /// An array of scalars (raw little-endian bytes).
+    Array(Prim, &'a [u8]),
+}
+
+/// Read one scalar at the start of `b` (which holds at least its width).
+pub fn read_prim(p: Prim, b: &[u8]) -> Value<'_> {
+    match p {
+        Prim::U8 => Value::U(b[0] as u64),
+        Prim::I8 => Value::I(b[0] as i8 as i64),
+        Prim::U16 => Value::U(u16::from_le_bytes([b[0], b[1]]) as u64),
+        Prim::I16 => Value::I(i16::from_le_bytes([b[0], b[1]]) as i64),
+        Prim::U32 => Value::U(u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as u64),
+        Prim::I32 => Value::I(i32::from_le_bytes([b[0], b[1], b[2], b[3]]) as i64),
+        Prim::F32 => Value::F(f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64),
+    }
+}
+
+impl Value<'_> {
+    /// The value as an integer, for integer scalars.
+    pub fn as_i64(&self) -> Option<i64> {
+        match *self {
+            Value::U(v) => i64::try_from(v).ok(),
+            Value::I(v) => Some(v),
+            _ => None,
+        }
+    }
+    /// The value as a float, for scalars.
+    pub fn as_f64(&self) -> Option<f64> {
+        match *self {
+            Value::U(v) => Some(v as f64),
+            Value::I(v) => Some(v as f64),
+            Value::F(v) => Some(v),
+            _ => None,
+        }
+    }
+    /// Elements of an array value.
+    pub fn elements(&self) -> impl Iterator<Item = Value<'_>> {
+        let (p, b) = match *self {
+            Value::Array(p, b) => (p, b),
+            _ => (Prim::U8, &[][..]),
+        };
+        b.chunks_exact(p.width()).map(move |c| read_prim(p, c))
+    }
+}
+
+/// The text of a `str[N]` field: bytes up to the first NUL, lossy UTF-8.
+pub fn text_of(b: &[u8]) -> std::borrow::Cow<'_, str> {
+    let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
+    String::from_utf8_lossy(&b[..end])
+}
+
+impl<'a, 't> AptFrame<'a, 't> {
+    /// Decode a frame (as produced by the framer: at least 6 bytes).
+    pub fn decode(table: &'t Table, offset: u64, bytes: &'a [u8], truncated: bool) -> Option<Self> {
+        let h = Header::new(bytes)?;
+        let mut f = AptFrame {
+            offset,
+            bytes,
+            msg: table.msg(h.msg_id()),
+            msg_form: None,
+            sub: None,
+            form: None,
+            diags: Diags::default(),
+            table,
+        };
+        if truncated {
+            f.diag(bytes.len(), DiagKind::Truncated {
+                expected: HEADER_LEN + h.data_len(),
+                got: bytes.len(),
+            });
+        }
+        if !h.dst().is_known() {
+            f.diag(4, DiagKind::UnknownAddress {
+                which: Which::Destination,
+                value: h.dst_byte(),
+            });
+        }
+        if !h.src().is_known() {
+            f.diag(5, DiagKind::UnknownAddress {
+                which: Which::Source,
+                value: h.src_byte(),
+            });
+        }
+        let Some(m) = f.msg else {
+            f.diag(0, DiagKind::UnknownId { msg_id: h.msg_id() });
+            return Some(f);
+        };
+        let has_data = h.has_data();
+        let len = h.data_len();
+        for form in &m.forms {
+            match form.kind {
+                FormKind::Header if !has_data => {
+                    f.msg_form = Some(form);
+                    f.form = Some(form);
+                    if let (Some(g), Some(p1)) = (m.subs, form.fields.iter().find(|x| x.name == "sub_id")) {
+                        let id = bytes[p1.loc.frame_offset()] as u16;
+                        f.sub = table.sub(g, id);
+                        if f.sub.is_none() {
+                            f.diag(2, DiagKind::UnknownSubId { sub_id: id });
+                        }
+                    }
+                }
+                FormKind::Data(n) if has_data && n as usize == len => {
+                    f.msg_form = Some(form);
+                    f.form = Some(form);
+                }
+                FormKind::Sub if has_data && len >= 2 => {
+                    let Some(g) = m.subs else { continue };
+                    f.msg_form = Some(form);
+                    let Some(id) = bytes.get(6..8).map(|b| u16::from_le_bytes([b[0], b[1]])) else {
+                        continue;
+                    };
+                    match table.sub(g, id) {
+                        None => f.diag(6, DiagKind::UnknownSubId { sub_id: id }),
+                        Some(s) => {
+                            f.sub = Some(s);
+                            f.form = s.forms.iter().find(|sf| sf.kind == FormKind::Data(len as u16));
+                            if f.form.is_none() {
+                                f.diag(2, DiagKind::LengthMismatch { len, has_data });
+                            }
+                        }
+                    }
+                }
+                _ => continue,
+            }
+            break;
+        }
+        if f.msg_form.is_none() {
+            let hdr_only = m.forms.iter().all(|x| x.kind == FormKind::Header);
+            if has_data && hdr_only {
+                f.diag(4, DiagKind::HeaderOnlyWithData { len });
+            } else {
+                f.diag(2, DiagKind::LengthMismatch { len, has_data });
+            }
+        }
+        Some(f)
+    }
+
+    fn diag(&mut self, at: usize, kind: DiagKind) {
+        self.diags.push(Diag {
+            offset: self.offset + at as u64,
+            kind,
+        });
+    }
+
+    /// The header view.
+    pub fn header(&self) -> Header<'a> {
+        // The constructor checked the length.
+        Header::new(self.bytes).unwrap_or_else(|| unreachable!("frames hold a header"))
+    }
+
+    /// The table this frame was decoded with.
+    pub fn table(&self) -> &'t Table {
+        self.table
+    }
+
+    /// Message name, or `None` for an unknown id.
+    pub fn name(&self) -> Option<&'static str> {
+        self.msg.map(|m| m.name)
+    }
+
+    /// Source address.
+    pub fn src(&self) -> Addr {
+        self.header().src()
+    }
+
+    /// Destination address.
+    pub fn dst(&self) -> Addr {
+        self.header().dst()
+    }
+
+    /// A field's value; `None` when the frame is too short to hold it.
+    pub fn value(&self, f: &Field) -> Option<Value<'a>> {
+        let start = f.loc.frame_offset();
+        let b = self.bytes.get(start..start + f.ty.width())?;
+        Some(match f.ty {
+            Ty::Prim(p) => read_prim(p, b),
+            Ty::Array(p, _) => Value::Array(p, b),
+            Ty::Str(_) => Value::Str(b),
+            Ty::Bytes(_) | Ty::Pad(_) => Value::Bytes(b),
+        })
+    }
+
+    /// The fields of the matched form with their values (reserved `pad` fields left out).
+    pub fn fields(&self) -> impl Iterator<Item = (&'t Field, Value<'a>)> + '_ {
+        self.form
+            .into_iter()
+            .flat_map(|f| f.fields.iter())
+            .filter(|f| !matches!(f.ty, Ty::Pad(_)))
+            .filter_map(move |f| self.value(f).map(|v| (f, v)))
+    }
+
+    /// A field by name.
+    pub fn field(&self, name: &str) -> Option<(&'t Field, Value<'a>)> {
+        self.fields().find(|(f, _)| f.name == name)
+    }
+
+    /// The channel, from the `chan_ident` field.
+    pub fn channel(&self) -> Option<i64> {
+        self.field("chan_ident").and_then(|(_, v)| v.as_i64())
+    }
+
+    /// Whether a field is the form's sub-id or channel (shown in their own columns).
+    pub fn is_key_field(f: &Field) -> bool {
+        f.name == "sub_id" || f.name == "chan_ident"
+    }
+}
+
+/// How a field's value reads for people: enum label, flag names, scaled value with unit.
+pub fn fmt_value(table: &Table, f: &Field, v: &Value<'_>, out: &mut String) {
+    use std::fmt::Write;
+    match v {
+        Value::Str(b) => {
+            let _ = write!(out, "{:?}", text_of(b));
+        }
+        Value::Bytes(b) | Value::Array(_, b) if b.is_empty() => out.push_str("[]"),
+        Value::Bytes(b) => {
+            for x in b.iter() {
+                let _ = write!(out, "{x:02x}");
+            }
+        }
+        Value::Array(..) => {
+            out.push('[');
+            for (i, e) in v.elements().enumerate() {
+                if i > 0 {
+                    out.push(',');
+                }
+                fmt_scalar(&e, out);
+            }
+            out.push(']');
+        }
+        _ => {
+            let raw = v.as_i64();
+            if let (Some(e), Some(r)) = (f.enumeration, raw) {
+                match table.enum_def(e).label(r) {
+                    Some(l) => out.push_str(l),
+                    None => {
+                        let _ = write!(out, "{r}(?)");
+                    }
+                }
+                return;
+            }
+            if let (Some(fl), Some(r)) = (f.flags, raw) {
+                let defs = table.flags_def(fl);
+                let mut first = true;
+                let mut rest = r as u64;
+                for (m, l) in &defs.items {
+                    if (r as u64) & m == *m {
+                        if !first {
+                            out.push('|');
+                        }
+                        out.push_str(l);
+                        first = false;
+                        rest &= !m;
+                    }
+                }
+                if rest != 0 {
+                    if !first {
+                        out.push('|');
+                    }
+                    let _ = write!(out, "0x{rest:X}");
+                } else if first {
+                    out.push('0');
+                }
+                return;
+            }
+            match (f.scale, v.as_f64()) {
+                (Some(s), Some(x)) => {
+                    let _ = write!(out, "{}", round_sig(x * s));
+                }
+                _ => fmt_scalar(v, out),
+            }
+            if let Some(u) = f.unit {
+                out.push(' ');
+                out.push_str(u);
+            }
+        }
+    }
+}
+
+fn fmt_scalar(v: &Value<'_>, out: &mut String) {
+    use std::fmt::Write;
+    let _ = match v {
+        Value::U(x) => write!(out, "{x}"),
+        Value::I(x) => write!(out, "{x}"),
+        Value::F(x) => write!(out, "{}", round_sig(*x)),
+        _ => Ok(()),
+    };
+}
+
+/// Round a physical value to 6 significant digits for display.
+pub fn round_sig(x: f64) -> f64 {
+    if x == 0.0 || !x.is_finite() {
+        return x;
+    }
+    let d = 6 - x.abs().log10().ceil() as i32;
+    let p = 10f64.powi(d.clamp(-300, 300));
+    (x * p).round() / p
+}
+
+/// A one-line summary of the key fields (`name=value unit`, comma separated), for timelines.
+pub fn summary(frame: &AptFrame<'_, '_>, max_fields: usize, out: &mut String) {
+    let mut n = 0;
+    for (f, v) in frame.fields() {
+        if AptFrame::is_key_field(f) {
+            continue;
+        }
+        if n == max_fields {
+            out.push_str(" …");
+            break;
+        }
+        if n > 0 {
+            out.push(' ');
+        }
+        out.push_str(f.name);
+        out.push('=');
+        fmt_value(frame.table(), f, &v, out);
+        n += 1;
+    }
+}

@@ -1,0 +1,11 @@
+//! The APT binary protocol: header view, streaming framer, decoder and encoder.
+
+mod decode;
+mod encode;
+mod frame;
+mod header;
+
+pub use decode::{fmt_value, read_prim, round_sig, summary, text_of, AptFrame, Value};
+pub use encode::{encode, EncodeError, FieldValue};
+pub use frame::{AptFramer, GarbageKind, Item, MAX_GARBAGE_RUN};
+pub use header::{emit_header, Addr, AddrName, Header, DATA_FLAG, HEADER_LEN, MAX_DATA_LEN};

@@ -1,0 +1,175 @@
+//! Diagnostics: what is wrong with the input, and where (stream byte offset).
+
+use std::fmt;
+
+/// Which header address a diagnostic is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Which {
+    /// The source byte (5).
+    Source,
+    /// The destination byte (4).
+    Destination,
+}
+
+/// What is wrong.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DiagKind {
+    /// Bytes that are not part of any frame.
+    Garbage {
+        /// How many.
+        len: usize,
+    },
+    /// A known message's header claims a data packet longer than any APT message.
+    AbsurdLength {
+        /// Message id.
+        msg_id: u16,
+        /// Claimed length.
+        len: u16,
+    },
+    /// Fewer than 6 bytes left at the end of the stream.
+    TrailingBytes {
+        /// How many.
+        len: usize,
+    },
+    /// The stream ended inside this frame.
+    Truncated {
+        /// Frame length the header announces.
+        expected: usize,
+        /// Bytes present.
+        got: usize,
+    },
+    /// The message id is not in the table.
+    UnknownId {
+        /// The id.
+        msg_id: u16,
+    },
+    /// An address byte the spec does not define.
+    UnknownAddress {
+        /// Source or destination.
+        which: Which,
+        /// The byte (without the 0x80 flag).
+        value: u8,
+    },
+    /// The length matches none of the message's forms.
+    LengthMismatch {
+        /// Data length in the header (0 for header-only).
+        len: usize,
+        /// Whether the 0x80 data flag is set.
+        has_data: bool,
+    },
+    /// A header-only message sent with the 0x80 "data follows" bit set.
+    HeaderOnlyWithData {
+        /// The data length it claims.
+        len: usize,
+    },
+    /// A sub-message id the table does not know for this message.
+    UnknownSubId {
+        /// The sub id.
+        sub_id: u16,
+    },
+    /// A character that is not a hex digit in hex text input.
+    BadHex {
+        /// The character.
+        ch: char,
+    },
+    /// An odd number of hex digits at the end of hex text input.
+    OddHexDigit,
+}
+
+impl DiagKind {
+    /// A stable snake_case name (JSON `diag[].kind`, filters).
+    pub fn name(&self) -> &'static str {
+        match self {
+            DiagKind::Garbage { .. } => "garbage",
+            DiagKind::AbsurdLength { .. } => "absurd_length",
+            DiagKind::TrailingBytes { .. } => "trailing_bytes",
+            DiagKind::Truncated { .. } => "truncated",
+            DiagKind::UnknownId { .. } => "unknown_id",
+            DiagKind::UnknownAddress { .. } => "unknown_address",
+            DiagKind::LengthMismatch { .. } => "length_mismatch",
+            DiagKind::HeaderOnlyWithData { .. } => "header_only_with_data",
+            DiagKind::UnknownSubId { .. } => "unknown_sub_id",
+            DiagKind::BadHex { .. } => "bad_hex",
+            DiagKind::OddHexDigit => "odd_hex_digit",
+        }
+    }
+}
+
+/// A diagnostic at a stream byte offset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Diag {
+    /// Byte offset in the stream (in the text for hex-input diagnostics).
+    pub offset: u64,
+    /// What.
+    pub kind: DiagKind,
+}
+
+impl fmt::Display for DiagKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            DiagKind::Garbage { len } => write!(f, "{len} byte(s) that start no frame"),
+            DiagKind::AbsurdLength { msg_id, len } => {
+                write!(f, "header of 0x{msg_id:04X} claims a {len}-byte data packet (max 255); header skipped")
+            }
+            DiagKind::TrailingBytes { len } => write!(f, "{len} byte(s) at end of stream, too short for a header"),
+            DiagKind::Truncated { expected, got } => {
+                write!(f, "truncated: header announces {expected} bytes, stream ends after {got}")
+            }
+            DiagKind::UnknownId { msg_id } => write!(f, "unknown message id 0x{msg_id:04X}"),
+            DiagKind::UnknownAddress { which, value } => {
+                let w = match which {
+                    Which::Source => "source",
+                    Which::Destination => "destination",
+                };
+                write!(f, "unknown {w} address 0x{value:02X}")
+            }
+            DiagKind::LengthMismatch { len, has_data } => {
+                if has_data {
+                    write!(f, "data length {len} matches no form of this message")
+                } else {
+                    write!(f, "header-only form does not exist for this message")
+                }
+            }
+            DiagKind::HeaderOnlyWithData { len } => {
+                write!(f, "header-only message sent with the 0x80 data flag ({len}-byte data packet)")
+            }
+            DiagKind::UnknownSubId { sub_id } => write!(f, "unknown sub-message id 0x{sub_id:04X}"),
+            DiagKind::BadHex { ch } => write!(f, "not a hex digit: {ch:?}; skipped"),
+            DiagKind::OddHexDigit => write!(f, "odd number of hex digits; last digit ignored"),
+        }
+    }
+}
+
+impl fmt::Display for Diag {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "@{}: {}", self.offset, self.kind)
+    }
+}
+
+/// A small inline list of diagnostics (no allocation per frame).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Diags {
+    items: [Option<Diag>; 6],
+    len: u8,
+}
+
+impl Diags {
+    /// Add one (beyond capacity, the last slot is overwritten: never more than 6 per frame occur).
+    pub fn push(&mut self, d: Diag) {
+        let i = (self.len as usize).min(self.items.len() - 1);
+        self.items[i] = Some(d);
+        self.len = (i + 1) as u8;
+    }
+    /// Iterate.
+    pub fn iter(&self) -> impl Iterator<Item = &Diag> {
+        self.items[..self.len as usize].iter().flatten()
+    }
+    /// Number of diagnostics.
+    pub fn len(&self) -> usize {
+        self.len as usize
+    }
+    /// None at all.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+}

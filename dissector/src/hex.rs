@@ -1,0 +1,79 @@
+//! Streaming decoder of hex text (`53 04 06 00 …`, any whitespace, commas or colons between
+//! bytes), like `xxd -r -p`, with a diagnostic for every character that is not a hex digit.
+
+use crate::diag::{Diag, DiagKind};
+
+/// Turns hex text, pushed in any chunking, into bytes.
+#[derive(Debug, Default)]
+pub struct HexDecoder {
+    /// High nibble waiting for its low nibble.
+    pending: Option<(u8, u64)>,
+    /// Text offset of the next character.
+    offset: u64,
+}
+
+fn nibble(c: u8) -> Option<u8> {
+    match c {
+        b'0'..=b'9' => Some(c - b'0'),
+        b'a'..=b'f' => Some(c - b'a' + 10),
+        b'A'..=b'F' => Some(c - b'A' + 10),
+        _ => None,
+    }
+}
+
+impl HexDecoder {
+    /// A decoder at text offset 0.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Decode a chunk of text: bytes are appended to `out`, problems to `diags` (with text
+    /// offsets). Separators (whitespace, `,`, `:`, `;`) are skipped silently; anything else that
+    /// is not a hex digit gets a `bad_hex` diagnostic and is skipped.
+    pub fn push(&mut self, text: &[u8], out: &mut Vec<u8>, diags: &mut Vec<Diag>) {
+        for &c in text {
+            let at = self.offset;
+            self.offset += 1;
+            match nibble(c) {
+                Some(n) => match self.pending.take() {
+                    Some((hi, _)) => out.push(hi << 4 | n),
+                    None => self.pending = Some((n, at)),
+                },
+                None if c.is_ascii_whitespace() || matches!(c, b',' | b':' | b';') => {}
+                None => diags.push(Diag {
+                    offset: at,
+                    kind: DiagKind::BadHex { ch: c as char },
+                }),
+            }
+        }
+    }
+
+    /// End of text: a lone last digit is reported.
+    pub fn finish(&mut self, diags: &mut Vec<Diag>) {
+        if let Some((_, at)) = self.pending.take() {
+            diags.push(Diag {
+                offset: at,
+                kind: DiagKind::OddHexDigit,
+            });
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn decodes_with_separators_and_reports_bad_chars() {
+        let mut d = HexDecoder::new();
+        let (mut out, mut diags) = (vec![], vec![]);
+        d.push(b"23 02,0", &mut out, &mut diags);
+        d.push(b"1 0O\n5 01 f", &mut out, &mut diags);
+        d.finish(&mut diags);
+        assert_eq!(out, [0x23, 0x02, 0x01, 0x05, 0x01]);
+        assert_eq!(diags.len(), 2);
+        assert_eq!(diags[0].offset, 10);
+        assert_eq!(diags[0].kind, DiagKind::BadHex { ch: 'O' });
+        assert_eq!(diags[1].kind, DiagKind::OddHexDigit);
+    }
+}

@@ -1,0 +1,219 @@
+//! The NDJSON shape of decoded records, written without allocation per value.
+//!
+//! One object per line; the shape is documented in the README ("NDJSON output").
+
+use crate::apt::{text_of, AptFrame, GarbageKind, Value};
+use crate::diag::{Diag, DiagKind};
+use crate::table::{Field, Table};
+use std::fmt::Write;
+
+/// Append `s` as a JSON string literal.
+pub fn string(out: &mut String, s: &str) {
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            '\n' => out.push_str("\\n"),
+            '\r' => out.push_str("\\r"),
+            '\t' => out.push_str("\\t"),
+            c if (c as u32) < 0x20 => {
+                let _ = write!(out, "\\u{:04x}", c as u32);
+            }
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+}
+
+/// Append bytes as a lower-case hex JSON string.
+pub fn hex(out: &mut String, b: &[u8]) {
+    const H: &[u8; 16] = b"0123456789abcdef";
+    out.reserve(b.len() * 2 + 2);
+    out.push('"');
+    for &x in b {
+        out.push(H[(x >> 4) as usize] as char);
+        out.push(H[(x & 15) as usize] as char);
+    }
+    out.push('"');
+}
+
+/// Append a float (non-finite as `null`).
+pub fn float(out: &mut String, x: f64) {
+    if x.is_finite() {
+        let _ = write!(out, "{x}");
+    } else {
+        out.push_str("null");
+    }
+}
+
+/// Append a diagnostics array: `[{"kind":…, "offset":…, "msg":…}]`.
+pub fn diags<'a>(out: &mut String, ds: impl Iterator<Item = &'a Diag>) {
+    out.push('[');
+    for (i, d) in ds.enumerate() {
+        if i > 0 {
+            out.push(',');
+        }
+        let _ = write!(out, "{{\"kind\":\"{}\",\"offset\":{},\"msg\":", d.kind.name(), d.offset);
+        string(out, &d.kind.to_string());
+        out.push('}');
+    }
+    out.push(']');
+}
+
+/// Append one field value: numbers as numbers, enums as names, flags as lists of set names,
+/// text as strings, opaque bytes as hex, arrays as arrays.
+pub fn value(out: &mut String, table: &Table, f: &Field, v: &Value<'_>) {
+    match v {
+        Value::U(x) => {
+            if let Some(e) = f.enumeration {
+                if let Some(l) = table.enum_def(e).label(*x as i64) {
+                    return string(out, l);
+                }
+            }
+            if let Some(fl) = f.flags {
+                out.push('[');
+                let mut first = true;
+                for (m, l) in &table.flags_def(fl).items {
+                    if x & m == *m {
+                        if !first {
+                            out.push(',');
+                        }
+                        string(out, l);
+                        first = false;
+                    }
+                }
+                out.push(']');
+                return;
+            }
+            let _ = write!(out, "{x}");
+        }
+        Value::I(x) => {
+            if let Some(l) = f.enumeration.and_then(|e| table.enum_def(e).label(*x)) {
+                return string(out, l);
+            }
+            let _ = write!(out, "{x}");
+        }
+        Value::F(x) => float(out, *x),
+        Value::Str(b) => string(out, &text_of(b)),
+        Value::Bytes(b) => hex(out, b),
+        Value::Array(..) => {
+            out.push('[');
+            for (i, e) in v.elements().enumerate() {
+                if i > 0 {
+                    out.push(',');
+                }
+                match e {
+                    Value::U(x) => {
+                        let _ = write!(out, "{x}");
+                    }
+                    Value::I(x) => {
+                        let _ = write!(out, "{x}");
+                    }
+                    Value::F(x) => float(out, x),
+                    _ => out.push_str("null"),
+                }
+            }
+            out.push(']');
+        }
+    }
+}
+
+fn addr(out: &mut String, key: &str, a: crate::apt::Addr) {
+    let _ = write!(out, ",\"{key}\":{{\"addr\":{},\"name\":\"{}\"", a.byte(), a.name());
+    if let Some(b) = a.bay() {
+        let _ = write!(out, ",\"bay\":{b}");
+    }
+    out.push('}');
+}
+
+/// Append the JSON object of a decoded APT frame (no trailing newline). `n` is the record number.
+pub fn apt_frame(out: &mut String, n: u64, f: &AptFrame<'_, '_>) {
+    let h = f.header();
+    let _ = write!(
+        out,
+        "{{\"n\":{n},\"proto\":\"apt\",\"type\":\"frame\",\"offset\":{},\"len\":{},\"raw\":",
+        f.offset,
+        f.bytes.len()
+    );
+    hex(out, f.bytes);
+    let _ = write!(out, ",\"msgid\":{},\"msgid_hex\":\"0x{:04X}\",\"name\":", h.msg_id(), h.msg_id());
+    match f.msg {
+        Some(m) => {
+            string(out, m.name);
+            let _ = write!(out, ",\"dir\":\"{}\"", m.dir.as_str());
+        }
+        None => out.push_str("null"),
+    }
+    addr(out, "src", h.src());
+    addr(out, "dst", h.dst());
+    let _ = write!(out, ",\"data_flag\":{},\"data_len\":{}", h.has_data(), h.data_len());
+    if let Some(form) = f.form {
+        if !form.note.is_empty() {
+            out.push_str(",\"form_note\":");
+            string(out, form.note);
+        }
+    }
+    if let Some(c) = f.channel() {
+        let _ = write!(out, ",\"channel\":{c}");
+    }
+    if let Some(s) = f.sub {
+        let _ = write!(out, ",\"sub\":{{\"id\":{},\"name\":\"{}\"}}", s.id, s.name);
+    }
+    out.push_str(",\"fields\":{");
+    let mut phys = String::new();
+    for (i, (fd, v)) in f.fields().enumerate() {
+        if i > 0 {
+            out.push(',');
+        }
+        string(out, fd.name);
+        out.push(':');
+        value(out, f.table(), fd, &v);
+        if let (Some(s), Some(x)) = (fd.scale, v.as_f64()) {
+            if !phys.is_empty() {
+                phys.push(',');
+            }
+            string(&mut phys, fd.name);
+            phys.push_str(":{\"value\":");
+            float(&mut phys, crate::apt::round_sig(x * s));
+            phys.push_str(",\"unit\":");
+            string(&mut phys, fd.unit.unwrap_or(""));
+            phys.push('}');
+        }
+    }
+    out.push('}');
+    if !phys.is_empty() {
+        out.push_str(",\"phys\":{");
+        out.push_str(&phys);
+        out.push('}');
+    }
+    out.push_str(",\"diag\":");
+    diags(out, f.diags.iter());
+    out.push('}');
+}
+
+/// The diagnostic of a garbage record.
+pub fn garbage_diag(offset: u64, len: usize, kind: GarbageKind) -> Diag {
+    Diag {
+        offset,
+        kind: match kind {
+            GarbageKind::NoHeader => DiagKind::Garbage { len },
+            GarbageKind::AbsurdLength { msg_id, len } => DiagKind::AbsurdLength { msg_id, len },
+            GarbageKind::TrailingBytes => DiagKind::TrailingBytes { len },
+        },
+    }
+}
+
+/// Append the JSON object of a garbage record.
+pub fn apt_garbage(out: &mut String, n: u64, offset: u64, bytes: &[u8], kind: GarbageKind) {
+    let _ = write!(
+        out,
+        "{{\"n\":{n},\"proto\":\"apt\",\"type\":\"garbage\",\"offset\":{offset},\"len\":{},\"raw\":",
+        bytes.len()
+    );
+    hex(out, bytes);
+    out.push_str(",\"diag\":");
+    let d = garbage_diag(offset, bytes.len(), kind);
+    diags(out, std::iter::once(&d));
+    out.push('}');
+}

@@ -1,0 +1,18 @@
+//! aptscope's dissector: framing and decoding of the Thorlabs APT (binary) and Elliptec (ASCII)
+//! serial protocols.
+//!
+//! A pure library: bytes in, frames and decoded messages out; no I/O, no clocks. Every APT
+//! message is described once in the message table ([`table`]), which decode, encode, listings
+//! and JSON output all read.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod apt;
+pub mod diag;
+pub mod hex;
+pub mod json;
+pub mod spec_examples;
+pub mod table;
+
+pub use diag::{Diag, DiagKind};
+pub use table::Table;

@@ -1,0 +1,133 @@
+//! The message table: every APT message described once, parsed from `dissector/msgs/*.apt`.
+//!
+//! Decode, encode, the `messages` listing, JSON names and the spec-example tests all read it.
+
+mod model;
+mod parse;
+
+pub use model::*;
+pub use parse::example_bytes;
+
+use std::sync::OnceLock;
+
+mod sources {
+    include!(concat!(env!("OUT_DIR"), "/sources.rs"));
+}
+
+/// The parsed table with its lookup indexes.
+#[derive(Debug)]
+pub struct Table {
+    data: TableData,
+    /// Message index by id; `u16::MAX` for none.
+    by_id: Box<[u16]>,
+}
+
+impl Table {
+    /// The table compiled into this library.
+    ///
+    /// The embedded files are checked by this crate's tests, so a failure here is a build defect,
+    /// never a property of input data.
+    pub fn global() -> &'static Table {
+        static T: OnceLock<Table> = OnceLock::new();
+        T.get_or_init(|| match Table::from_sources(sources::SOURCES) {
+            Ok(t) => t,
+            Err(e) => panic!("the embedded message table has errors:\n{}", e.join("\n")),
+        })
+    }
+
+    /// The embedded table files: `(file name, text)`.
+    pub fn embedded_sources() -> &'static [(&'static str, &'static str)] {
+        sources::SOURCES
+    }
+
+    /// Parse table files (`(file name, text)`, in order).
+    pub fn from_sources(src: &[(&'static str, &'static str)]) -> Result<Table, Vec<String>> {
+        let data = parse::parse_sources(src)?;
+        let mut by_id = vec![u16::MAX; 65536].into_boxed_slice();
+        for (i, m) in data.msgs.iter().enumerate() {
+            by_id[m.id as usize] = i as u16;
+        }
+        Ok(Table { data, by_id })
+    }
+
+    /// All messages, in table order.
+    pub fn msgs(&self) -> &[MsgDef] {
+        &self.data.msgs
+    }
+
+    /// All sub-messages.
+    pub fn subs(&self) -> &[SubDef] {
+        &self.data.subs
+    }
+
+    /// The message with this id.
+    #[inline]
+    pub fn msg(&self, id: u16) -> Option<&MsgDef> {
+        match self.by_id[id as usize] {
+            u16::MAX => None,
+            i => self.data.msgs.get(i as usize),
+        }
+    }
+
+    /// The message with this name (case-insensitive, `MGMSG_` prefix optional).
+    pub fn msg_by_name(&self, name: &str) -> Option<&MsgDef> {
+        let n = name.strip_prefix("MGMSG_").or_else(|| name.strip_prefix("mgmsg_")).unwrap_or(name);
+        self.data.msgs.iter().find(|m| m.name.eq_ignore_ascii_case(n))
+    }
+
+    /// A sub-message of a group.
+    pub fn sub(&self, group: &str, id: u16) -> Option<&SubDef> {
+        self.data.subs.iter().find(|s| s.group == group && s.id == id)
+    }
+
+    /// A sub-message of a group by name (case-insensitive).
+    pub fn sub_by_name(&self, group: &str, name: &str) -> Option<&SubDef> {
+        self.data.subs.iter().find(|s| s.group == group && s.name.eq_ignore_ascii_case(name))
+    }
+
+    /// An enumeration by index (as in [`Field::enumeration`]).
+    pub fn enum_def(&self, i: usize) -> &EnumDef {
+        &self.data.enums[i]
+    }
+
+    /// A flag set by index (as in [`Field::flags`]).
+    pub fn flags_def(&self, i: usize) -> &FlagsDef {
+        &self.data.flags[i]
+    }
+
+    /// All enumerations.
+    pub fn enums(&self) -> &[EnumDef] {
+        &self.data.enums
+    }
+
+    /// All flag sets.
+    pub fn flag_sets(&self) -> &[FlagsDef] {
+        &self.data.flags
+    }
+
+    /// Whether `m` exists in this length (header-only when `!has_data`).
+    pub fn accepts_len(&self, m: &MsgDef, has_data: bool, len: usize) -> bool {
+        m.forms.iter().any(|f| match f.kind {
+            FormKind::Header => !has_data,
+            FormKind::Data(n) => has_data && n as usize == len,
+            FormKind::Sub => {
+                has_data
+                    && self.data.subs.iter().any(|s| {
+                        Some(s.group) == m.subs && s.forms.iter().any(|sf| sf.kind == FormKind::Data(len as u16))
+                    })
+            }
+        })
+    }
+
+    /// The messages that answer `m`: its `reply=` list, or GET_x for REQ_x.
+    pub fn replies_of<'a>(&'a self, m: &'a MsgDef) -> Vec<&'a MsgDef> {
+        let mut out: Vec<&MsgDef> = m.reply.iter().filter_map(|r| self.msg_by_name(r)).collect();
+        if out.is_empty() {
+            if let Some(i) = m.name.find("_REQ_") {
+                let get = format!("{}_GET_{}", &m.name[..i], &m.name[i + 5..]);
+                out.extend(self.msg_by_name(&get));
+            }
+        }
+        out
+    }
+}

@@ -1,0 +1,316 @@
+//! The data model of the message table: what one `msg`, `sub`, `form` and field is.
+//!
+//! This file depends on `std` only: the build script includes it (with `parse.rs`) to check
+//! the table at compile time.
+
+/// Who sends a message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dir {
+    /// Host → device (SET, REQ, MOVE and other commands).
+    HostToDevice,
+    /// Device → host (GET, status updates, completions, errors).
+    DeviceToHost,
+    /// Either side may send it.
+    Both,
+}
+
+impl Dir {
+    /// The short name used in the table files and JSON (`h2d`, `d2h`, `both`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Dir::HostToDevice => "h2d",
+            Dir::DeviceToHost => "d2h",
+            Dir::Both => "both",
+        }
+    }
+}
+
+/// A scalar type of a field or of an array's elements.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Prim {
+    /// Unsigned byte.
+    U8,
+    /// Signed byte.
+    I8,
+    /// Unsigned 16-bit little-endian ("word").
+    U16,
+    /// Signed 16-bit little-endian ("short").
+    I16,
+    /// Unsigned 32-bit little-endian ("dword").
+    U32,
+    /// Signed 32-bit little-endian ("long").
+    I32,
+    /// IEEE-754 single precision, little-endian.
+    F32,
+}
+
+impl Prim {
+    /// Width in bytes.
+    pub fn width(self) -> usize {
+        match self {
+            Prim::U8 | Prim::I8 => 1,
+            Prim::U16 | Prim::I16 => 2,
+            Prim::U32 | Prim::I32 | Prim::F32 => 4,
+        }
+    }
+    /// Name as written in the table files.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Prim::U8 => "u8",
+            Prim::I8 => "i8",
+            Prim::U16 => "u16",
+            Prim::I16 => "i16",
+            Prim::U32 => "u32",
+            Prim::I32 => "i32",
+            Prim::F32 => "f32",
+        }
+    }
+    /// Whether the type is a signed integer.
+    pub fn signed(self) -> bool {
+        matches!(self, Prim::I8 | Prim::I16 | Prim::I32)
+    }
+    fn from_name(s: &str) -> Option<Prim> {
+        Some(match s {
+            "u8" => Prim::U8,
+            "i8" => Prim::I8,
+            "u16" => Prim::U16,
+            "i16" => Prim::I16,
+            "u32" => Prim::U32,
+            "i32" => Prim::I32,
+            "f32" => Prim::F32,
+            _ => return None,
+        })
+    }
+}
+
+/// The type of a field.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ty {
+    /// One scalar.
+    Prim(Prim),
+    /// `N` scalars in a row.
+    Array(Prim, u16),
+    /// Zero-padded ASCII text of `N` bytes.
+    Str(u16),
+    /// Opaque bytes.
+    Bytes(u16),
+    /// Reserved bytes.
+    Pad(u16),
+}
+
+impl Ty {
+    /// Width in bytes.
+    pub fn width(self) -> usize {
+        match self {
+            Ty::Prim(p) => p.width(),
+            Ty::Array(p, n) => p.width() * n as usize,
+            Ty::Str(n) | Ty::Bytes(n) | Ty::Pad(n) => n as usize,
+        }
+    }
+    /// Parse a type name as written in the table (`u16`, `str[16]`, `i32[4]`).
+    pub fn parse(s: &str) -> Option<Ty> {
+        if let Some(p) = Prim::from_name(s) {
+            return Some(Ty::Prim(p));
+        }
+        let (base, rest) = s.split_once('[')?;
+        let n: u16 = rest.strip_suffix(']')?.parse().ok()?;
+        if n == 0 {
+            return None;
+        }
+        Some(match base {
+            "str" => Ty::Str(n),
+            "bytes" => Ty::Bytes(n),
+            "pad" => Ty::Pad(n),
+            b => Ty::Array(Prim::from_name(b)?, n),
+        })
+    }
+    /// The name as written in the table.
+    pub fn name(self) -> String {
+        match self {
+            Ty::Prim(p) => p.as_str().to_string(),
+            Ty::Array(p, n) => format!("{}[{n}]", p.as_str()),
+            Ty::Str(n) => format!("str[{n}]"),
+            Ty::Bytes(n) => format!("bytes[{n}]"),
+            Ty::Pad(n) => format!("pad[{n}]"),
+        }
+    }
+}
+
+/// Where a field lives in the frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Loc {
+    /// Header byte 2 (param1).
+    P1,
+    /// Header byte 3 (param2).
+    P2,
+    /// Offset from the first byte of the data packet (frame byte 6).
+    Data(u16),
+}
+
+impl Loc {
+    /// Offset of the field's first byte from the start of the frame.
+    pub fn frame_offset(self) -> usize {
+        match self {
+            Loc::P1 => 2,
+            Loc::P2 => 3,
+            Loc::Data(o) => 6 + o as usize,
+        }
+    }
+}
+
+/// One field of a form.
+#[derive(Debug, Clone)]
+pub struct Field {
+    /// snake_case name; the JSON key and the filter name.
+    pub name: &'static str,
+    /// Position.
+    pub loc: Loc,
+    /// Type.
+    pub ty: Ty,
+    /// Unit of the scaled value.
+    pub unit: Option<&'static str>,
+    /// Physical value = raw × scale.
+    pub scale: Option<f64>,
+    /// Index into [`TableData::enums`].
+    pub enumeration: Option<usize>,
+    /// Index into [`TableData::flags`].
+    pub flags: Option<usize>,
+}
+
+/// Which bytes a form covers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FormKind {
+    /// The 6-byte header-only form.
+    Header,
+    /// A data packet of exactly this many bytes.
+    Data(u16),
+    /// The data packet is one of the message's sub-messages.
+    Sub,
+}
+
+/// One length a message exists in, and its fields.
+#[derive(Debug, Clone)]
+pub struct Form {
+    /// Header-only, a data length, or sub-message.
+    pub kind: FormKind,
+    /// Which variant this is, as the table says ("short version").
+    pub note: &'static str,
+    /// Fields in order.
+    pub fields: Vec<Field>,
+}
+
+/// A byte string from the spec with the values it should decode to.
+#[derive(Debug, Clone)]
+pub struct Example {
+    /// The bytes as printed in the spec (hex pairs with commas/spaces).
+    pub hex: &'static str,
+    /// `(field, value)` pairs the spec states; empty for a bad example.
+    pub checks: Vec<(&'static str, &'static str)>,
+    /// For a spec example known to be wrong: why.
+    pub bad_reason: Option<&'static str>,
+    /// Where it is in the table files.
+    pub file: &'static str,
+    /// Line number in that file.
+    pub line: usize,
+}
+
+/// One APT message.
+#[derive(Debug, Clone)]
+pub struct MsgDef {
+    /// Message id.
+    pub id: u16,
+    /// Name without `MGMSG_`.
+    pub name: &'static str,
+    /// Who sends it.
+    pub dir: Dir,
+    /// Messages that answer or complete it (besides the automatic REQ_x → GET_x).
+    pub reply: Vec<&'static str>,
+    /// Sub-message group, when the data packet starts with a sub-message id.
+    pub subs: Option<&'static str>,
+    /// One-line description.
+    pub doc: &'static str,
+    /// Every length the message exists in.
+    pub forms: Vec<Form>,
+    /// Spec examples.
+    pub examples: Vec<Example>,
+    /// Table file it is defined in.
+    pub file: &'static str,
+    /// Line in that file.
+    pub line: usize,
+}
+
+/// One sub-message of a group (LA_, TEC_, QUAD_, PZMOT_ … PARAMS).
+#[derive(Debug, Clone)]
+pub struct SubDef {
+    /// Group name (`la`, `tec`, …).
+    pub group: &'static str,
+    /// Sub-message id.
+    pub id: u16,
+    /// Name.
+    pub name: &'static str,
+    /// One-line description.
+    pub doc: &'static str,
+    /// Forms (each covering the whole data packet, `sub_id` first).
+    pub forms: Vec<Form>,
+    /// Spec examples (full frames of any message of the group).
+    pub examples: Vec<Example>,
+    /// Table file.
+    pub file: &'static str,
+    /// Line.
+    pub line: usize,
+}
+
+/// An enumeration: value → label.
+#[derive(Debug, Clone)]
+pub struct EnumDef {
+    /// Name referenced by `enum=`.
+    pub name: &'static str,
+    /// Values and labels.
+    pub items: Vec<(i64, &'static str)>,
+}
+
+impl EnumDef {
+    /// The label of a value.
+    pub fn label(&self, v: i64) -> Option<&'static str> {
+        self.items.iter().find(|(x, _)| *x == v).map(|(_, l)| *l)
+    }
+    /// The value of a label.
+    pub fn value(&self, label: &str) -> Option<i64> {
+        self.items
+            .iter()
+            .find(|(_, l)| l.eq_ignore_ascii_case(label))
+            .map(|(v, _)| *v)
+    }
+}
+
+/// A set of bit flags: mask → label.
+#[derive(Debug, Clone)]
+pub struct FlagsDef {
+    /// Name referenced by `flags=`.
+    pub name: &'static str,
+    /// Masks and labels.
+    pub items: Vec<(u64, &'static str)>,
+}
+
+impl FlagsDef {
+    /// The mask of a label.
+    pub fn mask(&self, label: &str) -> Option<u64> {
+        self.items
+            .iter()
+            .find(|(_, l)| l.eq_ignore_ascii_case(label))
+            .map(|(m, _)| *m)
+    }
+}
+
+/// Everything the table files define.
+#[derive(Debug, Clone, Default)]
+pub struct TableData {
+    /// Messages, in file order.
+    pub msgs: Vec<MsgDef>,
+    /// Sub-messages, in file order.
+    pub subs: Vec<SubDef>,
+    /// Enumerations.
+    pub enums: Vec<EnumDef>,
+    /// Flag sets.
+    pub flags: Vec<FlagsDef>,
+}

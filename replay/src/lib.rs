@@ -1,0 +1,2 @@
+//! aptscope-replay: placeholder, filled by its issue.
+#![forbid(unsafe_code)]

@@ -1,0 +1,2 @@
+//! aptscope-tui: placeholder, filled by its issue.
+#![forbid(unsafe_code)]
