@@ -111,9 +111,14 @@ impl fmt::Display for DiagKind {
             DiagKind::AbsurdLength { msg_id, len } => {
                 write!(f, "header of 0x{msg_id:04X} claims a {len}-byte data packet (max 255); header skipped")
             }
-            DiagKind::TrailingBytes { len } => write!(f, "{len} byte(s) at end of stream, too short for a header"),
+            DiagKind::TrailingBytes { len } => {
+                write!(f, "{len} byte(s) at end of stream, too short for a header")
+            }
             DiagKind::Truncated { expected, got } => {
-                write!(f, "truncated: header announces {expected} bytes, stream ends after {got}")
+                write!(
+                    f,
+                    "truncated: header announces {expected} bytes, stream ends after {got}"
+                )
             }
             DiagKind::UnknownId { msg_id } => write!(f, "unknown message id 0x{msg_id:04X}"),
             DiagKind::UnknownAddress { which, value } => {
@@ -131,7 +136,10 @@ impl fmt::Display for DiagKind {
                 }
             }
             DiagKind::HeaderOnlyWithData { len } => {
-                write!(f, "header-only message sent with the 0x80 data flag ({len}-byte data packet)")
+                write!(
+                    f,
+                    "header-only message sent with the 0x80 data flag ({len}-byte data packet)"
+                )
             }
             DiagKind::UnknownSubId { sub_id } => write!(f, "unknown sub-message id 0x{sub_id:04X}"),
             DiagKind::BadHex { ch } => write!(f, "not a hex digit: {ch:?}; skipped"),

@@ -54,7 +54,12 @@ pub fn diags<'a>(out: &mut String, ds: impl Iterator<Item = &'a Diag>) {
         if i > 0 {
             out.push(',');
         }
-        let _ = write!(out, "{{\"kind\":\"{}\",\"offset\":{},\"msg\":", d.kind.name(), d.offset);
+        let _ = write!(
+            out,
+            "{{\"kind\":\"{}\",\"offset\":{},\"msg\":",
+            d.kind.name(),
+            d.offset
+        );
         string(out, &d.kind.to_string());
         out.push('}');
     }
@@ -120,7 +125,12 @@ pub fn value(out: &mut String, table: &Table, f: &Field, v: &Value<'_>) {
 }
 
 fn addr(out: &mut String, key: &str, a: crate::apt::Addr) {
-    let _ = write!(out, ",\"{key}\":{{\"addr\":{},\"name\":\"{}\"", a.byte(), a.name());
+    let _ = write!(
+        out,
+        ",\"{key}\":{{\"addr\":{},\"name\":\"{}\"",
+        a.byte(),
+        a.name()
+    );
     if let Some(b) = a.bay() {
         let _ = write!(out, ",\"bay\":{b}");
     }
@@ -137,7 +147,12 @@ pub fn apt_frame(out: &mut String, n: u64, f: &AptFrame<'_, '_>) {
         f.bytes.len()
     );
     hex(out, f.bytes);
-    let _ = write!(out, ",\"msgid\":{},\"msgid_hex\":\"0x{:04X}\",\"name\":", h.msg_id(), h.msg_id());
+    let _ = write!(
+        out,
+        ",\"msgid\":{},\"msgid_hex\":\"0x{:04X}\",\"name\":",
+        h.msg_id(),
+        h.msg_id()
+    );
     match f.msg {
         Some(m) => {
             string(out, m.name);
@@ -147,7 +162,12 @@ pub fn apt_frame(out: &mut String, n: u64, f: &AptFrame<'_, '_>) {
     }
     addr(out, "src", h.src());
     addr(out, "dst", h.dst());
-    let _ = write!(out, ",\"data_flag\":{},\"data_len\":{}", h.has_data(), h.data_len());
+    let _ = write!(
+        out,
+        ",\"data_flag\":{},\"data_len\":{}",
+        h.has_data(),
+        h.data_len()
+    );
     if let Some(form) = f.form {
         if !form.note.is_empty() {
             out.push_str(",\"form_note\":");
@@ -216,4 +236,120 @@ pub fn apt_garbage(out: &mut String, n: u64, offset: u64, bytes: &[u8], kind: Ga
     let d = garbage_diag(offset, bytes.len(), kind);
     diags(out, std::iter::once(&d));
     out.push('}');
+}
+
+fn form_json(out: &mut String, table: &Table, form: &crate::table::Form) {
+    use crate::table::{FormKind, Loc};
+    out.push_str("{\"kind\":");
+    match form.kind {
+        FormKind::Header => out.push_str("\"header\",\"data_len\":0"),
+        FormKind::Data(n) => {
+            let _ = write!(out, "\"data\",\"data_len\":{n}");
+        }
+        FormKind::Sub => out.push_str("\"sub\""),
+    }
+    if !form.note.is_empty() {
+        out.push_str(",\"note\":");
+        string(out, form.note);
+    }
+    out.push_str(",\"fields\":[");
+    for (i, f) in form.fields.iter().enumerate() {
+        if i > 0 {
+            out.push(',');
+        }
+        out.push_str("{\"name\":");
+        string(out, f.name);
+        match f.loc {
+            Loc::P1 => out.push_str(",\"loc\":\"param1\""),
+            Loc::P2 => out.push_str(",\"loc\":\"param2\""),
+            Loc::Data(o) => {
+                let _ = write!(out, ",\"offset\":{o}");
+            }
+        }
+        let _ = write!(
+            out,
+            ",\"type\":\"{}\",\"width\":{}",
+            f.ty.name(),
+            f.ty.width()
+        );
+        if let Some(u) = f.unit {
+            out.push_str(",\"unit\":");
+            string(out, u);
+        }
+        if let Some(s) = f.scale {
+            out.push_str(",\"scale\":");
+            float(out, s);
+        }
+        if let Some(e) = f.enumeration {
+            let d = table.enum_def(e);
+            let _ = write!(out, ",\"enum\":{{\"name\":\"{}\",\"values\":{{", d.name);
+            for (j, (v, l)) in d.items.iter().enumerate() {
+                let _ = write!(out, "{}\"{v}\":\"{l}\"", if j > 0 { "," } else { "" });
+            }
+            out.push_str("}}");
+        }
+        if let Some(fl) = f.flags {
+            let d = table.flags_def(fl);
+            let _ = write!(out, ",\"flags\":{{\"name\":\"{}\",\"bits\":{{", d.name);
+            for (j, (m, l)) in d.items.iter().enumerate() {
+                let _ = write!(out, "{}\"0x{m:X}\":\"{l}\"", if j > 0 { "," } else { "" });
+            }
+            out.push_str("}}");
+        }
+        out.push('}');
+    }
+    out.push_str("]}");
+}
+
+/// Append the JSON object describing a message definition (for `aptscope messages --json`).
+pub fn msg_def(out: &mut String, table: &Table, m: &crate::table::MsgDef) {
+    let _ = write!(
+        out,
+        "{{\"type\":\"msg\",\"msgid\":{},\"msgid_hex\":\"0x{:04X}\",\"name\":",
+        m.id, m.id
+    );
+    string(out, m.name);
+    let _ = write!(out, ",\"dir\":\"{}\",\"doc\":", m.dir.as_str());
+    string(out, m.doc);
+    let replies: Vec<&str> = table.replies_of(m).iter().map(|r| r.name).collect();
+    out.push_str(",\"replies\":[");
+    for (i, r) in replies.iter().enumerate() {
+        if i > 0 {
+            out.push(',');
+        }
+        string(out, r);
+    }
+    out.push(']');
+    if let Some(g) = m.subs {
+        out.push_str(",\"sub_group\":");
+        string(out, g);
+    }
+    out.push_str(",\"forms\":[");
+    for (i, f) in m.forms.iter().enumerate() {
+        if i > 0 {
+            out.push(',');
+        }
+        form_json(out, table, f);
+    }
+    let _ = write!(out, "],\"examples\":{}}}", m.examples.len());
+}
+
+/// Append the JSON object describing a sub-message definition.
+pub fn sub_def(out: &mut String, table: &Table, s: &crate::table::SubDef) {
+    let _ = write!(
+        out,
+        "{{\"type\":\"sub\",\"group\":\"{}\",\"sub_id\":{},\"name\":",
+        s.group, s.id
+    );
+    string(out, s.name);
+    out.push_str(",\"doc\":");
+    string(out, s.doc);
+    out.push_str(",\"forms\":[");
+    for (i, f) in s.forms.iter().enumerate() {
+        if i > 0 {
+            out.push(',');
+        }
+        form_json(out, table, f);
+    }
+    let _ = write!(out, "],\"examples\":{}}}", s.examples.len());
 }

@@ -13,6 +13,7 @@ pub mod hex;
 pub mod json;
 pub mod spec_examples;
 pub mod table;
+pub mod text;
 
 pub use diag::{Diag, DiagKind};
 pub use table::Table;

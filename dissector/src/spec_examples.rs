@@ -69,15 +69,28 @@ fn value_matches(table: &Table, f: &crate::table::Field, v: &Value<'_>, want: &s
             }
             false
         }
-        Value::F(x) => want.parse::<f64>().is_ok_and(|w| (w - x).abs() <= 1e-4 * w.abs().max(1e-3)),
+        Value::F(x) => want
+            .parse::<f64>()
+            .is_ok_and(|w| (w - x).abs() <= 1e-4 * w.abs().max(1e-3)),
         Value::Str(b) => text_of(b).trim() == want.trim(),
         Value::Bytes(b) => {
             let h: String = b.iter().map(|x| format!("{x:02x}")).collect();
             h == want.to_ascii_lowercase().replace([' ', ','], "")
         }
         Value::Array(..) => {
-            let got: Vec<String> = v.elements().map(|e| e.as_f64().map(|x| x.to_string()).unwrap_or_default()).collect();
-            let w: Vec<String> = want.split(',').map(|x| x.trim().parse::<f64>().map(|x| x.to_string()).unwrap_or_default()).collect();
+            let got: Vec<String> = v
+                .elements()
+                .map(|e| e.as_f64().map(|x| x.to_string()).unwrap_or_default())
+                .collect();
+            let w: Vec<String> = want
+                .split(',')
+                .map(|x| {
+                    x.trim()
+                        .parse::<f64>()
+                        .map(|x| x.to_string())
+                        .unwrap_or_default()
+                })
+                .collect();
             got == w
         }
     }
@@ -104,9 +117,20 @@ fn check_good(table: &Table, owner: Owner<'_>, ex: &Example) -> Result<(), Strin
     let mut frames = vec![];
     while let Some(it) = fr.next_item() {
         match it {
-            Item::Frame { offset, bytes, truncated } => frames.push((offset, bytes.to_vec(), truncated)),
-            Item::Garbage { offset, bytes, kind } => {
-                return Err(format!("{} byte(s) at offset {offset} do not frame ({kind:?})", bytes.len()))
+            Item::Frame {
+                offset,
+                bytes,
+                truncated,
+            } => frames.push((offset, bytes.to_vec(), truncated)),
+            Item::Garbage {
+                offset,
+                bytes,
+                kind,
+            } => {
+                return Err(format!(
+                    "{} byte(s) at offset {offset} do not frame ({kind:?})",
+                    bytes.len()
+                ))
             }
         }
     }
@@ -122,7 +146,12 @@ fn check_good(table: &Table, owner: Owner<'_>, ex: &Example) -> Result<(), Strin
             return Err(format!("decodes as {:?}, not {}", f.name(), m.name))
         }
         Owner::Sub(s) if f.sub.map(|x| (x.group, x.id)) != Some((s.group, s.id)) => {
-            return Err(format!("decodes as sub {:?} of {:?}, not {}", f.sub.map(|x| x.name), f.name(), s.name))
+            return Err(format!(
+                "decodes as sub {:?} of {:?}, not {}",
+                f.sub.map(|x| x.name),
+                f.name(),
+                s.name
+            ))
         }
         _ => {}
     }
@@ -143,7 +172,10 @@ fn check_good(table: &Table, owner: Owner<'_>, ex: &Example) -> Result<(), Strin
             let got = match *k {
                 "dst" => format!("0x{:02X}", h.dst_byte()),
                 "src" => format!("0x{:02X}", h.src_byte()),
-                _ => f.field(k).map(|(_, v)| format!("{v:?}")).unwrap_or_default(),
+                _ => f
+                    .field(k)
+                    .map(|(_, v)| format!("{v:?}"))
+                    .unwrap_or_default(),
             };
             return Err(format!("{k}: spec says {want}, decoded {got}"));
         }

@@ -103,22 +103,31 @@ impl<'a, 't> AptFrame<'a, 't> {
             table,
         };
         if truncated {
-            f.diag(bytes.len(), DiagKind::Truncated {
-                expected: HEADER_LEN + h.data_len(),
-                got: bytes.len(),
-            });
+            f.diag(
+                bytes.len(),
+                DiagKind::Truncated {
+                    expected: HEADER_LEN + h.data_len(),
+                    got: bytes.len(),
+                },
+            );
         }
         if !h.dst().is_known() {
-            f.diag(4, DiagKind::UnknownAddress {
-                which: Which::Destination,
-                value: h.dst_byte(),
-            });
+            f.diag(
+                4,
+                DiagKind::UnknownAddress {
+                    which: Which::Destination,
+                    value: h.dst_byte(),
+                },
+            );
         }
         if !h.src().is_known() {
-            f.diag(5, DiagKind::UnknownAddress {
-                which: Which::Source,
-                value: h.src_byte(),
-            });
+            f.diag(
+                5,
+                DiagKind::UnknownAddress {
+                    which: Which::Source,
+                    value: h.src_byte(),
+                },
+            );
         }
         let Some(m) = f.msg else {
             f.diag(0, DiagKind::UnknownId { msg_id: h.msg_id() });
@@ -131,7 +140,9 @@ impl<'a, 't> AptFrame<'a, 't> {
                 FormKind::Header if !has_data => {
                     f.msg_form = Some(form);
                     f.form = Some(form);
-                    if let (Some(g), Some(p1)) = (m.subs, form.fields.iter().find(|x| x.name == "sub_id")) {
+                    if let (Some(g), Some(p1)) =
+                        (m.subs, form.fields.iter().find(|x| x.name == "sub_id"))
+                    {
                         let id = bytes[p1.loc.frame_offset()] as u16;
                         f.sub = table.sub(g, id);
                         if f.sub.is_none() {
@@ -153,7 +164,10 @@ impl<'a, 't> AptFrame<'a, 't> {
                         None => f.diag(6, DiagKind::UnknownSubId { sub_id: id }),
                         Some(s) => {
                             f.sub = Some(s);
-                            f.form = s.forms.iter().find(|sf| sf.kind == FormKind::Data(len as u16));
+                            f.form = s
+                                .forms
+                                .iter()
+                                .find(|sf| sf.kind == FormKind::Data(len as u16));
                             if f.form.is_none() {
                                 f.diag(2, DiagKind::LengthMismatch { len, has_data });
                             }
@@ -234,9 +248,16 @@ impl<'a, 't> AptFrame<'a, 't> {
         self.fields().find(|(f, _)| f.name == name)
     }
 
-    /// The channel, from the `chan_ident` field.
+    /// The channel number (1-based), from the `chan_ident` field: idents 0x01, 0x02, 0x04, 0x08
+    /// are channels 1–4; other values are given as they are.
     pub fn channel(&self) -> Option<i64> {
-        self.field("chan_ident").and_then(|(_, v)| v.as_i64())
+        self.field("chan_ident")
+            .and_then(|(_, v)| v.as_i64())
+            .map(|c| match c {
+                4 => 3,
+                8 => 4,
+                c => c,
+            })
     }
 
     /// Whether a field is the form's sub-id or channel (shown in their own columns).

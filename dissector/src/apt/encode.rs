@@ -48,11 +48,20 @@ impl fmt::Display for EncodeError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             EncodeError::UnknownField(n) => write!(f, "no field `{n}` in this form"),
-            EncodeError::OutOfRange { field, value } => write!(f, "{field}: {value} does not fit the field"),
-            EncodeError::BadValue { field, text, expected } => {
+            EncodeError::OutOfRange { field, value } => {
+                write!(f, "{field}: {value} does not fit the field")
+            }
+            EncodeError::BadValue {
+                field,
+                text,
+                expected,
+            } => {
                 write!(f, "{field}: cannot read `{text}` (expected {expected})")
             }
-            EncodeError::SubFormNeedsSub => write!(f, "this message's data is a sub-message: name the sub-message"),
+            EncodeError::SubFormNeedsSub => write!(
+                f,
+                "this message's data is a sub-message: name the sub-message"
+            ),
         }
     }
 }
@@ -72,7 +81,12 @@ impl FieldValue {
             Ty::Str(_) => return Ok(FieldValue::Text(s.to_string())),
             Ty::Bytes(_) | Ty::Pad(_) => {
                 let clean: String = s.chars().filter(|c| c.is_ascii_hexdigit()).collect();
-                if clean.len() % 2 != 0 || clean.len() != s.chars().filter(|c| !c.is_whitespace() && *c != ',').count() {
+                if clean.len() % 2 != 0
+                    || clean.len()
+                        != s.chars()
+                            .filter(|c| !c.is_whitespace() && *c != ',')
+                            .count()
+                {
                     return Err(bad("hex bytes"));
                 }
                 let bytes = (0..clean.len())
@@ -123,11 +137,27 @@ impl FieldValue {
         let mut exp = String::from("a number");
         if let Some(e) = field.enumeration {
             exp.push_str(" or one of ");
-            exp.push_str(&table.enum_def(e).items.iter().map(|(_, l)| *l).collect::<Vec<_>>().join(", "));
+            exp.push_str(
+                &table
+                    .enum_def(e)
+                    .items
+                    .iter()
+                    .map(|(_, l)| *l)
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            );
         }
         if let Some(fl) = field.flags {
             exp.push_str(" or flags from ");
-            exp.push_str(&table.flags_def(fl).items.iter().map(|(_, l)| *l).collect::<Vec<_>>().join("|"));
+            exp.push_str(
+                &table
+                    .flags_def(fl)
+                    .items
+                    .iter()
+                    .map(|(_, l)| *l)
+                    .collect::<Vec<_>>()
+                    .join("|"),
+            );
         }
         Err(bad(&exp))
     }
@@ -146,7 +176,9 @@ fn parse_int(s: &str) -> Option<i64> {
 }
 
 fn parse_num(s: &str) -> Option<f64> {
-    parse_int(s).map(|v| v as f64).or_else(|| s.parse::<f64>().ok().filter(|v| v.is_finite()))
+    parse_int(s)
+        .map(|v| v as f64)
+        .or_else(|| s.parse::<f64>().ok().filter(|v| v.is_finite()))
 }
 
 fn put_prim(p: Prim, field: &str, v: f64, out: &mut [u8]) -> Result<(), EncodeError> {
@@ -163,15 +195,23 @@ fn put_prim(p: Prim, field: &str, v: f64, out: &mut [u8]) -> Result<(), EncodeEr
     match p {
         Prim::U8 => out[0] = u8::try_from(int()?).map_err(|_| oor())?,
         Prim::I8 => out[0] = i8::try_from(int()?).map_err(|_| oor())? as u8,
-        Prim::U16 => out[..2].copy_from_slice(&u16::try_from(int()?).map_err(|_| oor())?.to_le_bytes()),
-        Prim::I16 => out[..2].copy_from_slice(&i16::try_from(int()?).map_err(|_| oor())?.to_le_bytes()),
+        Prim::U16 => {
+            out[..2].copy_from_slice(&u16::try_from(int()?).map_err(|_| oor())?.to_le_bytes())
+        }
+        Prim::I16 => {
+            out[..2].copy_from_slice(&i16::try_from(int()?).map_err(|_| oor())?.to_le_bytes())
+        }
         // Status words are often written as signed masks; accept the i32 range for u32.
         Prim::U32 => {
             let x = int()?;
-            let u = u32::try_from(x).or_else(|_| i32::try_from(x).map(|y| y as u32)).map_err(|_| oor())?;
+            let u = u32::try_from(x)
+                .or_else(|_| i32::try_from(x).map(|y| y as u32))
+                .map_err(|_| oor())?;
             out[..4].copy_from_slice(&u.to_le_bytes())
         }
-        Prim::I32 => out[..4].copy_from_slice(&i32::try_from(int()?).map_err(|_| oor())?.to_le_bytes()),
+        Prim::I32 => {
+            out[..4].copy_from_slice(&i32::try_from(int()?).map_err(|_| oor())?.to_le_bytes())
+        }
         Prim::F32 => out[..4].copy_from_slice(&(v as f32).to_le_bytes()),
     }
     Ok(())
@@ -179,7 +219,13 @@ fn put_prim(p: Prim, field: &str, v: f64, out: &mut [u8]) -> Result<(), EncodeEr
 
 /// Build a frame of `form` (a message's `hdr` or data form, or a sub-message's form) from named
 /// values; fields not given are 0. For a sub-message form, give `sub_id` (or it stays 0).
-pub fn encode(form: &Form, values: &[(&str, FieldValue)], msg_id: u16, dst: u8, src: u8) -> Result<Vec<u8>, EncodeError> {
+pub fn encode(
+    form: &Form,
+    values: &[(&str, FieldValue)],
+    msg_id: u16,
+    dst: u8,
+    src: u8,
+) -> Result<Vec<u8>, EncodeError> {
     let data_len = match form.kind {
         FormKind::Header => 0,
         FormKind::Data(n) => n as usize,
@@ -232,7 +278,13 @@ pub fn encode(form: &Form, values: &[(&str, FieldValue)], msg_id: u16, dst: u8, 
     let params = if data_len > 0 {
         (data_len as u16).to_le_bytes()
     } else {
-        let p = |l: Loc| form.fields.iter().find(|f| f.loc == l).map(|f| out[f.loc.frame_offset()]).unwrap_or(0);
+        let p = |l: Loc| {
+            form.fields
+                .iter()
+                .find(|f| f.loc == l)
+                .map(|f| out[f.loc.frame_offset()])
+                .unwrap_or(0)
+        };
         [p(Loc::P1), p(Loc::P2)]
     };
     out[..HEADER_LEN].copy_from_slice(&emit_header(msg_id, params, data_len > 0, dst, src));

@@ -237,7 +237,11 @@ impl<'t> AptFramer<'t> {
                 }
                 Step::Absurd(msg_id, len) => {
                     self.pos += HEADER_LEN;
-                    return Some(self.garbage_item(start, start + HEADER_LEN, GarbageKind::AbsurdLength { msg_id, len }));
+                    return Some(self.garbage_item(
+                        start,
+                        start + HEADER_LEN,
+                        GarbageKind::AbsurdLength { msg_id, len },
+                    ));
                 }
                 // NeedMore at end of stream: fewer than 6 bytes left.
                 _ => {

@@ -130,7 +130,9 @@ impl<'a> Header<'a> {
     /// View the first 6 bytes of `b`; `None` when it is shorter.
     #[inline]
     pub fn new(b: &'a [u8]) -> Option<Header<'a>> {
-        b.get(..HEADER_LEN).and_then(|h| h.try_into().ok()).map(Header)
+        b.get(..HEADER_LEN)
+            .and_then(|h| h.try_into().ok())
+            .map(Header)
     }
     /// The message id (bytes 0–1, little endian).
     #[inline]
@@ -180,8 +182,18 @@ impl<'a> Header<'a> {
 }
 
 /// Build a header.
-pub fn emit_header(id: u16, p1_or_len: [u8; 2], has_data: bool, dst: u8, src: u8) -> [u8; HEADER_LEN] {
+pub fn emit_header(
+    id: u16,
+    p1_or_len: [u8; 2],
+    has_data: bool,
+    dst: u8,
+    src: u8,
+) -> [u8; HEADER_LEN] {
     let idb = id.to_le_bytes();
-    let d = if has_data { dst | DATA_FLAG } else { dst & !DATA_FLAG };
+    let d = if has_data {
+        dst | DATA_FLAG
+    } else {
+        dst & !DATA_FLAG
+    };
     [idb[0], idb[1], p1_or_len[0], p1_or_len[1], d, src]
 }

@@ -71,18 +71,30 @@ impl Table {
 
     /// The message with this name (case-insensitive, `MGMSG_` prefix optional).
     pub fn msg_by_name(&self, name: &str) -> Option<&MsgDef> {
-        let n = name.strip_prefix("MGMSG_").or_else(|| name.strip_prefix("mgmsg_")).unwrap_or(name);
-        self.data.msgs.iter().find(|m| m.name.eq_ignore_ascii_case(n))
+        let n = name
+            .strip_prefix("MGMSG_")
+            .or_else(|| name.strip_prefix("mgmsg_"))
+            .unwrap_or(name);
+        self.data
+            .msgs
+            .iter()
+            .find(|m| m.name.eq_ignore_ascii_case(n))
     }
 
     /// A sub-message of a group.
     pub fn sub(&self, group: &str, id: u16) -> Option<&SubDef> {
-        self.data.subs.iter().find(|s| s.group == group && s.id == id)
+        self.data
+            .subs
+            .iter()
+            .find(|s| s.group == group && s.id == id)
     }
 
     /// A sub-message of a group by name (case-insensitive).
     pub fn sub_by_name(&self, group: &str, name: &str) -> Option<&SubDef> {
-        self.data.subs.iter().find(|s| s.group == group && s.name.eq_ignore_ascii_case(name))
+        self.data
+            .subs
+            .iter()
+            .find(|s| s.group == group && s.name.eq_ignore_ascii_case(name))
     }
 
     /// An enumeration by index (as in [`Field::enumeration`]).
@@ -113,7 +125,10 @@ impl Table {
             FormKind::Sub => {
                 has_data
                     && self.data.subs.iter().any(|s| {
-                        Some(s.group) == m.subs && s.forms.iter().any(|sf| sf.kind == FormKind::Data(len as u16))
+                        Some(s.group) == m.subs
+                            && s.forms
+                                .iter()
+                                .any(|sf| sf.kind == FormKind::Data(len as u16))
                     })
             }
         })

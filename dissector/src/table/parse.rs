@@ -146,7 +146,11 @@ impl Parser {
                 "enum" | "flags" => self.def(file, ln, kw == "enum", rest),
                 "+" => match self.cur {
                     Cur::Def(is_enum, idx) => self.def_items(file, ln, is_enum, idx, rest),
-                    _ => self.err(file, ln, "`+` continuation outside an enum/flags definition"),
+                    _ => self.err(
+                        file,
+                        ln,
+                        "`+` continuation outside an enum/flags definition",
+                    ),
                 },
                 "msg" => self.msg(file, ln, rest),
                 "sub" => self.sub(file, ln, rest),
@@ -193,7 +197,14 @@ impl Parser {
         self.def_items(file, ln, is_enum, idx, items);
     }
 
-    fn def_items(&mut self, file: &'static str, ln: usize, is_enum: bool, idx: usize, s: &'static str) {
+    fn def_items(
+        &mut self,
+        file: &'static str,
+        ln: usize,
+        is_enum: bool,
+        idx: usize,
+        s: &'static str,
+    ) {
         for tok in tokens(s) {
             let Some((v, label)) = tok.split_once('=') else {
                 self.err(file, ln, format!("`{tok}` is not VALUE=LABEL"));
@@ -211,7 +222,11 @@ impl Parser {
                 let e = &mut self.data.enums[idx];
                 if e.items.iter().any(|(x, l)| *x == v || *l == label) {
                     let n = e.name;
-                    self.err(file, ln, format!("enum {n}: value {v} or label {label} repeated"));
+                    self.err(
+                        file,
+                        ln,
+                        format!("enum {n}: value {v} or label {label} repeated"),
+                    );
                 }
                 self.data.enums[idx].items.push((v, label));
             } else {
@@ -234,13 +249,26 @@ impl Parser {
         if t.len() < 3 {
             return self.err(file, ln, "msg needs: ID NAME DIR");
         }
-        let id = match t[0].strip_prefix("0x").and_then(|h| u16::from_str_radix(h, 16).ok()) {
+        let id = match t[0]
+            .strip_prefix("0x")
+            .and_then(|h| u16::from_str_radix(h, 16).ok())
+        {
             Some(id) if t[0].len() == 6 => id,
-            _ => return self.err(file, ln, format!("bad message id `{}` (want 0x + 4 hex)", t[0])),
+            _ => {
+                return self.err(
+                    file,
+                    ln,
+                    format!("bad message id `{}` (want 0x + 4 hex)", t[0]),
+                )
+            }
         };
         let name = t[1];
         if !is_ident(name) || name.starts_with("MGMSG") || name.to_ascii_uppercase() != name {
-            self.err(file, ln, format!("bad message name `{name}` (UPPER_SNAKE, no MGMSG_)"));
+            self.err(
+                file,
+                ln,
+                format!("bad message name `{name}` (UPPER_SNAKE, no MGMSG_)"),
+            );
         }
         let dir = match t[2] {
             "h2d" => Dir::HostToDevice,
@@ -269,7 +297,11 @@ impl Parser {
         }
         if let Some(o) = self.data.msgs.iter().find(|o| o.id == id || o.name == name) {
             let (of, ol, on) = (o.file, o.line, o.name);
-            self.err(file, ln, format!("{name} 0x{id:04X} clashes with {on} at {of}:{ol}"));
+            self.err(
+                file,
+                ln,
+                format!("{name} 0x{id:04X} clashes with {on} at {of}:{ol}"),
+            );
         }
         self.data.msgs.push(m);
         self.cur = Cur::Msg(self.data.msgs.len() - 1);
@@ -287,9 +319,18 @@ impl Parser {
         if !is_ident(group) || !is_ident(name) {
             self.err(file, ln, "bad sub group or name");
         }
-        if let Some(o) = self.data.subs.iter().find(|o| o.group == group && (o.id == id || o.name == name)) {
+        if let Some(o) = self
+            .data
+            .subs
+            .iter()
+            .find(|o| o.group == group && (o.id == id || o.name == name))
+        {
             let (of, ol) = (o.file, o.line);
-            self.err(file, ln, format!("sub {group} {name} clashes with the one at {of}:{ol}"));
+            self.err(
+                file,
+                ln,
+                format!("sub {group} {name} clashes with the one at {of}:{ol}"),
+            );
         }
         self.data.subs.push(SubDef {
             group,
@@ -329,7 +370,9 @@ impl Parser {
             n => match parse_int(n).and_then(|v| u16::try_from(v).ok()) {
                 Some(0) => return self.err(file, ln, "a data form of length 0: use `form hdr`"),
                 Some(l) => FormKind::Data(l),
-                None => return self.err(file, ln, format!("bad form `{k}` (hdr, sub or a length)")),
+                None => {
+                    return self.err(file, ln, format!("bad form `{k}` (hdr, sub or a length)"))
+                }
             },
         };
         let is_sub_def = matches!(self.cur, Cur::Sub(_));
@@ -356,7 +399,15 @@ impl Parser {
         });
     }
 
-    fn push_field(&mut self, file: &'static str, ln: usize, name: &'static str, loc: Loc, ty: Ty, attrs: &[&'static str]) {
+    fn push_field(
+        &mut self,
+        file: &'static str,
+        ln: usize,
+        name: &'static str,
+        loc: Loc,
+        ty: Ty,
+        attrs: &[&'static str],
+    ) {
         let target = match self.cur {
             Cur::Msg(m) => Target::Msg(m),
             Cur::Sub(s) => Target::Sub(s),
@@ -387,7 +438,9 @@ impl Parser {
                 _ => self.err(file, ln, format!("unknown field attribute `{a}`")),
             }
         }
-        if matches!(ty, Ty::Str(_) | Ty::Bytes(_) | Ty::Pad(_)) && (!pending.is_empty() || f.scale.is_some()) {
+        if matches!(ty, Ty::Str(_) | Ty::Bytes(_) | Ty::Pad(_))
+            && (!pending.is_empty() || f.scale.is_some())
+        {
             self.err(file, ln, "enum/flags/scale on a str/bytes/pad field");
         }
         let forms = match target {
@@ -456,8 +509,20 @@ impl Parser {
         };
         let off = match self.current_form_kind() {
             Some((FormKind::Data(_), off)) => off,
-            Some((FormKind::Header, _)) => return self.err(file, ln, "data fields are not allowed in `form hdr` (use p1/p2)"),
-            Some((FormKind::Sub, _)) => return self.err(file, ln, "`form sub` has no fields: they are in the `sub` definitions"),
+            Some((FormKind::Header, _)) => {
+                return self.err(
+                    file,
+                    ln,
+                    "data fields are not allowed in `form hdr` (use p1/p2)",
+                )
+            }
+            Some((FormKind::Sub, _)) => {
+                return self.err(
+                    file,
+                    ln,
+                    "`form sub` has no fields: they are in the `sub` definitions",
+                )
+            }
             None => return self.err(file, ln, "a field outside a form"),
         };
         let Ok(off16) = u16::try_from(off) else {
@@ -492,7 +557,14 @@ impl Parser {
             // Values after a last `;` are checks only when they all look like FIELD=VALUE, so a
             // reason may itself contain `;`.
             let (reason, checks) = match tail.rsplit_once(';') {
-                Some((r, c)) if !c.trim().is_empty() && tokens(c).iter().all(|t| t.split_once('=').is_some_and(|(k, _)| is_ident(k))) => (r.trim(), c.trim()),
+                Some((r, c))
+                    if !c.trim().is_empty()
+                        && tokens(c)
+                            .iter()
+                            .all(|t| t.split_once('=').is_some_and(|(k, _)| is_ident(k))) =>
+                {
+                    (r.trim(), c.trim())
+                }
                 _ => (tail, ""),
             };
             if reason.is_empty() {
@@ -506,7 +578,9 @@ impl Parser {
         {
             for tok in tokens(checks) {
                 match tok.split_once('=') {
-                    Some((k, v)) if is_ident(k) && !v.is_empty() => ex.checks.push((k, v.trim_matches('"'))),
+                    Some((k, v)) if is_ident(k) && !v.is_empty() => {
+                        ex.checks.push((k, v.trim_matches('"')))
+                    }
                     _ => self.err(file, ln, format!("`{tok}` is not FIELD=VALUE")),
                 }
             }
@@ -592,7 +666,9 @@ fn check_forms(at: &str, forms: &[Form], errs: &mut Vec<String>) {
         if let FormKind::Data(len) = f.kind {
             let sum: usize = f.fields.iter().map(|x| x.ty.width()).sum();
             if sum != len as usize {
-                errs.push(format!("{at}: form {len}: fields add up to {sum} bytes, not {len}"));
+                errs.push(format!(
+                    "{at}: form {len}: fields add up to {sum} bytes, not {len}"
+                ));
             }
         }
     }

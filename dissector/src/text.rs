@@ -1,0 +1,64 @@
+//! One-line text rendering of records, like tshark's default output.
+
+use crate::apt::{summary, AptFrame, GarbageKind};
+use crate::diag::Diag;
+use std::fmt::Write;
+
+/// Append the timeline line of a decoded APT frame (no newline):
+/// `N  offset  src → dst  NAME  chN  key fields  [diagnostics]`.
+pub fn apt_line(out: &mut String, n: u64, f: &AptFrame<'_, '_>) {
+    let h = f.header();
+    let _ = write!(
+        out,
+        "{n:>6} {:>#10x}  {:>5} → {:<5} ",
+        f.offset,
+        h.src().name(),
+        h.dst().name()
+    );
+    match f.name() {
+        Some(name) => {
+            let _ = write!(out, "{name:<32}");
+        }
+        None => {
+            let _ = write!(out, "{:<32}", format!("UNKNOWN_0x{:04X}", h.msg_id()));
+        }
+    }
+    match f.channel() {
+        Some(c) => {
+            let _ = write!(out, " ch{c:<2}");
+        }
+        None => out.push_str("     "),
+    }
+    if let Some(s) = f.sub {
+        let _ = write!(out, " [{}]", s.name);
+    }
+    out.push(' ');
+    let before = out.len();
+    summary(f, 6, out);
+    if out.len() == before && f.form.is_none() && f.bytes.len() > 6 {
+        out.push_str("data=");
+        for b in &f.bytes[6..f.bytes.len().min(6 + 32)] {
+            let _ = write!(out, "{b:02x}");
+        }
+    }
+    for d in f.diags.iter() {
+        let _ = write!(out, "  !! {d}");
+    }
+}
+
+/// Append the line of a garbage record.
+pub fn garbage_line(out: &mut String, n: u64, offset: u64, bytes: &[u8], kind: GarbageKind) {
+    let d = crate::json::garbage_diag(offset, bytes.len(), kind);
+    let _ = write!(out, "{n:>6} {offset:>#10x}  !! {}: ", d.kind);
+    for b in bytes.iter().take(24) {
+        let _ = write!(out, "{b:02x}");
+    }
+    if bytes.len() > 24 {
+        out.push('…');
+    }
+}
+
+/// Append the line of an input diagnostic (e.g. a bad character in hex text).
+pub fn input_diag_line(out: &mut String, d: &Diag) {
+    let _ = write!(out, "     - {:>#10x}  !! input: {}", d.offset, d.kind);
+}
