@@ -28,8 +28,8 @@ impl HexDecoder {
     }
 
     /// Decode a chunk of text: bytes are appended to `out`, problems to `diags` (with text
-    /// offsets). Separators (whitespace, `,`, `:`, `;`) are skipped silently; anything else that
-    /// is not a hex digit gets a `bad_hex` diagnostic and is skipped.
+    /// offsets). Separators (whitespace, `,`, `:`, `;`) end a byte; anything else that is not a
+    /// hex digit gets a `bad_hex` diagnostic and is skipped.
     pub fn push(&mut self, text: &[u8], out: &mut Vec<u8>, diags: &mut Vec<Diag>) {
         for &c in text {
             let at = self.offset;
@@ -39,7 +39,16 @@ impl HexDecoder {
                     Some((hi, _)) => out.push(hi << 4 | n),
                     None => self.pending = Some((n, at)),
                 },
-                None if c.is_ascii_whitespace() || matches!(c, b',' | b':' | b';') => {}
+                // A separator ends a byte: a lone digit before it is reported and dropped, so one
+                // typo does not shift every later byte by a nibble.
+                None if c.is_ascii_whitespace() || matches!(c, b',' | b':' | b';') => {
+                    if let Some((_, at)) = self.pending.take() {
+                        diags.push(Diag {
+                            offset: at,
+                            kind: DiagKind::OddHexDigit,
+                        });
+                    }
+                }
                 None => diags.push(Diag {
                     offset: at,
                     kind: DiagKind::BadHex { ch: c as char },
@@ -68,12 +77,13 @@ mod tests {
         let mut d = HexDecoder::new();
         let (mut out, mut diags) = (vec![], vec![]);
         d.push(b"23 02,0", &mut out, &mut diags);
-        d.push(b"1 0O\n5 01 f", &mut out, &mut diags);
+        d.push(b"1 5O 50\n0102f", &mut out, &mut diags);
         d.finish(&mut diags);
-        assert_eq!(out, [0x23, 0x02, 0x01, 0x05, 0x01]);
-        assert_eq!(diags.len(), 2);
-        assert_eq!(diags[0].offset, 10);
-        assert_eq!(diags[0].kind, DiagKind::BadHex { ch: 'O' });
-        assert_eq!(diags[1].kind, DiagKind::OddHexDigit);
+        assert_eq!(out, [0x23, 0x02, 0x01, 0x50, 0x01, 0x02]);
+        let got: Vec<(u64, DiagKind)> = diags.iter().map(|d| (d.offset, d.kind)).collect();
+        assert_eq!(
+            got,
+            [(10, DiagKind::BadHex { ch: 'O' }), (9, DiagKind::OddHexDigit), (19, DiagKind::OddHexDigit)]
+        );
     }
 }

@@ -12,6 +12,7 @@ pub mod diag;
 pub mod hex;
 pub mod json;
 pub mod spec_examples;
+pub mod synth;
 pub mod table;
 pub mod text;
 

@@ -1,10 +1,7 @@
 //! The streaming framer: chunking invariance, byte accounting, and every kind of bad input.
 
-mod common;
-
 use aptscope_dissector::apt::{AptFrame, AptFramer, GarbageKind, Item};
 use aptscope_dissector::{DiagKind, Table};
-use common::{all_forms, random_frame, Rng};
 use proptest::prelude::*;
 
 #[derive(Debug, Clone, PartialEq)]
@@ -36,22 +33,8 @@ fn run(input: &[u8], cuts: &[usize]) -> Vec<Rec> {
     out
 }
 
-/// A stream of random valid frames of every kind, with garbage between some of them.
 fn stream(seed: u64, frames: usize, garbage: bool) -> Vec<u8> {
-    let t = Table::global();
-    let forms = all_forms(t);
-    let mut r = Rng(seed);
-    let mut out = vec![];
-    for _ in 0..frames {
-        if garbage && r.below(4) == 0 {
-            for _ in 0..r.below(12) {
-                out.push(r.below(256) as u8);
-            }
-        }
-        let (m, form, sub) = forms[r.below(forms.len() as u64) as usize];
-        out.extend(random_frame(t, &mut r, m, form, sub).0);
-    }
-    out
+    aptscope_dissector::synth::stream(Table::global(), seed, frames, garbage)
 }
 
 fn accounted(recs: &[Rec], len: usize) {

@@ -1,13 +1,11 @@
 //! The message table against the spec: coverage of every id, every spec example, and
 //! encode/decode round trips over every form.
 
-mod common;
-
 use aptscope_dissector::apt::{AptFrame, FieldValue, Value};
 use aptscope_dissector::spec_examples::{self, Owner};
 use aptscope_dissector::table::FormKind;
 use aptscope_dissector::Table;
-use common::{all_forms, random_frame, Rng};
+use aptscope_dissector::synth::{all_forms, random_frame, Rng};
 
 #[test]
 fn every_id_in_the_spec_indexes_is_in_the_table() {
