@@ -19,11 +19,17 @@ fn aptscope(args: &[&str], stdin: Option<&[u8]>) -> (String, String, bool) {
     }
     drop(si);
     let o = c.wait_with_output().expect("wait");
-    (String::from_utf8_lossy(&o.stdout).into_owned(), String::from_utf8_lossy(&o.stderr).into_owned(), o.status.success())
+    (
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+        o.status.success(),
+    )
 }
 
 fn ndjson(out: &str) -> Vec<Value> {
-    out.lines().map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not JSON ({e}): {l}"))).collect()
+    out.lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not JSON ({e}): {l}")))
+        .collect()
 }
 
 #[test]
@@ -33,9 +39,20 @@ fn decodes_the_kdc101_sample_as_a_timeline() {
     let lines: Vec<&str> = out.lines().collect();
     assert_eq!(lines.len(), 20);
     assert!(lines[0].contains("host → usb") && lines[0].contains("HW_REQ_INFO"));
-    assert!(lines[1].contains("HW_GET_INFO") && lines[1].contains("serial_number=27000123") && lines[1].contains("\"KDC101\""));
-    assert!(lines[12].contains("MOT_MOVE_ABSOLUTE") && lines[12].contains("ch1") && lines[12].contains("absolute_position=171520 counts"));
-    assert!(!out.contains("!!"), "a clean sample has no diagnostics:\n{out}");
+    assert!(
+        lines[1].contains("HW_GET_INFO")
+            && lines[1].contains("serial_number=27000123")
+            && lines[1].contains("\"KDC101\"")
+    );
+    assert!(
+        lines[12].contains("MOT_MOVE_ABSOLUTE")
+            && lines[12].contains("ch1")
+            && lines[12].contains("absolute_position=171520 counts")
+    );
+    assert!(
+        !out.contains("!!"),
+        "a clean sample has no diagnostics:\n{out}"
+    );
 }
 
 #[test]
@@ -57,17 +74,26 @@ fn json_output_has_the_documented_shape() {
     assert_eq!(r["data_flag"], true);
     assert_eq!(r["channel"], 1);
     assert_eq!(r["fields"]["position"], 0);
-    assert_eq!(r["fields"]["status_bits"], serde_json::json!(["MOVING_CCW", "MOTOR_CONNECTED", "HOMING", "ENABLED"]));
+    assert_eq!(
+        r["fields"]["status_bits"],
+        serde_json::json!(["MOVING_CCW", "MOTOR_CONNECTED", "HOMING", "ENABLED"])
+    );
     assert_eq!(r["diag"], serde_json::json!([]));
     assert_eq!(r["raw"].as_str().map(str::len), Some(40));
 }
 
 #[test]
 fn rack_sample_names_bays() {
-    let (out, _, ok) = aptscope(&["decode", "--json", "--hex", "samples/bsc203-rack.hex"], None);
+    let (out, _, ok) = aptscope(
+        &["decode", "--json", "--hex", "samples/bsc203-rack.hex"],
+        None,
+    );
     assert!(ok);
     let recs = ndjson(&out);
-    let bay2 = recs.iter().find(|r| r["name"] == "MOT_MOVE_STOP").expect("stop");
+    let bay2 = recs
+        .iter()
+        .find(|r| r["name"] == "MOT_MOVE_STOP")
+        .expect("stop");
     assert_eq!(bay2["dst"]["name"], "bay2");
     assert_eq!(bay2["dst"]["bay"], 2);
     assert_eq!(bay2["dst"]["addr"], 0x23);
@@ -81,7 +107,12 @@ fn damaged_sample_reports_every_problem_with_its_offset_and_carries_on() {
     let diags: Vec<(String, u64)> = recs
         .iter()
         .flat_map(|r| r["diag"].as_array().cloned().unwrap_or_default())
-        .map(|d| (d["kind"].as_str().unwrap_or("").to_string(), d["offset"].as_u64().unwrap_or(u64::MAX)))
+        .map(|d| {
+            (
+                d["kind"].as_str().unwrap_or("").to_string(),
+                d["offset"].as_u64().unwrap_or(u64::MAX),
+            )
+        })
         .collect();
     let want = [
         ("garbage", 0),
@@ -95,24 +126,49 @@ fn damaged_sample_reports_every_problem_with_its_offset_and_carries_on() {
     assert_eq!(diags, want);
     // Nothing lost: records cover the file byte for byte.
     let total: u64 = recs.iter().map(|r| r["len"].as_u64().unwrap_or(0)).sum();
-    assert_eq!(total, std::fs::metadata("samples/damaged.bin").expect("sample").len());
+    assert_eq!(
+        total,
+        std::fs::metadata("samples/damaged.bin")
+            .expect("sample")
+            .len()
+    );
     let names: Vec<&str> = recs.iter().filter_map(|r| r["name"].as_str()).collect();
-    assert_eq!(names, ["HW_REQ_INFO", "MOD_IDENTIFY", "MOT_MOVE_ABSOLUTE", "MOT_MOVE_ABSOLUTE", "MOT_GET_DCSTATUSUPDATE"]);
+    assert_eq!(
+        names,
+        [
+            "HW_REQ_INFO",
+            "MOD_IDENTIFY",
+            "MOT_MOVE_ABSOLUTE",
+            "MOT_MOVE_ABSOLUTE",
+            "MOT_GET_DCSTATUSUPDATE"
+        ]
+    );
 }
 
 #[test]
 fn hex_input_with_a_non_hex_character_is_reported_at_its_text_offset() {
-    let (out, _, ok) = aptscope(&["decode", "--hex", "--json", "-"], Some(b"23 02 01 00 5O 01\n23 02 01 00 50 01\n"));
+    let (out, _, ok) = aptscope(
+        &["decode", "--hex", "--json", "-"],
+        Some(b"23 02 01 00 5O 01\n23 02 01 00 50 01\n"),
+    );
     assert!(ok);
     let recs = ndjson(&out);
     let input: Vec<(&str, u64)> = recs
         .iter()
         .filter(|r| r["type"] == "input")
-        .map(|r| (r["diag"][0]["kind"].as_str().unwrap_or(""), r["diag"][0]["offset"].as_u64().unwrap_or(0)))
+        .map(|r| {
+            (
+                r["diag"][0]["kind"].as_str().unwrap_or(""),
+                r["diag"][0]["offset"].as_u64().unwrap_or(0),
+            )
+        })
         .collect();
     // The `O` is reported, and the `5` it left alone is dropped rather than shifting later bytes.
     assert_eq!(input, [("bad_hex", 13), ("odd_hex_digit", 12)]);
-    let last = recs.iter().rfind(|r| r["type"] == "frame").expect("a frame");
+    let last = recs
+        .iter()
+        .rfind(|r| r["type"] == "frame")
+        .expect("a frame");
     assert_eq!(last["name"], "MOD_IDENTIFY");
     assert_eq!(last["diag"], serde_json::json!([]));
 }
@@ -136,12 +192,22 @@ fn messages_json_lists_every_id_in_the_spec() {
     let (out, _, ok) = aptscope(&["messages", "--json"], None);
     assert!(ok);
     let recs = ndjson(&out);
-    let ids: std::collections::HashSet<u64> = recs.iter().filter(|r| r["type"] == "msg").filter_map(|r| r["msgid"].as_u64()).collect();
-    for line in include_str!("../dissector/tests/spec_ids.txt").lines().filter(|l| !l.starts_with('#')) {
+    let ids: std::collections::HashSet<u64> = recs
+        .iter()
+        .filter(|r| r["type"] == "msg")
+        .filter_map(|r| r["msgid"].as_u64())
+        .collect();
+    for line in include_str!("../dissector/tests/spec_ids.txt")
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+    {
         let id = u64::from_str_radix(line[2..6].trim(), 16).expect("hex");
         assert!(ids.contains(&id), "{line} missing from `messages --json`");
     }
-    let abs = recs.iter().find(|r| r["name"] == "MOT_MOVE_ABSOLUTE").expect("listed");
+    let abs = recs
+        .iter()
+        .find(|r| r["name"] == "MOT_MOVE_ABSOLUTE")
+        .expect("listed");
     assert_eq!(abs["dir"], "h2d");
     assert_eq!(abs["forms"].as_array().map(Vec::len), Some(2));
     assert_eq!(abs["forms"][1]["fields"][1]["type"], "i32");
@@ -149,7 +215,17 @@ fn messages_json_lists_every_id_in_the_spec() {
 
 #[test]
 fn encode_then_decode_gives_back_the_values() {
-    let (hex, err, ok) = aptscope(&["encode", "MOT_MOVE_ABSOLUTE", "chan_ident=CH1", "absolute_position=-5000", "--dest", "bay3"], None);
+    let (hex, err, ok) = aptscope(
+        &[
+            "encode",
+            "MOT_MOVE_ABSOLUTE",
+            "chan_ident=CH1",
+            "absolute_position=-5000",
+            "--dest",
+            "bay3",
+        ],
+        None,
+    );
     assert!(ok, "{err}");
     assert_eq!(hex.trim(), "53 04 06 00 A4 01 01 00 78 EC FF FF");
     let (out, _, ok) = aptscope(&["decode", "--hex", "--json", "-"], Some(hex.as_bytes()));

@@ -17,7 +17,7 @@ pub enum DiagKind {
     /// Bytes that are not part of any frame.
     Garbage {
         /// How many.
-        len: usize,
+        len: u32,
     },
     /// A known message's header claims a data packet longer than any APT message.
     AbsurdLength {
@@ -29,14 +29,14 @@ pub enum DiagKind {
     /// Fewer than 6 bytes left at the end of the stream.
     TrailingBytes {
         /// How many.
-        len: usize,
+        len: u32,
     },
     /// The stream ended inside this frame.
     Truncated {
         /// Frame length the header announces.
-        expected: usize,
+        expected: u32,
         /// Bytes present.
-        got: usize,
+        got: u32,
     },
     /// The message id is not in the table.
     UnknownId {
@@ -53,14 +53,14 @@ pub enum DiagKind {
     /// The length matches none of the message's forms.
     LengthMismatch {
         /// Data length in the header (0 for header-only).
-        len: usize,
+        len: u32,
         /// Whether the 0x80 data flag is set.
         has_data: bool,
     },
     /// A header-only message sent with the 0x80 "data follows" bit set.
     HeaderOnlyWithData {
         /// The data length it claims.
-        len: usize,
+        len: u32,
     },
     /// A sub-message id the table does not know for this message.
     UnknownSubId {
@@ -157,12 +157,13 @@ impl fmt::Display for Diag {
 /// A small inline list of diagnostics (no allocation per frame).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Diags {
-    items: [Option<Diag>; 6],
+    items: [Option<Diag>; 4],
     len: u8,
 }
 
 impl Diags {
-    /// Add one (beyond capacity, the last slot is overwritten: never more than 6 per frame occur).
+    /// Add one (beyond capacity, the last slot is overwritten: at most 4 kinds can apply to one
+    /// frame: truncation, two addresses, and one of id/length/sub-id).
     pub fn push(&mut self, d: Diag) {
         let i = (self.len as usize).min(self.items.len() - 1);
         self.items[i] = Some(d);

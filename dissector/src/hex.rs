@@ -83,7 +83,11 @@ mod tests {
         let got: Vec<(u64, DiagKind)> = diags.iter().map(|d| (d.offset, d.kind)).collect();
         assert_eq!(
             got,
-            [(10, DiagKind::BadHex { ch: 'O' }), (9, DiagKind::OddHexDigit), (19, DiagKind::OddHexDigit)]
+            [
+                (10, DiagKind::BadHex { ch: 'O' }),
+                (9, DiagKind::OddHexDigit),
+                (19, DiagKind::OddHexDigit)
+            ]
         );
     }
 }

@@ -217,9 +217,9 @@ pub fn garbage_diag(offset: u64, len: usize, kind: GarbageKind) -> Diag {
     Diag {
         offset,
         kind: match kind {
-            GarbageKind::NoHeader => DiagKind::Garbage { len },
+            GarbageKind::NoHeader => DiagKind::Garbage { len: len as u32 },
             GarbageKind::AbsurdLength { msg_id, len } => DiagKind::AbsurdLength { msg_id, len },
-            GarbageKind::TrailingBytes => DiagKind::TrailingBytes { len },
+            GarbageKind::TrailingBytes => DiagKind::TrailingBytes { len: len as u32 },
         },
     }
 }

@@ -10,7 +10,7 @@ pub struct Rng(pub u64);
 
 impl Rng {
     /// The next 64 random bits.
-    pub fn next(&mut self) -> u64 {
+    pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -22,7 +22,7 @@ impl Rng {
         if n == 0 {
             0
         } else {
-            self.next() % n
+            self.next_u64() % n
         }
     }
 }
@@ -66,7 +66,11 @@ pub fn random_values(table: &Table, r: &mut Rng, form: &Form) -> Vec<(&'static s
             Ty::Array(p, n) => FieldValue::List((0..n).map(|_| prim_value(r, p)).collect()),
             Ty::Str(n) => {
                 let len = r.below(n as u64 + 1) as usize;
-                FieldValue::Text((0..len).map(|_| (b'A' + r.below(26) as u8) as char).collect())
+                FieldValue::Text(
+                    (0..len)
+                        .map(|_| (b'A' + r.below(26) as u8) as char)
+                        .collect(),
+                )
             }
             Ty::Bytes(n) => FieldValue::Bytes((0..n).map(|_| r.below(256) as u8).collect()),
         };
@@ -97,7 +101,11 @@ pub fn all_forms(table: &Table) -> Vec<(&MsgDef, &Form, Option<u16>)> {
             match f.kind {
                 FormKind::Sub => {
                     for s in table.subs().iter().filter(|s| Some(s.group) == m.subs) {
-                        for sf in s.forms.iter().filter(|sf| matches!(sf.kind, FormKind::Data(_))) {
+                        for sf in s
+                            .forms
+                            .iter()
+                            .filter(|sf| matches!(sf.kind, FormKind::Data(_)))
+                        {
                             out.push((m, sf, Some(s.id)));
                         }
                     }
@@ -111,12 +119,20 @@ pub fn all_forms(table: &Table) -> Vec<(&MsgDef, &Form, Option<u16>)> {
 
 /// Random addresses from the spec's address space.
 pub fn random_addr(r: &mut Rng) -> u8 {
-    const A: [u8; 13] = [0x01, 0x11, 0x21, 0x22, 0x23, 0x24, 0x25, 0x26, 0x27, 0x28, 0x29, 0x2A, 0x50];
+    const A: [u8; 13] = [
+        0x01, 0x11, 0x21, 0x22, 0x23, 0x24, 0x25, 0x26, 0x27, 0x28, 0x29, 0x2A, 0x50,
+    ];
     A[r.below(A.len() as u64) as usize]
 }
 
 /// Encode one random frame of the given form.
-pub fn random_frame(table: &Table, r: &mut Rng, m: &MsgDef, form: &Form, sub: Option<u16>) -> (Vec<u8>, Vec<(&'static str, FieldValue)>) {
+pub fn random_frame(
+    table: &Table,
+    r: &mut Rng,
+    m: &MsgDef,
+    form: &Form,
+    sub: Option<u16>,
+) -> (Vec<u8>, Vec<(&'static str, FieldValue)>) {
     let mut vals = random_values(table, r, form);
     if let Some(id) = sub {
         for (k, v) in vals.iter_mut() {
@@ -126,7 +142,12 @@ pub fn random_frame(table: &Table, r: &mut Rng, m: &MsgDef, form: &Form, sub: Op
         }
     } else if m.subs.is_some() && form.kind == FormKind::Header {
         // A header-only request of a sub group carries a sub id the table knows.
-        let subs: Vec<u16> = table.subs().iter().filter(|s| Some(s.group) == m.subs && s.id < 256).map(|s| s.id).collect();
+        let subs: Vec<u16> = table
+            .subs()
+            .iter()
+            .filter(|s| Some(s.group) == m.subs && s.id < 256)
+            .map(|s| s.id)
+            .collect();
         if let Some(&id) = subs.get(r.below(subs.len() as u64) as usize) {
             for (k, v) in vals.iter_mut() {
                 if *k == "sub_id" {

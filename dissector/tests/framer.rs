@@ -16,8 +16,16 @@ fn run(input: &[u8], cuts: &[usize]) -> Vec<Rec> {
     let mut drain = |f: &mut AptFramer| {
         while let Some(it) = f.next_item() {
             out.push(match it {
-                Item::Frame { offset, bytes, truncated } => Rec::Frame(offset, bytes.to_vec(), truncated),
-                Item::Garbage { offset, bytes, kind } => Rec::Garbage(offset, bytes.to_vec(), kind),
+                Item::Frame {
+                    offset,
+                    bytes,
+                    truncated,
+                } => Rec::Frame(offset, bytes.to_vec(), truncated),
+                Item::Garbage {
+                    offset,
+                    bytes,
+                    kind,
+                } => Rec::Garbage(offset, bytes.to_vec(), kind),
             });
         }
     };
@@ -46,7 +54,10 @@ fn accounted(recs: &[Rec], len: usize) {
         assert_eq!(off, at, "records are contiguous: nothing lost or repeated");
         at += n as u64;
     }
-    assert_eq!(at, len as u64, "every input byte is in a frame or a garbage record");
+    assert_eq!(
+        at, len as u64,
+        "every input byte is in a frame or a garbage record"
+    );
 }
 
 proptest! {
@@ -86,7 +97,9 @@ fn clean_stream_frames_without_garbage() {
 }
 
 fn hex(s: &str) -> Vec<u8> {
-    s.split_whitespace().map(|b| u8::from_str_radix(b, 16).expect("hex")).collect()
+    s.split_whitespace()
+        .map(|b| u8::from_str_radix(b, 16).expect("hex"))
+        .collect()
 }
 
 const IDENTIFY: &str = "23 02 01 00 50 01";
@@ -125,7 +138,13 @@ fn truncated_final_frame_is_shown_with_its_offset() {
     assert_eq!(diags_of(&recs), vec![(15, "truncated")]);
     let f = AptFrame::decode(Table::global(), 6, &input[6..], true).expect("frame");
     assert_eq!(f.name(), Some("MOT_MOVE_ABSOLUTE"));
-    assert_eq!(f.diags.iter().next().map(|d| d.kind), Some(DiagKind::Truncated { expected: 12, got: 9 }));
+    assert_eq!(
+        f.diags.iter().next().map(|d| d.kind),
+        Some(DiagKind::Truncated {
+            expected: 12,
+            got: 9
+        })
+    );
 }
 
 #[test]
@@ -144,7 +163,10 @@ fn garbage_before_between_and_after_frames() {
         })
         .collect();
     assert_eq!(kinds, ["garbage", "frame", "garbage", "frame", "garbage"]);
-    assert_eq!(diags_of(&recs), vec![(0, "garbage"), (9, "garbage"), (28, "trailing_bytes")]);
+    assert_eq!(
+        diags_of(&recs),
+        vec![(0, "garbage"), (9, "garbage"), (28, "trailing_bytes")]
+    );
     accounted(&recs, input.len());
 }
 
@@ -161,7 +183,17 @@ fn absurd_length_is_skipped_with_a_diagnostic_and_decoding_carries_on() {
     let mut input = hex("53 04 ff ff a2 01");
     input.extend(hex(MOVE_ABS));
     let recs = run(&input, &[]);
-    assert_eq!(recs[0], Rec::Garbage(0, input[..6].to_vec(), GarbageKind::AbsurdLength { msg_id: 0x0453, len: 0xFFFF }));
+    assert_eq!(
+        recs[0],
+        Rec::Garbage(
+            0,
+            input[..6].to_vec(),
+            GarbageKind::AbsurdLength {
+                msg_id: 0x0453,
+                len: 0xFFFF
+            }
+        )
+    );
     assert!(matches!(&recs[1], Rec::Frame(6, _, false)));
     assert_eq!(diags_of(&recs), vec![(0, "absurd_length")]);
 }
@@ -198,7 +230,12 @@ fn long_garbage_runs_are_cut_into_bounded_records() {
     let recs = run(&input, &[123, 5000]);
     // 4096 + 4096 + 1803 bytes of garbage, then the last 5 bytes, too few for a header.
     assert_eq!(recs.len(), 4);
-    assert!(recs.iter().all(|r| matches!(r, Rec::Garbage(_, b, _) if b.len() <= 4096)));
-    assert!(matches!(recs[3], Rec::Garbage(9995, _, GarbageKind::TrailingBytes)));
+    assert!(recs
+        .iter()
+        .all(|r| matches!(r, Rec::Garbage(_, b, _) if b.len() <= 4096)));
+    assert!(matches!(
+        recs[3],
+        Rec::Garbage(9995, _, GarbageKind::TrailingBytes)
+    ));
     accounted(&recs, input.len());
 }

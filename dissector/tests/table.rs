@@ -3,16 +3,19 @@
 
 use aptscope_dissector::apt::{AptFrame, FieldValue, Value};
 use aptscope_dissector::spec_examples::{self, Owner};
+use aptscope_dissector::synth::{all_forms, random_frame, Rng};
 use aptscope_dissector::table::FormKind;
 use aptscope_dissector::Table;
-use aptscope_dissector::synth::{all_forms, random_frame, Rng};
 
 #[test]
 fn every_id_in_the_spec_indexes_is_in_the_table() {
     let t = Table::global();
     let mut missing = vec![];
     let mut n = 0;
-    for line in include_str!("spec_ids.txt").lines().filter(|l| !l.starts_with('#')) {
+    for line in include_str!("spec_ids.txt")
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+    {
         let (id, name) = line.split_once(' ').expect("id name");
         let id = u16::from_str_radix(id.trim_start_matches("0x"), 16).expect("hex id");
         n += 1;
@@ -21,7 +24,10 @@ fn every_id_in_the_spec_indexes_is_in_the_table() {
         }
     }
     assert!(n > 400, "the fixture lists the spec's index lines");
-    assert!(missing.is_empty(), "ids in the spec's indexes but not in the table: {missing:#?}");
+    assert!(
+        missing.is_empty(),
+        "ids in the spec's indexes but not in the table: {missing:#?}"
+    );
     assert!(t.msgs().len() >= 320, "{} messages", t.msgs().len());
 }
 
@@ -40,16 +46,30 @@ fn every_spec_example_decodes_as_the_spec_states() {
         }
     }
     assert!(all.len() >= 200, "only {} examples", all.len());
-    assert!(failures.is_empty(), "{} of {} examples fail:\n{}", failures.len(), all.len(), failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "{} of {} examples fail:\n{}",
+        failures.len(),
+        all.len(),
+        failures.join("\n")
+    );
 }
 
 #[test]
 fn spec_examples_known_wrong_are_recorded_with_a_reason() {
     let t = Table::global();
-    let bad: Vec<_> = spec_examples::all(t).into_iter().filter(|(_, e)| e.bad_reason.is_some()).collect();
+    let bad: Vec<_> = spec_examples::all(t)
+        .into_iter()
+        .filter(|(_, e)| e.bad_reason.is_some())
+        .collect();
     assert!(!bad.is_empty());
     for (_, e) in bad {
-        assert!(e.bad_reason.is_some_and(|r| r.len() > 10), "{}:{} needs a real reason", e.file, e.line);
+        assert!(
+            e.bad_reason.is_some_and(|r| r.len() > 10),
+            "{}:{} needs a real reason",
+            e.file,
+            e.line
+        );
     }
 }
 
@@ -59,7 +79,10 @@ fn same(v: &Value<'_>, want: &FieldValue) -> bool {
         (Value::F(x), FieldValue::Float(w)) => x == w,
         (Value::Str(b), FieldValue::Text(w)) => aptscope_dissector::apt::text_of(b) == w.as_str(),
         (Value::Bytes(b), FieldValue::Bytes(w)) => b == &w.as_slice(),
-        (Value::Array(..), FieldValue::List(w)) => v.elements().map(|e| e.as_f64()).eq(w.iter().map(|x| Some(*x))),
+        (Value::Array(..), FieldValue::List(w)) => v
+            .elements()
+            .map(|e| e.as_f64())
+            .eq(w.iter().map(|x| Some(*x))),
         _ => false,
     }
 }
@@ -75,11 +98,22 @@ fn decode_of_encode_is_identity_for_every_form() {
             let (bytes, vals) = random_frame(t, &mut r, m, form, sub);
             let f = AptFrame::decode(t, 0, &bytes, false).expect("a frame");
             assert_eq!(f.msg.map(|x| x.id), Some(m.id), "{}", m.name);
-            assert!(f.form.is_some_and(|x| std::ptr::eq(x, form)), "{} {:?}: decoded another form", m.name, form.kind);
+            assert!(
+                f.form.is_some_and(|x| std::ptr::eq(x, form)),
+                "{} {:?}: decoded another form",
+                m.name,
+                form.kind
+            );
             assert!(f.diags.is_empty(), "{}: {:?}", m.name, f.diags);
             for (k, want) in &vals {
-                let (_, got) = f.field(k).unwrap_or_else(|| panic!("{}: field {k} missing", m.name));
-                assert!(same(&got, want), "{} {k}: encoded {want:?}, decoded {got:?}", m.name);
+                let (_, got) = f
+                    .field(k)
+                    .unwrap_or_else(|| panic!("{}: field {k} missing", m.name));
+                assert!(
+                    same(&got, want),
+                    "{} {k}: encoded {want:?}, decoded {got:?}",
+                    m.name
+                );
             }
             if form.kind != FormKind::Header {
                 assert_eq!(f.bytes.len(), 6 + f.header().data_len());

@@ -106,8 +106,8 @@ impl<'a, 't> AptFrame<'a, 't> {
             f.diag(
                 bytes.len(),
                 DiagKind::Truncated {
-                    expected: HEADER_LEN + h.data_len(),
-                    got: bytes.len(),
+                    expected: (HEADER_LEN + h.data_len()) as u32,
+                    got: bytes.len() as u32,
                 },
             );
         }
@@ -144,7 +144,7 @@ impl<'a, 't> AptFrame<'a, 't> {
                         (m.subs, form.fields.iter().find(|x| x.name == "sub_id"))
                     {
                         let id = bytes[p1.loc.frame_offset()] as u16;
-                        f.sub = table.sub(g, id);
+                        f.sub = table.sub_of(m, g, id);
                         if f.sub.is_none() {
                             f.diag(2, DiagKind::UnknownSubId { sub_id: id });
                         }
@@ -160,7 +160,7 @@ impl<'a, 't> AptFrame<'a, 't> {
                     let Some(id) = bytes.get(6..8).map(|b| u16::from_le_bytes([b[0], b[1]])) else {
                         continue;
                     };
-                    match table.sub(g, id) {
+                    match table.sub_of(m, g, id) {
                         None => f.diag(6, DiagKind::UnknownSubId { sub_id: id }),
                         Some(s) => {
                             f.sub = Some(s);
@@ -169,7 +169,13 @@ impl<'a, 't> AptFrame<'a, 't> {
                                 .iter()
                                 .find(|sf| sf.kind == FormKind::Data(len as u16));
                             if f.form.is_none() {
-                                f.diag(2, DiagKind::LengthMismatch { len, has_data });
+                                f.diag(
+                                    2,
+                                    DiagKind::LengthMismatch {
+                                        len: len as u32,
+                                        has_data,
+                                    },
+                                );
                             }
                         }
                     }
@@ -181,9 +187,15 @@ impl<'a, 't> AptFrame<'a, 't> {
         if f.msg_form.is_none() {
             let hdr_only = m.forms.iter().all(|x| x.kind == FormKind::Header);
             if has_data && hdr_only {
-                f.diag(4, DiagKind::HeaderOnlyWithData { len });
+                f.diag(4, DiagKind::HeaderOnlyWithData { len: len as u32 });
             } else {
-                f.diag(2, DiagKind::LengthMismatch { len, has_data });
+                f.diag(
+                    2,
+                    DiagKind::LengthMismatch {
+                        len: len as u32,
+                        has_data,
+                    },
+                );
             }
         }
         Some(f)

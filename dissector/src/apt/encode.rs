@@ -81,7 +81,7 @@ impl FieldValue {
             Ty::Str(_) => return Ok(FieldValue::Text(s.to_string())),
             Ty::Bytes(_) | Ty::Pad(_) => {
                 let clean: String = s.chars().filter(|c| c.is_ascii_hexdigit()).collect();
-                if clean.len() % 2 != 0
+                if !clean.len().is_multiple_of(2)
                     || clean.len()
                         != s.chars()
                             .filter(|c| !c.is_whitespace() && *c != ',')

@@ -20,6 +20,8 @@ pub struct Table {
     data: TableData,
     /// Message index by id; `u16::MAX` for none.
     by_id: Box<[u16]>,
+    /// Per message index: its group's sub-messages as (sub id, index into `data.subs`).
+    msg_subs: Vec<Vec<(u16, usize)>>,
 }
 
 impl Table {
@@ -47,7 +49,21 @@ impl Table {
         for (i, m) in data.msgs.iter().enumerate() {
             by_id[m.id as usize] = i as u16;
         }
-        Ok(Table { data, by_id })
+        let msg_subs = data
+            .msgs
+            .iter()
+            .map(|m| {
+                let subs = data.subs.iter().enumerate();
+                subs.filter(|(_, s)| Some(s.group) == m.subs)
+                    .map(|(i, s)| (s.id, i))
+                    .collect()
+            })
+            .collect();
+        Ok(Table {
+            data,
+            by_id,
+            msg_subs,
+        })
     }
 
     /// All messages, in table order.
@@ -87,6 +103,18 @@ impl Table {
             .subs
             .iter()
             .find(|s| s.group == group && s.id == id)
+    }
+
+    /// A sub-message of `m`'s group (`g`) by id, through a per-message index (the decoder's path).
+    #[inline]
+    pub fn sub_of(&self, m: &MsgDef, g: &str, id: u16) -> Option<&SubDef> {
+        match self.by_id[m.id as usize] {
+            u16::MAX => self.sub(g, id),
+            i => self.msg_subs[i as usize]
+                .iter()
+                .find(|(s, _)| *s == id)
+                .map(|(_, x)| &self.data.subs[*x]),
+        }
     }
 
     /// A sub-message of a group by name (case-insensitive).
