@@ -10,6 +10,12 @@ use std::fmt::Write;
 /// Append `s` as a JSON string literal.
 pub fn string(out: &mut String, s: &str) {
     out.push('"');
+    // Names and labels never need escaping: copy them in one go.
+    if s.bytes().all(|b| b >= 0x20 && b != b'"' && b != b'\\') {
+        out.push_str(s);
+        out.push('"');
+        return;
+    }
     for c in s.chars() {
         match c {
             '"' => out.push_str("\\\""),
@@ -91,13 +97,13 @@ pub fn value(out: &mut String, table: &Table, f: &Field, v: &Value<'_>) {
                 out.push(']');
                 return;
             }
-            let _ = write!(out, "{x}");
+            uint(out, *x);
         }
         Value::I(x) => {
             if let Some(l) = f.enumeration.and_then(|e| table.enum_def(e).label(*x)) {
                 return string(out, l);
             }
-            let _ = write!(out, "{x}");
+            int(out, *x);
         }
         Value::F(x) => float(out, *x),
         Value::Str(b) => string(out, &text_of(b)),
@@ -109,12 +115,8 @@ pub fn value(out: &mut String, table: &Table, f: &Field, v: &Value<'_>) {
                     out.push(',');
                 }
                 match e {
-                    Value::U(x) => {
-                        let _ = write!(out, "{x}");
-                    }
-                    Value::I(x) => {
-                        let _ = write!(out, "{x}");
-                    }
+                    Value::U(x) => uint(out, x),
+                    Value::I(x) => int(out, x),
                     Value::F(x) => float(out, x),
                     _ => out.push_str("null"),
                 }
@@ -125,34 +127,74 @@ pub fn value(out: &mut String, table: &Table, f: &Field, v: &Value<'_>) {
 }
 
 fn addr(out: &mut String, key: &str, a: crate::apt::Addr) {
-    let _ = write!(
-        out,
-        ",\"{key}\":{{\"addr\":{},\"name\":\"{}\"",
-        a.byte(),
-        a.name()
-    );
+    use crate::apt::Addr;
+    out.push_str(",\"");
+    out.push_str(key);
+    out.push_str("\":{\"addr\":");
+    uint(out, a.byte() as u64);
+    out.push_str(",\"name\":\"");
+    match a {
+        Addr::Host => out.push_str("host"),
+        Addr::Rack => out.push_str("rack"),
+        Addr::Usb => out.push_str("usb"),
+        Addr::Bay(n) => {
+            out.push_str("bay");
+            out.push((b'0' + n) as char);
+        }
+        Addr::Unknown(x) => {
+            let _ = write!(out, "0x{x:02X}");
+        }
+    }
+    out.push('"');
     if let Some(b) = a.bay() {
-        let _ = write!(out, ",\"bay\":{b}");
+        out.push_str(",\"bay\":");
+        uint(out, b as u64);
     }
     out.push('}');
+}
+
+/// Append an unsigned integer (cheaper than `write!` on the hot path).
+pub fn uint(out: &mut String, mut x: u64) {
+    let mut buf = [0u8; 20];
+    let mut i = buf.len();
+    loop {
+        i -= 1;
+        buf[i] = b'0' + (x % 10) as u8;
+        x /= 10;
+        if x == 0 {
+            break;
+        }
+    }
+    out.extend(buf[i..].iter().map(|&b| b as char));
+}
+
+/// Append a signed integer.
+pub fn int(out: &mut String, x: i64) {
+    if x < 0 {
+        out.push('-');
+    }
+    uint(out, x.unsigned_abs());
 }
 
 /// Append the JSON object of a decoded APT frame (no trailing newline). `n` is the record number.
 pub fn apt_frame(out: &mut String, n: u64, f: &AptFrame<'_, '_>) {
     let h = f.header();
-    let _ = write!(
-        out,
-        "{{\"n\":{n},\"proto\":\"apt\",\"type\":\"frame\",\"offset\":{},\"len\":{},\"raw\":",
-        f.offset,
-        f.bytes.len()
-    );
+    out.push_str("{\"n\":");
+    uint(out, n);
+    out.push_str(",\"proto\":\"apt\",\"type\":\"frame\",\"offset\":");
+    uint(out, f.offset);
+    out.push_str(",\"len\":");
+    uint(out, f.bytes.len() as u64);
+    out.push_str(",\"raw\":");
     hex(out, f.bytes);
-    let _ = write!(
-        out,
-        ",\"msgid\":{},\"msgid_hex\":\"0x{:04X}\",\"name\":",
-        h.msg_id(),
-        h.msg_id()
-    );
+    out.push_str(",\"msgid\":");
+    uint(out, h.msg_id() as u64);
+    const H: &[u8; 16] = b"0123456789ABCDEF";
+    out.push_str(",\"msgid_hex\":\"0x");
+    for sh in [12, 8, 4, 0] {
+        out.push(H[(h.msg_id() >> sh) as usize & 15] as char);
+    }
+    out.push_str("\",\"name\":");
     match f.msg {
         Some(m) => {
             string(out, m.name);
