@@ -343,6 +343,17 @@ fn form_json(out: &mut String, table: &Table, form: &crate::table::Form) {
     out.push_str("]}");
 }
 
+fn forms_json(out: &mut String, table: &Table, forms: &[crate::table::Form]) {
+    out.push_str(",\"forms\":[");
+    for (i, f) in forms.iter().enumerate() {
+        if i > 0 {
+            out.push(',');
+        }
+        form_json(out, table, f);
+    }
+    out.push(']');
+}
+
 /// Append the JSON object describing a message definition (for `aptscope messages --json`).
 pub fn msg_def(out: &mut String, table: &Table, m: &crate::table::MsgDef) {
     let _ = write!(
@@ -366,14 +377,8 @@ pub fn msg_def(out: &mut String, table: &Table, m: &crate::table::MsgDef) {
         out.push_str(",\"sub_group\":");
         string(out, g);
     }
-    out.push_str(",\"forms\":[");
-    for (i, f) in m.forms.iter().enumerate() {
-        if i > 0 {
-            out.push(',');
-        }
-        form_json(out, table, f);
-    }
-    let _ = write!(out, "],\"examples\":{}}}", m.examples.len());
+    forms_json(out, table, &m.forms);
+    let _ = write!(out, ",\"examples\":{}}}", m.examples.len());
 }
 
 /// Append the JSON object describing a sub-message definition.
@@ -386,12 +391,6 @@ pub fn sub_def(out: &mut String, table: &Table, s: &crate::table::SubDef) {
     string(out, s.name);
     out.push_str(",\"doc\":");
     string(out, s.doc);
-    out.push_str(",\"forms\":[");
-    for (i, f) in s.forms.iter().enumerate() {
-        if i > 0 {
-            out.push(',');
-        }
-        form_json(out, table, f);
-    }
-    let _ = write!(out, "],\"examples\":{}}}", s.examples.len());
+    forms_json(out, table, &s.forms);
+    let _ = write!(out, ",\"examples\":{}}}", s.examples.len());
 }

@@ -2,7 +2,7 @@
 //! framer and decoder. Used by the crate's tests and the `checktable` example.
 
 use crate::apt::{text_of, AptFrame, AptFramer, Item, Value};
-use crate::table::{example_bytes, Example, FlagsDef, Table};
+use crate::table::{example_bytes, parse_int, Example, FlagsDef, Table};
 
 /// What an example belongs to.
 #[derive(Debug, Clone, Copy)]
@@ -35,18 +35,6 @@ fn flags_mask(defs: Option<&FlagsDef>, s: &str) -> Option<u64> {
         };
     }
     Some(acc)
-}
-
-fn parse_int(s: &str) -> Option<i64> {
-    let (neg, t) = match s.strip_prefix('-') {
-        Some(r) => (true, r),
-        None => (false, s),
-    };
-    let v = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
-        Some(h) => i64::from_str_radix(h, 16).ok()?,
-        None => t.parse().ok()?,
-    };
-    Some(if neg { -v } else { v })
 }
 
 fn value_matches(table: &Table, f: &crate::table::Field, v: &Value<'_>, want: &str) -> bool {

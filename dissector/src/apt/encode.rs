@@ -1,7 +1,7 @@
 //! Building frames from field values, driven by the same table as decoding.
 
 use super::header::{emit_header, HEADER_LEN};
-use crate::table::{Field, Form, FormKind, Loc, Prim, Table, Ty};
+use crate::table::{parse_int, Field, Form, FormKind, Loc, Prim, Table, Ty};
 use std::fmt;
 
 /// A value to put into a field.
@@ -161,18 +161,6 @@ impl FieldValue {
         }
         Err(bad(&exp))
     }
-}
-
-fn parse_int(s: &str) -> Option<i64> {
-    let (neg, t) = match s.strip_prefix('-') {
-        Some(r) => (true, r),
-        None => (false, s),
-    };
-    let v = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
-        Some(h) => i64::from_str_radix(h, 16).ok()?,
-        None => t.parse::<i64>().ok()?,
-    };
-    Some(if neg { -v } else { v })
 }
 
 fn parse_num(s: &str) -> Option<f64> {

@@ -6,7 +6,7 @@ mod model;
 mod parse;
 
 pub use model::*;
-pub use parse::example_bytes;
+pub use parse::{example_bytes, parse_int};
 
 use std::sync::OnceLock;
 

@@ -88,7 +88,9 @@ fn tokens(s: &str) -> Vec<&str> {
     out
 }
 
-fn parse_int(s: &str) -> Option<i64> {
+/// Parse an integer as written in the table and on the command line: decimal or `0x` hex, an
+/// optional `-`, `_` separators allowed.
+pub fn parse_int(s: &str) -> Option<i64> {
     let s = s.trim();
     let (neg, s) = match s.strip_prefix('-') {
         Some(r) => (true, r),
