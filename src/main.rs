@@ -148,7 +148,7 @@ fn decode(file: &str, hex: bool, as_json: bool) -> io::Result<()> {
             let mut l = String::new();
             if as_json {
                 l.push_str("{\"type\":\"input\",\"diag\":");
-                json::diags(&mut l, std::iter::once(d));
+                json::diags(&mut l, std::iter::once(*d));
                 l.push('}');
             } else {
                 text::input_diag_line(&mut l, d);

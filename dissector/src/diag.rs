@@ -153,32 +153,3 @@ impl fmt::Display for Diag {
         write!(f, "@{}: {}", self.offset, self.kind)
     }
 }
-
-/// A small inline list of diagnostics (no allocation per frame).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct Diags {
-    items: [Option<Diag>; 4],
-    len: u8,
-}
-
-impl Diags {
-    /// Add one (beyond capacity, the last slot is overwritten: at most 4 kinds can apply to one
-    /// frame: truncation, two addresses, and one of id/length/sub-id).
-    pub fn push(&mut self, d: Diag) {
-        let i = (self.len as usize).min(self.items.len() - 1);
-        self.items[i] = Some(d);
-        self.len = (i + 1) as u8;
-    }
-    /// Iterate.
-    pub fn iter(&self) -> impl Iterator<Item = &Diag> {
-        self.items[..self.len as usize].iter().flatten()
-    }
-    /// Number of diagnostics.
-    pub fn len(&self) -> usize {
-        self.len as usize
-    }
-    /// None at all.
-    pub fn is_empty(&self) -> bool {
-        self.len == 0
-    }
-}

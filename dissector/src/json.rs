@@ -54,7 +54,7 @@ pub fn float(out: &mut String, x: f64) {
 }
 
 /// Append a diagnostics array: `[{"kind":…, "offset":…, "msg":…}]`.
-pub fn diags<'a>(out: &mut String, ds: impl Iterator<Item = &'a Diag>) {
+pub fn diags(out: &mut String, ds: impl Iterator<Item = Diag>) {
     out.push('[');
     for (i, d) in ds.enumerate() {
         if i > 0 {
@@ -250,7 +250,7 @@ pub fn apt_frame(out: &mut String, n: u64, f: &AptFrame<'_, '_>) {
         out.push('}');
     }
     out.push_str(",\"diag\":");
-    diags(out, f.diags.iter());
+    diags(out, f.diags());
     out.push('}');
 }
 
@@ -276,7 +276,7 @@ pub fn apt_garbage(out: &mut String, n: u64, offset: u64, bytes: &[u8], kind: Ga
     hex(out, bytes);
     out.push_str(",\"diag\":");
     let d = garbage_diag(offset, bytes.len(), kind);
-    diags(out, std::iter::once(&d));
+    diags(out, std::iter::once(d));
     out.push('}');
 }
 

@@ -126,7 +126,7 @@ fn check_good(table: &Table, owner: Owner<'_>, ex: &Example) -> Result<(), Strin
         return Err(format!("frames as {} frames, not 1", frames.len()));
     };
     let f = AptFrame::decode(table, *off, fb, *trunc).ok_or("not a frame")?;
-    if let Some(d) = f.diags.iter().next() {
+    if let Some(d) = f.diags().next() {
         return Err(format!("diagnostic: {d}"));
     }
     match owner {

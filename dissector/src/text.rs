@@ -41,7 +41,7 @@ pub fn apt_line(out: &mut String, n: u64, f: &AptFrame<'_, '_>) {
             let _ = write!(out, "{b:02x}");
         }
     }
-    for d in f.diags.iter() {
+    for d in f.diags() {
         let _ = write!(out, "  !! {d}");
     }
 }

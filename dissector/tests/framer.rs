@@ -112,7 +112,7 @@ fn diags_of(recs: &[Rec]) -> Vec<(u64, &'static str)> {
         match r {
             Rec::Frame(o, b, tr) => {
                 let f = AptFrame::decode(t, *o, b, *tr).expect("frame");
-                v.extend(f.diags.iter().map(|d| (d.offset, d.kind.name())));
+                v.extend(f.diags().map(|d| (d.offset, d.kind.name())));
             }
             Rec::Garbage(o, b, k) => {
                 let d = aptscope_dissector::json::garbage_diag(*o, b.len(), *k);
@@ -139,7 +139,7 @@ fn truncated_final_frame_is_shown_with_its_offset() {
     let f = AptFrame::decode(Table::global(), 6, &input[6..], true).expect("frame");
     assert_eq!(f.name(), Some("MOT_MOVE_ABSOLUTE"));
     assert_eq!(
-        f.diags.iter().next().map(|d| d.kind),
+        f.diags().next().map(|d| d.kind),
         Some(DiagKind::Truncated {
             expected: 12,
             got: 9

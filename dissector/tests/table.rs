@@ -104,7 +104,12 @@ fn decode_of_encode_is_identity_for_every_form() {
                 m.name,
                 form.kind
             );
-            assert!(f.diags.is_empty(), "{}: {:?}", m.name, f.diags);
+            assert!(
+                !f.has_diags(),
+                "{}: {:?}",
+                m.name,
+                f.diags().collect::<Vec<_>>()
+            );
             for (k, want) in &vals {
                 let (_, got) = f
                     .field(k)

@@ -1,8 +1,17 @@
 //! Decoding a framed APT message against the table: message, form, sub-message, typed fields.
 
 use super::header::{Addr, Header, HEADER_LEN};
-use crate::diag::{Diag, DiagKind, Diags, Which};
+use crate::diag::{Diag, DiagKind, Which};
 use crate::table::{Field, Form, FormKind, MsgDef, Prim, SubDef, Table, Ty};
+
+const D_TRUNCATED: u8 = 1;
+const D_DST: u8 = 2;
+const D_SRC: u8 = 4;
+const D_UNKNOWN_ID: u8 = 8;
+const D_SUB_HDR: u8 = 16;
+const D_SUB_DATA: u8 = 32;
+const D_LENGTH: u8 = 64;
+const D_HDR_WITH_DATA: u8 = 128;
 
 /// A frame decoded against the table. Borrows the frame bytes and the table; no allocation.
 #[derive(Debug, Clone, Copy)]
@@ -19,8 +28,8 @@ pub struct AptFrame<'a, 't> {
     pub sub: Option<&'t SubDef>,
     /// The form whose fields apply (the sub's form for sub-message data packets).
     pub form: Option<&'t Form>,
-    /// Problems found.
-    pub diags: Diags,
+    /// Problems found, as `D_*` bits (see [`diags`](Self::diags)).
+    diag_bits: u8,
     table: &'t Table,
 }
 
@@ -99,38 +108,20 @@ impl<'a, 't> AptFrame<'a, 't> {
             msg_form: None,
             sub: None,
             form: None,
-            diags: Diags::default(),
+            diag_bits: 0,
             table,
         };
         if truncated {
-            f.diag(
-                bytes.len(),
-                DiagKind::Truncated {
-                    expected: (HEADER_LEN + h.data_len()) as u32,
-                    got: bytes.len() as u32,
-                },
-            );
+            f.diag_bits |= D_TRUNCATED;
         }
         if !h.dst().is_known() {
-            f.diag(
-                4,
-                DiagKind::UnknownAddress {
-                    which: Which::Destination,
-                    value: h.dst_byte(),
-                },
-            );
+            f.diag_bits |= D_DST;
         }
         if !h.src().is_known() {
-            f.diag(
-                5,
-                DiagKind::UnknownAddress {
-                    which: Which::Source,
-                    value: h.src_byte(),
-                },
-            );
+            f.diag_bits |= D_SRC;
         }
         let Some(m) = f.msg else {
-            f.diag(0, DiagKind::UnknownId { msg_id: h.msg_id() });
+            f.diag_bits |= D_UNKNOWN_ID;
             return Some(f);
         };
         let has_data = h.has_data();
@@ -140,13 +131,12 @@ impl<'a, 't> AptFrame<'a, 't> {
                 FormKind::Header if !has_data => {
                     f.msg_form = Some(form);
                     f.form = Some(form);
-                    if let (Some(g), Some(p1)) =
-                        (m.subs, form.fields.iter().find(|x| x.name == "sub_id"))
-                    {
-                        let id = bytes[p1.loc.frame_offset()] as u16;
-                        f.sub = table.sub_of(m, g, id);
-                        if f.sub.is_none() {
-                            f.diag(2, DiagKind::UnknownSubId { sub_id: id });
+                    if let Some(g) = m.subs {
+                        if let Some(p1) = form.fields.iter().find(|x| x.name == "sub_id") {
+                            f.sub = table.sub_of(m, g, bytes[p1.loc.frame_offset()] as u16);
+                            if f.sub.is_none() {
+                                f.diag_bits |= D_SUB_HDR;
+                            }
                         }
                     }
                 }
@@ -155,27 +145,18 @@ impl<'a, 't> AptFrame<'a, 't> {
                     f.form = Some(form);
                 }
                 FormKind::Sub if has_data && len >= 2 => {
-                    let Some(g) = m.subs else { continue };
-                    f.msg_form = Some(form);
-                    let Some(id) = bytes.get(6..8).map(|b| u16::from_le_bytes([b[0], b[1]])) else {
+                    let (Some(g), Some(id)) = (m.subs, f.data_sub_id()) else {
                         continue;
                     };
+                    f.msg_form = Some(form);
                     match table.sub_of(m, g, id) {
-                        None => f.diag(6, DiagKind::UnknownSubId { sub_id: id }),
+                        None => f.diag_bits |= D_SUB_DATA,
                         Some(s) => {
                             f.sub = Some(s);
-                            f.form = s
-                                .forms
-                                .iter()
-                                .find(|sf| sf.kind == FormKind::Data(len as u16));
+                            let want = FormKind::Data(len as u16);
+                            f.form = s.forms.iter().find(|sf| sf.kind == want);
                             if f.form.is_none() {
-                                f.diag(
-                                    2,
-                                    DiagKind::LengthMismatch {
-                                        len: len as u32,
-                                        has_data,
-                                    },
-                                );
+                                f.diag_bits |= D_LENGTH;
                             }
                         }
                     }
@@ -186,26 +167,87 @@ impl<'a, 't> AptFrame<'a, 't> {
         }
         if f.msg_form.is_none() {
             let hdr_only = m.forms.iter().all(|x| x.kind == FormKind::Header);
-            if has_data && hdr_only {
-                f.diag(4, DiagKind::HeaderOnlyWithData { len: len as u32 });
+            f.diag_bits |= if has_data && hdr_only {
+                D_HDR_WITH_DATA
             } else {
-                f.diag(
-                    2,
-                    DiagKind::LengthMismatch {
-                        len: len as u32,
-                        has_data,
-                    },
-                );
-            }
+                D_LENGTH
+            };
         }
         Some(f)
     }
 
-    fn diag(&mut self, at: usize, kind: DiagKind) {
-        self.diags.push(Diag {
-            offset: self.offset + at as u64,
-            kind,
-        });
+    fn data_sub_id(&self) -> Option<u16> {
+        self.bytes
+            .get(6..8)
+            .map(|b| u16::from_le_bytes([b[0], b[1]]))
+    }
+
+    /// Whether anything is wrong with this frame.
+    pub fn has_diags(&self) -> bool {
+        self.diag_bits != 0
+    }
+
+    /// The problems found, each with its stream offset. Derived from the frame on demand, so a
+    /// clean frame costs nothing.
+    pub fn diags(&self) -> impl Iterator<Item = Diag> + '_ {
+        let h = self.header();
+        let (has_data, len) = (h.has_data(), h.data_len() as u32);
+        [
+            D_TRUNCATED,
+            D_DST,
+            D_SRC,
+            D_UNKNOWN_ID,
+            D_SUB_HDR,
+            D_SUB_DATA,
+            D_LENGTH,
+            D_HDR_WITH_DATA,
+        ]
+        .into_iter()
+        .filter(move |bit| self.diag_bits & bit != 0)
+        .map(move |bit| {
+            let (at, kind) = match bit {
+                D_TRUNCATED => (
+                    self.bytes.len(),
+                    DiagKind::Truncated {
+                        expected: HEADER_LEN as u32 + len,
+                        got: self.bytes.len() as u32,
+                    },
+                ),
+                D_DST => (
+                    4,
+                    DiagKind::UnknownAddress {
+                        which: Which::Destination,
+                        value: h.dst_byte(),
+                    },
+                ),
+                D_SRC => (
+                    5,
+                    DiagKind::UnknownAddress {
+                        which: Which::Source,
+                        value: h.src_byte(),
+                    },
+                ),
+                D_UNKNOWN_ID => (0, DiagKind::UnknownId { msg_id: h.msg_id() }),
+                D_SUB_HDR => (
+                    2,
+                    DiagKind::UnknownSubId {
+                        sub_id: h.param1() as u16,
+                    },
+                ),
+                D_SUB_DATA => (
+                    6,
+                    DiagKind::UnknownSubId {
+                        sub_id: self.data_sub_id().unwrap_or(0),
+                    },
+                ),
+                D_LENGTH => (2, DiagKind::LengthMismatch { len, has_data }),
+                _ => (4, DiagKind::HeaderOnlyWithData { len }),
+            };
+            Diag {
+                offset: self.offset + at as u64,
+                kind,
+            }
+        })
     }
 
     /// The header view.
