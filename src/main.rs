@@ -2,9 +2,11 @@
 #![forbid(unsafe_code)]
 
 use aptscope_capture::{ByteSource, InputFormat};
-use aptscope_dissector::apt::{encode, Addr, AptFrame, AptFramer, FieldValue, Item};
+use aptscope_dissector::apt::{encode, Addr, FieldValue};
+use aptscope_dissector::detect::Proto;
+use aptscope_dissector::pipeline::{Format, Pipeline};
 use aptscope_dissector::table::{Form, FormKind, MsgDef};
-use aptscope_dissector::{json, text, Table};
+use aptscope_dissector::{json, Table};
 use clap::{Parser, Subcommand};
 use std::io::{self, BufWriter, Write};
 use std::process::ExitCode;
@@ -20,6 +22,13 @@ struct Cli {
     cmd: Cmd,
 }
 
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum ProtoArg {
+    Auto,
+    Apt,
+    Elliptec,
+}
+
 #[derive(Subcommand)]
 enum Cmd {
     /// Decode a byte stream: one line per frame (or NDJSON with --json).
@@ -33,6 +42,9 @@ enum Cmd {
         /// Write NDJSON, one object per frame or garbage record.
         #[arg(long)]
         json: bool,
+        /// Protocol of the stream (default: detected from the first 4 KiB).
+        #[arg(long, value_enum, default_value_t = ProtoArg::Auto)]
+        proto: ProtoArg,
     },
     /// List the message table.
     Messages {
@@ -67,7 +79,12 @@ enum Cmd {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let r = match cli.cmd {
-        Cmd::Decode { file, hex, json } => decode(&file, hex, json),
+        Cmd::Decode {
+            file,
+            hex,
+            json,
+            proto,
+        } => decode(&file, hex, json, proto),
         Cmd::Messages { json, verbose } => messages(json, verbose),
         Cmd::Encode {
             name,
@@ -95,8 +112,7 @@ fn main() -> ExitCode {
     }
 }
 
-fn decode(file: &str, hex: bool, as_json: bool) -> io::Result<()> {
-    let table = Table::global();
+fn decode(file: &str, hex: bool, as_json: bool, proto: ProtoArg) -> io::Result<()> {
     let fmt = if hex {
         InputFormat::Hex
     } else {
@@ -105,62 +121,23 @@ fn decode(file: &str, hex: bool, as_json: bool) -> io::Result<()> {
     let mut src = ByteSource::open(file, fmt)
         .map_err(|e| io::Error::new(e.kind(), format!("{file}: {e}")))?;
     let mut out = BufWriter::with_capacity(1 << 16, io::stdout().lock());
-    let mut framer = AptFramer::new(table);
-    let mut line = String::with_capacity(512);
-    let mut n = 0u64;
-    let mut emit = |framer: &mut AptFramer, out: &mut BufWriter<_>| -> io::Result<()> {
-        while let Some(item) = framer.next_item() {
-            n += 1;
-            line.clear();
-            match item {
-                Item::Frame {
-                    offset,
-                    bytes,
-                    truncated,
-                } => {
-                    if let Some(f) = AptFrame::decode(table, offset, bytes, truncated) {
-                        if as_json {
-                            json::apt_frame(&mut line, n, &f);
-                        } else {
-                            text::apt_line(&mut line, n, &f);
-                        }
-                    }
-                }
-                Item::Garbage {
-                    offset,
-                    bytes,
-                    kind,
-                } => {
-                    if as_json {
-                        json::apt_garbage(&mut line, n, offset, bytes, kind);
-                    } else {
-                        text::garbage_line(&mut line, n, offset, bytes, kind);
-                    }
-                }
-            }
-            line.push('\n');
-            out.write_all(line.as_bytes())?;
-        }
-        Ok(())
+    let proto = match proto {
+        ProtoArg::Auto => None,
+        ProtoArg::Apt => Some(Proto::Apt),
+        ProtoArg::Elliptec => Some(Proto::Elliptec),
+    };
+    let mut p = Pipeline::new(proto, if as_json { Format::Json } else { Format::Text });
+    let mut emit = |line: &str| -> io::Result<()> {
+        out.write_all(line.as_bytes())?;
+        out.write_all(b"\n")
     };
     while let Some((chunk, diags)) = src.next_chunk()? {
         for d in diags {
-            let mut l = String::new();
-            if as_json {
-                l.push_str("{\"type\":\"input\",\"diag\":");
-                json::diags(&mut l, std::iter::once(*d));
-                l.push('}');
-            } else {
-                text::input_diag_line(&mut l, d);
-            }
-            l.push('\n');
-            out.write_all(l.as_bytes())?;
+            p.input_diag(d, &mut emit)?;
         }
-        framer.push(chunk);
-        emit(&mut framer, &mut out)?;
+        p.push(chunk, None, &mut emit)?;
     }
-    framer.finish();
-    emit(&mut framer, &mut out)?;
+    p.finish(&mut emit)?;
     out.flush()
 }
 

@@ -74,6 +74,33 @@ pub enum DiagKind {
     },
     /// An odd number of hex digits at the end of hex text input.
     OddHexDigit,
+    /// Elliptec: a two-letter command the manual does not define.
+    UnknownCommand,
+    /// Elliptec: a data character that is not valid for its field (not a hex digit).
+    BadDataChar {
+        /// The character.
+        ch: char,
+    },
+    /// Elliptec: data of another length than the command's.
+    DataLength {
+        /// Characters the command has.
+        expected: u32,
+        /// Characters present.
+        got: u32,
+    },
+    /// Elliptec: a module reply without its CR LF terminator.
+    MissingTerminator,
+    /// Elliptec: spaces or commas between address, command and data.
+    Separators,
+    /// Elliptec: the letter O where the digit 0 belongs.
+    LetterO,
+    /// A command that got no reply within its timeout (or before the stream ended).
+    NoReply {
+        /// Record number of the command.
+        cmd: u64,
+    },
+    /// A reply no command asked for.
+    Unsolicited,
 }
 
 impl DiagKind {
@@ -91,6 +118,14 @@ impl DiagKind {
             DiagKind::UnknownSubId { .. } => "unknown_sub_id",
             DiagKind::BadHex { .. } => "bad_hex",
             DiagKind::OddHexDigit => "odd_hex_digit",
+            DiagKind::UnknownCommand => "unknown_command",
+            DiagKind::BadDataChar { .. } => "bad_data_char",
+            DiagKind::DataLength { .. } => "data_length",
+            DiagKind::MissingTerminator => "missing_terminator",
+            DiagKind::Separators => "separators",
+            DiagKind::LetterO => "letter_o",
+            DiagKind::NoReply { .. } => "no_reply",
+            DiagKind::Unsolicited => "unsolicited",
         }
     }
 }
@@ -144,6 +179,16 @@ impl fmt::Display for DiagKind {
             DiagKind::UnknownSubId { sub_id } => write!(f, "unknown sub-message id 0x{sub_id:04X}"),
             DiagKind::BadHex { ch } => write!(f, "not a hex digit: {ch:?}; skipped"),
             DiagKind::OddHexDigit => write!(f, "odd number of hex digits; last digit ignored"),
+            DiagKind::UnknownCommand => write!(f, "command not in the ELLx manual"),
+            DiagKind::BadDataChar { ch } => write!(f, "{ch:?} is not a valid data character"),
+            DiagKind::DataLength { expected, got } => {
+                write!(f, "{got} data characters, the command has {expected}")
+            }
+            DiagKind::MissingTerminator => write!(f, "reply not terminated by CR LF"),
+            DiagKind::Separators => write!(f, "spaces or commas inside the frame (ignored)"),
+            DiagKind::LetterO => write!(f, "letter O used for digit 0"),
+            DiagKind::NoReply { cmd } => write!(f, "no reply to record {cmd}"),
+            DiagKind::Unsolicited => write!(f, "reply without a pending command"),
         }
     }
 }

@@ -394,3 +394,123 @@ pub fn sub_def(out: &mut String, table: &Table, s: &crate::table::SubDef) {
     forms_json(out, table, &s.forms);
     let _ = write!(out, ",\"examples\":{}}}", s.examples.len());
 }
+
+/// Append the JSON object of a decoded Elliptec frame with what the bus made of it.
+pub fn ell_frame(
+    out: &mut String,
+    n: u64,
+    f: &crate::ell::EllFrame<'_>,
+    o: &crate::ell::Observation,
+) {
+    use crate::ell::{table::Kind, EllValue};
+    out.push_str("{\"n\":");
+    uint(out, n);
+    out.push_str(",\"proto\":\"ell\",\"type\":\"frame\",\"offset\":");
+    uint(out, f.offset);
+    out.push_str(",\"len\":");
+    uint(out, f.bytes.len() as u64);
+    out.push_str(",\"raw\":");
+    hex(out, f.bytes);
+    out.push_str(",\"text\":");
+    string(out, &String::from_utf8_lossy(f.bytes));
+    let _ = write!(
+        out,
+        ",\"addr\":\"{}\",\"dir\":\"{}\",\"cmd\":",
+        f.addr_char(),
+        f.dir().as_str()
+    );
+    string(out, f.code_str());
+    out.push_str(",\"name\":");
+    match f.cmd {
+        Some(c) => string(out, c.name),
+        None => out.push_str("null"),
+    }
+    let scale = o.module.as_ref().and_then(|m| m.scale());
+    out.push_str(",\"fields\":{");
+    let mut phys = String::new();
+    for (i, (fd, v)) in f.fields().enumerate() {
+        if i > 0 {
+            out.push(',');
+        }
+        string(out, fd.name);
+        out.push(':');
+        match (fd.kind, v) {
+            (Kind::Status, EllValue::U(c)) => string(out, crate::ell::table::status_name(c as u32)),
+            (_, EllValue::U(x)) => uint(out, x),
+            (_, EllValue::I(x)) => int(out, x),
+            (_, EllValue::Char(c)) => string(out, c.encode_utf8(&mut [0; 4])),
+            (_, EllValue::Digits(d)) => string(out, d),
+            (_, EllValue::Raw(b)) => hex(out, b),
+        }
+        if let (Kind::Position, EllValue::I(p), Some((ppu, unit))) = (fd.kind, v, scale) {
+            if ppu > 0.0 {
+                if !phys.is_empty() {
+                    phys.push(',');
+                }
+                string(&mut phys, fd.name);
+                phys.push_str(":{\"value\":");
+                float(&mut phys, crate::apt::round_sig(p as f64 / ppu));
+                let _ = write!(phys, ",\"unit\":\"{unit}\"}}");
+            }
+        }
+    }
+    out.push('}');
+    if !phys.is_empty() {
+        out.push_str(",\"phys\":{");
+        out.push_str(&phys);
+        out.push('}');
+    }
+    if let Some(m) = &o.module {
+        out.push_str(",\"module\":{\"first_addr\":");
+        uint(out, m.first_addr as u64);
+        if let Some(x) = m.model {
+            let _ = write!(out, ",\"model\":\"ELL{x}\"");
+        }
+        if let Some(s) = &m.serial {
+            out.push_str(",\"serial\":");
+            string(out, s);
+        }
+        out.push('}');
+    }
+    if let Some(p) = o.pair {
+        out.push_str(",\"pair\":");
+        uint(out, p);
+    }
+    if let Some(l) = o.latency_ns {
+        out.push_str(",\"latency_ms\":");
+        float(out, l as f64 / 1e6);
+    }
+    if o.interim {
+        out.push_str(",\"interim\":true");
+    }
+    out.push_str(",\"diag\":");
+    diags(out, f.diags().iter().copied());
+    out.push('}');
+}
+
+/// Append the JSON object of an Elliptec garbage record.
+pub fn ell_garbage(out: &mut String, n: u64, offset: u64, bytes: &[u8]) {
+    let _ = write!(out, "{{\"n\":{n},\"proto\":\"ell\",\"type\":\"garbage\",\"offset\":{offset},\"len\":{},\"raw\":", bytes.len());
+    hex(out, bytes);
+    out.push_str(",\"text\":");
+    string(out, &String::from_utf8_lossy(bytes));
+    out.push_str(",\"diag\":");
+    let d = Diag {
+        offset,
+        kind: DiagKind::Garbage {
+            len: bytes.len() as u32,
+        },
+    };
+    diags(out, std::iter::once(d));
+    out.push('}');
+}
+
+/// Append a diagnostic that refers to an earlier record (a command that got no reply).
+pub fn late_diag(out: &mut String, proto: &str, refers_to: u64, d: Diag) {
+    let _ = write!(
+        out,
+        "{{\"proto\":\"{proto}\",\"type\":\"diag\",\"ref\":{refers_to},\"diag\":"
+    );
+    diags(out, std::iter::once(d));
+    out.push('}');
+}

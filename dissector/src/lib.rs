@@ -8,9 +8,12 @@
 #![warn(missing_docs)]
 
 pub mod apt;
+pub mod detect;
 pub mod diag;
+pub mod ell;
 pub mod hex;
 pub mod json;
+pub mod pipeline;
 pub mod spec_examples;
 pub mod synth;
 pub mod table;

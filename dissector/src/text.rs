@@ -62,3 +62,67 @@ pub fn garbage_line(out: &mut String, n: u64, offset: u64, bytes: &[u8], kind: G
 pub fn input_diag_line(out: &mut String, d: &Diag) {
     let _ = write!(out, "     - {:>#10x}  !! input: {}", d.offset, d.kind);
 }
+
+/// Append the timeline line of an Elliptec frame with what the bus made of it.
+pub fn ell_line(
+    out: &mut String,
+    n: u64,
+    f: &crate::ell::EllFrame<'_>,
+    o: &crate::ell::Observation,
+) {
+    let arrow = if f.dir() == crate::table::Dir::HostToDevice {
+        "host → "
+    } else {
+        "   ← "
+    };
+    let _ = write!(
+        out,
+        "{n:>6} {:>#10x}  {arrow}{}  {} ",
+        f.offset,
+        f.addr_char(),
+        f.code_str()
+    );
+    let name = f.cmd.map_or("UNKNOWN", |c| c.name);
+    let _ = write!(out, "{name:<28}");
+    let scale = o.module.as_ref().and_then(|m| m.scale());
+    for (fd, v) in f.fields() {
+        out.push(' ');
+        out.push_str(fd.name);
+        out.push('=');
+        crate::ell::fmt_value(fd, &v, scale, out);
+    }
+    if let Some(m) = o.module.as_ref().and_then(|m| m.model) {
+        let _ = write!(out, "  [ELL{m}]");
+    }
+    if let Some(p) = o.pair {
+        let _ = write!(out, "  ↩ #{p}");
+        if let Some(l) = o.latency_ns {
+            let _ = write!(out, " {:.1} ms", l as f64 / 1e6);
+        }
+        if o.interim {
+            out.push_str(" (interim)");
+        }
+    }
+    for d in f.diags() {
+        let _ = write!(out, "  !! {d}");
+    }
+}
+
+/// Append the line of an Elliptec garbage record.
+pub fn ell_garbage_line(out: &mut String, n: u64, offset: u64, bytes: &[u8]) {
+    let _ = write!(
+        out,
+        "{n:>6} {offset:>#10x}  !! {} byte(s) that start no frame: {:?}",
+        bytes.len(),
+        String::from_utf8_lossy(&bytes[..bytes.len().min(32)])
+    );
+}
+
+/// Append a line for a diagnostic that refers to an earlier record.
+pub fn late_diag_line(out: &mut String, refers_to: u64, d: &Diag) {
+    let _ = write!(
+        out,
+        "     - {:>#10x}  !! #{refers_to}: {}",
+        d.offset, d.kind
+    );
+}

@@ -1,0 +1,311 @@
+//! The streaming Elliptec framer.
+//!
+//! A frame is an address character, a two-letter command and its data, then an optional
+//! terminator (CR LF, CR or LF). Host commands are often sent without a terminator, so they are
+//! framed by the command's known data length; module replies end at CR LF. The framer is lenient
+//! about what the manual's own examples contain: a space after the address or the command,
+//! commas between fields, the letter O for the digit 0 as address, one or two extra data
+//! characters before the terminator. Every byte ends up in one frame or garbage record.
+
+use super::table::{lookup, Cmd, Kind};
+
+/// Longest line accepted for a reply of an unknown command, or slack for extra characters.
+const SLACK: usize = 24;
+/// Longest unknown-command line.
+const MAX_UNKNOWN: usize = 64;
+
+/// Why bytes were not framed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GarbageKind {
+    /// No frame starts at these bytes.
+    NoFrame,
+    /// Bytes at the end of the stream too short for a frame.
+    TrailingBytes,
+}
+
+/// What the framer produces.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Item<'a> {
+    /// A frame with its terminator, if any.
+    Frame {
+        /// Stream offset.
+        offset: u64,
+        /// Bytes.
+        bytes: &'a [u8],
+        /// The stream ended inside it.
+        truncated: bool,
+    },
+    /// Bytes outside frames.
+    Garbage {
+        /// Stream offset.
+        offset: u64,
+        /// Bytes.
+        bytes: &'a [u8],
+        /// Why.
+        kind: GarbageKind,
+    },
+}
+
+/// The parsed start of a frame: where address, command and data are.
+#[derive(Debug, Clone, Copy)]
+pub struct Head {
+    /// Address 0–15 (the letter O read as 0).
+    pub addr: u8,
+    /// The address was the letter O.
+    pub letter_o: bool,
+    /// Offset of the two command characters.
+    pub cmd_at: usize,
+    /// Offset of the first data character.
+    pub data_at: usize,
+    /// A space followed the address or the command.
+    pub spaced: bool,
+    /// The command, when known.
+    pub cmd: Option<&'static Cmd>,
+}
+
+fn addr_of(c: u8) -> Option<(u8, bool)> {
+    match c {
+        b'0'..=b'9' => Some((c - b'0', false)),
+        b'A'..=b'F' => Some((c - b'A' + 10, false)),
+        b'a'..=b'f' => Some((c - b'a' + 10, false)),
+        b'O' | b'o' => Some((0, true)),
+        _ => None,
+    }
+}
+
+fn is_term(c: u8) -> bool {
+    c == b'\r' || c == b'\n'
+}
+
+fn is_data_char(c: u8) -> bool {
+    c.is_ascii_hexdigit() || c == b',' || c == b' ' || c == b'O'
+}
+
+/// Parse address and command at the start of `b`. `None` if no frame can start here, `Some(Err)`
+/// if more bytes are needed to tell.
+pub fn head(b: &[u8]) -> Option<Result<Head, ()>> {
+    let (addr, letter_o) = addr_of(*b.first()?)?;
+    let mut at = 1;
+    let mut spaced = false;
+    if matches!(b.get(at), Some(b' ' | b',')) {
+        at += 1;
+        spaced = true;
+    }
+    let Some(code) = b.get(at..at + 2) else {
+        return Some(Err(()));
+    };
+    if !code[0].is_ascii_alphabetic() || !code[1].is_ascii_alphanumeric() {
+        return None;
+    }
+    let cmd = lookup(code);
+    // A letter-O address is only believed for a known command.
+    if letter_o && cmd.is_none() {
+        return None;
+    }
+    let cmd_at = at;
+    at += 2;
+    let mut data_at = at;
+    if cmd.is_some_and(|c| c.data_len() > 0) && matches!(b.get(at), Some(b' ' | b',')) {
+        data_at += 1;
+        spaced = true;
+    } else if b.len() <= at && cmd.is_some_and(|c| c.data_len() > 0) {
+        return Some(Err(()));
+    }
+    Some(Ok(Head {
+        addr,
+        letter_o,
+        cmd_at,
+        data_at,
+        spaced,
+        cmd,
+    }))
+}
+
+/// Decision at one position.
+enum Step {
+    /// A frame of this many bytes (terminator included); `true` if truncated at end of stream.
+    Frame(usize, bool),
+    Skip,
+    NeedMore,
+}
+
+/// Length of the terminator at the start of `b`: CR LF, CR, LF or none. `None` when the end of
+/// the buffer leaves it open (a CR that may be followed by LF).
+fn term_len(b: &[u8], eof: bool) -> Option<usize> {
+    match b {
+        [b'\r', b'\n', ..] => Some(2),
+        [b'\r'] if !eof => None,
+        [b'\r', ..] | [b'\n', ..] => Some(1),
+        [] if !eof => None,
+        _ => Some(0),
+    }
+}
+
+fn step(b: &[u8], eof: bool) -> Step {
+    let h = match head(b) {
+        None => return Step::Skip,
+        Some(Err(())) => return if eof { Step::Skip } else { Step::NeedMore },
+        Some(Ok(h)) => h,
+    };
+    let Some(cmd) = h.cmd else {
+        // Unknown command: only a whole terminated line of data characters is a frame.
+        let rest = &b[h.data_at..];
+        return match rest.iter().take(MAX_UNKNOWN).position(|&c| is_term(c)) {
+            Some(p)
+                if rest[..p]
+                    .iter()
+                    .all(|&c| is_data_char(c) || c.is_ascii_alphanumeric()) =>
+            {
+                match term_len(&rest[p..], eof) {
+                    Some(t) => Step::Frame(h.data_at + p + t, false),
+                    None => Step::NeedMore,
+                }
+            }
+            None if rest.len() < MAX_UNKNOWN && !eof => Step::NeedMore,
+            _ => Step::Skip,
+        };
+    };
+    let n = cmd.data_len();
+    let data = &b[h.data_at..];
+    let raw = cmd.fields.iter().any(|f| f.kind == Kind::Raw);
+    if raw {
+        // Binary data: fixed length, then an optional terminator.
+        if data.len() < n {
+            return if eof {
+                Step::Frame(b.len(), true)
+            } else {
+                Step::NeedMore
+            };
+        }
+        return match term_len(&data[n..], eof) {
+            Some(t) => Step::Frame(h.data_at + n + t, false),
+            None => Step::NeedMore,
+        };
+    }
+    let host = cmd.dir == crate::table::Dir::HostToDevice;
+    if host {
+        if data.len() < n {
+            return if eof {
+                Step::Frame(b.len(), true)
+            } else {
+                Step::NeedMore
+            };
+        }
+        return match term_len(&data[n..], eof) {
+            Some(t) => Step::Frame(h.data_at + n + t, false),
+            None => Step::NeedMore,
+        };
+    }
+    // A module reply: up to its terminator, allowing separators and a few extra characters.
+    let limit = n + SLACK;
+    match data
+        .iter()
+        .take(limit + 1)
+        .position(|&c| is_term(c) || !is_data_char(c))
+    {
+        Some(p) if is_term(data[p]) => match term_len(&data[p..], eof) {
+            Some(t) => Step::Frame(h.data_at + p + t, false),
+            None => Step::NeedMore,
+        },
+        // A non-data character (the next frame's command letters, say) before any terminator:
+        // the reply had no terminator. Take its own length.
+        Some(p) if p >= n => Step::Frame(h.data_at + n, false),
+        Some(_) => Step::Frame(h.data_at + n.min(data.len()), false),
+        None if data.len() > limit => Step::Frame(h.data_at + n, false),
+        None if eof => Step::Frame(b.len(), data.len() < n),
+        None => Step::NeedMore,
+    }
+}
+
+/// Streaming, sans-io Elliptec framer (same interface as the APT framer).
+#[derive(Debug, Default)]
+pub struct EllFramer {
+    buf: Vec<u8>,
+    pos: usize,
+    garbage: Option<usize>,
+    base: u64,
+    eof: bool,
+}
+
+impl EllFramer {
+    /// A new framer.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Append input bytes (consumed bytes are dropped first: bounded memory).
+    pub fn push(&mut self, data: &[u8]) {
+        let keep = self.garbage.unwrap_or(self.pos);
+        if keep > 0 {
+            self.buf.drain(..keep);
+            self.base += keep as u64;
+            self.pos -= keep;
+            if let Some(g) = self.garbage.as_mut() {
+                *g -= keep;
+            }
+        }
+        self.buf.extend_from_slice(data);
+    }
+
+    /// Declare the end of the stream.
+    pub fn finish(&mut self) {
+        self.eof = true;
+    }
+
+    /// The next frame or garbage record, or `None` when more input is needed.
+    pub fn next_item(&mut self) -> Option<Item<'_>> {
+        loop {
+            if let Some(g) = self.garbage {
+                if self.pos - g >= crate::apt::MAX_GARBAGE_RUN {
+                    let end = g + crate::apt::MAX_GARBAGE_RUN;
+                    self.garbage = if end < self.pos { Some(end) } else { None };
+                    return Some(Item::Garbage {
+                        offset: self.base + g as u64,
+                        bytes: &self.buf[g..end],
+                        kind: GarbageKind::NoFrame,
+                    });
+                }
+            }
+            if self.pos >= self.buf.len() {
+                if self.eof {
+                    if let Some(g) = self.garbage.take() {
+                        return Some(Item::Garbage {
+                            offset: self.base + g as u64,
+                            bytes: &self.buf[g..self.pos],
+                            kind: GarbageKind::NoFrame,
+                        });
+                    }
+                }
+                return None;
+            }
+            let s = step(&self.buf[self.pos..], self.eof);
+            match s {
+                Step::Skip => {
+                    if self.garbage.is_none() {
+                        self.garbage = Some(self.pos);
+                    }
+                    self.pos += 1;
+                    continue;
+                }
+                Step::NeedMore => return None,
+                Step::Frame(..) => {}
+            }
+            if let Some(g) = self.garbage.take() {
+                return Some(Item::Garbage {
+                    offset: self.base + g as u64,
+                    bytes: &self.buf[g..self.pos],
+                    kind: GarbageKind::NoFrame,
+                });
+            }
+            if let Step::Frame(len, truncated) = s {
+                let start = self.pos;
+                self.pos += len;
+                return Some(Item::Frame {
+                    offset: self.base + start as u64,
+                    bytes: &self.buf[start..start + len],
+                    truncated,
+                });
+            }
+        }
+    }
+}
