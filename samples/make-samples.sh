@@ -61,3 +61,28 @@ xxd -r -p kdc101-session.hex > kdc101-session.bin
   echo "91 04 0e 00 81 50 01 00 00 50"      # MOT_GET_DCSTATUSUPDATE cut off after 10 bytes
 } > damaged.hex
 xxd -r -p damaged.hex > damaged.bin
+
+# An Elliptec bus (9600 baud, one line for all modules) as a raw capture of both directions:
+# an ELL14 rotation mount at 0, an ELL9 slider at 1 and an ELL17 linear stage at 2. The host
+# identifies them, moves each, readdresses the ELL17 to 5 and groups the slider with the mount;
+# a button press on the mount sends BS/BO; a move out of range errors; one request is never
+# answered. Host commands go without terminator, as many programs send them.
+{
+  printf '0in'; printf '0IN0E1140028420200117016800023000\r\n'
+  printf '1in'; printf '1IN0911300123202315010013 00000020\r\n' | tr -d ' '
+  printf '2in'; printf '2IN1111700456202217010 01C00000800\r\n' | tr -d ' '
+  printf '0gs'; printf '0GS00\r\n'
+  printf '0ho0'; printf '0GS09\r\n'; printf '0PO00000000\r\n'
+  printf '0ma00008C00'; printf '0GS09\r\n'; printf '0PO00008C00\r\n'
+  printf '1fw'; printf '1PO00000020\r\n'
+  printf '2ma00002000'; printf '2PO00002000\r\n'
+  printf '2mr00001000'; printf '2PO00003000\r\n'
+  printf '2ca5'; printf '5GS00\r\n'
+  printf '5gp'; printf '5PO00003000\r\n'
+  printf '5ma0000F000'; printf '5GS0C\r\n'
+  printf '0gv'; printf '0GV64\r\n'
+  printf '0sv32'; printf '0GS00\r\n'
+  printf '0BS09\r\n'; printf '0BO00004600\r\n'
+  printf '1ga0'; printf '0GS00\r\n'
+  printf '1gj'
+} > elliptec-bus.txt

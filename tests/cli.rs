@@ -247,3 +247,90 @@ fn encode_rejects_bad_values_with_a_reason() {
     assert!(!ok);
     assert!(err.contains("does not fit"), "{err}");
 }
+
+#[test]
+fn elliptec_bus_sample_is_detected_paired_and_scaled() {
+    let (out, err, ok) = aptscope(&["decode", "--json", "samples/elliptec-bus.txt"], None);
+    assert!(ok, "{err}");
+    let all: Vec<Value> = out
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("JSON"))
+        .collect();
+    assert_eq!(all[0]["type"], "detect");
+    assert_eq!(all[0]["proto"], "elliptec");
+    assert_eq!(all[0]["certain"], true);
+    let recs = ndjson(&out);
+    let frames: Vec<&Value> = recs.iter().filter(|r| r["type"] == "frame").collect();
+    assert_eq!(frames.len(), 35);
+    assert!(frames.iter().all(|f| f["proto"] == "ell"));
+    // IN of the ELL14: every field, thread and hardware release split out.
+    let info = frames[1];
+    assert_eq!(info["cmd"], "IN");
+    assert_eq!(info["fields"]["model"], 14);
+    assert_eq!(info["fields"]["serial"], "11400284");
+    assert_eq!(info["fields"]["pulses_per_unit"], 143360);
+    assert_eq!(info["fields"]["thread"], "metric");
+    assert_eq!(info["fields"]["hw_release"], 23);
+    assert_eq!(info["pair"], 1);
+    // ma 0x8C00 on the ELL14 is 90 degrees; the busy GS is an interim reply.
+    assert_eq!(frames[11]["phys"]["position"]["value"], 90.0);
+    assert_eq!(frames[12]["interim"], true);
+    assert_eq!(frames[13]["pair"], 12);
+    // After 2ca5 the ELL17 answers at 5 and its positions stay in mm.
+    let at5: Vec<&&Value> = frames
+        .iter()
+        .filter(|f| f["addr"] == "5" && f["cmd"] == "PO")
+        .collect();
+    assert_eq!(at5[0]["module"]["model"], "ELL17");
+    assert_eq!(at5[0]["phys"]["position"]["value"], 6.0);
+    assert_eq!(at5[0]["phys"]["position"]["unit"], "mm");
+    // The out-of-range error is named; button messages are not unsolicited.
+    assert!(frames
+        .iter()
+        .any(|f| f["fields"]["status"] == "OUT_OF_RANGE"));
+    assert!(frames.iter().all(|f| f["diag"] == serde_json::json!([])));
+    // The last request gets no reply: reported after the stream ends, pointing at it.
+    let late: Vec<&Value> = recs.iter().filter(|r| r["type"] == "diag").collect();
+    assert_eq!(late.len(), 1);
+    assert_eq!(late[0]["ref"], 35);
+    assert_eq!(late[0]["diag"][0]["kind"], "no_reply");
+}
+
+#[test]
+fn proto_flag_overrides_detection() {
+    let (out, _, ok) = aptscope(
+        &[
+            "decode",
+            "--proto",
+            "apt",
+            "--json",
+            "samples/elliptec-bus.txt",
+        ],
+        None,
+    );
+    assert!(ok);
+    assert!(!out.contains("\"type\":\"detect\""));
+    let recs = ndjson(&out);
+    assert!(recs.iter().all(|r| r["proto"] == "apt"));
+    // Read as APT, this ASCII is mostly garbage, and every byte is still accounted for.
+    let total: u64 = recs.iter().map(|r| r["len"].as_u64().unwrap_or(0)).sum();
+    assert_eq!(
+        total,
+        std::fs::metadata("samples/elliptec-bus.txt")
+            .expect("sample")
+            .len()
+    );
+}
+
+#[test]
+fn a_mixed_stream_is_reported_not_guessed_silently() {
+    let mut mixed = std::fs::read("samples/kdc101-session.bin").expect("sample");
+    mixed.extend(std::fs::read("samples/elliptec-bus.txt").expect("sample"));
+    let (out, _, ok) = aptscope(&["decode", "-"], Some(&mixed));
+    assert!(ok);
+    let first = out.lines().next().unwrap_or("");
+    assert!(
+        first.starts_with("# protocol") && first.contains("mixed or unknown"),
+        "{first}"
+    );
+}

@@ -79,7 +79,7 @@ pub fn detect(sample: &[u8]) -> Detection {
         } = it
         {
             if EllFrame::decode(offset, bytes, truncated)
-                .is_some_and(|f| f.cmd.is_some() && !truncated)
+                .is_some_and(|f| f.cmd.is_some() && f.diags().is_empty())
             {
                 clean_ell += bytes.len();
             }

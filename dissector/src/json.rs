@@ -442,6 +442,11 @@ pub fn ell_frame(
             (_, EllValue::Digits(d)) => string(out, d),
             (_, EllValue::Raw(b)) => hex(out, b),
         }
+        // The manual packs two facts into this byte: give each its own key too.
+        if let (Kind::ThreadHw, EllValue::U(x)) = (fd.kind, v) {
+            let thread = if x & 0x80 != 0 { "imperial" } else { "metric" };
+            let _ = write!(out, ",\"thread\":\"{thread}\",\"hw_release\":{}", x & 0x7F);
+        }
         if let (Kind::Position, EllValue::I(p), Some((ppu, unit))) = (fd.kind, v, scale) {
             if ppu > 0.0 {
                 if !phys.is_empty() {

@@ -157,7 +157,11 @@ impl Bus {
                     _ => self.alias[new as usize & 15] = Some(addr),
                 }
             }
-            o.module = self.module(reply_addr).cloned();
+            // The addressed module; after `ca` it already sits at its new address.
+            o.module = self
+                .module(addr)
+                .or_else(|| self.module(reply_addr))
+                .cloned();
             if !cmd.replies.is_empty() {
                 if self.pending.len() == MAX_PENDING {
                     if let Some(p) = self.pending.pop_front() {
@@ -205,10 +209,11 @@ impl Bus {
                 let busy = code == "GS" && matches!(f.field("status"), Some(EllValue::U(9)));
                 o.interim = p.cmd.is_move() && busy;
                 if !o.interim {
-                    self.pending.remove(i);
-                    if p_is_group_end(code) {
+                    // A group (`ga`) lasts for one operation: until a motion completes.
+                    if p.cmd.is_move() {
                         self.alias[addr as usize & 15] = None;
                     }
+                    self.pending.remove(i);
                 }
             }
             None => o.unsolicited = !matches!(code, "BS" | "BO"),
@@ -220,8 +225,4 @@ impl Bus {
     pub fn finish(&mut self) -> Vec<Expired> {
         self.pending.drain(..).map(|p| (&p).into()).collect()
     }
-}
-
-fn p_is_group_end(code: &str) -> bool {
-    matches!(code, "PO" | "GS")
 }

@@ -177,7 +177,9 @@ fn step(b: &[u8], eof: bool) -> Step {
                 Step::NeedMore
             };
         }
+        // Binary data can hold anything, so only a terminator right after it makes it a frame.
         return match term_len(&data[n..], eof) {
+            Some(0) => Step::Skip,
             Some(t) => Step::Frame(h.data_at + n + t, false),
             None => Step::NeedMore,
         };
@@ -210,7 +212,8 @@ fn step(b: &[u8], eof: bool) -> Step {
         // A non-data character (the next frame's command letters, say) before any terminator:
         // the reply had no terminator. Take its own length.
         Some(p) if p >= n => Step::Frame(h.data_at + n, false),
-        Some(_) => Step::Frame(h.data_at + n.min(data.len()), false),
+        // Data cut short by a byte that is neither data nor terminator: not a reply.
+        Some(_) => Step::Skip,
         None if data.len() > limit => Step::Frame(h.data_at + n, false),
         None if eof => Step::Frame(b.len(), data.len() < n),
         None => Step::NeedMore,
