@@ -1,0 +1,1 @@
+//! MCAP reading and writing (being written).

@@ -1,0 +1,148 @@
+//! The capture model: a capture is a sequence of chunks, each with a timestamp, a direction, a
+//! stream (port or USB device) and bytes. Readers produce [`Event`]s; writers consume chunks.
+
+use std::fmt;
+
+/// Which way bytes went.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Direction {
+    /// Host → device (the host program wrote them).
+    HostToDevice,
+    /// Device → host (the controller sent them).
+    DeviceToHost,
+    /// Not recorded.
+    Unknown,
+}
+
+impl Direction {
+    /// `h2d`, `d2h` or `unknown` (the NDJSON `dir`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Direction::HostToDevice => "h2d",
+            Direction::DeviceToHost => "d2h",
+            Direction::Unknown => "unknown",
+        }
+    }
+    /// Parse `h2d`/`d2h`/`unknown` (and `tx`/`rx`, `out`/`in`).
+    pub fn parse(s: &str) -> Option<Direction> {
+        Some(match s {
+            "h2d" | "tx" | "out" | ">" => Direction::HostToDevice,
+            "d2h" | "rx" | "in" | "<" => Direction::DeviceToHost,
+            "unknown" | "?" => Direction::Unknown,
+            _ => return None,
+        })
+    }
+}
+
+/// A chunk of captured bytes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Chunk<'a> {
+    /// Capture time in ns since the Unix epoch (or since the capture's start when the format
+    /// has no absolute time), when the format records one.
+    pub ts_ns: Option<u64>,
+    /// Direction.
+    pub dir: Direction,
+    /// Stream (serial port, or USB device) index, as announced by [`Event::Stream`]; 0 when the
+    /// format has one stream.
+    pub stream: u32,
+    /// The bytes.
+    pub bytes: &'a [u8],
+}
+
+/// An owned chunk (for tests, converters and writers that reorder).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct OwnedChunk {
+    /// Capture time in ns.
+    pub ts_ns: Option<u64>,
+    /// Direction.
+    pub dir: Direction,
+    /// Stream index.
+    pub stream: u32,
+    /// The bytes.
+    pub bytes: Vec<u8>,
+}
+
+impl Chunk<'_> {
+    /// Copy into an [`OwnedChunk`].
+    pub fn to_owned(&self) -> OwnedChunk {
+        OwnedChunk {
+            ts_ns: self.ts_ns,
+            dir: self.dir,
+            stream: self.stream,
+            bytes: self.bytes.to_vec(),
+        }
+    }
+}
+
+impl OwnedChunk {
+    /// Borrow as a [`Chunk`].
+    pub fn as_chunk(&self) -> Chunk<'_> {
+        Chunk {
+            ts_ns: self.ts_ns,
+            dir: self.dir,
+            stream: self.stream,
+            bytes: &self.bytes,
+        }
+    }
+}
+
+/// What a stream is: a serial port, or a USB device.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct StreamInfo {
+    /// Index used by chunks.
+    pub id: u32,
+    /// Name (`/dev/ttyUSB0`, `usb 1:7 0403:faf0`).
+    pub name: String,
+    /// Line settings when known (`115200 8N1 RTS/CTS`).
+    pub settings: Option<String>,
+}
+
+/// A problem reading the capture file, at a file offset.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ReadDiag {
+    /// Byte offset in the file.
+    pub offset: u64,
+    /// What kind of problem (stable snake_case name).
+    pub kind: &'static str,
+    /// Human explanation.
+    pub msg: String,
+}
+
+impl fmt::Display for ReadDiag {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "@{}: {}: {}", self.offset, self.kind, self.msg)
+    }
+}
+
+/// What a reader produces.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Event<'a> {
+    /// A stream is announced (before its first chunk).
+    Stream(StreamInfo),
+    /// Captured bytes.
+    Chunk(Chunk<'a>),
+    /// A problem in the file; reading carries on where the format allows.
+    Diag(ReadDiag),
+}
+
+/// A capture reader: a lending iterator of events (each borrows the reader until the next call).
+pub trait Reader {
+    /// The next event, `None` at the end.
+    fn next_event(&mut self) -> Option<Event<'_>>;
+    /// The format's name (`pcapng`, `usbmon pcap`, `socat log` …).
+    fn format(&self) -> String;
+}
+
+/// A capture writer.
+pub trait Writer {
+    /// Declare a stream before its chunks.
+    fn stream(&mut self, s: &StreamInfo) -> std::io::Result<()>;
+    /// Write one chunk.
+    fn chunk(&mut self, c: &Chunk<'_>) -> std::io::Result<()>;
+    /// Flush and close (writes summaries/footers).
+    fn finish(&mut self) -> std::io::Result<()>;
+    /// What the format cannot carry (said by `convert`).
+    fn limits(&self) -> &'static [&'static str] {
+        &[]
+    }
+}

@@ -1,0 +1,1 @@
+//! Logs of serial tools: socat, jpnevulator, interceptty (being written).

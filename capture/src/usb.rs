@@ -1,0 +1,1 @@
+//! USB captures of FTDI-based controllers: usbmon and USBPcap (being written).
