@@ -198,7 +198,7 @@ pub fn apt_frame(out: &mut String, n: u64, f: &AptFrame<'_, '_>) {
     match f.msg {
         Some(m) => {
             string(out, m.name);
-            let _ = write!(out, ",\"dir\":\"{}\"", m.dir.as_str());
+            let _ = write!(out, ",\"msg_dir\":\"{}\"", m.dir.as_str());
         }
         None => out.push_str("null"),
     }

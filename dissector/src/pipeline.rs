@@ -1,10 +1,15 @@
-//! From bytes to rendered records: protocol detection, framing, decoding, bus state and
-//! pairing, text or NDJSON lines. Pure: the caller feeds chunks and writes the lines out.
+//! From captured chunks to rendered records: protocol detection, one framer per (stream,
+//! direction) lane, decoding, Elliptec bus state and pairing, text or NDJSON lines. Pure: the
+//! caller feeds chunks and writes the lines out.
+//!
+//! Frames come out in the order they complete, which for a capture read in time order is time
+//! order: the lanes are merged by time.
 
 use crate::apt::{AptFrame, AptFramer, Item as AptItem};
 use crate::detect::{detect, Detection, Proto, SAMPLE};
 use crate::diag::{Diag, DiagKind};
 use crate::ell::{Bus, EllFrame, EllFramer, Expired, Item as EllItem};
+use crate::table::Dir;
 use crate::{json, text, Table};
 use std::fmt::Write;
 
@@ -17,15 +22,36 @@ pub enum Format {
     Json,
 }
 
-/// The decoding pipeline for one byte stream.
+/// A chunk's context: where and when its bytes were captured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Ctx {
+    /// Stream (port/device) index.
+    pub stream: u32,
+    /// Direction, when the capture records it.
+    pub dir: Option<Dir>,
+    /// Capture time in ns, when recorded.
+    pub ts_ns: Option<u64>,
+}
+
+struct Lane {
+    stream: u32,
+    dir: Option<Dir>,
+    apt: AptFramer<'static>,
+    ell: EllFramer,
+    /// Time of the latest chunk: the time a frame completing now gets.
+    ts: Option<u64>,
+}
+
+/// The decoding pipeline for one capture.
 pub struct Pipeline {
     fmt: Format,
     proto: Option<Proto>,
-    /// Bytes held back until the protocol is known.
-    sample: Vec<u8>,
-    apt: AptFramer<'static>,
-    ell: EllFramer,
-    bus: Bus,
+    /// Chunks held back until the protocol is known.
+    sample: Vec<(Ctx, Vec<u8>)>,
+    sample_len: usize,
+    lanes: Vec<Lane>,
+    buses: Vec<(u32, Bus)>,
+    first_ts: Option<u64>,
     n: u64,
     line: String,
 }
@@ -37,9 +63,10 @@ impl Pipeline {
             fmt,
             proto,
             sample: vec![],
-            apt: AptFramer::new(Table::global()),
-            ell: EllFramer::new(),
-            bus: Bus::new(),
+            sample_len: 0,
+            lanes: vec![],
+            buses: vec![],
+            first_ts: None,
             n: 0,
             line: String::with_capacity(512),
         }
@@ -50,27 +77,49 @@ impl Pipeline {
         self.proto
     }
 
-    /// Feed stream bytes; `ts` is the capture time (ns) of the chunk, when known. Each rendered
-    /// record is passed to `emit` (without newline).
+    /// Records emitted so far.
+    pub fn records(&self) -> u64 {
+        self.n
+    }
+
+    /// Feed bytes of a single unknown-direction stream without times.
     pub fn push<E>(
         &mut self,
         chunk: &[u8],
         ts: Option<u64>,
         emit: &mut impl FnMut(&str) -> Result<(), E>,
     ) -> Result<(), E> {
-        if self.proto.is_none() {
-            self.sample.extend_from_slice(chunk);
-            if self.sample.len() < SAMPLE {
-                return Ok(());
-            }
-            let sample = std::mem::take(&mut self.sample);
-            self.choose(&sample, emit)?;
-            return self.feed(&sample, ts, emit);
-        }
-        self.feed(chunk, ts, emit)
+        self.push_chunk(
+            Ctx {
+                ts_ns: ts,
+                ..Ctx::default()
+            },
+            chunk,
+            emit,
+        )
     }
 
-    /// Report a problem of the input itself (e.g. a bad character in hex text).
+    /// Feed one captured chunk. Each rendered record is passed to `emit` (without newline).
+    pub fn push_chunk<E>(
+        &mut self,
+        ctx: Ctx,
+        chunk: &[u8],
+        emit: &mut impl FnMut(&str) -> Result<(), E>,
+    ) -> Result<(), E> {
+        if self.proto.is_none() {
+            self.sample.push((ctx, chunk.to_vec()));
+            self.sample_len += chunk.len();
+            if self.sample_len < SAMPLE {
+                return Ok(());
+            }
+            self.choose(emit)?;
+            return self.replay_sample(emit);
+        }
+        self.feed(ctx, chunk, emit)
+    }
+
+    /// Report a problem of the input itself (a bad character in hex text, a corrupt capture
+    /// record), with its offset in the file.
     pub fn input_diag<E>(
         &mut self,
         d: &Diag,
@@ -88,29 +137,86 @@ impl Pipeline {
         emit(&self.line)
     }
 
-    /// End of stream: flush what is left and report commands that got no reply.
+    /// Report a capture-file problem given as text (kind and message) at a file offset.
+    pub fn file_diag<E>(
+        &mut self,
+        offset: u64,
+        kind: &str,
+        msg: &str,
+        emit: &mut impl FnMut(&str) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.line.clear();
+        match self.fmt {
+            Format::Json => {
+                let _ = write!(self.line, "{{\"type\":\"input\",\"diag\":[{{\"kind\":");
+                json::string(&mut self.line, kind);
+                let _ = write!(self.line, ",\"offset\":{offset},\"msg\":");
+                json::string(&mut self.line, msg);
+                self.line.push_str("}]}");
+            }
+            Format::Text => {
+                let _ = write!(self.line, "     - {offset:>#10x}  !! file: {kind}: {msg}");
+            }
+        }
+        emit(&self.line)
+    }
+
+    /// End of capture: flush what is left and report commands that got no reply.
     pub fn finish<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
         if self.proto.is_none() {
-            let sample = std::mem::take(&mut self.sample);
-            if sample.is_empty() {
+            if self.sample.is_empty() {
                 return Ok(());
             }
-            self.choose(&sample, emit)?;
-            self.feed(&sample, None, emit)?;
+            self.choose(emit)?;
+            self.replay_sample(emit)?;
         }
-        self.apt.finish();
-        self.ell.finish();
-        self.drain(None, emit)?;
-        let left = self.bus.finish();
+        for i in 0..self.lanes.len() {
+            self.lanes[i].apt.finish();
+            self.lanes[i].ell.finish();
+            self.drain(i, emit)?;
+        }
+        let mut left = vec![];
+        for (_, bus) in self.buses.iter_mut() {
+            left.extend(bus.finish());
+        }
+        left.sort_by_key(|e| e.n);
         self.report_expired(&left, emit)
     }
 
-    fn choose<E>(
-        &mut self,
-        sample: &[u8],
-        emit: &mut impl FnMut(&str) -> Result<(), E>,
-    ) -> Result<(), E> {
-        let d: Detection = detect(sample);
+    fn replay_sample<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
+        for (ctx, bytes) in std::mem::take(&mut self.sample) {
+            self.feed(ctx, &bytes, emit)?;
+        }
+        self.sample_len = 0;
+        Ok(())
+    }
+
+    fn choose<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
+        let mut bytes = Vec::with_capacity(SAMPLE);
+        // Judge the busiest lane of the sample: interleaved lanes would confuse both framers.
+        let lane_of = |c: &Ctx| (c.stream, c.dir.map(|d| d.as_str()));
+        let mut best: Option<((u32, Option<&str>), usize)> = None;
+        for (c, b) in &self.sample {
+            let k = lane_of(c);
+            let total: usize = self
+                .sample
+                .iter()
+                .filter(|(x, _)| lane_of(x) == k)
+                .map(|(_, y)| y.len())
+                .sum();
+            if best.is_none_or(|(_, t)| total > t) {
+                best = Some((k, total));
+            }
+            let _ = b;
+        }
+        if let Some((k, _)) = best {
+            for (c, b) in &self.sample {
+                if lane_of(c) == k && bytes.len() < SAMPLE {
+                    bytes.extend_from_slice(b);
+                }
+            }
+        }
+        let d: Detection = detect(&bytes);
         let proto = d.proto.unwrap_or(if d.elliptec > d.apt {
             Proto::Elliptec
         } else {
@@ -140,7 +246,7 @@ impl Pipeline {
                     "# protocol {}: {verdict} ({:.0}% of the first {} bytes frame as APT, {:.0}% as Elliptec; --proto to choose)",
                     proto.name(),
                     d.apt * 100.0,
-                    sample.len().min(SAMPLE),
+                    bytes.len().min(SAMPLE),
                     d.elliptec * 100.0
                 );
             }
@@ -148,68 +254,126 @@ impl Pipeline {
         emit(&self.line)
     }
 
+    fn lane(&mut self, ctx: &Ctx) -> usize {
+        if let Some(i) = self
+            .lanes
+            .iter()
+            .position(|l| l.stream == ctx.stream && l.dir == ctx.dir)
+        {
+            return i;
+        }
+        self.lanes.push(Lane {
+            stream: ctx.stream,
+            dir: ctx.dir,
+            apt: AptFramer::new(Table::global()),
+            ell: EllFramer::new(),
+            ts: None,
+        });
+        self.lanes.len() - 1
+    }
+
     fn feed<E>(
         &mut self,
+        ctx: Ctx,
         chunk: &[u8],
-        ts: Option<u64>,
         emit: &mut impl FnMut(&str) -> Result<(), E>,
     ) -> Result<(), E> {
-        match self.proto {
-            Some(Proto::Apt) => self.apt.push(chunk),
-            _ => self.ell.push(chunk),
+        if self.first_ts.is_none() {
+            self.first_ts = ctx.ts_ns;
         }
-        self.drain(ts, emit)
+        let i = self.lane(&ctx);
+        let lane = &mut self.lanes[i];
+        if ctx.ts_ns.is_some() {
+            lane.ts = ctx.ts_ns;
+        }
+        match self.proto {
+            Some(Proto::Apt) => lane.apt.push(chunk),
+            _ => lane.ell.push(chunk),
+        }
+        self.drain(i, emit)
+    }
+
+    /// Append the capture context to a JSON object (before its closing brace).
+    fn close_json(line: &mut String, ts: Option<u64>, stream: u32, dir: Option<&str>) {
+        if line.ends_with('}') {
+            line.pop();
+            if let Some(d) = dir {
+                let _ = write!(line, ",\"dir\":\"{d}\"");
+            }
+            if let Some(t) = ts {
+                let _ = write!(line, ",\"ts_ns\":{t}");
+            }
+            let _ = write!(line, ",\"stream\":{stream}}}");
+        }
     }
 
     fn drain<E>(
         &mut self,
-        ts: Option<u64>,
+        i: usize,
         emit: &mut impl FnMut(&str) -> Result<(), E>,
     ) -> Result<(), E> {
         let t = Table::global();
+        let first = self.first_ts;
+        let lane = &mut self.lanes[i];
+        let (ts, stream, cap_dir) = (lane.ts, lane.stream, lane.dir);
+        let time = match (ts, first) {
+            (Some(a), Some(b)) => Some(a.saturating_sub(b) as f64 / 1e9),
+            _ => None,
+        };
         if self.proto == Some(Proto::Apt) {
-            while let Some(item) = self.apt.next_item() {
+            while let Some(item) = lane.apt.next_item() {
                 self.n += 1;
                 self.line.clear();
-                match (item, self.fmt) {
-                    (
-                        AptItem::Frame {
-                            offset,
-                            bytes,
-                            truncated,
-                        },
-                        fmt,
-                    ) => {
+                let mut dir = cap_dir.map(|d| d.as_str());
+                match item {
+                    AptItem::Frame {
+                        offset,
+                        bytes,
+                        truncated,
+                    } => {
                         if let Some(f) = AptFrame::decode(t, offset, bytes, truncated) {
-                            match fmt {
+                            if dir.is_none() {
+                                dir = f
+                                    .msg
+                                    .map(|m| m.dir)
+                                    .filter(|d| *d != Dir::Both)
+                                    .map(|d| d.as_str());
+                            }
+                            match self.fmt {
                                 Format::Json => json::apt_frame(&mut self.line, self.n, &f),
-                                Format::Text => text::apt_line(&mut self.line, self.n, &f),
+                                Format::Text => text::apt_line(&mut self.line, self.n, &f, time),
                             }
                         }
                     }
-                    (
-                        AptItem::Garbage {
-                            offset,
-                            bytes,
-                            kind,
-                        },
-                        Format::Json,
-                    ) => json::apt_garbage(&mut self.line, self.n, offset, bytes, kind),
-                    (
-                        AptItem::Garbage {
-                            offset,
-                            bytes,
-                            kind,
-                        },
-                        Format::Text,
-                    ) => text::garbage_line(&mut self.line, self.n, offset, bytes, kind),
+                    AptItem::Garbage {
+                        offset,
+                        bytes,
+                        kind,
+                    } => match self.fmt {
+                        Format::Json => {
+                            json::apt_garbage(&mut self.line, self.n, offset, bytes, kind)
+                        }
+                        Format::Text => {
+                            text::garbage_line(&mut self.line, self.n, offset, bytes, kind, time)
+                        }
+                    },
+                }
+                if self.fmt == Format::Json {
+                    Self::close_json(&mut self.line, ts, stream, Some(dir.unwrap_or("unknown")));
                 }
                 emit(&self.line)?;
             }
             return Ok(());
         }
+        let bus_idx = match self.buses.iter().position(|(s, _)| *s == stream) {
+            Some(b) => b,
+            None => {
+                self.buses.push((stream, Bus::new()));
+                self.buses.len() - 1
+            }
+        };
         let mut expired: Vec<Expired> = vec![];
-        while let Some(item) = self.ell.next_item() {
+        while let Some(item) = lane.ell.next_item() {
             self.n += 1;
             self.line.clear();
             match item {
@@ -221,7 +385,7 @@ impl Pipeline {
                     let Some(mut f) = EllFrame::decode(offset, bytes, truncated) else {
                         continue;
                     };
-                    let o = self.bus.observe(self.n, &f, ts);
+                    let o = self.buses[bus_idx].1.observe(self.n, &f, ts);
                     if o.unsolicited {
                         f.push_diag(Diag {
                             offset,
@@ -231,17 +395,22 @@ impl Pipeline {
                     expired.extend(o.expired.iter().copied());
                     match self.fmt {
                         Format::Json => json::ell_frame(&mut self.line, self.n, &f, &o),
-                        Format::Text => text::ell_line(&mut self.line, self.n, &f, &o),
+                        Format::Text => text::ell_line(&mut self.line, self.n, &f, &o, time),
                     }
                 }
                 EllItem::Garbage { offset, bytes, .. } => match self.fmt {
                     Format::Json => json::ell_garbage(&mut self.line, self.n, offset, bytes),
-                    Format::Text => text::ell_garbage_line(&mut self.line, self.n, offset, bytes),
+                    Format::Text => {
+                        text::ell_garbage_line(&mut self.line, self.n, offset, bytes, time)
+                    }
                 },
+            }
+            if self.fmt == Format::Json {
+                Self::close_json(&mut self.line, ts, stream, None);
             }
             emit(&self.line)?;
             if !expired.is_empty() {
-                self.report_expired(&expired, emit)?;
+                Self::render_expired(&mut self.line, self.fmt, &expired, emit)?;
                 expired.clear();
             }
         }
@@ -253,17 +422,26 @@ impl Pipeline {
         list: &[Expired],
         emit: &mut impl FnMut(&str) -> Result<(), E>,
     ) -> Result<(), E> {
+        Self::render_expired(&mut self.line, self.fmt, list, emit)
+    }
+
+    fn render_expired<E>(
+        line: &mut String,
+        fmt: Format,
+        list: &[Expired],
+        emit: &mut impl FnMut(&str) -> Result<(), E>,
+    ) -> Result<(), E> {
         for e in list {
             let d = Diag {
                 offset: e.offset,
                 kind: DiagKind::NoReply { cmd: e.n },
             };
-            self.line.clear();
-            match self.fmt {
-                Format::Json => json::late_diag(&mut self.line, "ell", e.n, d),
-                Format::Text => text::late_diag_line(&mut self.line, e.n, &d),
+            line.clear();
+            match fmt {
+                Format::Json => json::late_diag(line, "ell", e.n, d),
+                Format::Text => text::late_diag_line(line, e.n, &d),
             }
-            emit(&self.line)?;
+            emit(line)?;
         }
         Ok(())
     }

@@ -4,17 +4,22 @@ use crate::apt::{summary, AptFrame, GarbageKind};
 use crate::diag::Diag;
 use std::fmt::Write;
 
+/// Record number, time (seconds since the first record, when the capture has times) and
+/// stream offset: the start of every line.
+fn prefix(out: &mut String, n: u64, time: Option<f64>, offset: u64) {
+    let _ = write!(out, "{n:>6} ");
+    if let Some(t) = time {
+        let _ = write!(out, "{t:>11.6} ");
+    }
+    let _ = write!(out, "{offset:>#10x}  ");
+}
+
 /// Append the timeline line of a decoded APT frame (no newline):
 /// `N  offset  src → dst  NAME  chN  key fields  [diagnostics]`.
-pub fn apt_line(out: &mut String, n: u64, f: &AptFrame<'_, '_>) {
+pub fn apt_line(out: &mut String, n: u64, f: &AptFrame<'_, '_>, time: Option<f64>) {
     let h = f.header();
-    let _ = write!(
-        out,
-        "{n:>6} {:>#10x}  {:>5} → {:<5} ",
-        f.offset,
-        h.src().name(),
-        h.dst().name()
-    );
+    prefix(out, n, time, f.offset);
+    let _ = write!(out, "{:>5} → {:<5} ", h.src().name(), h.dst().name());
     match f.name() {
         Some(name) => {
             let _ = write!(out, "{name:<32}");
@@ -47,9 +52,17 @@ pub fn apt_line(out: &mut String, n: u64, f: &AptFrame<'_, '_>) {
 }
 
 /// Append the line of a garbage record.
-pub fn garbage_line(out: &mut String, n: u64, offset: u64, bytes: &[u8], kind: GarbageKind) {
+pub fn garbage_line(
+    out: &mut String,
+    n: u64,
+    offset: u64,
+    bytes: &[u8],
+    kind: GarbageKind,
+    time: Option<f64>,
+) {
     let d = crate::json::garbage_diag(offset, bytes.len(), kind);
-    let _ = write!(out, "{n:>6} {offset:>#10x}  !! {}: ", d.kind);
+    prefix(out, n, time, offset);
+    let _ = write!(out, "!! {}: ", d.kind);
     for b in bytes.iter().take(24) {
         let _ = write!(out, "{b:02x}");
     }
@@ -69,19 +82,15 @@ pub fn ell_line(
     n: u64,
     f: &crate::ell::EllFrame<'_>,
     o: &crate::ell::Observation,
+    time: Option<f64>,
 ) {
     let arrow = if f.dir() == crate::table::Dir::HostToDevice {
         "host → "
     } else {
         "   ← "
     };
-    let _ = write!(
-        out,
-        "{n:>6} {:>#10x}  {arrow}{}  {} ",
-        f.offset,
-        f.addr_char(),
-        f.code_str()
-    );
+    prefix(out, n, time, f.offset);
+    let _ = write!(out, "{arrow}{}  {} ", f.addr_char(), f.code_str());
     let name = f.cmd.map_or("UNKNOWN", |c| c.name);
     let _ = write!(out, "{name:<28}");
     let scale = o.module.as_ref().and_then(|m| m.scale());
@@ -109,10 +118,11 @@ pub fn ell_line(
 }
 
 /// Append the line of an Elliptec garbage record.
-pub fn ell_garbage_line(out: &mut String, n: u64, offset: u64, bytes: &[u8]) {
+pub fn ell_garbage_line(out: &mut String, n: u64, offset: u64, bytes: &[u8], time: Option<f64>) {
+    prefix(out, n, time, offset);
     let _ = write!(
         out,
-        "{n:>6} {offset:>#10x}  !! {} byte(s) that start no frame: {:?}",
+        "!! {} byte(s) that start no frame: {:?}",
         bytes.len(),
         String::from_utf8_lossy(&bytes[..bytes.len().min(32)])
     );
