@@ -4,8 +4,10 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod info;
 pub mod mcap_io;
 pub mod model;
+pub mod pcap;
 pub mod raw;
 pub mod textlog;
 pub mod usb;

@@ -1,0 +1,757 @@
+//! pcap and pcapng: reading (serial captures written by aptscope, and USB captures of FTDI
+//! controllers) and writing, streamed through a bounded buffer.
+//!
+//! aptscope's serial link types:
+//! - **pcapng**: `LINKTYPE_USER0` (147). Each Enhanced Packet Block holds the bytes as they
+//!   crossed the line, the direction in the EPB flags (outbound = host → device, inbound =
+//!   device → host), ns timestamps (`if_tsresol` 9), one interface per port with its name and
+//!   line settings in `if_name`/`if_description`. USER0 is reserved for private use, so no
+//!   dissector claims it: Wireshark and tshark open the files, show the bytes, times and
+//!   direction (`frame.p2p_dir`/packet flags) without errors, and a user can bind a dissector
+//!   to it under *DLT_USER* preferences.
+//! - **pcap**: `LINKTYPE_USER1` (148) with a 2-byte pseudo-header per record, `[direction,
+//!   stream]` (direction 0 unknown, 1 host → device, 2 device → host), because legacy pcap has
+//!   no per-packet flags and one link type for the whole file; ns timestamps (magic a1b23c4d).
+
+use crate::model::{Chunk, Direction, Event, OwnedChunk, ReadDiag, Reader, StreamInfo, Writer};
+use crate::usb::{is_usb_linktype, UsbDemux, UsbOut};
+use pcap_file::pcap::{PcapHeader, PcapPacket, PcapParser, PcapWriter};
+use pcap_file::pcapng::blocks::enhanced_packet::{EnhancedPacketBlock, EnhancedPacketOption};
+use pcap_file::pcapng::blocks::interface_description::{InterfaceDescriptionBlock, InterfaceDescriptionOption};
+use pcap_file::pcapng::{Block, PcapNgParser, PcapNgWriter};
+use pcap_file::{DataLink, Endianness, PcapError, TsResolution};
+use std::borrow::Cow;
+use std::collections::VecDeque;
+use std::io::{self, Read, Write};
+use std::time::Duration;
+
+/// Link type of aptscope's pcapng serial captures.
+pub const LINKTYPE_SERIAL_NG: u32 = 147;
+/// Link type of aptscope's legacy pcap serial captures (with a 2-byte pseudo-header).
+pub const LINKTYPE_SERIAL_PCAP: u32 = 148;
+/// Largest block or record accepted; a longer one is taken as corruption (bounded memory).
+pub const MAX_RECORD: usize = 16 << 20;
+const READ_SIZE: usize = 1 << 20;
+
+/// The pcap magic numbers (both byte orders, µs and ns).
+pub fn sniff_pcap(head: &[u8]) -> bool {
+    matches!(head.get(..4), Some([0xd4, 0xc3, 0xb2, 0xa1] | [0xa1, 0xb2, 0xc3, 0xd4] | [0x4d, 0x3c, 0xb2, 0xa1] | [0xa1, 0xb2, 0x3c, 0x4d]))
+}
+
+/// The pcapng Section Header Block type.
+pub fn sniff_pcapng(head: &[u8]) -> bool {
+    head.get(..4) == Some(&[0x0a, 0x0d, 0x0d, 0x0a])
+}
+
+enum Owned {
+    Stream(StreamInfo),
+    Chunk(OwnedChunk),
+    Diag(ReadDiag),
+}
+
+enum Parser {
+    None,
+    Legacy(PcapParser),
+    Ng(PcapNgParser),
+}
+
+/// What the reader knows of one pcapng interface.
+#[derive(Clone)]
+struct Iface {
+    linktype: u32,
+    /// Units per second of EPB timestamps.
+    units_per_s: u64,
+    stream: u32,
+}
+
+/// Streaming reader of pcap and pcapng files.
+pub struct PcapReader<R: Read> {
+    src: R,
+    buf: Vec<u8>,
+    start: usize,
+    /// File offset of `buf[0]`.
+    base: u64,
+    eof: bool,
+    parser: Parser,
+    ng: bool,
+    ifaces: Vec<Iface>,
+    next_stream: u32,
+    usb: UsbDemux,
+    usb_out: Vec<UsbOut>,
+    queue: VecDeque<Owned>,
+    current: Option<Owned>,
+    warned_linktypes: Vec<u32>,
+    pcap_linktype: u32,
+    pcap_streams: Vec<u32>,
+    done: bool,
+    usb_flushed: bool,
+}
+
+fn diag(offset: u64, kind: &'static str, msg: impl Into<String>) -> Owned {
+    Owned::Diag(ReadDiag {
+        offset,
+        kind,
+        msg: msg.into(),
+    })
+}
+
+fn dir_of_flags(flags: u32) -> Direction {
+    match flags & 3 {
+        2 => Direction::HostToDevice,
+        1 => Direction::DeviceToHost,
+        _ => Direction::Unknown,
+    }
+}
+
+fn dir_byte(d: Direction) -> u8 {
+    match d {
+        Direction::Unknown => 0,
+        Direction::HostToDevice => 1,
+        Direction::DeviceToHost => 2,
+    }
+}
+
+fn dir_from_byte(b: u8) -> Direction {
+    match b {
+        1 => Direction::HostToDevice,
+        2 => Direction::DeviceToHost,
+        _ => Direction::Unknown,
+    }
+}
+
+impl<R: Read> PcapReader<R> {
+    /// Read a pcap or pcapng stream; `usb_device` restricts USB captures to one BUS:ADDR.
+    pub fn new(src: R, usb_device: Option<(u16, u8)>) -> Self {
+        PcapReader {
+            src,
+            buf: Vec::with_capacity(READ_SIZE),
+            start: 0,
+            base: 0,
+            eof: false,
+            parser: Parser::None,
+            ng: false,
+            ifaces: vec![],
+            next_stream: 0,
+            usb: UsbDemux::new(usb_device),
+            usb_out: vec![],
+            queue: VecDeque::new(),
+            current: None,
+            warned_linktypes: vec![],
+            pcap_linktype: 0,
+            pcap_streams: vec![],
+            done: false,
+            usb_flushed: false,
+        }
+    }
+
+    fn offset(&self) -> u64 {
+        self.base + self.start as u64
+    }
+
+    /// Read more input; `false` at end of file.
+    fn fill(&mut self) -> bool {
+        if self.eof {
+            return false;
+        }
+        if self.start > 0 {
+            self.buf.drain(..self.start);
+            self.base += self.start as u64;
+            self.start = 0;
+        }
+        let old = self.buf.len();
+        self.buf.resize(old + READ_SIZE, 0);
+        loop {
+            match self.src.read(&mut self.buf[old..]) {
+                Ok(0) => {
+                    self.buf.truncate(old);
+                    self.eof = true;
+                    return false;
+                }
+                Ok(n) => {
+                    self.buf.truncate(old + n);
+                    return true;
+                }
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                Err(e) => {
+                    self.buf.truncate(old);
+                    self.eof = true;
+                    let at = self.base + old as u64;
+                    self.queue.push_back(diag(at, "io_error", e.to_string()));
+                    return false;
+                }
+            }
+        }
+    }
+
+    fn endianness(&self) -> Endianness {
+        match &self.parser {
+            Parser::Ng(p) => p.section().endianness,
+            Parser::Legacy(p) => p.header().endianness,
+            Parser::None => Endianness::Little,
+        }
+    }
+
+    fn read_u32(&self, at: usize) -> Option<u32> {
+        let b: [u8; 4] = self.buf.get(at..at + 4)?.try_into().ok()?;
+        Some(match self.endianness() {
+            Endianness::Big => u32::from_be_bytes(b),
+            Endianness::Little => u32::from_le_bytes(b),
+        })
+    }
+
+    /// Declared length of the block/record at `start`, when its header is present.
+    fn declared_len(&self) -> Option<usize> {
+        if self.ng {
+            self.read_u32(self.start + 4).map(|l| l as usize)
+        } else {
+            self.read_u32(self.start + 8).map(|l| l as usize + 16)
+        }
+    }
+
+    /// Whether a plausible block/record starts at `at` (for resynchronisation).
+    fn plausible_at(&self, at: usize) -> bool {
+        if self.ng {
+            let (Some(t), Some(l)) = (self.read_u32(at), self.read_u32(at + 4)) else {
+                return false;
+            };
+            let l = l as usize;
+            matches!(t, 1 | 3 | 5 | 6 | 0x0A0D0D0A) && l >= 12 && l % 4 == 0 && l <= MAX_RECORD && self.read_u32(at + l - 4) == Some(l as u32)
+        } else {
+            let (Some(cap), Some(orig)) = (self.read_u32(at + 8), self.read_u32(at + 12)) else {
+                return false;
+            };
+            let snap = match &self.parser {
+                Parser::Legacy(p) => p.header().snaplen.max(65535),
+                _ => 65535,
+            };
+            cap <= orig && cap <= snap && (cap as usize) < MAX_RECORD && self.buf.len() >= at + 16 + cap as usize
+        }
+    }
+
+    /// Skip a corrupt block: find the next plausible one.
+    fn resync(&mut self, kind: &'static str, msg: String) {
+        let from = self.offset();
+        let mut at = self.start + 1;
+        loop {
+            while at + 16 <= self.buf.len() {
+                if self.plausible_at(at) {
+                    let skipped = at - self.start;
+                    self.queue.push_back(diag(from, kind, format!("{msg}; skipped {skipped} bytes to the next plausible record")));
+                    self.start = at;
+                    return;
+                }
+                at += if self.ng { 4 } else { 1 };
+            }
+            let rel = at - self.start;
+            if !self.fill() {
+                let rest = self.buf.len() - self.start;
+                self.queue.push_back(diag(from, kind, format!("{msg}; no record follows in the last {rest} bytes")));
+                self.start = self.buf.len();
+                return;
+            }
+            at = self.start + rel;
+        }
+    }
+
+    fn start_parser(&mut self) -> bool {
+        while self.buf.len() - self.start < 64 && self.fill() {}
+        let head = &self.buf[self.start..];
+        if sniff_pcapng(head) {
+            match PcapNgParser::new(head) {
+                Ok((rem, p)) => {
+                    self.start += head.len() - rem.len();
+                    self.parser = Parser::Ng(p);
+                    self.ng = true;
+                    true
+                }
+                Err(e) => {
+                    self.queue.push_back(diag(self.offset(), "bad_section_header", e.to_string()));
+                    false
+                }
+            }
+        } else if sniff_pcap(head) {
+            match PcapParser::new(head) {
+                Ok((rem, p)) => {
+                    self.start += head.len() - rem.len();
+                    self.pcap_linktype = u32::from(p.header().datalink);
+                    self.parser = Parser::Legacy(p);
+                    self.announce_linktype(self.pcap_linktype);
+                    true
+                }
+                Err(e) => {
+                    self.queue.push_back(diag(self.offset(), "bad_pcap_header", e.to_string()));
+                    false
+                }
+            }
+        } else {
+            let magic: Vec<String> = head.iter().take(4).map(|b| format!("{b:02x}")).collect();
+            self.queue.push_back(diag(self.offset(), "bad_magic", format!("not a pcap or pcapng file (starts {})", magic.join(" "))));
+            false
+        }
+    }
+
+    fn announce_linktype(&mut self, lt: u32) {
+        if lt == LINKTYPE_SERIAL_NG || lt == LINKTYPE_SERIAL_PCAP || is_usb_linktype(lt) || self.warned_linktypes.contains(&lt) {
+            return;
+        }
+        self.warned_linktypes.push(lt);
+        let at = self.offset();
+        self.queue.push_back(diag(at, "unknown_linktype", format!("link type {lt} is neither aptscope serial (147/148) nor USB (189/220/249): its packets are skipped")));
+    }
+
+    fn stream_for(&mut self, known: &mut Vec<u32>, id: u32, name: String, settings: Option<String>) {
+        if !known.contains(&id) {
+            known.push(id);
+            self.queue.push_back(Owned::Stream(StreamInfo { id, name, settings }));
+        }
+    }
+
+    fn packet(&mut self, lt: u32, data: Vec<u8>, orig_len: u32, ts: u64, at: u64, stream: u32, flags: Option<u32>) {
+        if is_usb_linktype(lt) {
+            self.usb.packet(lt, &data, orig_len, ts, at, &mut self.usb_out);
+            self.push_usb_out();
+            return;
+        }
+        if lt == LINKTYPE_SERIAL_PCAP {
+            let (Some(&d), Some(&s)) = (data.first(), data.get(1)) else {
+                self.queue.push_back(diag(at, "short_record", "record shorter than its 2-byte direction header"));
+                return;
+            };
+            let mut known = std::mem::take(&mut self.pcap_streams);
+            self.stream_for(&mut known, s as u32, format!("stream {s}"), None);
+            self.pcap_streams = known;
+            self.queue.push_back(Owned::Chunk(OwnedChunk {
+                ts_ns: Some(ts),
+                dir: dir_from_byte(d),
+                stream: s as u32,
+                bytes: data[2..].to_vec(),
+            }));
+        } else if lt == LINKTYPE_SERIAL_NG {
+            if orig_len as usize > data.len() {
+                self.queue.push_back(diag(at, "snapped_packet", format!("{} of {orig_len} bytes captured: the rest is lost", data.len())));
+            }
+            self.queue.push_back(Owned::Chunk(OwnedChunk {
+                ts_ns: Some(ts),
+                dir: flags.map_or(Direction::Unknown, dir_of_flags),
+                stream,
+                bytes: data,
+            }));
+        }
+    }
+
+    fn push_usb_out(&mut self) {
+        for o in self.usb_out.drain(..) {
+            self.queue.push_back(match o {
+                UsbOut::Stream(s) => Owned::Stream(s),
+                UsbOut::Chunk(c) => Owned::Chunk(c),
+                UsbOut::Diag(d) => Owned::Diag(d),
+            });
+        }
+    }
+
+    /// Parse the next block/record into the queue. `false` at the end.
+    fn step(&mut self) -> bool {
+        if matches!(self.parser, Parser::None) {
+            if self.done || !self.start_parser() {
+                self.done = true;
+                return !self.queue.is_empty();
+            }
+        }
+        if self.start >= self.buf.len() && !self.fill() {
+            return false;
+        }
+        let at = self.offset();
+        // A header whose length is absurd is corruption, not a reason to buffer the whole file.
+        if let Some(len) = self.declared_len() {
+            if len > MAX_RECORD || (self.ng && (len < 12 || len % 4 != 0)) {
+                self.resync("bad_block_length", format!("declared length {len} is not a valid length"));
+                return true;
+            }
+            while self.buf.len() - self.start < len {
+                if !self.fill() {
+                    let have = self.buf.len() - self.start;
+                    self.queue.push_back(diag(at, "truncated_record", format!("record of {len} bytes runs past the end of the file ({have} bytes left)")));
+                    self.start = self.buf.len();
+                    return true;
+                }
+            }
+        }
+        let avail = &self.buf[self.start..];
+        let result: Result<(usize, Option<Parsed>), PcapError> = match &mut self.parser {
+            Parser::Legacy(p) => p.next_packet(avail).map(|(rem, pkt)| {
+                (avail.len() - rem.len(), Some(Parsed::Packet(u32::MAX, pkt.timestamp.as_nanos() as u64, pkt.orig_len, pkt.data.into_owned(), None)))
+            }),
+            Parser::Ng(p) => match p.next_block(avail) {
+                Ok((rem, block)) => {
+                    let used = avail.len() - rem.len();
+                    let parsed = match block {
+                        Block::InterfaceDescription(idb) => Some(Parsed::Iface(iface_of(&idb))),
+                        Block::EnhancedPacket(epb) => {
+                            let flags = epb.options.iter().find_map(|o| match o {
+                                EnhancedPacketOption::Flags(f) => Some(*f),
+                                _ => None,
+                            });
+                            Some(Parsed::Packet(epb.interface_id, epb.timestamp.as_nanos() as u64, epb.original_len, epb.data.into_owned(), flags))
+                        }
+                        Block::SimplePacket(spb) => Some(Parsed::Packet(0, 0, spb.original_len, spb.data.into_owned(), None)),
+                        Block::SectionHeader(_) => Some(Parsed::Section),
+                        _ => None,
+                    };
+                    Ok((used, parsed))
+                }
+                Err(e) => Err(e),
+            },
+            Parser::None => return false,
+        };
+        match result {
+            Ok((used, parsed)) => {
+                self.start += used.max(1);
+                match parsed {
+                    Some(Parsed::Iface((lt, units, name, settings))) => {
+                        let stream = self.next_stream;
+                        self.next_stream += 1;
+                        self.ifaces.push(Iface {
+                            linktype: lt,
+                            units_per_s: units,
+                            stream,
+                        });
+                        self.announce_linktype(lt);
+                        if lt == LINKTYPE_SERIAL_NG {
+                            self.queue.push_back(Owned::Stream(StreamInfo {
+                                id: stream,
+                                name: name.unwrap_or_else(|| format!("interface {}", self.ifaces.len() - 1)),
+                                settings,
+                            }));
+                        }
+                    }
+                    Some(Parsed::Section) => self.ifaces.clear(),
+                    Some(Parsed::Packet(ifid, raw_ts, orig, data, flags)) => {
+                        let (lt, ts, stream) = if ifid == u32::MAX {
+                            (self.pcap_linktype, raw_ts, 0)
+                        } else {
+                            match self.ifaces.get(ifid as usize).cloned() {
+                                Some(i) => (i.linktype, scale_ts(raw_ts, i.units_per_s), i.stream),
+                                None => {
+                                    self.queue.push_back(diag(at, "unknown_interface", format!("packet of interface {ifid}, which no Interface Description Block declared")));
+                                    return true;
+                                }
+                            }
+                        };
+                        self.packet(lt, data, orig, ts, at, stream, flags);
+                    }
+                    None => {}
+                }
+                true
+            }
+            Err(PcapError::IncompleteBuffer) => {
+                if !self.fill() {
+                    let have = self.buf.len() - self.start;
+                    if have > 0 {
+                        self.queue.push_back(diag(at, "truncated_record", format!("{have} bytes at the end of the file are not a whole record")));
+                        self.start = self.buf.len();
+                    }
+                    return have > 0;
+                }
+                true
+            }
+            Err(e) => {
+                self.resync("bad_record", e.to_string());
+                true
+            }
+        }
+    }
+}
+
+enum Parsed {
+    Iface((u32, u64, Option<String>, Option<String>)),
+    Packet(u32, u64, u32, Vec<u8>, Option<u32>),
+    Section,
+}
+
+fn iface_of(idb: &InterfaceDescriptionBlock<'_>) -> (u32, u64, Option<String>, Option<String>) {
+    let mut units = 1_000_000u64;
+    let (mut name, mut desc) = (None, None);
+    for o in &idb.options {
+        match o {
+            InterfaceDescriptionOption::IfTsResol(r) => {
+                units = if r & 0x80 != 0 { 1u64.checked_shl((r & 0x7F) as u32).unwrap_or(u64::MAX) } else { 10u64.checked_pow(*r as u32).unwrap_or(u64::MAX) };
+            }
+            InterfaceDescriptionOption::IfName(n) => name = Some(n.to_string()),
+            InterfaceDescriptionOption::IfDescription(d) => desc = Some(d.to_string()),
+            _ => {}
+        }
+    }
+    (u32::from(idb.linktype), units, name, desc)
+}
+
+/// Convert timestamp units to ns.
+fn scale_ts(units: u64, per_s: u64) -> u64 {
+    if per_s == 1_000_000_000 {
+        units
+    } else {
+        ((units as u128) * 1_000_000_000 / per_s.max(1) as u128) as u64
+    }
+}
+
+impl<R: Read> Reader for PcapReader<R> {
+    fn next_event(&mut self) -> Option<Event<'_>> {
+        self.current = None;
+        while self.queue.is_empty() {
+            if !self.step() && self.queue.is_empty() {
+                if self.usb_flushed {
+                    return None;
+                }
+                // End of file: data the USB demultiplexer still holds comes out now.
+                self.usb_flushed = true;
+                self.usb.finish(&mut self.usb_out);
+                self.push_usb_out();
+            }
+        }
+        self.current = self.queue.pop_front();
+        Some(match self.current.as_ref()? {
+            Owned::Stream(s) => Event::Stream(s.clone()),
+            Owned::Chunk(c) => Event::Chunk(c.as_chunk()),
+            Owned::Diag(d) => Event::Diag(d.clone()),
+        })
+    }
+
+    fn format(&self) -> String {
+        let kind = if self.ng { "pcapng" } else { "pcap" };
+        let lts: Vec<u32> = if self.ng { self.ifaces.iter().map(|i| i.linktype).collect() } else { vec![self.pcap_linktype] };
+        let usb = lts.iter().any(|l| is_usb_linktype(*l));
+        let mut lts = lts;
+        lts.dedup();
+        format!("{kind}{} (link type {})", if usb { ", USB" } else { "" }, lts.iter().map(|l| l.to_string()).collect::<Vec<_>>().join(", "))
+    }
+}
+
+/// Writer of aptscope pcapng serial captures.
+pub struct PcapNgOut<W: Write> {
+    w: Option<PcapNgWriter<W>>,
+    streams: Vec<u32>,
+}
+
+impl<W: Write> PcapNgOut<W> {
+    /// Start a pcapng file.
+    pub fn new(w: W) -> io::Result<Self> {
+        let w = PcapNgWriter::new(w).map_err(io::Error::other)?;
+        Ok(PcapNgOut { w: Some(w), streams: vec![] })
+    }
+
+    fn iface(&mut self, s: &StreamInfo) -> io::Result<u32> {
+        if let Some(i) = self.streams.iter().position(|x| *x == s.id) {
+            return Ok(i as u32);
+        }
+        let w = self.w.as_mut().ok_or_else(|| io::Error::other("writer finished"))?;
+        let mut options = vec![InterfaceDescriptionOption::IfName(Cow::Owned(s.name.clone())), InterfaceDescriptionOption::IfTsResol(9)];
+        if let Some(d) = &s.settings {
+            options.push(InterfaceDescriptionOption::IfDescription(Cow::Owned(d.clone())));
+        }
+        w.write_pcapng_block(InterfaceDescriptionBlock {
+            linktype: DataLink::from(LINKTYPE_SERIAL_NG),
+            snaplen: 0,
+            options,
+        })
+        .map_err(io::Error::other)?;
+        self.streams.push(s.id);
+        Ok(self.streams.len() as u32 - 1)
+    }
+}
+
+impl<W: Write> Writer for PcapNgOut<W> {
+    fn stream(&mut self, s: &StreamInfo) -> io::Result<()> {
+        self.iface(s).map(|_| ())
+    }
+
+    fn chunk(&mut self, c: &Chunk<'_>) -> io::Result<()> {
+        let ifid = match self.streams.iter().position(|x| *x == c.stream) {
+            Some(i) => i as u32,
+            None => self.iface(&StreamInfo {
+                id: c.stream,
+                name: format!("serial{}", c.stream),
+                settings: None,
+            })?,
+        };
+        let flags = match c.dir {
+            Direction::HostToDevice => 2,
+            Direction::DeviceToHost => 1,
+            Direction::Unknown => 0,
+        };
+        let w = self.w.as_mut().ok_or_else(|| io::Error::other("writer finished"))?;
+        w.write_pcapng_block(EnhancedPacketBlock {
+            interface_id: ifid,
+            // pcap-file writes the Duration's nanoseconds as raw units: with if_tsresol 9
+            // those are ns.
+            timestamp: Duration::from_nanos(c.ts_ns.unwrap_or(0)),
+            original_len: c.bytes.len() as u32,
+            data: Cow::Borrowed(c.bytes),
+            options: vec![EnhancedPacketOption::Flags(flags)],
+        })
+        .map_err(io::Error::other)?;
+        Ok(())
+    }
+
+    fn finish(&mut self) -> io::Result<()> {
+        if let Some(w) = self.w.take() {
+            w.into_inner().flush()?;
+        }
+        Ok(())
+    }
+
+    fn limits(&self) -> &'static [&'static str] {
+        &["chunks without a timestamp are written at time 0"]
+    }
+}
+
+/// Writer of legacy pcap serial captures (USER1 with a `[direction, stream]` pseudo-header).
+pub struct PcapOut<W: Write> {
+    w: Option<PcapWriter<W>>,
+    buf: Vec<u8>,
+}
+
+impl<W: Write> PcapOut<W> {
+    /// Start a pcap file (ns resolution).
+    pub fn new(w: W) -> io::Result<Self> {
+        let header = PcapHeader {
+            version_major: 2,
+            version_minor: 4,
+            ts_correction: 0,
+            ts_accuracy: 0,
+            snaplen: 65535,
+            datalink: DataLink::from(LINKTYPE_SERIAL_PCAP),
+            ts_resolution: TsResolution::NanoSecond,
+            endianness: Endianness::Little,
+        };
+        let w = PcapWriter::with_header(w, header).map_err(io::Error::other)?;
+        Ok(PcapOut { w: Some(w), buf: vec![] })
+    }
+}
+
+impl<W: Write> Writer for PcapOut<W> {
+    fn stream(&mut self, _s: &StreamInfo) -> io::Result<()> {
+        Ok(())
+    }
+
+    fn chunk(&mut self, c: &Chunk<'_>) -> io::Result<()> {
+        let w = self.w.as_mut().ok_or_else(|| io::Error::other("writer finished"))?;
+        // Records longer than the snap length are split: the bytes stay in order.
+        for piece in c.bytes.chunks(65535 - 2) {
+            self.buf.clear();
+            self.buf.push(dir_byte(c.dir));
+            self.buf.push(u8::try_from(c.stream).unwrap_or(u8::MAX));
+            self.buf.extend_from_slice(piece);
+            let len = self.buf.len() as u32;
+            w.write_packet(&PcapPacket::new(Duration::from_nanos(c.ts_ns.unwrap_or(0)), len, &self.buf)).map_err(io::Error::other)?;
+        }
+        Ok(())
+    }
+
+    fn finish(&mut self) -> io::Result<()> {
+        if let Some(w) = self.w.take() {
+            w.into_writer().flush()?;
+        }
+        Ok(())
+    }
+
+    fn limits(&self) -> &'static [&'static str] {
+        &["stream names and line settings (pcap has one link type and no interface descriptions)", "more than 255 streams"]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chunks() -> Vec<OwnedChunk> {
+        vec![
+            OwnedChunk {
+                ts_ns: Some(1_700_000_000_123_456_789),
+                dir: Direction::HostToDevice,
+                stream: 0,
+                bytes: vec![0x05, 0x00, 0x00, 0x00, 0x50, 0x01],
+            },
+            OwnedChunk {
+                ts_ns: Some(1_700_000_000_223_456_789),
+                dir: Direction::DeviceToHost,
+                stream: 0,
+                bytes: vec![0x12, 0x02, 0x01, 0x01, 0x01, 0x50],
+            },
+            OwnedChunk {
+                ts_ns: Some(1_700_000_001_000_000_001),
+                dir: Direction::Unknown,
+                stream: 1,
+                bytes: b"0gs".to_vec(),
+            },
+        ]
+    }
+
+    fn read_all(bytes: Vec<u8>) -> (Vec<OwnedChunk>, Vec<ReadDiag>, Vec<StreamInfo>) {
+        let mut r = PcapReader::new(std::io::Cursor::new(bytes), None);
+        let (mut c, mut d, mut s) = (vec![], vec![], vec![]);
+        while let Some(ev) = r.next_event() {
+            match ev {
+                Event::Chunk(x) => c.push(x.to_owned()),
+                Event::Diag(x) => d.push(x),
+                Event::Stream(x) => s.push(x),
+            }
+        }
+        (c, d, s)
+    }
+
+    #[test]
+    fn pcapng_round_trip_keeps_bytes_times_direction_and_ports() {
+        let mut w = PcapNgOut::new(Vec::new()).expect("writer");
+        w.stream(&StreamInfo {
+            id: 0,
+            name: "/dev/ttyUSB0".into(),
+            settings: Some("115200 8N1 RTS/CTS".into()),
+        })
+        .expect("stream");
+        for c in chunks() {
+            w.chunk(&c.as_chunk()).expect("chunk");
+        }
+        let bytes = w.w.take().expect("writer").into_inner();
+        let (c, d, s) = read_all(bytes);
+        assert!(d.is_empty(), "{d:?}");
+        assert_eq!(c, chunks());
+        assert_eq!(s[0].name, "/dev/ttyUSB0");
+        assert_eq!(s[0].settings.as_deref(), Some("115200 8N1 RTS/CTS"));
+        assert_eq!(s.len(), 2);
+    }
+
+    #[test]
+    fn pcap_round_trip_keeps_bytes_times_direction_and_stream() {
+        let mut w = PcapOut::new(Vec::new()).expect("writer");
+        for c in chunks() {
+            w.chunk(&c.as_chunk()).expect("chunk");
+        }
+        let bytes = w.w.take().expect("writer").into_writer();
+        let (c, d, _) = read_all(bytes);
+        assert!(d.is_empty(), "{d:?}");
+        assert_eq!(c, chunks());
+    }
+
+    #[test]
+    fn bad_magic_unknown_linktype_and_short_files() {
+        let (c, d, _) = read_all(b"hello world, not a capture".to_vec());
+        assert!(c.is_empty());
+        assert_eq!(d[0].kind, "bad_magic");
+        assert_eq!(d[0].offset, 0);
+        let (c, d, _) = read_all(vec![]);
+        assert!(c.is_empty());
+        assert_eq!(d.len(), 1, "{d:?}");
+        // An Ethernet pcap: its packets are skipped with one diagnostic.
+        let mut w = PcapWriter::with_header(
+            Vec::new(),
+            PcapHeader {
+                datalink: DataLink::ETHERNET,
+                ..PcapHeader::default()
+            },
+        )
+        .expect("writer");
+        w.write_packet(&PcapPacket::new(Duration::from_secs(1), 4, &[1, 2, 3, 4])).expect("packet");
+        let (c, d, _) = read_all(w.into_writer());
+        assert!(c.is_empty());
+        assert_eq!(d.iter().map(|x| x.kind).collect::<Vec<_>>(), ["unknown_linktype"]);
+    }
+}
