@@ -1,10 +1,13 @@
 //! `aptscope`: the command line. Parses arguments and calls the libraries.
 #![forbid(unsafe_code)]
 
-use aptscope_capture::{ByteSource, InputFormat};
+use aptscope_capture::info::summarize;
+use aptscope_capture::open::{create, open, Format, OpenOptions};
+use aptscope_capture::{Direction, Event};
 use aptscope_dissector::apt::{encode, Addr, FieldValue};
 use aptscope_dissector::detect::Proto;
-use aptscope_dissector::pipeline::{Format, Pipeline};
+use aptscope_dissector::pipeline::{Ctx, Format as PFormat, Pipeline};
+use aptscope_dissector::table::Dir;
 use aptscope_dissector::table::{Form, FormKind, MsgDef};
 use aptscope_dissector::{json, Table};
 use clap::{Parser, Subcommand};
@@ -31,12 +34,17 @@ enum ProtoArg {
 
 #[derive(Subcommand)]
 enum Cmd {
-    /// Decode a byte stream: one line per frame (or NDJSON with --json).
+    /// Decode captures (any readable format, detected from content): one line per frame, or
+    /// NDJSON with --json.
     Decode {
-        /// Input file, or `-` for standard input.
+        /// Capture files, or `-` for standard input.
         #[arg(default_value = "-")]
-        file: String,
-        /// The input is hex text (any whitespace) instead of raw bytes.
+        files: Vec<String>,
+        /// Input format instead of detecting it (pcap, pcapng, mcap, socat, jpnevulator,
+        /// interceptty, xxd, hexdump, hex, raw).
+        #[arg(long, short = 'F')]
+        format: Option<String>,
+        /// Shorthand for --format hex: hex text, any whitespace.
         #[arg(long)]
         hex: bool,
         /// Write NDJSON, one object per frame or garbage record.
@@ -45,6 +53,46 @@ enum Cmd {
         /// Protocol of the stream (default: detected from the first 4 KiB).
         #[arg(long, value_enum, default_value_t = ProtoArg::Auto)]
         proto: ProtoArg,
+        /// USB captures: only the device at BUS:ADDR.
+        #[arg(long)]
+        usb_device: Option<String>,
+    },
+    /// What a capture holds: format, streams, counts per direction, times (like capinfos).
+    Info {
+        /// Capture file.
+        file: String,
+        /// Input format instead of detecting it.
+        #[arg(long, short = 'F')]
+        format: Option<String>,
+        /// One JSON object.
+        #[arg(long)]
+        json: bool,
+        /// Protocol instead of detecting it.
+        #[arg(long, value_enum, default_value_t = ProtoArg::Auto)]
+        proto: ProtoArg,
+        /// USB captures: only the device at BUS:ADDR.
+        #[arg(long)]
+        usb_device: Option<String>,
+    },
+    /// Convert a capture to pcapng, pcap, MCAP, raw bytes or hex text (by OUT's extension, or
+    /// --to), losslessly where the target can carry it.
+    Convert {
+        /// Input capture.
+        input: String,
+        /// Output file.
+        output: String,
+        /// Input format instead of detecting it.
+        #[arg(long, short = 'F')]
+        format: Option<String>,
+        /// Output format: pcapng, pcap, mcap, raw, hex.
+        #[arg(long)]
+        to: Option<String>,
+        /// Overwrite OUT if it exists.
+        #[arg(long)]
+        force: bool,
+        /// USB captures: only the device at BUS:ADDR.
+        #[arg(long)]
+        usb_device: Option<String>,
     },
     /// List the message table.
     Messages {
@@ -80,11 +128,31 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let r = match cli.cmd {
         Cmd::Decode {
-            file,
+            files,
+            format,
             hex,
             json,
             proto,
-        } => decode(&file, hex, json, proto),
+            usb_device,
+        } => open_opts(format.as_deref(), hex, usb_device.as_deref())
+            .and_then(|o| files.iter().try_for_each(|f| decode(f, o, json, proto))),
+        Cmd::Info {
+            file,
+            format,
+            json,
+            proto,
+            usb_device,
+        } => open_opts(format.as_deref(), false, usb_device.as_deref())
+            .and_then(|o| info(&file, o, json, proto)),
+        Cmd::Convert {
+            input,
+            output,
+            format,
+            to,
+            force,
+            usb_device,
+        } => open_opts(format.as_deref(), false, usb_device.as_deref())
+            .and_then(|o| convert(&input, &output, o, to.as_deref(), force)),
         Cmd::Messages { json, verbose } => messages(json, verbose),
         Cmd::Encode {
             name,
@@ -112,33 +180,162 @@ fn main() -> ExitCode {
     }
 }
 
-fn decode(file: &str, hex: bool, as_json: bool, proto: ProtoArg) -> io::Result<()> {
-    let fmt = if hex {
-        InputFormat::Hex
-    } else {
-        InputFormat::Raw
-    };
-    let mut src = ByteSource::open(file, fmt)
-        .map_err(|e| io::Error::new(e.kind(), format!("{file}: {e}")))?;
-    let mut out = BufWriter::with_capacity(1 << 16, io::stdout().lock());
-    let proto = match proto {
+fn proto_of(p: ProtoArg) -> Option<Proto> {
+    match p {
         ProtoArg::Auto => None,
         ProtoArg::Apt => Some(Proto::Apt),
         ProtoArg::Elliptec => Some(Proto::Elliptec),
+    }
+}
+
+fn open_opts(format: Option<&str>, hex: bool, usb: Option<&str>) -> io::Result<OpenOptions> {
+    let format = match (format, hex) {
+        (Some(f), _) => Some(Format::parse(f).ok_or_else(|| {
+            bad(format!(
+                "unknown format {f} (one of {})",
+                Format::NAMES.join(", ")
+            ))
+        })?),
+        (None, true) => Some(Format::Hex),
+        (None, false) => None,
     };
-    let mut p = Pipeline::new(proto, if as_json { Format::Json } else { Format::Text });
+    let usb_device = match usb {
+        None => None,
+        Some(s) => {
+            let (b, a) = s
+                .split_once(':')
+                .ok_or_else(|| bad(format!("--usb-device takes BUS:ADDR, not {s}")))?;
+            Some((
+                b.parse().map_err(|_| bad(format!("bad bus {b}")))?,
+                a.parse().map_err(|_| bad(format!("bad address {a}")))?,
+            ))
+        }
+    };
+    Ok(OpenOptions { format, usb_device })
+}
+
+fn dir_of(d: Direction) -> Option<Dir> {
+    match d {
+        Direction::HostToDevice => Some(Dir::HostToDevice),
+        Direction::DeviceToHost => Some(Dir::DeviceToHost),
+        Direction::Unknown => None,
+    }
+}
+
+fn decode(file: &str, opts: OpenOptions, as_json: bool, proto: ProtoArg) -> io::Result<()> {
+    let (mut reader, _) = open(file, opts)?;
+    let mut out = BufWriter::with_capacity(1 << 16, io::stdout().lock());
+    let mut p = Pipeline::new(
+        proto_of(proto),
+        if as_json {
+            PFormat::Json
+        } else {
+            PFormat::Text
+        },
+    );
     let mut emit = |line: &str| -> io::Result<()> {
         out.write_all(line.as_bytes())?;
         out.write_all(b"\n")
     };
-    while let Some((chunk, diags)) = src.next_chunk()? {
-        for d in diags {
-            p.input_diag(d, &mut emit)?;
+    while let Some(ev) = reader.next_event() {
+        match ev {
+            Event::Chunk(c) => {
+                let ctx = Ctx {
+                    stream: c.stream,
+                    dir: dir_of(c.dir),
+                    ts_ns: c.ts_ns,
+                };
+                p.push_chunk(ctx, c.bytes, &mut emit)?;
+            }
+            Event::Diag(d) => p.file_diag(d.offset, d.kind, &d.msg, &mut emit)?,
+            Event::Stream(s) => {
+                let line = if as_json {
+                    let mut l = format!("{{\"type\":\"stream\",\"stream\":{},\"name\":", s.id);
+                    json::string(&mut l, &s.name);
+                    if let Some(x) = &s.settings {
+                        l.push_str(",\"settings\":");
+                        json::string(&mut l, x);
+                    }
+                    l.push('}');
+                    l
+                } else {
+                    format!(
+                        "# stream {}: {}{}",
+                        s.id,
+                        s.name,
+                        s.settings.map(|x| format!(" ({x})")).unwrap_or_default()
+                    )
+                };
+                emit(&line)?;
+            }
         }
-        p.push(chunk, None, &mut emit)?;
     }
     p.finish(&mut emit)?;
     out.flush()
+}
+
+fn info(file: &str, opts: OpenOptions, as_json: bool, proto: ProtoArg) -> io::Result<()> {
+    let (mut reader, _) = open(file, opts)?;
+    let i = summarize(reader.as_mut(), proto_of(proto));
+    if as_json {
+        println!("{}", i.to_json(file));
+    } else {
+        print!("{}", i.to_text(file));
+    }
+    Ok(())
+}
+
+fn convert(
+    input: &str,
+    output: &str,
+    opts: OpenOptions,
+    to: Option<&str>,
+    force: bool,
+) -> io::Result<()> {
+    let target = match to {
+        Some(t) => Format::parse(t).ok_or_else(|| bad(format!("unknown output format {t}")))?,
+        None => Format::from_extension(output).ok_or_else(|| {
+            bad(format!(
+                "cannot tell the output format from {output}: use --to pcapng|pcap|mcap|raw|hex"
+            ))
+        })?,
+    };
+    let (mut reader, from) = open(input, opts)?;
+    let mut w = create(output, target, force)?;
+    let (mut chunks, mut bytes, mut diags) = (0u64, 0u64, 0u64);
+    let (mut no_ts, mut no_dir) = (false, false);
+    while let Some(ev) = reader.next_event() {
+        match ev {
+            Event::Stream(s) => w.stream(&s)?,
+            Event::Chunk(c) => {
+                chunks += 1;
+                bytes += c.bytes.len() as u64;
+                no_ts |= c.ts_ns.is_none();
+                no_dir |= c.dir == Direction::Unknown;
+                w.chunk(&c)?;
+            }
+            Event::Diag(d) => {
+                diags += 1;
+                eprintln!("aptscope: {input}: {d}");
+            }
+        }
+    }
+    w.finish()?;
+    eprintln!(
+        "{input} ({}) -> {output} ({}): {chunks} chunks, {bytes} bytes, {diags} input diagnostics",
+        from.name(),
+        target.name()
+    );
+    for l in w.limits() {
+        eprintln!("  {} cannot carry: {l}", target.name());
+    }
+    if no_ts {
+        eprintln!("  the input has chunks without timestamps");
+    }
+    if no_dir {
+        eprintln!("  the input has chunks without direction");
+    }
+    Ok(())
 }
 
 fn form_label(f: &Form) -> String {

@@ -57,9 +57,15 @@ fn count(f: &mut Framer, s: &mut LaneStats) {
         Framer::Apt(a) => {
             while let Some(it) = a.next_item() {
                 match it {
-                    AptItem::Frame { offset, bytes, truncated } => {
+                    AptItem::Frame {
+                        offset,
+                        bytes,
+                        truncated,
+                    } => {
                         s.frames += 1;
-                        if AptFrame::decode(Table::global(), offset, bytes, truncated).is_none_or(|x| x.has_diags()) {
+                        if AptFrame::decode(Table::global(), offset, bytes, truncated)
+                            .is_none_or(|x| x.has_diags())
+                        {
                             s.frames_with_diags += 1;
                         }
                     }
@@ -70,9 +76,15 @@ fn count(f: &mut Framer, s: &mut LaneStats) {
         Framer::Ell(e) => {
             while let Some(it) = e.next_item() {
                 match it {
-                    EllItem::Frame { offset, bytes, truncated } => {
+                    EllItem::Frame {
+                        offset,
+                        bytes,
+                        truncated,
+                    } => {
                         s.frames += 1;
-                        if EllFrame::decode(offset, bytes, truncated).is_none_or(|x| !x.diags().is_empty()) {
+                        if EllFrame::decode(offset, bytes, truncated)
+                            .is_none_or(|x| !x.diags().is_empty())
+                        {
                             s.frames_with_diags += 1;
                         }
                     }
@@ -105,7 +117,11 @@ pub fn summarize(r: &mut dyn Reader, proto: Option<Proto>) -> Info {
             }
             Event::Chunk(c) => {
                 let dir = Some(c.dir).filter(|d| *d != Direction::Unknown);
-                let i = match info.lanes.iter().position(|l| l.stream == c.stream && l.dir == dir) {
+                let i = match info
+                    .lanes
+                    .iter()
+                    .position(|l| l.stream == c.stream && l.dir == dir)
+                {
                     Some(i) => i,
                     None => {
                         info.lanes.push(LaneStats {
@@ -183,11 +199,23 @@ fn push(f: &mut Framer, b: &[u8]) {
 
 fn decide(sample: &[(usize, Vec<u8>)]) -> (Proto, bool) {
     let first = sample.first().map_or(0, |s| s.0);
-    let bytes: Vec<u8> = sample.iter().filter(|s| s.0 == first).flat_map(|s| s.1.iter().copied()).take(SAMPLE).collect();
+    let bytes: Vec<u8> = sample
+        .iter()
+        .filter(|s| s.0 == first)
+        .flat_map(|s| s.1.iter().copied())
+        .take(SAMPLE)
+        .collect();
     let d = detect(&bytes);
     match d.proto {
         Some(p) => (p, true),
-        None => (if d.elliptec > d.apt { Proto::Elliptec } else { Proto::Apt }, false),
+        None => (
+            if d.elliptec > d.apt {
+                Proto::Elliptec
+            } else {
+                Proto::Apt
+            },
+            false,
+        ),
     }
 }
 
@@ -205,7 +233,13 @@ pub fn utc(ns: u64) -> String {
     let d = doy - (153 * mp + 2) / 5 + 1;
     let m = if mp < 10 { mp + 3 } else { mp - 9 };
     let y = yoe + era * 400 + i64::from(m <= 2);
-    format!("{y:04}-{m:02}-{d:02} {:02}:{:02}:{:02}.{:09}", rem / 3600, rem / 60 % 60, rem % 60, ns % 1_000_000_000)
+    format!(
+        "{y:04}-{m:02}-{d:02} {:02}:{:02}:{:02}.{:09}",
+        rem / 3600,
+        rem / 60 % 60,
+        rem % 60,
+        ns % 1_000_000_000
+    )
 }
 
 impl Info {
@@ -216,14 +250,32 @@ impl Info {
         let _ = writeln!(s, "File format:          {}", self.format);
         match self.proto {
             Some((p, certain)) => {
-                let _ = writeln!(s, "Protocol:             {}{}", p.name(), if certain { "" } else { " (mixed or unknown; best guess)" });
+                let _ = writeln!(
+                    s,
+                    "Protocol:             {}{}",
+                    p.name(),
+                    if certain {
+                        ""
+                    } else {
+                        " (mixed or unknown; best guess)"
+                    }
+                );
             }
             None => {
                 let _ = writeln!(s, "Protocol:             none (no data)");
             }
         }
         for st in &self.streams {
-            let _ = writeln!(s, "Stream {}:             {}{}", st.id, st.name, st.settings.as_ref().map(|x| format!(" ({x})")).unwrap_or_default());
+            let _ = writeln!(
+                s,
+                "Stream {}:             {}{}",
+                st.id,
+                st.name,
+                st.settings
+                    .as_ref()
+                    .map(|x| format!(" ({x})"))
+                    .unwrap_or_default()
+            );
         }
         if let (Some(a), Some(b)) = (self.first_ts, self.last_ts) {
             let _ = writeln!(s, "First chunk time:     {}", utc(a));
@@ -269,7 +321,12 @@ impl Info {
         }
         s.push_str(",\"streams\":[");
         for (i, st) in self.streams.iter().enumerate() {
-            let _ = write!(s, "{}{{\"id\":{},\"name\":", if i > 0 { "," } else { "" }, st.id);
+            let _ = write!(
+                s,
+                "{}{{\"id\":{},\"name\":",
+                if i > 0 { "," } else { "" },
+                st.id
+            );
             string(&mut s, &st.name);
             if let Some(x) = &st.settings {
                 s.push_str(",\"settings\":");
@@ -294,7 +351,11 @@ impl Info {
         }
         s.push(']');
         if let (Some(a), Some(b)) = (self.first_ts, self.last_ts) {
-            let _ = write!(s, ",\"first_ts_ns\":{a},\"last_ts_ns\":{b},\"duration_s\":{}", (b - a) as f64 / 1e9);
+            let _ = write!(
+                s,
+                ",\"first_ts_ns\":{a},\"last_ts_ns\":{b},\"duration_s\":{}",
+                (b - a) as f64 / 1e9
+            );
         }
         let _ = write!(s, ",\"file_diags\":{}}}", self.file_diag_count);
         s
@@ -308,7 +369,13 @@ mod tests {
     #[test]
     fn utc_formats_known_instants() {
         assert_eq!(utc(0), "1970-01-01 00:00:00.000000000");
-        assert_eq!(utc(1_700_000_000_123_456_789), "2023-11-14 22:13:20.123456789");
-        assert_eq!(utc(951_782_400_000_000_000), "2000-02-29 00:00:00.000000000");
+        assert_eq!(
+            utc(1_700_000_000_123_456_789),
+            "2023-11-14 22:13:20.123456789"
+        );
+        assert_eq!(
+            utc(951_782_400_000_000_000),
+            "2000-02-29 00:00:00.000000000"
+        );
     }
 }

@@ -7,6 +7,7 @@
 pub mod info;
 pub mod mcap_io;
 pub mod model;
+pub mod open;
 pub mod pcap;
 pub mod raw;
 pub mod textlog;

@@ -17,7 +17,9 @@ use crate::model::{Chunk, Direction, Event, OwnedChunk, ReadDiag, Reader, Stream
 use crate::usb::{is_usb_linktype, UsbDemux, UsbOut};
 use pcap_file::pcap::{PcapHeader, PcapPacket, PcapParser, PcapWriter};
 use pcap_file::pcapng::blocks::enhanced_packet::{EnhancedPacketBlock, EnhancedPacketOption};
-use pcap_file::pcapng::blocks::interface_description::{InterfaceDescriptionBlock, InterfaceDescriptionOption};
+use pcap_file::pcapng::blocks::interface_description::{
+    InterfaceDescriptionBlock, InterfaceDescriptionOption,
+};
 use pcap_file::pcapng::{Block, PcapNgParser, PcapNgWriter};
 use pcap_file::{DataLink, Endianness, PcapError, TsResolution};
 use std::borrow::Cow;
@@ -35,7 +37,15 @@ const READ_SIZE: usize = 1 << 20;
 
 /// The pcap magic numbers (both byte orders, µs and ns).
 pub fn sniff_pcap(head: &[u8]) -> bool {
-    matches!(head.get(..4), Some([0xd4, 0xc3, 0xb2, 0xa1] | [0xa1, 0xb2, 0xc3, 0xd4] | [0x4d, 0x3c, 0xb2, 0xa1] | [0xa1, 0xb2, 0x3c, 0x4d]))
+    matches!(
+        head.get(..4),
+        Some(
+            [0xd4, 0xc3, 0xb2, 0xa1]
+                | [0xa1, 0xb2, 0xc3, 0xd4]
+                | [0x4d, 0x3c, 0xb2, 0xa1]
+                | [0xa1, 0xb2, 0x3c, 0x4d]
+        )
+    )
 }
 
 /// The pcapng Section Header Block type.
@@ -215,7 +225,11 @@ impl<R: Read> PcapReader<R> {
                 return false;
             };
             let l = l as usize;
-            matches!(t, 1 | 3 | 5 | 6 | 0x0A0D0D0A) && l >= 12 && l % 4 == 0 && l <= MAX_RECORD && self.read_u32(at + l - 4) == Some(l as u32)
+            matches!(t, 1 | 3 | 5 | 6 | 0x0A0D0D0A)
+                && l >= 12
+                && l.is_multiple_of(4)
+                && l <= MAX_RECORD
+                && self.read_u32(at + l - 4) == Some(l as u32)
         } else {
             let (Some(cap), Some(orig)) = (self.read_u32(at + 8), self.read_u32(at + 12)) else {
                 return false;
@@ -224,19 +238,27 @@ impl<R: Read> PcapReader<R> {
                 Parser::Legacy(p) => p.header().snaplen.max(65535),
                 _ => 65535,
             };
-            cap <= orig && cap <= snap && (cap as usize) < MAX_RECORD && self.buf.len() >= at + 16 + cap as usize
+            cap <= orig
+                && cap <= snap
+                && (cap as usize) < MAX_RECORD
+                && self.buf.len() >= at + 16 + cap as usize
         }
     }
 
     /// Skip a corrupt block: find the next plausible one.
     fn resync(&mut self, kind: &'static str, msg: String) {
         let from = self.offset();
-        let mut at = self.start + 1;
+        // pcapng blocks are 4-byte aligned; pcap records are not.
+        let mut at = self.start + if self.ng { 4 } else { 1 };
         loop {
             while at + 16 <= self.buf.len() {
                 if self.plausible_at(at) {
                     let skipped = at - self.start;
-                    self.queue.push_back(diag(from, kind, format!("{msg}; skipped {skipped} bytes to the next plausible record")));
+                    self.queue.push_back(diag(
+                        from,
+                        kind,
+                        format!("{msg}; skipped {skipped} bytes to the next plausible record"),
+                    ));
                     self.start = at;
                     return;
                 }
@@ -245,7 +267,11 @@ impl<R: Read> PcapReader<R> {
             let rel = at - self.start;
             if !self.fill() {
                 let rest = self.buf.len() - self.start;
-                self.queue.push_back(diag(from, kind, format!("{msg}; no record follows in the last {rest} bytes")));
+                self.queue.push_back(diag(
+                    from,
+                    kind,
+                    format!("{msg}; no record follows in the last {rest} bytes"),
+                ));
                 self.start = self.buf.len();
                 return;
             }
@@ -265,7 +291,8 @@ impl<R: Read> PcapReader<R> {
                     true
                 }
                 Err(e) => {
-                    self.queue.push_back(diag(self.offset(), "bad_section_header", e.to_string()));
+                    self.queue
+                        .push_back(diag(self.offset(), "bad_section_header", e.to_string()));
                     false
                 }
             }
@@ -279,19 +306,28 @@ impl<R: Read> PcapReader<R> {
                     true
                 }
                 Err(e) => {
-                    self.queue.push_back(diag(self.offset(), "bad_pcap_header", e.to_string()));
+                    self.queue
+                        .push_back(diag(self.offset(), "bad_pcap_header", e.to_string()));
                     false
                 }
             }
         } else {
             let magic: Vec<String> = head.iter().take(4).map(|b| format!("{b:02x}")).collect();
-            self.queue.push_back(diag(self.offset(), "bad_magic", format!("not a pcap or pcapng file (starts {})", magic.join(" "))));
+            self.queue.push_back(diag(
+                self.offset(),
+                "bad_magic",
+                format!("not a pcap or pcapng file (starts {})", magic.join(" ")),
+            ));
             false
         }
     }
 
     fn announce_linktype(&mut self, lt: u32) {
-        if lt == LINKTYPE_SERIAL_NG || lt == LINKTYPE_SERIAL_PCAP || is_usb_linktype(lt) || self.warned_linktypes.contains(&lt) {
+        if lt == LINKTYPE_SERIAL_NG
+            || lt == LINKTYPE_SERIAL_PCAP
+            || is_usb_linktype(lt)
+            || self.warned_linktypes.contains(&lt)
+        {
             return;
         }
         self.warned_linktypes.push(lt);
@@ -299,22 +335,44 @@ impl<R: Read> PcapReader<R> {
         self.queue.push_back(diag(at, "unknown_linktype", format!("link type {lt} is neither aptscope serial (147/148) nor USB (189/220/249): its packets are skipped")));
     }
 
-    fn stream_for(&mut self, known: &mut Vec<u32>, id: u32, name: String, settings: Option<String>) {
+    fn stream_for(
+        &mut self,
+        known: &mut Vec<u32>,
+        id: u32,
+        name: String,
+        settings: Option<String>,
+    ) {
         if !known.contains(&id) {
             known.push(id);
-            self.queue.push_back(Owned::Stream(StreamInfo { id, name, settings }));
+            self.queue
+                .push_back(Owned::Stream(StreamInfo { id, name, settings }));
         }
     }
 
-    fn packet(&mut self, lt: u32, data: Vec<u8>, orig_len: u32, ts: u64, at: u64, stream: u32, flags: Option<u32>) {
+    #[allow(clippy::too_many_arguments)]
+    fn packet(
+        &mut self,
+        lt: u32,
+        data: Vec<u8>,
+        orig_len: u32,
+        ts: u64,
+        at: u64,
+        stream: u32,
+        flags: Option<u32>,
+    ) {
         if is_usb_linktype(lt) {
-            self.usb.packet(lt, &data, orig_len, ts, at, &mut self.usb_out);
+            self.usb
+                .packet(lt, &data, orig_len, ts, at, &mut self.usb_out);
             self.push_usb_out();
             return;
         }
         if lt == LINKTYPE_SERIAL_PCAP {
             let (Some(&d), Some(&s)) = (data.first(), data.get(1)) else {
-                self.queue.push_back(diag(at, "short_record", "record shorter than its 2-byte direction header"));
+                self.queue.push_back(diag(
+                    at,
+                    "short_record",
+                    "record shorter than its 2-byte direction header",
+                ));
                 return;
             };
             let mut known = std::mem::take(&mut self.pcap_streams);
@@ -328,7 +386,14 @@ impl<R: Read> PcapReader<R> {
             }));
         } else if lt == LINKTYPE_SERIAL_NG {
             if orig_len as usize > data.len() {
-                self.queue.push_back(diag(at, "snapped_packet", format!("{} of {orig_len} bytes captured: the rest is lost", data.len())));
+                self.queue.push_back(diag(
+                    at,
+                    "snapped_packet",
+                    format!(
+                        "{} of {orig_len} bytes captured: the rest is lost",
+                        data.len()
+                    ),
+                ));
             }
             self.queue.push_back(Owned::Chunk(OwnedChunk {
                 ts_ns: Some(ts),
@@ -351,11 +416,9 @@ impl<R: Read> PcapReader<R> {
 
     /// Parse the next block/record into the queue. `false` at the end.
     fn step(&mut self) -> bool {
-        if matches!(self.parser, Parser::None) {
-            if self.done || !self.start_parser() {
-                self.done = true;
-                return !self.queue.is_empty();
-            }
+        if matches!(self.parser, Parser::None) && (self.done || !self.start_parser()) {
+            self.done = true;
+            return !self.queue.is_empty();
         }
         if self.start >= self.buf.len() && !self.fill() {
             return false;
@@ -363,8 +426,11 @@ impl<R: Read> PcapReader<R> {
         let at = self.offset();
         // A header whose length is absurd is corruption, not a reason to buffer the whole file.
         if let Some(len) = self.declared_len() {
-            if len > MAX_RECORD || (self.ng && (len < 12 || len % 4 != 0)) {
-                self.resync("bad_block_length", format!("declared length {len} is not a valid length"));
+            if len > MAX_RECORD || (self.ng && (len < 12 || !len.is_multiple_of(4))) {
+                self.resync(
+                    "bad_block_length",
+                    format!("declared length {len} is not a valid length"),
+                );
                 return true;
             }
             while self.buf.len() - self.start < len {
@@ -379,7 +445,16 @@ impl<R: Read> PcapReader<R> {
         let avail = &self.buf[self.start..];
         let result: Result<(usize, Option<Parsed>), PcapError> = match &mut self.parser {
             Parser::Legacy(p) => p.next_packet(avail).map(|(rem, pkt)| {
-                (avail.len() - rem.len(), Some(Parsed::Packet(u32::MAX, pkt.timestamp.as_nanos() as u64, pkt.orig_len, pkt.data.into_owned(), None)))
+                (
+                    avail.len() - rem.len(),
+                    Some(Parsed::Packet(
+                        u32::MAX,
+                        pkt.timestamp.as_nanos() as u64,
+                        pkt.orig_len,
+                        pkt.data.into_owned(),
+                        None,
+                    )),
+                )
             }),
             Parser::Ng(p) => match p.next_block(avail) {
                 Ok((rem, block)) => {
@@ -391,9 +466,21 @@ impl<R: Read> PcapReader<R> {
                                 EnhancedPacketOption::Flags(f) => Some(*f),
                                 _ => None,
                             });
-                            Some(Parsed::Packet(epb.interface_id, epb.timestamp.as_nanos() as u64, epb.original_len, epb.data.into_owned(), flags))
+                            Some(Parsed::Packet(
+                                epb.interface_id,
+                                epb.timestamp.as_nanos() as u64,
+                                epb.original_len,
+                                epb.data.into_owned(),
+                                flags,
+                            ))
                         }
-                        Block::SimplePacket(spb) => Some(Parsed::Packet(0, 0, spb.original_len, spb.data.into_owned(), None)),
+                        Block::SimplePacket(spb) => Some(Parsed::Packet(
+                            0,
+                            0,
+                            spb.original_len,
+                            spb.data.into_owned(),
+                            None,
+                        )),
                         Block::SectionHeader(_) => Some(Parsed::Section),
                         _ => None,
                     };
@@ -419,7 +506,9 @@ impl<R: Read> PcapReader<R> {
                         if lt == LINKTYPE_SERIAL_NG {
                             self.queue.push_back(Owned::Stream(StreamInfo {
                                 id: stream,
-                                name: name.unwrap_or_else(|| format!("interface {}", self.ifaces.len() - 1)),
+                                name: name.unwrap_or_else(|| {
+                                    format!("interface {}", self.ifaces.len() - 1)
+                                }),
                                 settings,
                             }));
                         }
@@ -447,7 +536,11 @@ impl<R: Read> PcapReader<R> {
                 if !self.fill() {
                     let have = self.buf.len() - self.start;
                     if have > 0 {
-                        self.queue.push_back(diag(at, "truncated_record", format!("{have} bytes at the end of the file are not a whole record")));
+                        self.queue.push_back(diag(
+                            at,
+                            "truncated_record",
+                            format!("{have} bytes at the end of the file are not a whole record"),
+                        ));
                         self.start = self.buf.len();
                     }
                     return have > 0;
@@ -474,7 +567,11 @@ fn iface_of(idb: &InterfaceDescriptionBlock<'_>) -> (u32, u64, Option<String>, O
     for o in &idb.options {
         match o {
             InterfaceDescriptionOption::IfTsResol(r) => {
-                units = if r & 0x80 != 0 { 1u64.checked_shl((r & 0x7F) as u32).unwrap_or(u64::MAX) } else { 10u64.checked_pow(*r as u32).unwrap_or(u64::MAX) };
+                units = if r & 0x80 != 0 {
+                    1u64.checked_shl((r & 0x7F) as u32).unwrap_or(u64::MAX)
+                } else {
+                    10u64.checked_pow(*r as u32).unwrap_or(u64::MAX)
+                };
             }
             InterfaceDescriptionOption::IfName(n) => name = Some(n.to_string()),
             InterfaceDescriptionOption::IfDescription(d) => desc = Some(d.to_string()),
@@ -517,11 +614,22 @@ impl<R: Read> Reader for PcapReader<R> {
 
     fn format(&self) -> String {
         let kind = if self.ng { "pcapng" } else { "pcap" };
-        let lts: Vec<u32> = if self.ng { self.ifaces.iter().map(|i| i.linktype).collect() } else { vec![self.pcap_linktype] };
+        let lts: Vec<u32> = if self.ng {
+            self.ifaces.iter().map(|i| i.linktype).collect()
+        } else {
+            vec![self.pcap_linktype]
+        };
         let usb = lts.iter().any(|l| is_usb_linktype(*l));
         let mut lts = lts;
         lts.dedup();
-        format!("{kind}{} (link type {})", if usb { ", USB" } else { "" }, lts.iter().map(|l| l.to_string()).collect::<Vec<_>>().join(", "))
+        format!(
+            "{kind}{} (link type {})",
+            if usb { ", USB" } else { "" },
+            lts.iter()
+                .map(|l| l.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
     }
 }
 
@@ -535,17 +643,28 @@ impl<W: Write> PcapNgOut<W> {
     /// Start a pcapng file.
     pub fn new(w: W) -> io::Result<Self> {
         let w = PcapNgWriter::new(w).map_err(io::Error::other)?;
-        Ok(PcapNgOut { w: Some(w), streams: vec![] })
+        Ok(PcapNgOut {
+            w: Some(w),
+            streams: vec![],
+        })
     }
 
     fn iface(&mut self, s: &StreamInfo) -> io::Result<u32> {
         if let Some(i) = self.streams.iter().position(|x| *x == s.id) {
             return Ok(i as u32);
         }
-        let w = self.w.as_mut().ok_or_else(|| io::Error::other("writer finished"))?;
-        let mut options = vec![InterfaceDescriptionOption::IfName(Cow::Owned(s.name.clone())), InterfaceDescriptionOption::IfTsResol(9)];
+        let w = self
+            .w
+            .as_mut()
+            .ok_or_else(|| io::Error::other("writer finished"))?;
+        let mut options = vec![
+            InterfaceDescriptionOption::IfName(Cow::Owned(s.name.clone())),
+            InterfaceDescriptionOption::IfTsResol(9),
+        ];
         if let Some(d) = &s.settings {
-            options.push(InterfaceDescriptionOption::IfDescription(Cow::Owned(d.clone())));
+            options.push(InterfaceDescriptionOption::IfDescription(Cow::Owned(
+                d.clone(),
+            )));
         }
         w.write_pcapng_block(InterfaceDescriptionBlock {
             linktype: DataLink::from(LINKTYPE_SERIAL_NG),
@@ -577,7 +696,10 @@ impl<W: Write> Writer for PcapNgOut<W> {
             Direction::DeviceToHost => 1,
             Direction::Unknown => 0,
         };
-        let w = self.w.as_mut().ok_or_else(|| io::Error::other("writer finished"))?;
+        let w = self
+            .w
+            .as_mut()
+            .ok_or_else(|| io::Error::other("writer finished"))?;
         w.write_pcapng_block(EnhancedPacketBlock {
             interface_id: ifid,
             // pcap-file writes the Duration's nanoseconds as raw units: with if_tsresol 9
@@ -623,7 +745,10 @@ impl<W: Write> PcapOut<W> {
             endianness: Endianness::Little,
         };
         let w = PcapWriter::with_header(w, header).map_err(io::Error::other)?;
-        Ok(PcapOut { w: Some(w), buf: vec![] })
+        Ok(PcapOut {
+            w: Some(w),
+            buf: vec![],
+        })
     }
 }
 
@@ -633,7 +758,10 @@ impl<W: Write> Writer for PcapOut<W> {
     }
 
     fn chunk(&mut self, c: &Chunk<'_>) -> io::Result<()> {
-        let w = self.w.as_mut().ok_or_else(|| io::Error::other("writer finished"))?;
+        let w = self
+            .w
+            .as_mut()
+            .ok_or_else(|| io::Error::other("writer finished"))?;
         // Records longer than the snap length are split: the bytes stay in order.
         for piece in c.bytes.chunks(65535 - 2) {
             self.buf.clear();
@@ -641,7 +769,12 @@ impl<W: Write> Writer for PcapOut<W> {
             self.buf.push(u8::try_from(c.stream).unwrap_or(u8::MAX));
             self.buf.extend_from_slice(piece);
             let len = self.buf.len() as u32;
-            w.write_packet(&PcapPacket::new(Duration::from_nanos(c.ts_ns.unwrap_or(0)), len, &self.buf)).map_err(io::Error::other)?;
+            w.write_packet(&PcapPacket::new(
+                Duration::from_nanos(c.ts_ns.unwrap_or(0)),
+                len,
+                &self.buf,
+            ))
+            .map_err(io::Error::other)?;
         }
         Ok(())
     }
@@ -654,7 +787,10 @@ impl<W: Write> Writer for PcapOut<W> {
     }
 
     fn limits(&self) -> &'static [&'static str] {
-        &["stream names and line settings (pcap has one link type and no interface descriptions)", "more than 255 streams"]
+        &[
+            "stream names and line settings (pcap has one link type and no interface descriptions)",
+            "more than 255 streams",
+        ]
     }
 }
 
@@ -749,9 +885,13 @@ mod tests {
             },
         )
         .expect("writer");
-        w.write_packet(&PcapPacket::new(Duration::from_secs(1), 4, &[1, 2, 3, 4])).expect("packet");
+        w.write_packet(&PcapPacket::new(Duration::from_secs(1), 4, &[1, 2, 3, 4]))
+            .expect("packet");
         let (c, d, _) = read_all(w.into_writer());
         assert!(c.is_empty());
-        assert_eq!(d.iter().map(|x| x.kind).collect::<Vec<_>>(), ["unknown_linktype"]);
+        assert_eq!(
+            d.iter().map(|x| x.kind).collect::<Vec<_>>(),
+            ["unknown_linktype"]
+        );
     }
 }

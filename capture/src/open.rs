@@ -1,0 +1,295 @@
+//! Opening any capture: format detection from content, readers and writers by format.
+
+use crate::model::{Chunk, Direction, Event, ReadDiag, Reader, Writer};
+use crate::raw::{ByteSource, InputFormat};
+use crate::{mcap_io, pcap, textlog};
+use std::fs::File;
+use std::io::{self, BufReader, Cursor, Read};
+
+/// A capture file format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// Legacy pcap (serial or USB link types).
+    Pcap,
+    /// pcapng (serial or USB link types).
+    PcapNg,
+    /// MCAP.
+    Mcap,
+    /// A text log of a serial tool or a hex dump with columns.
+    Text(textlog::TextFormat),
+    /// Plain hex text, any whitespace.
+    Hex,
+    /// Raw bytes.
+    Raw,
+}
+
+impl Format {
+    /// Names accepted by `--format`.
+    pub const NAMES: &'static [&'static str] = &[
+        "pcap",
+        "pcapng",
+        "mcap",
+        "socat",
+        "jpnevulator",
+        "interceptty",
+        "xxd",
+        "hexdump",
+        "hexcols",
+        "hex",
+        "raw",
+    ];
+
+    /// Parse a `--format` name.
+    pub fn parse(s: &str) -> Option<Format> {
+        Some(match s {
+            "pcap" => Format::Pcap,
+            "pcapng" => Format::PcapNg,
+            "mcap" => Format::Mcap,
+            "hex" => Format::Hex,
+            "raw" | "bin" => Format::Raw,
+            other => Format::Text(textlog::TextFormat::parse(other)?),
+        })
+    }
+
+    /// The name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Pcap => "pcap",
+            Format::PcapNg => "pcapng",
+            Format::Mcap => "mcap",
+            Format::Text(t) => t.name(),
+            Format::Hex => "hex",
+            Format::Raw => "raw",
+        }
+    }
+
+    /// The format a file name asks for when writing (`.pcapng`, `.pcap`, `.mcap`, `.hex`,
+    /// `.bin`/`.raw`).
+    pub fn from_extension(path: &str) -> Option<Format> {
+        let ext = path.rsplit('.').next()?.to_ascii_lowercase();
+        Some(match ext.as_str() {
+            "pcapng" => Format::PcapNg,
+            "pcap" => Format::Pcap,
+            "mcap" => Format::Mcap,
+            "hex" => Format::Hex,
+            "bin" | "raw" => Format::Raw,
+            _ => return None,
+        })
+    }
+}
+
+/// How much of a file [`sniff`] looks at.
+pub const SNIFF_LEN: usize = 8192;
+
+/// Guess the format from the first bytes of a file.
+pub fn sniff(head: &[u8]) -> Format {
+    if pcap::sniff_pcapng(head) {
+        Format::PcapNg
+    } else if pcap::sniff_pcap(head) {
+        Format::Pcap
+    } else if mcap_io::sniff(head) {
+        Format::Mcap
+    } else if let Some(t) = textlog::sniff(head) {
+        Format::Text(t)
+    } else if looks_like_plain_hex(head) {
+        Format::Hex
+    } else {
+        Format::Raw
+    }
+}
+
+/// Plain hex text: only hex digit pairs and whitespace/commas, and at least a few bytes' worth.
+/// (An Elliptec stream is ASCII too, but has command letters beyond a-f.)
+fn looks_like_plain_hex(head: &[u8]) -> bool {
+    let digits = head.iter().filter(|c| c.is_ascii_hexdigit()).count();
+    digits >= 6
+        && head
+            .iter()
+            .all(|c| c.is_ascii_hexdigit() || c.is_ascii_whitespace() || *c == b',')
+}
+
+/// A raw or hex byte stream as a capture reader: one stream, unknown direction, no times.
+pub struct ByteReader {
+    src: ByteSource,
+    offset: u64,
+    hex: bool,
+    pending: Vec<ReadDiag>,
+    chunk: Vec<u8>,
+    done: bool,
+}
+
+impl ByteReader {
+    /// Wrap a reader of raw bytes or hex text.
+    pub fn new(r: Box<dyn Read>, hex: bool) -> Self {
+        ByteReader {
+            src: ByteSource::from_reader(
+                r,
+                if hex {
+                    InputFormat::Hex
+                } else {
+                    InputFormat::Raw
+                },
+            ),
+            offset: 0,
+            hex,
+            pending: vec![],
+            chunk: vec![],
+            done: false,
+        }
+    }
+}
+
+impl Reader for ByteReader {
+    fn next_event(&mut self) -> Option<Event<'_>> {
+        if let Some(d) = self.pending.pop() {
+            return Some(Event::Diag(d));
+        }
+        if self.done {
+            return None;
+        }
+        match self.src.next_chunk() {
+            Ok(Some((bytes, diags))) => {
+                self.chunk.clear();
+                self.chunk.extend_from_slice(bytes);
+                for d in diags.iter().rev() {
+                    self.pending.push(ReadDiag {
+                        offset: d.offset,
+                        kind: d.kind.name(),
+                        msg: d.kind.to_string(),
+                    });
+                }
+                self.offset += bytes.len() as u64;
+                if self.chunk.is_empty() {
+                    return self.next_event();
+                }
+                Some(Event::Chunk(Chunk {
+                    ts_ns: None,
+                    dir: Direction::Unknown,
+                    stream: 0,
+                    bytes: &self.chunk,
+                }))
+            }
+            Ok(None) => {
+                self.done = true;
+                None
+            }
+            Err(e) => {
+                self.done = true;
+                Some(Event::Diag(ReadDiag {
+                    offset: self.offset,
+                    kind: "io_error",
+                    msg: e.to_string(),
+                }))
+            }
+        }
+    }
+
+    fn format(&self) -> String {
+        if self.hex { "hex text" } else { "raw bytes" }.to_string()
+    }
+}
+
+/// Options for opening a capture.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct OpenOptions {
+    /// Force a format instead of detecting it.
+    pub format: Option<Format>,
+    /// For USB captures: only this BUS:ADDR.
+    pub usb_device: Option<(u16, u8)>,
+}
+
+/// Open a capture (`-` = standard input), detecting its format from its first bytes unless
+/// `opts.format` says. Returns the reader and the format used.
+pub fn open(path: &str, opts: OpenOptions) -> io::Result<(Box<dyn Reader>, Format)> {
+    let mut input: Box<dyn Read> = if path == "-" {
+        Box::new(io::stdin())
+    } else {
+        Box::new(File::open(path).map_err(|e| io::Error::new(e.kind(), format!("{path}: {e}")))?)
+    };
+    let mut head = Vec::with_capacity(SNIFF_LEN);
+    (&mut input).take(SNIFF_LEN as u64).read_to_end(&mut head)?;
+    let format = opts.format.unwrap_or_else(|| sniff(&head));
+    let stream: Box<dyn Read> = Box::new(Cursor::new(head).chain(input));
+    let reader: Box<dyn Reader> = match format {
+        Format::Pcap | Format::PcapNg => Box::new(pcap::PcapReader::new(stream, opts.usb_device)),
+        Format::Mcap => Box::new(mcap_io::McapReader::new(stream)),
+        Format::Text(t) => textlog::open(t, BufReader::new(stream)),
+        Format::Hex => Box::new(ByteReader::new(stream, true)),
+        Format::Raw => Box::new(ByteReader::new(stream, false)),
+    };
+    Ok((reader, format))
+}
+
+/// Create a capture writer for `path` in `format`, refusing to overwrite unless `force`.
+pub fn create(path: &str, format: Format, force: bool) -> io::Result<Box<dyn Writer>> {
+    let file = if force {
+        File::create(path)
+    } else {
+        File::options().write(true).create_new(true).open(path)
+    }
+    .map_err(|e| {
+        if e.kind() == io::ErrorKind::AlreadyExists {
+            io::Error::new(
+                e.kind(),
+                format!("{path} exists (use --force to overwrite)"),
+            )
+        } else {
+            io::Error::new(e.kind(), format!("{path}: {e}"))
+        }
+    })?;
+    let w = io::BufWriter::with_capacity(1 << 16, file);
+    Ok(match format {
+        Format::PcapNg => Box::new(pcap::PcapNgOut::new(w)?),
+        Format::Pcap => Box::new(pcap::PcapOut::new(w)?),
+        Format::Mcap => Box::new(mcap_io::McapWriter::new(w, None)?),
+        Format::Hex | Format::Raw => Box::new(BytesOut {
+            w,
+            hex: format == Format::Hex,
+            col: 0,
+        }),
+        Format::Text(t) => {
+            return Err(io::Error::new(
+                io::ErrorKind::Unsupported,
+                format!("aptscope reads {} logs but does not write them", t.name()),
+            ))
+        }
+    })
+}
+
+/// Writer of raw bytes or hex text: the bytes only, in capture order.
+struct BytesOut<W: io::Write> {
+    w: W,
+    hex: bool,
+    col: usize,
+}
+
+impl<W: io::Write> Writer for BytesOut<W> {
+    fn stream(&mut self, _s: &crate::model::StreamInfo) -> io::Result<()> {
+        Ok(())
+    }
+    fn chunk(&mut self, c: &Chunk<'_>) -> io::Result<()> {
+        if !self.hex {
+            return self.w.write_all(c.bytes);
+        }
+        for b in c.bytes {
+            write!(self.w, "{b:02x}")?;
+            self.col += 1;
+            if self.col == 32 {
+                self.w.write_all(b"\n")?;
+                self.col = 0;
+            } else {
+                self.w.write_all(b" ")?;
+            }
+        }
+        Ok(())
+    }
+    fn finish(&mut self) -> io::Result<()> {
+        if self.hex && self.col > 0 {
+            self.w.write_all(b"\n")?;
+        }
+        self.w.flush()
+    }
+    fn limits(&self) -> &'static [&'static str] {
+        &["timestamps", "directions", "streams"]
+    }
+}
