@@ -86,3 +86,9 @@ xxd -r -p damaged.hex > damaged.bin
   printf '1ga0'; printf '0GS00\r\n'
   printf '1gj'
 } > elliptec-bus.txt
+
+# The KDC101 session as captures with times and directions: pcapng, pcap, MCAP, a usbmon capture
+# of the FTDI chip, and the logs of socat, jpnevulator, interceptty and xxd.
+cd ..
+cargo run -q -p aptscope-capture --example make_samples
+python3 samples/make-textlogs.py
