@@ -1029,6 +1029,8 @@ struct Iface {
     name: String,
     dir: Direction,
     count: Option<u64>,
+    /// Interfaces of known direction are the two ends of one serial line: one stream, 0.
+    stream: u32,
 }
 
 struct Jpn {
@@ -1067,23 +1069,37 @@ impl Jpn {
             .or_else(|| classify_iface(&name))
             .or_else(|| (pty_seen && !is_pty(&name)).then_some(Direction::DeviceToHost))
             .unwrap_or(Direction::Unknown);
-        let id = self.ifaces.len() as u32;
-        sink.stream(StreamInfo {
-            id,
-            name: name.to_string(),
-            settings: None,
-        });
+        // The pty (what the host wrote) and the tty (what the device answered) are one line.
+        let directed = dir != Direction::Unknown;
+        let line_known = self.ifaces.iter().any(|f| f.dir != Direction::Unknown);
+        let first_directed = self
+            .ifaces
+            .iter()
+            .find(|f| f.dir != Direction::Unknown)
+            .map(|f| f.stream);
+        let id = match (directed, first_directed) {
+            (true, Some(s)) => s,
+            _ => self.ifaces.len() as u32,
+        };
+        if !(directed && line_known) {
+            sink.stream(StreamInfo {
+                id,
+                name: name.to_string(),
+                settings: None,
+            });
+        }
         self.ifaces.push(Iface {
             name: name.into_owned(),
             dir,
             count: None,
+            stream: id,
         });
         self.ifaces.len() - 1
     }
 
     fn start(&mut self, ts: Option<u64>, sink: &mut Sink) {
         let (dir, stream) = match self.cur {
-            Some(i) => (self.ifaces[i].dir, i as u32),
+            Some(i) => (self.ifaces[i].dir, self.ifaces[i].stream),
             None => (Direction::Unknown, 0),
         };
         self.acc.start(ts, dir, stream, sink);
@@ -1990,12 +2006,10 @@ mod tests {
     fn jpnevulator_sample() {
         let g = read_sample(TextFormat::Jpnevulator, "kdc101-session.jpnevulator.txt");
         check_session(&g, true, true);
+        // The pty and the tty are the two directions of one line: one stream.
         let names: Vec<_> = g.streams.iter().map(|s| (s.id, s.name.as_str())).collect();
-        assert_eq!(names, vec![(0, "/dev/pts/3"), (1, "/dev/ttyUSB0")]);
-        assert!(g
-            .chunks
-            .iter()
-            .all(|c| c.stream == u32::from(c.dir == Direction::DeviceToHost)));
+        assert_eq!(names, vec![(0, "/dev/pts/3")]);
+        assert!(g.chunks.iter().all(|c| c.stream == 0));
     }
 
     #[test]

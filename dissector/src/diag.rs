@@ -101,6 +101,11 @@ pub enum DiagKind {
     },
     /// A reply no command asked for.
     Unsolicited,
+    /// A second reply to a request that was already answered.
+    DuplicateReply {
+        /// Record number of the request.
+        request: u64,
+    },
 }
 
 impl DiagKind {
@@ -126,6 +131,7 @@ impl DiagKind {
             DiagKind::LetterO => "letter_o",
             DiagKind::NoReply { .. } => "no_reply",
             DiagKind::Unsolicited => "unsolicited",
+            DiagKind::DuplicateReply { .. } => "duplicate_reply",
         }
     }
 }
@@ -189,6 +195,7 @@ impl fmt::Display for DiagKind {
             DiagKind::LetterO => write!(f, "letter O used for digit 0"),
             DiagKind::NoReply { cmd } => write!(f, "no reply to record {cmd}"),
             DiagKind::Unsolicited => write!(f, "reply without a pending command"),
+            DiagKind::DuplicateReply { request } => write!(f, "second reply to record {request}"),
         }
     }
 }

@@ -178,6 +178,12 @@ pub fn int(out: &mut String, x: i64) {
 
 /// Append the JSON object of a decoded APT frame (no trailing newline). `n` is the record number.
 pub fn apt_frame(out: &mut String, n: u64, f: &AptFrame<'_, '_>) {
+    apt_frame_paired(out, n, f, &crate::pair::PairInfo::default());
+}
+
+/// [`apt_frame`] with what pairing found: `pair`, `latency_ms`, `pair_other_address`, and the
+/// `unsolicited`/`duplicate_reply` diagnostics.
+pub fn apt_frame_paired(out: &mut String, n: u64, f: &AptFrame<'_, '_>, p: &crate::pair::PairInfo) {
     let h = f.header();
     out.push_str("{\"n\":");
     uint(out, n);
@@ -249,8 +255,29 @@ pub fn apt_frame(out: &mut String, n: u64, f: &AptFrame<'_, '_>) {
         out.push_str(&phys);
         out.push('}');
     }
+    if let Some(x) = p.pair {
+        out.push_str(",\"pair\":");
+        uint(out, x);
+    }
+    if let Some(l) = p.latency_ns {
+        out.push_str(",\"latency_ms\":");
+        float(out, l as f64 / 1e6);
+    }
+    if p.other_address {
+        out.push_str(",\"pair_other_address\":true");
+    }
+    let extra = [
+        p.unsolicited.then_some(DiagKind::Unsolicited),
+        p.pair
+            .filter(|_| p.duplicate)
+            .map(|request| DiagKind::DuplicateReply { request }),
+    ];
+    let extra = extra.into_iter().flatten().map(|kind| Diag {
+        offset: f.offset,
+        kind,
+    });
     out.push_str(",\"diag\":");
-    diags(out, f.diags());
+    diags(out, f.diags().chain(extra));
     out.push('}');
 }
 

@@ -13,6 +13,7 @@ pub mod diag;
 pub mod ell;
 pub mod hex;
 pub mod json;
+pub mod pair;
 pub mod pipeline;
 pub mod spec_examples;
 pub mod synth;

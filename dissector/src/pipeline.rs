@@ -9,6 +9,7 @@ use crate::apt::{AptFrame, AptFramer, Item as AptItem};
 use crate::detect::{detect, Detection, Proto, SAMPLE};
 use crate::diag::{Diag, DiagKind};
 use crate::ell::{Bus, EllFrame, EllFramer, Expired, Item as EllItem};
+use crate::pair::AptPairer;
 use crate::table::Dir;
 use crate::{json, text, Table};
 use std::fmt::Write;
@@ -51,6 +52,7 @@ pub struct Pipeline {
     sample_len: usize,
     lanes: Vec<Lane>,
     buses: Vec<(u32, Bus)>,
+    pairers: Vec<(u32, AptPairer)>,
     first_ts: Option<u64>,
     n: u64,
     line: String,
@@ -66,6 +68,7 @@ impl Pipeline {
             sample_len: 0,
             lanes: vec![],
             buses: vec![],
+            pairers: vec![],
             first_ts: None,
             n: 0,
             line: String::with_capacity(512),
@@ -180,7 +183,17 @@ impl Pipeline {
             left.extend(bus.finish());
         }
         left.sort_by_key(|e| e.n);
-        self.report_expired(&left, emit)
+        Self::render_expired(&mut self.line, self.fmt, "ell", &left, emit)?;
+        let mut left: Vec<Expired> = vec![];
+        for (_, p) in self.pairers.iter_mut() {
+            left.extend(p.finish().into_iter().map(|u| Expired {
+                n: u.n,
+                offset: u.offset,
+                code: u.name,
+            }));
+        }
+        left.sort_by_key(|e| e.n);
+        Self::render_expired(&mut self.line, self.fmt, "apt", &left, emit)
     }
 
     fn replay_sample<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
@@ -321,10 +334,18 @@ impl Pipeline {
             _ => None,
         };
         if self.proto == Some(Proto::Apt) {
+            let pi_idx = match self.pairers.iter().position(|(s, _)| *s == stream) {
+                Some(p) => p,
+                None => {
+                    self.pairers.push((stream, AptPairer::new()));
+                    self.pairers.len() - 1
+                }
+            };
             while let Some(item) = lane.apt.next_item() {
                 self.n += 1;
                 self.line.clear();
                 let mut dir = cap_dir.map(|d| d.as_str());
+                let mut expired = vec![];
                 match item {
                     AptItem::Frame {
                         offset,
@@ -339,9 +360,24 @@ impl Pipeline {
                                     .filter(|d| *d != Dir::Both)
                                     .map(|d| d.as_str());
                             }
+                            let pinfo = self.pairers[pi_idx].1.observe(t, self.n, &f, cap_dir, ts);
+                            expired = pinfo
+                                .expired
+                                .iter()
+                                .map(|u| Expired {
+                                    n: u.n,
+                                    offset: u.offset,
+                                    code: u.name,
+                                })
+                                .collect();
                             match self.fmt {
-                                Format::Json => json::apt_frame(&mut self.line, self.n, &f),
-                                Format::Text => text::apt_line(&mut self.line, self.n, &f, time),
+                                Format::Json => {
+                                    json::apt_frame_paired(&mut self.line, self.n, &f, &pinfo)
+                                }
+                                Format::Text => {
+                                    text::apt_line(&mut self.line, self.n, &f, time);
+                                    text::pair_suffix(&mut self.line, &pinfo);
+                                }
                             }
                         }
                     }
@@ -362,6 +398,7 @@ impl Pipeline {
                     Self::close_json(&mut self.line, ts, stream, Some(dir.unwrap_or("unknown")));
                 }
                 emit(&self.line)?;
+                Self::render_expired(&mut self.line, self.fmt, "apt", &expired, emit)?;
             }
             return Ok(());
         }
@@ -410,24 +447,17 @@ impl Pipeline {
             }
             emit(&self.line)?;
             if !expired.is_empty() {
-                Self::render_expired(&mut self.line, self.fmt, &expired, emit)?;
+                Self::render_expired(&mut self.line, self.fmt, "ell", &expired, emit)?;
                 expired.clear();
             }
         }
         Ok(())
     }
 
-    fn report_expired<E>(
-        &mut self,
-        list: &[Expired],
-        emit: &mut impl FnMut(&str) -> Result<(), E>,
-    ) -> Result<(), E> {
-        Self::render_expired(&mut self.line, self.fmt, list, emit)
-    }
-
     fn render_expired<E>(
         line: &mut String,
         fmt: Format,
+        proto: &str,
         list: &[Expired],
         emit: &mut impl FnMut(&str) -> Result<(), E>,
     ) -> Result<(), E> {
@@ -438,7 +468,7 @@ impl Pipeline {
             };
             line.clear();
             match fmt {
-                Format::Json => json::late_diag(line, "ell", e.n, d),
+                Format::Json => json::late_diag(line, proto, e.n, d),
                 Format::Text => text::late_diag_line(line, e.n, &d),
             }
             emit(line)?;

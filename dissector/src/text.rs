@@ -136,3 +136,23 @@ pub fn late_diag_line(out: &mut String, refers_to: u64, d: &Diag) {
         d.offset, d.kind
     );
 }
+
+/// Append what pairing found to an APT line: the request a reply answers, its latency, and
+/// unsolicited or duplicate replies.
+pub fn pair_suffix(out: &mut String, p: &crate::pair::PairInfo) {
+    if let Some(n) = p.pair {
+        let _ = write!(out, "  ↩ #{n}");
+        if let Some(l) = p.latency_ns {
+            let _ = write!(out, " {:.1} ms", l as f64 / 1e6);
+        }
+        if p.other_address {
+            out.push_str(" (from another address)");
+        }
+    }
+    if p.duplicate {
+        out.push_str("  !! duplicate reply");
+    }
+    if p.unsolicited {
+        out.push_str("  !! unsolicited reply");
+    }
+}

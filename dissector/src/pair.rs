@@ -1,0 +1,380 @@
+//! APT request/reply pairing, derived from the message table: each REQ_x knows its GET_x, each
+//! command knows what completes it (`reply=` in the table: MOVE_ABSOLUTE → MOVE_COMPLETED or
+//! MOVE_STOPPED, MOVE_HOME → MOVE_HOMED …). Replies are matched to the oldest pending request
+//! expecting them, from the address the request went to (falling back to any address: a rack may
+//! answer from another bay) and on the same channel when both name one. Status updates are never
+//! "unsolicited": after HW_START_UPDATEMSGS they come by design.
+
+use crate::apt::AptFrame;
+use crate::table::{Dir, MsgDef, Table};
+use std::collections::VecDeque;
+
+/// A request still waiting.
+#[derive(Debug, Clone)]
+struct Pending {
+    n: u64,
+    offset: u64,
+    ts: Option<u64>,
+    name: &'static str,
+    expects: Vec<u16>,
+    device: u8,
+    chan: Option<i64>,
+    timeout_ns: u64,
+}
+
+/// A request answered recently (to recognise duplicate replies).
+#[derive(Debug, Clone, Copy)]
+struct Answered {
+    n: u64,
+    reply_id: u16,
+    device: u8,
+    chan: Option<i64>,
+}
+
+/// A request that got no reply.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Unanswered {
+    /// Record number of the request.
+    pub n: u64,
+    /// Its stream offset.
+    pub offset: u64,
+    /// Its name.
+    pub name: &'static str,
+}
+
+/// What pairing made of one frame.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PairInfo {
+    /// Record number of the request this frame answers.
+    pub pair: Option<u64>,
+    /// Time from the request to this reply.
+    pub latency_ns: Option<u64>,
+    /// The reply came from another address than the request went to.
+    pub other_address: bool,
+    /// A reply no pending request expected (status updates and error reports excepted).
+    pub unsolicited: bool,
+    /// A second reply to a request that was already answered.
+    pub duplicate: bool,
+    /// Requests whose timeout passed before this frame.
+    pub expired: Vec<Unanswered>,
+}
+
+/// Bound on requests waiting (a device that never answers must not grow memory).
+const MAX_PENDING: usize = 1024;
+const RECENT: usize = 64;
+
+/// Default timeouts: the spec gives none for replies; requests are answered within milliseconds,
+/// motion completes when the move ends.
+pub fn default_timeout_ns(m: &MsgDef) -> u64 {
+    const S: u64 = 1_000_000_000;
+    if m.name.contains("_MOVE_") || m.name.ends_with("_HOME") || m.name.contains("LUTOUTPUT") {
+        120 * S
+    } else {
+        2 * S
+    }
+}
+
+fn is_status_stream(m: &MsgDef) -> bool {
+    m.name.contains("STATUSUPDATE")
+        || m.name.contains("_GET_STATUSBITS")
+        || m.name.ends_with("_READING")
+}
+
+fn is_spontaneous(m: &MsgDef) -> bool {
+    matches!(m.name, "HW_RESPONSE" | "HW_RICHRESPONSE" | "HW_DISCONNECT")
+        || m.name.contains("BUTTON")
+        || m.name == "LD_POTROTATING"
+}
+
+/// APT pairing state for one stream.
+#[derive(Debug, Default)]
+pub struct AptPairer {
+    pending: VecDeque<Pending>,
+    recent: VecDeque<Answered>,
+    /// Overrides the per-message default timeout.
+    pub timeout_ns: Option<u64>,
+}
+
+impl AptPairer {
+    /// A pairer with the default timeouts.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    fn expire(&mut self, now: Option<u64>, out: &mut Vec<Unanswered>) {
+        let Some(now) = now else { return };
+        let fixed = self.timeout_ns;
+        self.pending.retain(|p| match p.ts {
+            Some(t) if now > t.saturating_add(fixed.unwrap_or(p.timeout_ns)) => {
+                out.push(Unanswered {
+                    n: p.n,
+                    offset: p.offset,
+                    name: p.name,
+                });
+                false
+            }
+            _ => true,
+        });
+    }
+
+    /// Observe frame `n` (time of its last byte `ts`; `dir` when the capture records it).
+    pub fn observe(
+        &mut self,
+        table: &Table,
+        n: u64,
+        f: &AptFrame<'_, '_>,
+        dir: Option<Dir>,
+        ts: Option<u64>,
+    ) -> PairInfo {
+        let mut info = PairInfo::default();
+        self.expire(ts, &mut info.expired);
+        let Some(m) = f.msg else { return info };
+        let h = f.header();
+        let chan = f.channel();
+        let from_host = match dir {
+            Some(d) => d == Dir::HostToDevice,
+            None => m.dir != Dir::DeviceToHost && h.src_byte() == 0x01,
+        };
+        if from_host {
+            let expects: Vec<u16> = table.replies_of(m).iter().map(|r| r.id).collect();
+            if !expects.is_empty() {
+                if self.pending.len() == MAX_PENDING {
+                    if let Some(p) = self.pending.pop_front() {
+                        info.expired.push(Unanswered {
+                            n: p.n,
+                            offset: p.offset,
+                            name: p.name,
+                        });
+                    }
+                }
+                self.pending.push_back(Pending {
+                    n,
+                    offset: f.offset,
+                    ts,
+                    name: m.name,
+                    expects,
+                    device: h.dst_byte(),
+                    chan,
+                    timeout_ns: default_timeout_ns(m),
+                });
+            }
+            return info;
+        }
+        let src = h.src_byte();
+        let chan_ok = |c: Option<i64>| c.is_none() || chan.is_none() || c == chan;
+        let exact = self
+            .pending
+            .iter()
+            .position(|p| p.expects.contains(&m.id) && p.device == src && chan_ok(p.chan));
+        let any = || {
+            self.pending
+                .iter()
+                .position(|p| p.expects.contains(&m.id) && chan_ok(p.chan))
+        };
+        match exact.or_else(any) {
+            Some(i) => {
+                let p = self
+                    .pending
+                    .remove(i)
+                    .unwrap_or_else(|| unreachable!("index from position"));
+                // The same message also answers other waiting requests to that device and
+                // channel (MOVE_STOPPED completes a move and the stop that ended it).
+                self.pending.retain(|q| {
+                    !(q.expects.contains(&m.id) && q.device == p.device && q.chan == p.chan)
+                });
+                info.pair = Some(p.n);
+                info.other_address = p.device != src;
+                info.latency_ns = match (p.ts, ts) {
+                    (Some(a), Some(b)) => Some(b.saturating_sub(a)),
+                    _ => None,
+                };
+                if self.recent.len() == RECENT {
+                    self.recent.pop_front();
+                }
+                self.recent.push_back(Answered {
+                    n: p.n,
+                    reply_id: m.id,
+                    device: p.device,
+                    chan: p.chan,
+                });
+            }
+            None => {
+                if is_status_stream(m) || is_spontaneous(m) {
+                    return info;
+                }
+                match self
+                    .recent
+                    .iter()
+                    .rev()
+                    .find(|a| a.reply_id == m.id && a.device == src && chan_ok(a.chan))
+                {
+                    Some(a) => {
+                        info.pair = Some(a.n);
+                        info.duplicate = true;
+                    }
+                    None => info.unsolicited = true,
+                }
+            }
+        }
+        info
+    }
+
+    /// End of stream: every request still waiting got no reply.
+    pub fn finish(&mut self) -> Vec<Unanswered> {
+        self.pending
+            .drain(..)
+            .map(|p| Unanswered {
+                n: p.n,
+                offset: p.offset,
+                name: p.name,
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::apt::{encode, FieldValue};
+
+    fn frame(
+        table: &Table,
+        name: &str,
+        vals: &[(&str, i64)],
+        dst: u8,
+        src: u8,
+        data: bool,
+    ) -> Vec<u8> {
+        let m = table.msg_by_name(name).expect("message");
+        let form = m
+            .forms
+            .iter()
+            .find(|f| matches!(f.kind, crate::table::FormKind::Data(_)) == data)
+            .expect("form");
+        let v: Vec<(&str, FieldValue)> = vals
+            .iter()
+            .map(|(k, x)| (*k, FieldValue::Int(*x)))
+            .collect();
+        encode(form, &v, m.id, dst, src).expect("encode")
+    }
+
+    #[test]
+    fn pairs_across_interleaved_status_updates_and_bays() {
+        let t = Table::global();
+        let mut p = AptPairer::new();
+        let frames = [
+            frame(
+                t,
+                "MOT_MOVE_ABSOLUTE",
+                &[("chan_ident", 1), ("absolute_position", 1000)],
+                0x21,
+                0x01,
+                true,
+            ),
+            frame(
+                t,
+                "MOT_REQ_VELPARAMS",
+                &[("chan_ident", 1)],
+                0x22,
+                0x01,
+                false,
+            ),
+            frame(
+                t,
+                "MOT_GET_DCSTATUSUPDATE",
+                &[("chan_ident", 1)],
+                0x01,
+                0x21,
+                true,
+            ),
+            frame(
+                t,
+                "MOT_GET_VELPARAMS",
+                &[("chan_ident", 1)],
+                0x01,
+                0x22,
+                true,
+            ),
+            frame(
+                t,
+                "MOT_GET_DCSTATUSUPDATE",
+                &[("chan_ident", 1)],
+                0x01,
+                0x21,
+                true,
+            ),
+            frame(
+                t,
+                "MOT_MOVE_COMPLETED",
+                &[("chan_ident", 1)],
+                0x01,
+                0x21,
+                true,
+            ),
+            frame(
+                t,
+                "MOT_MOVE_COMPLETED",
+                &[("chan_ident", 1)],
+                0x01,
+                0x21,
+                true,
+            ),
+            frame(
+                t,
+                "MOT_GET_VELPARAMS",
+                &[("chan_ident", 1)],
+                0x01,
+                0x23,
+                true,
+            ),
+        ];
+        let infos: Vec<PairInfo> = frames
+            .iter()
+            .enumerate()
+            .map(|(i, b)| {
+                let f = AptFrame::decode(t, 0, b, false).expect("frame");
+                p.observe(t, i as u64 + 1, &f, None, Some(i as u64 * 1_000_000))
+            })
+            .collect();
+        assert_eq!(
+            infos[2],
+            PairInfo::default(),
+            "a status update between is neither paired nor flagged"
+        );
+        assert_eq!(
+            infos[3].pair,
+            Some(2),
+            "GET_VELPARAMS from bay 1 answers REQ_VELPARAMS to bay 1"
+        );
+        assert_eq!(infos[3].latency_ns, Some(2_000_000));
+        assert_eq!(
+            infos[5].pair,
+            Some(1),
+            "MOVE_COMPLETED completes MOVE_ABSOLUTE"
+        );
+        assert!(
+            infos[6].duplicate && infos[6].pair == Some(1),
+            "a second MOVE_COMPLETED is a duplicate"
+        );
+        assert!(infos[7].unsolicited, "GET_VELPARAMS nobody asked for");
+        assert!(p.finish().is_empty());
+    }
+
+    #[test]
+    fn unanswered_requests_expire_by_time_or_at_the_end() {
+        let t = Table::global();
+        let mut p = AptPairer::new();
+        let req = frame(t, "HW_REQ_INFO", &[], 0x50, 0x01, false);
+        let f = AptFrame::decode(t, 0, &req, false).expect("frame");
+        p.observe(t, 1, &f, None, Some(0));
+        p.observe(t, 2, &f, None, Some(1_000_000_000));
+        let later = frame(t, "MOD_IDENTIFY", &[], 0x50, 0x01, false);
+        let g = AptFrame::decode(t, 12, &later, false).expect("frame");
+        let info = p.observe(t, 3, &g, None, Some(2_500_000_000));
+        assert_eq!(info.expired.iter().map(|u| u.n).collect::<Vec<_>>(), [1]);
+        assert_eq!(
+            p.finish().iter().map(|u| (u.n, u.name)).collect::<Vec<_>>(),
+            [(2, "HW_REQ_INFO")]
+        );
+    }
+}
