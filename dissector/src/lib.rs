@@ -16,6 +16,7 @@ pub mod json;
 pub mod pair;
 pub mod pipeline;
 pub mod spec_examples;
+pub mod stats;
 pub mod synth;
 pub mod table;
 pub mod text;

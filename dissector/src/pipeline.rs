@@ -56,6 +56,8 @@ pub struct Pipeline {
     first_ts: Option<u64>,
     n: u64,
     line: String,
+    jline: String,
+    filter: Option<Box<dyn FnMut(&serde_json::Value) -> bool>>,
 }
 
 impl Pipeline {
@@ -72,7 +74,15 @@ impl Pipeline {
             first_ts: None,
             n: 0,
             line: String::with_capacity(512),
+            jline: String::with_capacity(512),
+            filter: None,
         }
+    }
+
+    /// Emit only the records `keep` accepts (it sees each record as its NDJSON object, whatever
+    /// the output format). Records are still numbered, so a kept record keeps its number.
+    pub fn set_filter(&mut self, keep: impl FnMut(&serde_json::Value) -> bool + 'static) {
+        self.filter = Some(Box::new(keep));
     }
 
     /// The protocol in use (after detection).
@@ -183,7 +193,7 @@ impl Pipeline {
             left.extend(bus.finish());
         }
         left.sort_by_key(|e| e.n);
-        Self::render_expired(&mut self.line, self.fmt, "ell", &left, emit)?;
+        self.render_expired("ell", &left, emit)?;
         let mut left: Vec<Expired> = vec![];
         for (_, p) in self.pairers.iter_mut() {
             left.extend(p.finish().into_iter().map(|u| Expired {
@@ -193,7 +203,7 @@ impl Pipeline {
             }));
         }
         left.sort_by_key(|e| e.n);
-        Self::render_expired(&mut self.line, self.fmt, "apt", &left, emit)
+        self.render_expired("apt", &left, emit)
     }
 
     fn replay_sample<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
@@ -320,6 +330,25 @@ impl Pipeline {
         }
     }
 
+    /// Emit the record rendered in `self.jline` (JSON, when wanted) and `self.line` (text, when
+    /// wanted), if the filter lets it through.
+    fn emit_record<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
+        if let Some(f) = self.filter.as_mut() {
+            let keep = serde_json::from_str::<serde_json::Value>(&self.jline).is_ok_and(|v| f(&v));
+            if !keep {
+                return Ok(());
+            }
+        }
+        match self.fmt {
+            Format::Json => emit(&self.jline),
+            Format::Text => emit(&self.line),
+        }
+    }
+
+    fn want_json(&self) -> bool {
+        self.fmt == Format::Json || self.filter.is_some()
+    }
+
     fn drain<E>(
         &mut self,
         i: usize,
@@ -327,12 +356,12 @@ impl Pipeline {
     ) -> Result<(), E> {
         let t = Table::global();
         let first = self.first_ts;
-        let lane = &mut self.lanes[i];
-        let (ts, stream, cap_dir) = (lane.ts, lane.stream, lane.dir);
+        let (ts, stream, cap_dir) = (self.lanes[i].ts, self.lanes[i].stream, self.lanes[i].dir);
         let time = match (ts, first) {
             (Some(a), Some(b)) => Some(a.saturating_sub(b) as f64 / 1e9),
             _ => None,
         };
+        let (want_json, want_text) = (self.want_json(), self.fmt == Format::Text);
         if self.proto == Some(Proto::Apt) {
             let pi_idx = match self.pairers.iter().position(|(s, _)| *s == stream) {
                 Some(p) => p,
@@ -341,9 +370,14 @@ impl Pipeline {
                     self.pairers.len() - 1
                 }
             };
-            while let Some(item) = lane.apt.next_item() {
+            loop {
+                let lane = &mut self.lanes[i];
+                let Some(item) = lane.apt.next_item() else {
+                    break;
+                };
                 self.n += 1;
                 self.line.clear();
+                self.jline.clear();
                 let mut dir = cap_dir.map(|d| d.as_str());
                 let mut expired = vec![];
                 match item {
@@ -370,14 +404,12 @@ impl Pipeline {
                                     code: u.name,
                                 })
                                 .collect();
-                            match self.fmt {
-                                Format::Json => {
-                                    json::apt_frame_paired(&mut self.line, self.n, &f, &pinfo)
-                                }
-                                Format::Text => {
-                                    text::apt_line(&mut self.line, self.n, &f, time);
-                                    text::pair_suffix(&mut self.line, &pinfo);
-                                }
+                            if want_json {
+                                json::apt_frame_paired(&mut self.jline, self.n, &f, &pinfo);
+                            }
+                            if want_text {
+                                text::apt_line(&mut self.line, self.n, &f, time);
+                                text::pair_suffix(&mut self.line, &pinfo);
                             }
                         }
                     }
@@ -385,20 +417,18 @@ impl Pipeline {
                         offset,
                         bytes,
                         kind,
-                    } => match self.fmt {
-                        Format::Json => {
-                            json::apt_garbage(&mut self.line, self.n, offset, bytes, kind)
+                    } => {
+                        if want_json {
+                            json::apt_garbage(&mut self.jline, self.n, offset, bytes, kind);
                         }
-                        Format::Text => {
-                            text::garbage_line(&mut self.line, self.n, offset, bytes, kind, time)
+                        if want_text {
+                            text::garbage_line(&mut self.line, self.n, offset, bytes, kind, time);
                         }
-                    },
+                    }
                 }
-                if self.fmt == Format::Json {
-                    Self::close_json(&mut self.line, ts, stream, Some(dir.unwrap_or("unknown")));
-                }
-                emit(&self.line)?;
-                Self::render_expired(&mut self.line, self.fmt, "apt", &expired, emit)?;
+                Self::close_json(&mut self.jline, ts, stream, Some(dir.unwrap_or("unknown")));
+                self.emit_record(emit)?;
+                self.render_expired("apt", &expired, emit)?;
             }
             return Ok(());
         }
@@ -409,10 +439,15 @@ impl Pipeline {
                 self.buses.len() - 1
             }
         };
-        let mut expired: Vec<Expired> = vec![];
-        while let Some(item) = lane.ell.next_item() {
+        loop {
+            let lane = &mut self.lanes[i];
+            let Some(item) = lane.ell.next_item() else {
+                break;
+            };
             self.n += 1;
             self.line.clear();
+            self.jline.clear();
+            let mut expired: Vec<Expired> = vec![];
             match item {
                 EllItem::Frame {
                     offset,
@@ -430,33 +465,31 @@ impl Pipeline {
                         });
                     }
                     expired.extend(o.expired.iter().copied());
-                    match self.fmt {
-                        Format::Json => json::ell_frame(&mut self.line, self.n, &f, &o),
-                        Format::Text => text::ell_line(&mut self.line, self.n, &f, &o, time),
+                    if want_json {
+                        json::ell_frame(&mut self.jline, self.n, &f, &o);
+                    }
+                    if want_text {
+                        text::ell_line(&mut self.line, self.n, &f, &o, time);
                     }
                 }
-                EllItem::Garbage { offset, bytes, .. } => match self.fmt {
-                    Format::Json => json::ell_garbage(&mut self.line, self.n, offset, bytes),
-                    Format::Text => {
-                        text::ell_garbage_line(&mut self.line, self.n, offset, bytes, time)
+                EllItem::Garbage { offset, bytes, .. } => {
+                    if want_json {
+                        json::ell_garbage(&mut self.jline, self.n, offset, bytes);
                     }
-                },
+                    if want_text {
+                        text::ell_garbage_line(&mut self.line, self.n, offset, bytes, time);
+                    }
+                }
             }
-            if self.fmt == Format::Json {
-                Self::close_json(&mut self.line, ts, stream, None);
-            }
-            emit(&self.line)?;
-            if !expired.is_empty() {
-                Self::render_expired(&mut self.line, self.fmt, "ell", &expired, emit)?;
-                expired.clear();
-            }
+            Self::close_json(&mut self.jline, ts, stream, None);
+            self.emit_record(emit)?;
+            self.render_expired("ell", &expired, emit)?;
         }
         Ok(())
     }
 
     fn render_expired<E>(
-        line: &mut String,
-        fmt: Format,
+        &mut self,
         proto: &str,
         list: &[Expired],
         emit: &mut impl FnMut(&str) -> Result<(), E>,
@@ -466,12 +499,15 @@ impl Pipeline {
                 offset: e.offset,
                 kind: DiagKind::NoReply { cmd: e.n },
             };
-            line.clear();
-            match fmt {
-                Format::Json => json::late_diag(line, proto, e.n, d),
-                Format::Text => text::late_diag_line(line, e.n, &d),
+            self.line.clear();
+            self.jline.clear();
+            if self.want_json() {
+                json::late_diag(&mut self.jline, proto, e.n, d);
             }
-            emit(line)?;
+            if self.fmt == Format::Text {
+                text::late_diag_line(&mut self.line, e.n, &d);
+            }
+            self.emit_record(emit)?;
         }
         Ok(())
     }

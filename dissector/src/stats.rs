@@ -1,0 +1,317 @@
+//! `aptscope stats`: counts and bytes per message, per address, per direction; pair latency
+//! (min/median/p99/max) per request; diagnostics by kind; a time-binned rate. Built from the
+//! decoded records (the NDJSON objects), so what a filter selects is what is counted.
+
+use serde_json::Value;
+use std::collections::{BTreeMap, HashMap};
+use std::fmt::Write;
+
+/// Count and bytes.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Tally {
+    /// Records.
+    pub count: u64,
+    /// Bytes.
+    pub bytes: u64,
+}
+
+/// Per message: count, bytes, and the latencies of its requests' replies (ms).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct MsgStat {
+    /// Count and bytes.
+    pub tally: Tally,
+    /// Latencies of the replies to this message (when it is a request), in ms.
+    pub latencies: Vec<f64>,
+}
+
+/// Statistics over decoded records.
+#[derive(Debug, Clone)]
+pub struct Stats {
+    /// Frames.
+    pub frames: Tally,
+    /// Garbage records.
+    pub garbage: Tally,
+    /// Per message (`apt NAME` / `ell cmd NAME`).
+    pub messages: BTreeMap<String, MsgStat>,
+    /// Per address (`src → dst` for APT, the bus address for Elliptec).
+    pub addresses: BTreeMap<String, Tally>,
+    /// Per direction.
+    pub directions: BTreeMap<String, Tally>,
+    /// Diagnostics by kind.
+    pub diags: BTreeMap<String, u64>,
+    /// Frames per time bin (bin start in ns since the first frame).
+    pub bins: BTreeMap<u64, u64>,
+    /// Bin width in ns.
+    pub bin_ns: u64,
+    first_ts: Option<u64>,
+    /// Request record number → message key (to attribute reply latency to the request).
+    requests: HashMap<u64, String>,
+}
+
+fn key(rec: &Value) -> String {
+    match rec["proto"].as_str() {
+        Some("ell") => format!(
+            "ell {} {}",
+            rec["cmd"].as_str().unwrap_or("?"),
+            rec["name"].as_str().unwrap_or("UNKNOWN")
+        ),
+        _ => match rec["name"].as_str() {
+            Some(n) => format!("apt {n}"),
+            None => format!("apt {}", rec["msgid_hex"].as_str().unwrap_or("?")),
+        },
+    }
+}
+
+/// The value at fraction `q` of sorted data (nearest rank).
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let i = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len()) - 1;
+    sorted[i]
+}
+
+impl Stats {
+    /// Empty statistics with time bins of `bin_ns`.
+    pub fn new(bin_ns: u64) -> Self {
+        Stats {
+            frames: Tally::default(),
+            garbage: Tally::default(),
+            messages: BTreeMap::new(),
+            addresses: BTreeMap::new(),
+            directions: BTreeMap::new(),
+            diags: BTreeMap::new(),
+            bins: BTreeMap::new(),
+            bin_ns: bin_ns.max(1),
+            first_ts: None,
+            requests: HashMap::new(),
+        }
+    }
+
+    /// Count one record.
+    pub fn add(&mut self, rec: &Value) {
+        if let Some(ds) = rec["diag"].as_array() {
+            for d in ds {
+                *self
+                    .diags
+                    .entry(d["kind"].as_str().unwrap_or("?").to_string())
+                    .or_default() += 1;
+            }
+        }
+        let len = rec["len"].as_u64().unwrap_or(0);
+        match rec["type"].as_str() {
+            Some("frame") => {}
+            Some("garbage") => {
+                self.garbage.count += 1;
+                self.garbage.bytes += len;
+                return;
+            }
+            _ => return,
+        }
+        self.frames.count += 1;
+        self.frames.bytes += len;
+        let k = key(rec);
+        let m = self.messages.entry(k.clone()).or_default();
+        m.tally.count += 1;
+        m.tally.bytes += len;
+        if let Some(n) = rec["n"].as_u64() {
+            self.requests.insert(n, k);
+        }
+        if let (Some(p), Some(l)) = (rec["pair"].as_u64(), rec["latency_ms"].as_f64()) {
+            if let Some(req) = self.requests.get(&p) {
+                if let Some(s) = self.messages.get_mut(req) {
+                    s.latencies.push(l);
+                }
+            }
+        }
+        let addr = match rec["proto"].as_str() {
+            Some("ell") => format!("ell {}", rec["addr"].as_str().unwrap_or("?")),
+            _ => format!(
+                "apt {} → {}",
+                rec["src"]["name"].as_str().unwrap_or("?"),
+                rec["dst"]["name"].as_str().unwrap_or("?")
+            ),
+        };
+        let a = self.addresses.entry(addr).or_default();
+        a.count += 1;
+        a.bytes += len;
+        let d = self
+            .directions
+            .entry(rec["dir"].as_str().unwrap_or("unknown").to_string())
+            .or_default();
+        d.count += 1;
+        d.bytes += len;
+        if let Some(ts) = rec["ts_ns"].as_u64() {
+            let first = *self.first_ts.get_or_insert(ts);
+            let bin = ts.saturating_sub(first) / self.bin_ns * self.bin_ns;
+            *self.bins.entry(bin).or_default() += 1;
+        }
+    }
+
+    /// Latency summary of a message: (n, min, median, p99, max) in ms.
+    pub fn latency(&self, key: &str) -> Option<(usize, f64, f64, f64, f64)> {
+        let m = self.messages.get(key)?;
+        if m.latencies.is_empty() {
+            return None;
+        }
+        let mut v = m.latencies.clone();
+        v.sort_by(f64::total_cmp);
+        Some((
+            v.len(),
+            v[0],
+            quantile(&v, 0.5),
+            quantile(&v, 0.99),
+            v[v.len() - 1],
+        ))
+    }
+
+    /// Text tables, like Wireshark's Statistics menu.
+    pub fn to_text(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "Frames: {} ({} bytes); garbage: {} records ({} bytes)",
+            self.frames.count, self.frames.bytes, self.garbage.count, self.garbage.bytes
+        );
+        let _ = writeln!(
+            s,
+            "\nMessages{:>44}{:>10}   latency ms (n, min / median / p99 / max)",
+            "count", "bytes"
+        );
+        for (k, m) in &self.messages {
+            let _ = write!(s, "  {k:<48}{:>6}{:>10}", m.tally.count, m.tally.bytes);
+            if let Some((n, a, b, c, d)) = self.latency(k) {
+                let _ = write!(s, "   {n}, {a:.3} / {b:.3} / {c:.3} / {d:.3}");
+            }
+            s.push('\n');
+        }
+        let _ = writeln!(s, "\nAddresses{:>43}{:>10}", "count", "bytes");
+        for (k, t) in &self.addresses {
+            let _ = writeln!(s, "  {k:<48}{:>6}{:>10}", t.count, t.bytes);
+        }
+        let _ = writeln!(s, "\nDirections{:>42}{:>10}", "count", "bytes");
+        for (k, t) in &self.directions {
+            let _ = writeln!(s, "  {k:<48}{:>6}{:>10}", t.count, t.bytes);
+        }
+        let _ = writeln!(s, "\nDiagnostics{:>41}", "count");
+        if self.diags.is_empty() {
+            let _ = writeln!(s, "  none");
+        }
+        for (k, n) in &self.diags {
+            let _ = writeln!(s, "  {k:<48}{n:>6}");
+        }
+        if !self.bins.is_empty() {
+            let _ = writeln!(s, "\nRate (frames per {} s)", self.bin_ns as f64 / 1e9);
+            let max = self.bins.values().copied().max().unwrap_or(1).max(1);
+            for (b, n) in &self.bins {
+                let bar = "#".repeat(((*n * 40).div_ceil(max)) as usize);
+                let _ = writeln!(s, "  {:>10.3} s {n:>6} {bar}", *b as f64 / 1e9);
+            }
+        }
+        s
+    }
+
+    /// The same as one JSON object.
+    pub fn to_json(&self) -> String {
+        let mut s = String::new();
+        let tally = |s: &mut String, t: &Tally| {
+            let _ = write!(s, "{{\"count\":{},\"bytes\":{}}}", t.count, t.bytes);
+        };
+        s.push_str("{\"frames\":");
+        tally(&mut s, &self.frames);
+        s.push_str(",\"garbage\":");
+        tally(&mut s, &self.garbage);
+        s.push_str(",\"messages\":{");
+        for (i, (k, m)) in self.messages.iter().enumerate() {
+            if i > 0 {
+                s.push(',');
+            }
+            crate::json::string(&mut s, k);
+            let _ = write!(
+                s,
+                ":{{\"count\":{},\"bytes\":{}",
+                m.tally.count, m.tally.bytes
+            );
+            if let Some((n, a, b, c, d)) = self.latency(k) {
+                let _ = write!(s, ",\"latency_ms\":{{\"n\":{n},\"min\":{a},\"median\":{b},\"p99\":{c},\"max\":{d}}}");
+            }
+            s.push('}');
+        }
+        for (name, map) in [
+            ("addresses", &self.addresses),
+            ("directions", &self.directions),
+        ] {
+            let _ = write!(s, "}},\"{name}\":{{");
+            for (i, (k, t)) in map.iter().enumerate() {
+                if i > 0 {
+                    s.push(',');
+                }
+                crate::json::string(&mut s, k);
+                s.push(':');
+                tally(&mut s, t);
+            }
+        }
+        s.push_str("},\"diags\":{");
+        for (i, (k, n)) in self.diags.iter().enumerate() {
+            let _ = write!(s, "{}\"{k}\":{n}", if i > 0 { "," } else { "" });
+        }
+        let _ = write!(s, "}},\"bin_s\":{},\"rate\":[", self.bin_ns as f64 / 1e9);
+        for (i, (b, n)) in self.bins.iter().enumerate() {
+            let _ = write!(
+                s,
+                "{}[{},{n}]",
+                if i > 0 { "," } else { "" },
+                *b as f64 / 1e9
+            );
+        }
+        s.push_str("]}");
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn counts_latencies_and_bins() {
+        let mut st = Stats::new(1_000_000_000);
+        let recs = [
+            json!({"n":1,"type":"frame","proto":"apt","name":"HW_REQ_INFO","len":6,"src":{"name":"host"},"dst":{"name":"usb"},"dir":"h2d","ts_ns":1_000,"diag":[]}),
+            json!({"n":2,"type":"frame","proto":"apt","name":"HW_GET_INFO","len":90,"src":{"name":"usb"},"dst":{"name":"host"},"dir":"d2h","ts_ns":2_001_000,"pair":1,"latency_ms":2.0,"diag":[]}),
+            json!({"n":3,"type":"frame","proto":"apt","name":"HW_REQ_INFO","len":6,"src":{"name":"host"},"dst":{"name":"usb"},"dir":"h2d","ts_ns":1_500_000_000,"diag":[]}),
+            json!({"n":4,"type":"frame","proto":"apt","name":"HW_GET_INFO","len":90,"src":{"name":"usb"},"dst":{"name":"host"},"dir":"d2h","ts_ns":1_504_000_000,"pair":3,"latency_ms":4.0,"diag":[]}),
+            json!({"n":5,"type":"garbage","proto":"apt","len":3,"diag":[{"kind":"garbage"}]}),
+            json!({"proto":"apt","type":"diag","ref":3,"diag":[{"kind":"no_reply"}]}),
+        ];
+        for r in &recs {
+            st.add(r);
+        }
+        assert_eq!(
+            st.frames,
+            Tally {
+                count: 4,
+                bytes: 192
+            }
+        );
+        assert_eq!(st.garbage, Tally { count: 1, bytes: 3 });
+        assert_eq!(st.messages["apt HW_REQ_INFO"].tally.count, 2);
+        assert_eq!(st.latency("apt HW_REQ_INFO"), Some((2, 2.0, 2.0, 4.0, 4.0)));
+        assert_eq!(
+            st.addresses["apt usb → host"],
+            Tally {
+                count: 2,
+                bytes: 180
+            }
+        );
+        assert_eq!(st.directions["h2d"].count, 2);
+        assert_eq!(st.diags["garbage"], 1);
+        assert_eq!(st.diags["no_reply"], 1);
+        assert_eq!(st.bins.get(&0), Some(&2));
+        assert_eq!(st.bins.get(&1_000_000_000), Some(&2));
+        let j: Value = serde_json::from_str(&st.to_json()).expect("valid JSON");
+        assert_eq!(j["messages"]["apt HW_REQ_INFO"]["latency_ms"]["p99"], 4.0);
+        assert!(st.to_text().contains("apt HW_REQ_INFO"));
+    }
+}
