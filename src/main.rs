@@ -6,13 +6,17 @@ use aptscope_capture::open::{create, open, Format, OpenOptions};
 use aptscope_capture::{Direction, Event};
 use aptscope_dissector::apt::{encode, Addr, FieldValue};
 use aptscope_dissector::detect::Proto;
+use aptscope_dissector::filter::Filter;
 use aptscope_dissector::pipeline::{Ctx, Format as PFormat, Pipeline};
+use aptscope_dissector::stats::Stats;
 use aptscope_dissector::table::Dir;
 use aptscope_dissector::table::{Form, FormKind, MsgDef};
 use aptscope_dissector::{json, Table};
 use clap::{Parser, Subcommand};
+use std::cell::RefCell;
 use std::io::{self, BufWriter, Write};
 use std::process::ExitCode;
+use std::rc::Rc;
 
 #[derive(Parser)]
 #[command(
@@ -53,6 +57,33 @@ enum Cmd {
         /// Protocol of the stream (default: detected from the first 4 KiB).
         #[arg(long, value_enum, default_value_t = ProtoArg::Auto)]
         proto: ProtoArg,
+        /// USB captures: only the device at BUS:ADDR.
+        #[arg(long)]
+        usb_device: Option<String>,
+        /// Display filter: only records it matches (`apt.name ~ "MOT_" && dir == device`).
+        #[arg(short = 'Y', long = "filter")]
+        filter: Option<String>,
+    },
+    /// Statistics of a capture: counts and bytes per message, address and direction, request
+    /// latency (min/median/p99/max), diagnostics by kind, rate over time.
+    Stats {
+        /// Capture file.
+        file: String,
+        /// Input format instead of detecting it.
+        #[arg(long, short = 'F')]
+        format: Option<String>,
+        /// One JSON object.
+        #[arg(long)]
+        json: bool,
+        /// Protocol instead of detecting it.
+        #[arg(long, value_enum, default_value_t = ProtoArg::Auto)]
+        proto: ProtoArg,
+        /// Count only the records this display filter matches.
+        #[arg(short = 'Y', long = "filter")]
+        filter: Option<String>,
+        /// Width of the rate bins in seconds.
+        #[arg(long, default_value_t = 1.0)]
+        bin: f64,
         /// USB captures: only the device at BUS:ADDR.
         #[arg(long)]
         usb_device: Option<String>,
@@ -134,8 +165,22 @@ fn main() -> ExitCode {
             json,
             proto,
             usb_device,
-        } => open_opts(format.as_deref(), hex, usb_device.as_deref())
-            .and_then(|o| files.iter().try_for_each(|f| decode(f, o, json, proto))),
+            filter,
+        } => open_opts(format.as_deref(), hex, usb_device.as_deref()).and_then(|o| {
+            files
+                .iter()
+                .try_for_each(|f| decode(f, o, json, proto, filter.as_deref()))
+        }),
+        Cmd::Stats {
+            file,
+            format,
+            json,
+            proto,
+            filter,
+            bin,
+            usb_device,
+        } => open_opts(format.as_deref(), false, usb_device.as_deref())
+            .and_then(|o| stats(&file, o, json, proto, filter.as_deref(), bin)),
         Cmd::Info {
             file,
             format,
@@ -222,21 +267,17 @@ fn dir_of(d: Direction) -> Option<Dir> {
     }
 }
 
-fn decode(file: &str, opts: OpenOptions, as_json: bool, proto: ProtoArg) -> io::Result<()> {
-    let (mut reader, _) = open(file, opts)?;
-    let mut out = BufWriter::with_capacity(1 << 16, io::stdout().lock());
-    let mut p = Pipeline::new(
-        proto_of(proto),
-        if as_json {
-            PFormat::Json
-        } else {
-            PFormat::Text
-        },
-    );
-    let mut emit = |line: &str| -> io::Result<()> {
-        out.write_all(line.as_bytes())?;
-        out.write_all(b"\n")
-    };
+fn compile_filter(src: &str) -> io::Result<Filter> {
+    Filter::parse(src).map_err(|e| bad(format!("bad filter: {e}\n{}", e.caret(src))))
+}
+
+/// Feed every event of a capture through a pipeline.
+fn run_pipeline(
+    reader: &mut dyn aptscope_capture::Reader,
+    p: &mut Pipeline,
+    as_json: bool,
+    emit: &mut impl FnMut(&str) -> io::Result<()>,
+) -> io::Result<()> {
     while let Some(ev) = reader.next_event() {
         match ev {
             Event::Chunk(c) => {
@@ -245,9 +286,9 @@ fn decode(file: &str, opts: OpenOptions, as_json: bool, proto: ProtoArg) -> io::
                     dir: dir_of(c.dir),
                     ts_ns: c.ts_ns,
                 };
-                p.push_chunk(ctx, c.bytes, &mut emit)?;
+                p.push_chunk(ctx, c.bytes, emit)?;
             }
-            Event::Diag(d) => p.file_diag(d.offset, d.kind, &d.msg, &mut emit)?,
+            Event::Diag(d) => p.file_diag(d.offset, d.kind, &d.msg, emit)?,
             Event::Stream(s) => {
                 let line = if as_json {
                     let mut l = format!("{{\"type\":\"stream\",\"stream\":{},\"name\":", s.id);
@@ -270,7 +311,64 @@ fn decode(file: &str, opts: OpenOptions, as_json: bool, proto: ProtoArg) -> io::
             }
         }
     }
-    p.finish(&mut emit)?;
+    p.finish(emit)
+}
+
+fn stats(
+    file: &str,
+    opts: OpenOptions,
+    as_json: bool,
+    proto: ProtoArg,
+    filter: Option<&str>,
+    bin: f64,
+) -> io::Result<()> {
+    let mut f = filter.map(compile_filter).transpose()?;
+    let (mut reader, _) = open(file, opts)?;
+    let st = Rc::new(RefCell::new(Stats::new((bin.max(1e-6) * 1e9) as u64)));
+    let mut p = Pipeline::new(proto_of(proto), PFormat::Json);
+    let sink = st.clone();
+    p.set_filter(move |v| {
+        if f.as_mut().is_none_or(|f| f.matches(v)) {
+            sink.borrow_mut().add(v);
+        }
+        false
+    });
+    run_pipeline(reader.as_mut(), &mut p, true, &mut |_| Ok(()))?;
+    let st = st.borrow();
+    if as_json {
+        println!("{}", st.to_json());
+    } else {
+        print!("{}", st.to_text());
+    }
+    Ok(())
+}
+
+fn decode(
+    file: &str,
+    opts: OpenOptions,
+    as_json: bool,
+    proto: ProtoArg,
+    filter: Option<&str>,
+) -> io::Result<()> {
+    let filter = filter.map(compile_filter).transpose()?;
+    let (mut reader, _) = open(file, opts)?;
+    let mut out = BufWriter::with_capacity(1 << 16, io::stdout().lock());
+    let mut p = Pipeline::new(
+        proto_of(proto),
+        if as_json {
+            PFormat::Json
+        } else {
+            PFormat::Text
+        },
+    );
+    let mut emit = |line: &str| -> io::Result<()> {
+        out.write_all(line.as_bytes())?;
+        out.write_all(b"\n")
+    };
+    if let Some(f) = filter {
+        p.set_filter(move |v| f.matches(v));
+    }
+    run_pipeline(reader.as_mut(), &mut p, as_json, &mut emit)?;
     out.flush()
 }
 

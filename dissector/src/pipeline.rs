@@ -57,8 +57,11 @@ pub struct Pipeline {
     n: u64,
     line: String,
     jline: String,
-    filter: Option<Box<dyn FnMut(&serde_json::Value) -> bool>>,
+    filter: Option<RecordFilter>,
 }
+
+/// Decides, from its NDJSON object, whether a record is emitted.
+type RecordFilter = Box<dyn FnMut(&serde_json::Value) -> bool>;
 
 impl Pipeline {
     /// A pipeline for `proto`, or auto-detection from the first 4 KiB when `None`.
