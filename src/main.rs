@@ -2,7 +2,7 @@
 #![forbid(unsafe_code)]
 
 use aptscope_capture::info::summarize;
-use aptscope_capture::open::{create, open, Format, OpenOptions};
+use aptscope_capture::open::{create, open, open_with_progress, Format, OpenOptions, Progress};
 use aptscope_capture::{Direction, Event};
 use aptscope_dissector::apt::{encode, Addr, FieldValue};
 use aptscope_dissector::detect::Proto;
@@ -323,7 +323,8 @@ fn stats(
     bin: f64,
 ) -> io::Result<()> {
     let mut f = filter.map(compile_filter).transpose()?;
-    let (mut reader, _) = open(file, opts)?;
+    let (mut reader, _, progress) = open_with_progress(file, opts)?;
+    let mut ticker = Ticker::new(progress);
     let st = Rc::new(RefCell::new(Stats::new((bin.max(1e-6) * 1e9) as u64)));
     let mut p = Pipeline::new(proto_of(proto), PFormat::Json);
     let sink = st.clone();
@@ -333,7 +334,11 @@ fn stats(
         }
         false
     });
-    run_pipeline(reader.as_mut(), &mut p, true, &mut |_| Ok(()))?;
+    run_pipeline(reader.as_mut(), &mut p, true, &mut |_| {
+        ticker.tick();
+        Ok(())
+    })?;
+    ticker.done();
     let st = st.borrow();
     if as_json {
         println!("{}", st.to_json());
@@ -398,11 +403,13 @@ fn convert(
             ))
         })?,
     };
-    let (mut reader, from) = open(input, opts)?;
+    let (mut reader, from, progress) = open_with_progress(input, opts)?;
+    let mut ticker = Ticker::new(progress);
     let mut w = create(output, target, force)?;
     let (mut chunks, mut bytes, mut diags) = (0u64, 0u64, 0u64);
     let (mut no_ts, mut no_dir) = (false, false);
     while let Some(ev) = reader.next_event() {
+        ticker.tick();
         match ev {
             Event::Stream(s) => w.stream(&s)?,
             Event::Chunk(c) => {
@@ -419,6 +426,7 @@ fn convert(
         }
     }
     w.finish()?;
+    ticker.done();
     eprintln!(
         "{input} ({}) -> {output} ({}): {chunks} chunks, {bytes} bytes, {diags} input diagnostics",
         from.name(),
@@ -505,6 +513,55 @@ fn messages(as_json: bool, verbose: bool) -> io::Result<()> {
         )?;
     }
     out.flush()
+}
+
+/// A progress line on stderr for long jobs, only when stderr is a terminal.
+struct Ticker {
+    progress: Progress,
+    on: bool,
+    last: std::time::Instant,
+    count: u32,
+    shown: bool,
+}
+
+impl Ticker {
+    fn new(progress: Progress) -> Self {
+        use std::io::IsTerminal;
+        Ticker {
+            progress,
+            on: io::stderr().is_terminal(),
+            last: std::time::Instant::now(),
+            count: 0,
+            shown: false,
+        }
+    }
+
+    fn tick(&mut self) {
+        self.count = self.count.wrapping_add(1);
+        if !self.on
+            || !self.count.is_multiple_of(4096)
+            || self.last.elapsed() < std::time::Duration::from_millis(250)
+        {
+            return;
+        }
+        self.last = std::time::Instant::now();
+        let mb = self
+            .progress
+            .read
+            .load(std::sync::atomic::Ordering::Relaxed) as f64
+            / 1e6;
+        match self.progress.fraction() {
+            Some(f) => eprint!("\r{:5.1}%  {mb:.1} MB ", f * 100.0),
+            None => eprint!("\r{mb:.1} MB "),
+        }
+        self.shown = true;
+    }
+
+    fn done(&mut self) {
+        if self.shown {
+            eprint!("\r{:30}\r", "");
+        }
+    }
 }
 
 fn bad(msg: String) -> io::Error {

@@ -5,6 +5,8 @@ use crate::raw::{ByteSource, InputFormat};
 use crate::{mcap_io, pcap, textlog};
 use std::fs::File;
 use std::io::{self, BufReader, Cursor, Read};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 
 /// A capture file format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -198,14 +200,76 @@ pub struct OpenOptions {
     pub usb_device: Option<(u16, u8)>,
 }
 
+/// How far reading has got: bytes read from the file so far, and the file's size when known.
+#[derive(Debug, Clone, Default)]
+pub struct Progress {
+    /// Bytes read so far.
+    pub read: Arc<AtomicU64>,
+    /// Size of the file (`None` for standard input).
+    pub total: Option<u64>,
+}
+
+impl Progress {
+    /// Fraction read, 0..=1, when the size is known.
+    pub fn fraction(&self) -> Option<f64> {
+        let t = self.total.filter(|t| *t > 0)?;
+        Some((self.read.load(Ordering::Relaxed) as f64 / t as f64).min(1.0))
+    }
+}
+
+/// A reader that counts what passes through it.
+struct Counted<R> {
+    inner: R,
+    read: Arc<AtomicU64>,
+}
+
+impl<R: Read> Read for Counted<R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.read.fetch_add(n as u64, Ordering::Relaxed);
+        Ok(n)
+    }
+}
+
 /// Open a capture (`-` = standard input), detecting its format from its first bytes unless
 /// `opts.format` says. Returns the reader and the format used.
 pub fn open(path: &str, opts: OpenOptions) -> io::Result<(Box<dyn Reader>, Format)> {
+    open_with_progress(path, opts).map(|(r, f, _)| (r, f))
+}
+
+/// [`open`], also returning a [`Progress`] to show how far reading has got.
+pub fn open_with_progress(
+    path: &str,
+    opts: OpenOptions,
+) -> io::Result<(Box<dyn Reader>, Format, Progress)> {
+    let progress = Progress::default();
     let mut input: Box<dyn Read> = if path == "-" {
-        Box::new(io::stdin())
+        Box::new(Counted {
+            inner: io::stdin(),
+            read: progress.read.clone(),
+        })
     } else {
-        Box::new(File::open(path).map_err(|e| io::Error::new(e.kind(), format!("{path}: {e}")))?)
+        let f = File::open(path).map_err(|e| io::Error::new(e.kind(), format!("{path}: {e}")))?;
+        let total = f.metadata().ok().map(|m| m.len());
+        let p = Progress {
+            total,
+            ..progress.clone()
+        };
+        let input = Box::new(Counted {
+            inner: f,
+            read: progress.read.clone(),
+        });
+        return finish_open(input, opts, p);
     };
+    let head_input = std::mem::replace(&mut input, Box::new(io::empty()));
+    finish_open(head_input, opts, progress)
+}
+
+fn finish_open(
+    mut input: Box<dyn Read>,
+    opts: OpenOptions,
+    progress: Progress,
+) -> io::Result<(Box<dyn Reader>, Format, Progress)> {
     let mut head = Vec::with_capacity(SNIFF_LEN);
     (&mut input).take(SNIFF_LEN as u64).read_to_end(&mut head)?;
     let format = opts.format.unwrap_or_else(|| sniff(&head));
@@ -217,7 +281,7 @@ pub fn open(path: &str, opts: OpenOptions) -> io::Result<(Box<dyn Reader>, Forma
         Format::Hex => Box::new(ByteReader::new(stream, true)),
         Format::Raw => Box::new(ByteReader::new(stream, false)),
     };
-    Ok((reader, format))
+    Ok((reader, format, progress))
 }
 
 /// Create a capture writer for `path` in `format`, refusing to overwrite unless `force`.
