@@ -7,7 +7,7 @@
 
 use crate::apt::AptFrame;
 use crate::table::{Dir, MsgDef, Table};
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, HashMap, VecDeque};
 
 /// A request still waiting.
 #[derive(Debug, Clone)]
@@ -60,7 +60,7 @@ pub struct PairInfo {
 }
 
 /// Bound on requests waiting (a device that never answers must not grow memory).
-const MAX_PENDING: usize = 1024;
+const MAX_PENDING: usize = 256;
 const RECENT: usize = 64;
 
 /// Default timeouts: the spec gives none for replies; requests are answered within milliseconds,
@@ -89,7 +89,11 @@ fn is_spontaneous(m: &MsgDef) -> bool {
 /// APT pairing state for one stream.
 #[derive(Debug, Default)]
 pub struct AptPairer {
-    pending: VecDeque<Pending>,
+    /// Waiting requests by record number (oldest first).
+    pending: BTreeMap<u64, Pending>,
+    /// Record numbers of the waiting requests that expect each message id, oldest first: a reply
+    /// looks only at the requests it can answer.
+    by_reply: HashMap<u16, Vec<u64>>,
     recent: VecDeque<Answered>,
     /// Overrides the per-message default timeout.
     pub timeout_ns: Option<u64>,
@@ -101,20 +105,46 @@ impl AptPairer {
         Self::default()
     }
 
+    fn insert(&mut self, p: Pending) {
+        for id in &p.expects {
+            self.by_reply.entry(*id).or_default().push(p.n);
+        }
+        self.pending.insert(p.n, p);
+    }
+
+    fn remove(&mut self, n: u64) -> Option<Pending> {
+        let p = self.pending.remove(&n)?;
+        for id in &p.expects {
+            if let Some(v) = self.by_reply.get_mut(id) {
+                v.retain(|x| *x != n);
+                if v.is_empty() {
+                    self.by_reply.remove(id);
+                }
+            }
+        }
+        Some(p)
+    }
+
     fn expire(&mut self, now: Option<u64>, out: &mut Vec<Unanswered>) {
         let Some(now) = now else { return };
         let fixed = self.timeout_ns;
-        self.pending.retain(|p| match p.ts {
-            Some(t) if now > t.saturating_add(fixed.unwrap_or(p.timeout_ns)) => {
+        let late: Vec<u64> = self
+            .pending
+            .values()
+            .filter(|p| {
+                p.ts.is_some_and(|t| now > t.saturating_add(fixed.unwrap_or(p.timeout_ns)))
+            })
+            .map(|p| p.n)
+            .collect();
+        for n in late {
+            if let Some(p) = self.remove(n) {
                 out.push(Unanswered {
                     n: p.n,
                     offset: p.offset,
                     name: p.name,
                 });
-                false
             }
-            _ => true,
-        });
+        }
     }
 
     /// Observe frame `n` (time of its last byte `ts`; `dir` when the capture records it).
@@ -136,10 +166,12 @@ impl AptPairer {
             None => m.dir != Dir::DeviceToHost && h.src_byte() == 0x01,
         };
         if from_host {
-            let expects: Vec<u16> = table.replies_of(m).iter().map(|r| r.id).collect();
+            let expects = table.reply_ids(m);
             if !expects.is_empty() {
-                if self.pending.len() == MAX_PENDING {
-                    if let Some(p) = self.pending.pop_front() {
+                let expects = expects.to_vec();
+                if self.pending.len() >= MAX_PENDING {
+                    let oldest = self.pending.keys().next().copied();
+                    if let Some(p) = oldest.and_then(|k| self.remove(k)) {
                         info.expired.push(Unanswered {
                             n: p.n,
                             offset: p.offset,
@@ -147,7 +179,7 @@ impl AptPairer {
                         });
                     }
                 }
-                self.pending.push_back(Pending {
+                self.insert(Pending {
                     n,
                     offset: f.offset,
                     ts,
@@ -162,26 +194,35 @@ impl AptPairer {
         }
         let src = h.src_byte();
         let chan_ok = |c: Option<i64>| c.is_none() || chan.is_none() || c == chan;
-        let exact = self
-            .pending
+        let candidates: &[u64] = self.by_reply.get(&m.id).map_or(&[], |v| v.as_slice());
+        let usable = |k: &&u64| self.pending.get(k).is_some_and(|p| chan_ok(p.chan));
+        let found = candidates
             .iter()
-            .position(|p| p.expects.contains(&m.id) && p.device == src && chan_ok(p.chan));
-        let any = || {
-            self.pending
-                .iter()
-                .position(|p| p.expects.contains(&m.id) && chan_ok(p.chan))
-        };
-        match exact.or_else(any) {
-            Some(i) => {
-                let p = self
-                    .pending
-                    .remove(i)
-                    .unwrap_or_else(|| unreachable!("index from position"));
+            .filter(usable)
+            .find(|k| self.pending.get(k).is_some_and(|p| p.device == src))
+            .or_else(|| candidates.iter().find(usable))
+            .copied();
+        match found.and_then(|k| self.remove(k)) {
+            Some(p) => {
                 // The same message also answers other waiting requests to that device and
                 // channel (MOVE_STOPPED completes a move and the stop that ended it).
-                self.pending.retain(|q| {
-                    !(q.expects.contains(&m.id) && q.device == p.device && q.chan == p.chan)
-                });
+                let also: Vec<u64> = self
+                    .by_reply
+                    .get(&m.id)
+                    .map(|v| {
+                        v.iter()
+                            .copied()
+                            .filter(|k| {
+                                self.pending
+                                    .get(k)
+                                    .is_some_and(|q| q.device == p.device && q.chan == p.chan)
+                            })
+                            .collect()
+                    })
+                    .unwrap_or_default();
+                for k in also {
+                    self.remove(k);
+                }
                 info.pair = Some(p.n);
                 info.other_address = p.device != src;
                 info.latency_ns = match (p.ts, ts) {
@@ -221,8 +262,9 @@ impl AptPairer {
 
     /// End of stream: every request still waiting got no reply.
     pub fn finish(&mut self) -> Vec<Unanswered> {
-        self.pending
-            .drain(..)
+        self.by_reply.clear();
+        std::mem::take(&mut self.pending)
+            .into_values()
             .map(|p| Unanswered {
                 n: p.n,
                 offset: p.offset,

@@ -22,6 +22,8 @@ pub struct Table {
     by_id: Box<[u16]>,
     /// Per message index: its group's sub-messages as (sub id, index into `data.subs`).
     msg_subs: Vec<Vec<(u16, usize)>>,
+    /// Per message index: the ids of the messages that answer it (see [`Table::replies_of`]).
+    reply_ids: Vec<Vec<u16>>,
 }
 
 impl Table {
@@ -59,11 +61,19 @@ impl Table {
                     .collect()
             })
             .collect();
-        Ok(Table {
+        let mut t = Table {
             data,
             by_id,
             msg_subs,
-        })
+            reply_ids: vec![],
+        };
+        t.reply_ids = t
+            .data
+            .msgs
+            .iter()
+            .map(|m| t.replies_of(m).iter().map(|r| r.id).collect())
+            .collect();
+        Ok(t)
     }
 
     /// All messages, in table order.
@@ -160,6 +170,15 @@ impl Table {
                     })
             }
         })
+    }
+
+    /// The ids of the messages that answer `m` (precomputed [`replies_of`](Self::replies_of)).
+    #[inline]
+    pub fn reply_ids(&self, m: &MsgDef) -> &[u16] {
+        match self.by_id[m.id as usize] {
+            u16::MAX => &[],
+            i => self.reply_ids.get(i as usize).map_or(&[], |v| v.as_slice()),
+        }
     }
 
     /// The messages that answer `m`: its `reply=` list, or GET_x for REQ_x.
