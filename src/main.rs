@@ -88,6 +88,17 @@ enum Cmd {
         #[arg(long)]
         usb_device: Option<String>,
     },
+    /// Browse a capture in the terminal UI: timeline, detail tree, hex, filters, statistics, plots.
+    View {
+        /// Capture file.
+        file: String,
+        /// Input format instead of detecting it.
+        #[arg(long, short = 'F')]
+        format: Option<String>,
+        /// USB captures: only the device at BUS:ADDR.
+        #[arg(long)]
+        usb_device: Option<String>,
+    },
     /// What a capture holds: format, streams, counts per direction, times (like capinfos).
     Info {
         /// Capture file.
@@ -171,6 +182,12 @@ fn main() -> ExitCode {
                 .iter()
                 .try_for_each(|f| decode(f, o, json, proto, filter.as_deref()))
         }),
+        Cmd::View {
+            file,
+            format,
+            usb_device,
+        } => open_opts(format.as_deref(), false, usb_device.as_deref())
+            .and_then(|o| aptscope_tui::run(&file, o)),
         Cmd::Stats {
             file,
             format,
