@@ -63,6 +63,9 @@ enum Cmd {
         /// Display filter: only records it matches (`apt.name ~ "MOT_" && dir == device`).
         #[arg(short = 'Y', long = "filter")]
         filter: Option<String>,
+        /// Reply timeout for every request (`500ms`, `2s`) instead of the per-message defaults.
+        #[arg(long, value_parser = parse_duration)]
+        timeout: Option<u64>,
     },
     /// Statistics of a capture: counts and bytes per message, address and direction, request
     /// latency (min/median/p99/max), diagnostics by kind, rate over time.
@@ -81,6 +84,9 @@ enum Cmd {
         /// Count only the records this display filter matches.
         #[arg(short = 'Y', long = "filter")]
         filter: Option<String>,
+        /// Reply timeout for every request (`500ms`, `2s`) instead of the per-message defaults.
+        #[arg(long, value_parser = parse_duration)]
+        timeout: Option<u64>,
         /// Width of the rate bins in seconds.
         #[arg(long, default_value_t = 1.0)]
         bin: f64,
@@ -177,10 +183,11 @@ fn main() -> ExitCode {
             proto,
             usb_device,
             filter,
+            timeout,
         } => open_opts(format.as_deref(), hex, usb_device.as_deref()).and_then(|o| {
             files
                 .iter()
-                .try_for_each(|f| decode(f, o, json, proto, filter.as_deref()))
+                .try_for_each(|f| decode(f, o, json, proto, filter.as_deref(), timeout))
         }),
         Cmd::View {
             file,
@@ -194,10 +201,11 @@ fn main() -> ExitCode {
             json,
             proto,
             filter,
+            timeout,
             bin,
             usb_device,
         } => open_opts(format.as_deref(), false, usb_device.as_deref())
-            .and_then(|o| stats(&file, o, json, proto, filter.as_deref(), bin)),
+            .and_then(|o| stats(&file, o, json, proto, filter.as_deref(), bin, timeout)),
         Cmd::Info {
             file,
             format,
@@ -338,12 +346,16 @@ fn stats(
     proto: ProtoArg,
     filter: Option<&str>,
     bin: f64,
+    timeout: Option<u64>,
 ) -> io::Result<()> {
     let mut f = filter.map(compile_filter).transpose()?;
     let (mut reader, _, progress) = open_with_progress(file, opts)?;
     let mut ticker = Ticker::new(progress);
     let st = Rc::new(RefCell::new(Stats::new((bin.max(1e-6) * 1e9) as u64)));
     let mut p = Pipeline::new(proto_of(proto), PFormat::Json);
+    if let Some(t) = timeout {
+        p.set_reply_timeout(t);
+    }
     let sink = st.clone();
     p.set_filter(move |v| {
         if f.as_mut().is_none_or(|f| f.matches(v)) {
@@ -371,6 +383,7 @@ fn decode(
     as_json: bool,
     proto: ProtoArg,
     filter: Option<&str>,
+    timeout: Option<u64>,
 ) -> io::Result<()> {
     let filter = filter.map(compile_filter).transpose()?;
     let (mut reader, _) = open(file, opts)?;
@@ -387,6 +400,9 @@ fn decode(
         out.write_all(line.as_bytes())?;
         out.write_all(b"\n")
     };
+    if let Some(t) = timeout {
+        p.set_reply_timeout(t);
+    }
     if let Some(f) = filter {
         p.set_filter(move |v| f.matches(v));
     }
@@ -579,6 +595,29 @@ impl Ticker {
             eprint!("\r{:30}\r", "");
         }
     }
+}
+
+/// A duration (`500ms`, `2s`, `1.5s`, `200us`, `2min`, or plain seconds) in ns.
+fn parse_duration(s: &str) -> Result<u64, String> {
+    let s = s.trim();
+    let split = s.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(s.len());
+    let (num, unit) = s.split_at(split);
+    let v: f64 = num
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a duration (500ms, 2s)"))?;
+    let scale = match unit {
+        "" | "s" => 1e9,
+        "ms" => 1e6,
+        "us" => 1e3,
+        "ns" => 1.0,
+        "min" => 60e9,
+        u => return Err(format!("unknown unit `{u}` (ns, us, ms, s, min)")),
+    };
+    if !(v.is_finite() && v >= 0.0) {
+        return Err(format!("`{s}` is not a duration"));
+    }
+    Ok((v * scale) as u64)
 }
 
 fn bad(msg: String) -> io::Error {

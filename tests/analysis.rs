@@ -132,3 +132,28 @@ fn stats_match_the_hand_count() {
     let s: Value = serde_json::from_str(out.trim()).expect("JSON");
     assert_eq!(s["frames"]["count"], 7);
 }
+
+#[test]
+fn a_shorter_reply_timeout_flags_slow_replies() {
+    // Homing takes 2 s and the absolute move 0.5 s: with 100 ms both requests expire, and
+    // their completions arrive unsolicited.
+    let recs = records(&["decode", "--json", "--timeout", "100ms", KDC]);
+    let late: Vec<u64> = recs
+        .iter()
+        .filter(|r| r["type"] == "diag")
+        .filter_map(|r| r["ref"].as_u64())
+        .collect();
+    assert_eq!(late, [7, 13]);
+    let unsolicited: Vec<&str> = recs
+        .iter()
+        .filter(|r| {
+            r["diag"]
+                .as_array()
+                .is_some_and(|d| d.iter().any(|x| x["kind"] == "unsolicited"))
+        })
+        .filter_map(|r| r["name"].as_str())
+        .collect();
+    assert_eq!(unsolicited, ["MOT_MOVE_HOMED", "MOT_MOVE_COMPLETED"]);
+    let (_, err, ok) = run(&["decode", "--timeout", "1x", KDC]);
+    assert!(!ok && err.contains("unknown unit"), "{err}");
+}

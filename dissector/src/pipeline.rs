@@ -58,6 +58,7 @@ pub struct Pipeline {
     line: String,
     jline: String,
     filter: Option<RecordFilter>,
+    reply_timeout: Option<u64>,
 }
 
 /// Decides, from its NDJSON object, whether a record is emitted.
@@ -79,7 +80,13 @@ impl Pipeline {
             line: String::with_capacity(512),
             jline: String::with_capacity(512),
             filter: None,
+            reply_timeout: None,
         }
+    }
+
+    /// Use one reply timeout for every request instead of the per-message defaults.
+    pub fn set_reply_timeout(&mut self, ns: u64) {
+        self.reply_timeout = Some(ns);
     }
 
     /// Emit only the records `keep` accepts (it sees each record as its NDJSON object, whatever
@@ -369,7 +376,9 @@ impl Pipeline {
             let pi_idx = match self.pairers.iter().position(|(s, _)| *s == stream) {
                 Some(p) => p,
                 None => {
-                    self.pairers.push((stream, AptPairer::new()));
+                    let mut p = AptPairer::new();
+                    p.timeout_ns = self.reply_timeout;
+                    self.pairers.push((stream, p));
                     self.pairers.len() - 1
                 }
             };
@@ -438,7 +447,9 @@ impl Pipeline {
         let bus_idx = match self.buses.iter().position(|(s, _)| *s == stream) {
             Some(b) => b,
             None => {
-                self.buses.push((stream, Bus::new()));
+                let mut b = Bus::new();
+                b.timeout_ns = self.reply_timeout;
+                self.buses.push((stream, b));
                 self.buses.len() - 1
             }
         };

@@ -101,6 +101,8 @@ pub struct Bus {
     /// `ga`: address Y temporarily answered by the module at X.
     alias: [Option<u8>; 16],
     pending: VecDeque<Pending>,
+    /// Overrides the per-command default reply timeout.
+    pub timeout_ns: Option<u64>,
 }
 
 /// Bound on commands waiting for replies (a host that never gets answers must not grow memory).
@@ -127,8 +129,9 @@ impl Bus {
 
     fn expire(&mut self, now: Option<u64>, out: &mut Vec<Expired>) {
         let Some(now) = now else { return };
+        let fixed = self.timeout_ns;
         self.pending.retain(|p| match p.ts {
-            Some(t) if now > t + timeout_ns(p.cmd) => {
+            Some(t) if now > t.saturating_add(fixed.unwrap_or_else(|| timeout_ns(p.cmd))) => {
                 out.push(p.into());
                 false
             }
