@@ -92,3 +92,4 @@ xxd -r -p damaged.hex > damaged.bin
 cd ..
 cargo run -q -p aptscope-capture --example make_samples
 python3 samples/make-textlogs.py
+if command -v hexdump >/dev/null; then hexdump -C samples/kdc101-session.bin > samples/kdc101-session.hexdump.txt; fi

@@ -56,6 +56,7 @@ const KDC101: &[&str] = &[
     "samples/kdc101-session.bin",
     "samples/kdc101-session.hex",
     "samples/kdc101-session.xxd.txt",
+    "samples/kdc101-session.hexdump.txt",
     "samples/kdc101-session.socat.log",
     "samples/kdc101-session.jpnevulator.txt",
     "samples/kdc101-session.interceptty.log",
@@ -63,6 +64,7 @@ const KDC101: &[&str] = &[
     "samples/kdc101-session.pcap",
     "samples/kdc101-session.mcap",
     "samples/kdc101-session.usbmon.pcap",
+    "samples/kdc101-session.usbpcap.pcap",
 ];
 
 #[test]

@@ -113,4 +113,67 @@ fn main() {
         .expect("packet");
     }
     eprintln!("wrote samples/kdc101-session.usbmon.pcap");
+    let header = PcapHeader {
+        datalink: DataLink::from(249),
+        ts_resolution: TsResolution::MicroSecond,
+        ..PcapHeader::default()
+    };
+    let mut w = PcapWriter::with_header(
+        BufWriter::new(File::create("samples/kdc101-session.usbpcap.pcap").expect("create")),
+        header,
+    )
+    .expect("usbpcap");
+    for (ts, rec) in usbpcap_records(&chunks) {
+        w.write_packet(&PcapPacket::new(
+            Duration::from_nanos(ts),
+            rec.len() as u32,
+            &rec,
+        ))
+        .expect("packet");
+    }
+    eprintln!("wrote samples/kdc101-session.usbpcap.pcap");
+}
+
+/// One USBPcap record (`USBPCAP_BUFFER_PACKET_HEADER`, 27 bytes, bulk transfer) and its data.
+fn usbpcap(irp: u64, completion: bool, endpoint: u8, data: &[u8]) -> Vec<u8> {
+    let mut r = Vec::with_capacity(27 + data.len());
+    r.extend_from_slice(&27u16.to_le_bytes());
+    r.extend_from_slice(&irp.to_le_bytes());
+    r.extend_from_slice(&0u32.to_le_bytes()); // status: success
+    r.extend_from_slice(&0x0009u16.to_le_bytes()); // URB_FUNCTION_BULK_OR_INTERRUPT_TRANSFER
+    r.push(u8::from(completion)); // info bit 0: PDO -> FDO
+    r.extend_from_slice(&1u16.to_le_bytes()); // bus (root hub)
+    r.extend_from_slice(&5u16.to_le_bytes()); // device address
+    r.push(endpoint);
+    r.push(3); // bulk
+    r.extend_from_slice(&(data.len() as u32).to_le_bytes());
+    r.extend_from_slice(data);
+    r
+}
+
+/// The chunks as Windows USBPcap sees an FT232's bulk endpoints: OUT data on 0x02, IN data on
+/// 0x81 with the two FTDI modem-status bytes at the start of every 64-byte packet.
+fn usbpcap_records(chunks: &[OwnedChunk]) -> Vec<(u64, Vec<u8>)> {
+    let mut out = vec![];
+    let mut irp = 0xffff_a000u64;
+    for c in chunks {
+        let ts = c.ts_ns.unwrap_or(0);
+        irp += 1;
+        match c.dir {
+            Direction::HostToDevice => {
+                out.push((ts, usbpcap(irp, false, 0x02, &c.bytes)));
+                out.push((ts, usbpcap(irp, true, 0x02, &[])));
+            }
+            _ => {
+                let mut data = vec![];
+                for piece in c.bytes.chunks(62) {
+                    data.extend_from_slice(&[0x01, 0x60]);
+                    data.extend_from_slice(piece);
+                }
+                out.push((ts, usbpcap(irp, false, 0x81, &[])));
+                out.push((ts, usbpcap(irp, true, 0x81, &data)));
+            }
+        }
+    }
+    out
 }
