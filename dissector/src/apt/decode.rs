@@ -51,6 +51,7 @@ pub enum Value<'a> {
 }
 
 /// Read one scalar at the start of `b` (which holds at least its width).
+#[inline]
 pub fn read_prim(p: Prim, b: &[u8]) -> Value<'_> {
     match p {
         Prim::U8 => Value::U(b[0] as u64),
@@ -290,11 +291,20 @@ impl<'a, 't> AptFrame<'a, 't> {
 
     /// The fields of the matched form with their values (reserved `pad` fields left out).
     pub fn fields(&self) -> impl Iterator<Item = (&'t Field, Value<'a>)> + '_ {
-        self.form
-            .into_iter()
-            .flat_map(|f| f.fields.iter())
-            .filter(|f| !matches!(f.ty, Ty::Pad(_)))
-            .filter_map(move |f| self.value(f).map(|v| (f, v)))
+        let fields: &'t [Field] = self.form.map_or(&[], |f| f.fields.as_slice());
+        let bytes = self.bytes;
+        fields.iter().filter_map(move |f| {
+            let start = f.loc.frame_offset();
+            let b = bytes.get(start..start + f.ty.width())?;
+            let v = match f.ty {
+                Ty::Prim(p) => read_prim(p, b),
+                Ty::Array(p, _) => Value::Array(p, b),
+                Ty::Str(_) => Value::Str(b),
+                Ty::Bytes(_) => Value::Bytes(b),
+                Ty::Pad(_) => return None,
+            };
+            Some((f, v))
+        })
     }
 
     /// A field by name.

@@ -46,6 +46,7 @@ pub enum Prim {
 
 impl Prim {
     /// Width in bytes.
+    #[inline]
     pub fn width(self) -> usize {
         match self {
             Prim::U8 | Prim::I8 => 1,
@@ -100,6 +101,7 @@ pub enum Ty {
 
 impl Ty {
     /// Width in bytes.
+    #[inline]
     pub fn width(self) -> usize {
         match self {
             Ty::Prim(p) => p.width(),
@@ -149,6 +151,7 @@ pub enum Loc {
 
 impl Loc {
     /// Offset of the field's first byte from the start of the frame.
+    #[inline]
     pub fn frame_offset(self) -> usize {
         match self {
             Loc::P1 => 2,
