@@ -1,9 +1,84 @@
-//! aptscope-tui: the terminal UI (being written; this placeholder keeps the workspace building).
+//! aptscope-tui: the terminal UI of `aptscope view FILE`.
+//!
+//! Architecture (state → events → view): [`index`] builds a compact index of the capture in a
+//! background thread; [`scan`] runs the display filter and statistics over it in another;
+//! [`app::App`] holds the UI state and handles keys and mouse events without a terminal;
+//! [`ui::draw`] renders the state, decoding only the visible rows ([`decode`]).
 #![forbid(unsafe_code)]
+#![warn(missing_docs)]
 
-/// Browse a capture in the terminal UI.
-pub fn run(path: &str, _opts: aptscope_capture::open::OpenOptions) -> std::io::Result<()> {
-    Err(std::io::Error::other(format!(
-        "the terminal UI is not built yet ({path})"
-    )))
+pub mod app;
+pub mod decode;
+pub mod index;
+pub mod scan;
+pub mod ui;
+
+use aptscope_capture::open::OpenOptions;
+use ratatui::crossterm::event::{self, DisableMouseCapture, EnableMouseCapture, Event};
+use ratatui::crossterm::execute;
+use ratatui::crossterm::terminal::{
+    disable_raw_mode, enable_raw_mode, EnterAlternateScreen, LeaveAlternateScreen,
+};
+use ratatui::prelude::CrosstermBackend;
+use ratatui::Terminal;
+use std::io;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+fn restore_terminal() {
+    let _ = disable_raw_mode();
+    let _ = execute!(io::stdout(), DisableMouseCapture, LeaveAlternateScreen);
+    let _ = execute!(io::stdout(), ratatui::crossterm::cursor::Show);
+}
+
+/// Restores the terminal when dropped (normal exit, error, or unwinding panic).
+struct Guard;
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        restore_terminal();
+    }
+}
+
+/// Open `path` (any readable capture format) and run the interactive viewer until the user
+/// quits. The first screen shows at once; the index builds in the background.
+pub fn run(path: &str, opts: OpenOptions) -> io::Result<()> {
+    let shared = index::spawn(path, opts)?;
+    let title = std::path::Path::new(path)
+        .file_name()
+        .map_or_else(|| path.to_string(), |n| n.to_string_lossy().into_owned());
+    let mut app = app::App::new(shared.clone(), &title, true);
+
+    let hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        restore_terminal();
+        hook(info);
+    }));
+    enable_raw_mode()?;
+    let _guard = Guard;
+    execute!(io::stdout(), EnterAlternateScreen, EnableMouseCapture)?;
+    let mut term = Terminal::new(CrosstermBackend::new(io::stdout()))?;
+    term.clear()?;
+    let result = (|| -> io::Result<()> {
+        while !app.quit {
+            term.draw(|f| ui::draw(f, &mut app))?;
+            if event::poll(Duration::from_millis(100))? {
+                // Handle everything queued before drawing again (fast key repeat stays smooth).
+                loop {
+                    match event::read()? {
+                        Event::Key(k) => app.on_key(k),
+                        Event::Mouse(m) => app.on_mouse(m),
+                        _ => {}
+                    }
+                    if app.quit || !event::poll(Duration::ZERO)? {
+                        break;
+                    }
+                }
+            }
+        }
+        Ok(())
+    })();
+    shared.cancel.store(true, Ordering::Relaxed);
+    drop(term);
+    result
 }

@@ -1,0 +1,117 @@
+//! Throughput of capture reading and writing: pcapng read, usbmon read with FTDI unwrapping,
+//! MCAP write (raw and decoded channels). Criterion prints MB/s of serial payload and chunks/s.
+
+use aptscope_capture::mcap_io::McapWriter;
+use aptscope_capture::model::{Event, Reader, Writer};
+use aptscope_capture::pcap::{PcapNgOut, PcapReader};
+use aptscope_capture::usb::synth_usbmon;
+use aptscope_capture::{Direction, OwnedChunk, StreamInfo};
+use aptscope_dissector::{synth, Table};
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use pcap_file::pcap::{PcapHeader, PcapPacket, PcapWriter};
+use pcap_file::{DataLink, TsResolution};
+use std::hint::black_box;
+use std::io::Cursor;
+use std::time::Duration;
+
+/// Serial traffic as chunks of 20 bytes, alternating direction, 100 µs apart.
+fn chunks(total: usize) -> Vec<OwnedChunk> {
+    let bytes = synth::stream(Table::global(), 7, total / 14, false);
+    let mut t = 1_700_000_000_000_000_000u64;
+    bytes
+        .chunks(20)
+        .enumerate()
+        .map(|(i, b)| {
+            t += 100_000;
+            OwnedChunk {
+                ts_ns: Some(t),
+                dir: if i % 2 == 0 {
+                    Direction::HostToDevice
+                } else {
+                    Direction::DeviceToHost
+                },
+                stream: 0,
+                bytes: b.to_vec(),
+            }
+        })
+        .collect()
+}
+
+fn read_all(r: &mut dyn Reader) -> u64 {
+    let mut n = 0;
+    while let Some(ev) = r.next_event() {
+        if let Event::Chunk(c) = ev {
+            n += c.bytes.len() as u64;
+        }
+    }
+    n
+}
+
+fn benches(c: &mut Criterion) {
+    let cs = chunks(16 << 20);
+    let payload: u64 = cs.iter().map(|c| c.bytes.len() as u64).sum();
+    let port = StreamInfo {
+        id: 0,
+        name: "/dev/ttyUSB0".into(),
+        settings: None,
+    };
+    let mut pcapng = vec![];
+    {
+        let mut w = PcapNgOut::new(&mut pcapng).expect("writer");
+        w.stream(&port).expect("stream");
+        for ch in &cs {
+            w.chunk(&ch.as_chunk()).expect("chunk");
+        }
+        w.finish().expect("finish");
+    }
+    let mut usb = vec![];
+    {
+        let header = PcapHeader {
+            datalink: DataLink::from(220),
+            ts_resolution: TsResolution::MicroSecond,
+            ..PcapHeader::default()
+        };
+        let mut pw = PcapWriter::with_header(&mut usb, header).expect("usbmon");
+        for (ts, rec) in synth_usbmon(&cs, 1, 7, 64) {
+            pw.write_packet(&PcapPacket::new(
+                Duration::from_nanos(ts),
+                rec.len() as u32,
+                &rec,
+            ))
+            .expect("packet");
+        }
+    }
+    for (unit, tp) in [
+        ("bytes", Throughput::Bytes(payload)),
+        ("chunks", Throughput::Elements(cs.len() as u64)),
+    ] {
+        let mut g = c.benchmark_group(format!("capture_{unit}"));
+        g.sample_size(10).throughput(tp);
+        g.bench_function("pcapng_read", |b| {
+            b.iter(|| {
+                black_box(read_all(&mut PcapReader::new(
+                    Cursor::new(&pcapng[..]),
+                    None,
+                )))
+            })
+        });
+        g.bench_function("usbmon_read_ftdi", |b| {
+            b.iter(|| black_box(read_all(&mut PcapReader::new(Cursor::new(&usb[..]), None))))
+        });
+        g.bench_function("mcap_write", |b| {
+            b.iter(|| {
+                let mut w =
+                    McapWriter::new(Cursor::new(Vec::with_capacity(64 << 20)), None).expect("mcap");
+                w.stream(&port).expect("stream");
+                for ch in &cs {
+                    w.chunk(&ch.as_chunk()).expect("chunk");
+                }
+                w.finish().expect("finish");
+            })
+        });
+        g.finish();
+    }
+}
+
+criterion_group!(capture, benches);
+criterion_main!(capture);

@@ -1,0 +1,287 @@
+//! App state and key handling, without a terminal.
+
+use aptscope_capture::open::OpenOptions;
+use aptscope_tui::app::{App, Input, Pane, TimeMode, View};
+use aptscope_tui::index::{load, F_IS_REPLY};
+use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
+
+fn sample(name: &str) -> String {
+    format!("{}/../samples/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+fn app(name: &str) -> App {
+    let shared = load(&sample(name), OpenOptions::default()).expect("sample opens");
+    App::new(shared, name, false)
+}
+
+fn key(app: &mut App, c: KeyCode) {
+    app.on_key(KeyEvent::new(c, KeyModifiers::NONE));
+}
+
+fn typed(app: &mut App, s: &str) {
+    for c in s.chars() {
+        key(app, KeyCode::Char(c));
+    }
+}
+
+#[test]
+fn moves_with_vim_keys_and_arrows() {
+    let mut a = app("kdc101-session.pcapng");
+    assert_eq!(a.len(), 20);
+    assert_eq!(a.selected(), Some(1));
+    key(&mut a, KeyCode::Char('j'));
+    key(&mut a, KeyCode::Down);
+    assert_eq!(a.selected(), Some(3));
+    key(&mut a, KeyCode::Char('k'));
+    assert_eq!(a.selected(), Some(2));
+    key(&mut a, KeyCode::Char('G'));
+    assert_eq!(a.selected(), Some(20));
+    key(&mut a, KeyCode::Char('g'));
+    assert_eq!(a.selected(), Some(1));
+    a.list_rows = 5;
+    key(&mut a, KeyCode::PageDown);
+    assert_eq!(a.selected(), Some(6));
+    assert!(a.top <= a.sel && a.sel < a.top + 5);
+    key(&mut a, KeyCode::PageUp);
+    assert_eq!(a.selected(), Some(1));
+    key(&mut a, KeyCode::Up);
+    assert_eq!(a.selected(), Some(1));
+}
+
+#[test]
+fn filter_goto_pair_search() {
+    let mut a = app("kdc101-session.pcapng");
+    key(&mut a, KeyCode::Char('/'));
+    typed(&mut a, "apt.name ==");
+    let e = a
+        .filter_error
+        .clone()
+        .expect("incomplete filter is an error");
+    assert_eq!(e.column, 12);
+    key(&mut a, KeyCode::Enter);
+    assert!(
+        matches!(a.input, Input::Filter(_)),
+        "a bad filter stays open"
+    );
+    typed(&mut a, " MOT_GET_DCSTATUSUPDATE");
+    assert!(a.filter_error.is_none());
+    key(&mut a, KeyCode::Enter);
+    assert_eq!(a.input, Input::None);
+    let n = a.len();
+    assert!(n > 0 && n < 20, "filter selects status updates: {n}");
+    let shown = a.rows(0, n);
+    assert!(shown.iter().all(|x| *x >= 8));
+    // Clearing the filter keeps the selected record.
+    key(&mut a, KeyCode::Char('j'));
+    let sel = a.selected();
+    key(&mut a, KeyCode::Char('/'));
+    key(&mut a, KeyCode::Char('u'));
+    a.on_key(KeyEvent::new(KeyCode::Char('u'), KeyModifiers::CONTROL));
+    key(&mut a, KeyCode::Enter);
+    assert_eq!(a.len(), 20);
+    assert_eq!(a.selected(), sel);
+
+    // Go to a record, jump to its pair and back.
+    key(&mut a, KeyCode::Char(':'));
+    typed(&mut a, "2");
+    key(&mut a, KeyCode::Enter);
+    assert_eq!(a.selected(), Some(2));
+    key(&mut a, KeyCode::Char('p'));
+    assert_eq!(a.selected(), Some(1));
+    key(&mut a, KeyCode::Char('p'));
+    assert_eq!(a.selected(), Some(2));
+    let ix = a.shared.index.read().expect("lock");
+    assert!(ix.rec(2).expect("rec").has(F_IS_REPLY));
+    drop(ix);
+
+    // Search.
+    key(&mut a, KeyCode::Char('g'));
+    key(&mut a, KeyCode::Char('s'));
+    typed(&mut a, "apt.name ~ MOVE_HOMED");
+    key(&mut a, KeyCode::Enter);
+    let hit = a.selected().expect("a hit");
+    let mut buf = String::new();
+    let ix = a.shared.index.read().expect("lock");
+    let v = aptscope_tui::decode::json_of(&ix, hit, &mut buf).expect("json");
+    drop(ix);
+    assert_eq!(v["name"], "MOT_MOVE_HOMED");
+    key(&mut a, KeyCode::Char('n'));
+    assert!(a.message.is_some(), "only one homed message");
+    key(&mut a, KeyCode::Char('N'));
+    assert_eq!(a.selected(), Some(hit));
+}
+
+#[test]
+fn panes_tree_collapse_and_views() {
+    let mut a = app("kdc101-session.pcapng");
+    key(&mut a, KeyCode::Char(':'));
+    typed(&mut a, "8");
+    key(&mut a, KeyCode::Enter);
+    let lines = a.detail_lines();
+    assert!(
+        lines.iter().any(|l| l.text.contains("[x]")),
+        "flags expanded"
+    );
+    assert!(lines.iter().any(|l| l.text.starts_with("status_bits")));
+    key(&mut a, KeyCode::Tab);
+    assert_eq!(a.focus, Pane::Detail);
+    // Select the header section and collapse it.
+    key(&mut a, KeyCode::Char('j'));
+    assert!(a.detail_lines()[1].text.starts_with("Header"));
+    assert_eq!(a.highlight(), Some((0, 6)));
+    key(&mut a, KeyCode::Enter);
+    assert_eq!(a.detail_lines().len(), lines.len() - 5);
+    key(&mut a, KeyCode::Char('l'));
+    assert_eq!(a.detail_lines().len(), lines.len());
+    key(&mut a, KeyCode::Tab);
+    assert_eq!(a.focus, Pane::Hex);
+    key(&mut a, KeyCode::BackTab);
+    key(&mut a, KeyCode::BackTab);
+    assert_eq!(a.focus, Pane::List);
+    key(&mut a, KeyCode::Char('t'));
+    assert_eq!(a.time_mode, TimeMode::Delta);
+    key(&mut a, KeyCode::Char('2'));
+    assert_eq!(a.view, View::Stats);
+    key(&mut a, KeyCode::Char('q'));
+    assert_eq!(a.view, View::Timeline);
+    assert!(!a.quit);
+    key(&mut a, KeyCode::Char('?'));
+    assert!(a.help);
+    key(&mut a, KeyCode::Esc);
+    assert!(!a.help);
+    a.on_key(KeyEvent::new(KeyCode::Char('c'), KeyModifiers::CONTROL));
+    assert!(a.quit);
+}
+
+#[test]
+fn indexes_like_decode() {
+    // Record numbers, pairs and diagnostics agree with the NDJSON of `decode --json`.
+    for name in ["damaged.bin", "elliptec-bus.txt", "bsc203-rack.hex"] {
+        let a = app(name);
+        let ix = a.shared.index.read().expect("lock");
+        assert!(ix.done);
+        let mut buf = String::new();
+        for n in 1..=ix.recs.len() as u64 {
+            let v = aptscope_tui::decode::json_of(&ix, n, &mut buf).expect("json");
+            assert_eq!(v["n"], n, "{name} #{n}");
+            assert!(aptscope_tui::decode::row(&ix, n).is_some());
+            assert!(!aptscope_tui::decode::tree(&ix, n).is_empty());
+        }
+    }
+    let a = app("damaged.bin");
+    let st = a.scan.state.lock().expect("lock");
+    assert!(st.done);
+    assert!(st.stats.garbage.count > 0);
+    assert!(!st.stats.diags.is_empty());
+}
+
+#[test]
+fn background_index_and_follow() {
+    let shared = aptscope_tui::index::spawn(&sample("elliptec-bus.txt"), OpenOptions::default())
+        .expect("opens");
+    let mut a = App::new(shared, "bus", true);
+    for _ in 0..200 {
+        if a.shared.index.read().is_ok_and(|ix| ix.done)
+            && a.scan.state.lock().is_ok_and(|s| s.done)
+        {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    key(&mut a, KeyCode::Char('f'));
+    a.tick();
+    assert_eq!(a.sel, a.len() - 1);
+    assert!(!a.shared.index.read().expect("lock").series.is_empty());
+}
+
+#[test]
+fn records_equal_the_pipeline_ndjson() {
+    use aptscope_capture::model::{Direction, Event};
+    use aptscope_dissector::pipeline::{Ctx, Format, Pipeline};
+    use aptscope_dissector::table::Dir;
+    for name in [
+        "kdc101-session.pcapng",
+        "damaged.bin",
+        "damaged.hex",
+        "elliptec-bus.txt",
+        "bsc203-rack.hex",
+        "kdc101-session.socat.log",
+    ] {
+        let (mut r, _) =
+            aptscope_capture::open::open(&sample(name), OpenOptions::default()).expect("opens");
+        let mut p = Pipeline::new(None, Format::Json);
+        let mut out: Vec<serde_json::Value> = vec![];
+        let mut emit = |l: &str| -> Result<(), ()> {
+            out.push(serde_json::from_str(l).expect("json"));
+            Ok(())
+        };
+        while let Some(ev) = r.next_event() {
+            if let Event::Chunk(c) = ev {
+                let dir = match c.dir {
+                    Direction::HostToDevice => Some(Dir::HostToDevice),
+                    Direction::DeviceToHost => Some(Dir::DeviceToHost),
+                    Direction::Unknown => None,
+                };
+                let ctx = Ctx {
+                    stream: c.stream,
+                    dir,
+                    ts_ns: c.ts_ns,
+                };
+                p.push_chunk(ctx, c.bytes, &mut emit).expect("push");
+            }
+        }
+        p.finish(&mut emit).expect("finish");
+        let a = app(name);
+        let ix = a.shared.index.read().expect("lock");
+        let mut buf = String::new();
+        let mut count = 0;
+        for want in out.iter().filter(|v| v.get("n").is_some()) {
+            let n = want["n"].as_u64().expect("n");
+            let mut got = aptscope_tui::decode::json_of(&ix, n, &mut buf).expect("record");
+            if let Some(d) = got["diag"].as_array_mut() {
+                d.retain(|x| x["kind"] != "no_reply");
+            }
+            assert_eq!(&got, want, "{name} #{n}");
+            count += 1;
+        }
+        assert_eq!(count, ix.recs.len(), "{name}");
+        let late: Vec<u64> = out
+            .iter()
+            .filter(|v| v["type"] == "diag")
+            .filter_map(|v| v["ref"].as_u64())
+            .collect();
+        for n in late {
+            assert!(
+                ix.rec(n).expect("ref").has(aptscope_tui::index::F_NO_REPLY),
+                "{name} #{n}"
+            );
+        }
+    }
+}
+
+#[test]
+fn mouse_wheel_and_click() {
+    use aptscope_tui::app::Areas;
+    use ratatui::crossterm::event::{MouseButton, MouseEvent, MouseEventKind};
+    use ratatui::layout::Rect;
+    let mut a = app("kdc101-session.pcapng");
+    a.areas = Areas {
+        list: Rect::new(0, 2, 80, 8),
+        detail: Rect::new(0, 11, 80, 7),
+        hex: Rect::new(0, 19, 80, 2),
+    };
+    a.list_rows = 8;
+    let ev = |kind, row| MouseEvent {
+        kind,
+        column: 5,
+        row,
+        modifiers: KeyModifiers::NONE,
+    };
+    a.on_mouse(ev(MouseEventKind::ScrollDown, 3));
+    assert_eq!(a.selected(), Some(4));
+    a.on_mouse(ev(MouseEventKind::Down(MouseButton::Left), 2));
+    assert_eq!(a.selected(), Some(a.top as u64 + 1));
+    a.on_mouse(ev(MouseEventKind::Down(MouseButton::Left), 13));
+    assert_eq!(a.focus, Pane::Detail);
+    assert_eq!(a.detail_sel, 2);
+}
