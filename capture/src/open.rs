@@ -275,7 +275,9 @@ fn finish_open(
     let format = opts.format.unwrap_or_else(|| sniff(&head));
     let stream: Box<dyn Read> = Box::new(Cursor::new(head).chain(input));
     let reader: Box<dyn Reader> = match format {
-        Format::Pcap | Format::PcapNg => Box::new(pcap::PcapReader::new(stream, opts.usb_device)),
+        Format::Pcap | Format::PcapNg => Box::new(
+            pcap::PcapReader::new(stream, opts.usb_device).expect_pcapng(format == Format::PcapNg),
+        ),
         Format::Mcap => Box::new(mcap_io::McapReader::new(stream)),
         Format::Text(t) => textlog::open(t, BufReader::new(stream)),
         Format::Hex => Box::new(ByteReader::new(stream, true)),

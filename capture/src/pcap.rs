@@ -130,6 +130,13 @@ fn dir_from_byte(b: u8) -> Direction {
 }
 
 impl<R: Read> PcapReader<R> {
+    /// Say which of the two the stream is (from its magic), so [`Reader::format`] is right
+    /// before anything has been read.
+    pub fn expect_pcapng(mut self, ng: bool) -> Self {
+        self.ng = ng;
+        self
+    }
+
     /// Read a pcap or pcapng stream; `usb_device` restricts USB captures to one BUS:ADDR.
     pub fn new(src: R, usb_device: Option<(u16, u8)>) -> Self {
         PcapReader {
@@ -300,6 +307,7 @@ impl<R: Read> PcapReader<R> {
             match PcapParser::new(head) {
                 Ok((rem, p)) => {
                     self.start += head.len() - rem.len();
+                    self.ng = false;
                     self.pcap_linktype = u32::from(p.header().datalink);
                     self.parser = Parser::Legacy(p);
                     self.announce_linktype(self.pcap_linktype);
@@ -613,6 +621,9 @@ impl<R: Read> Reader for PcapReader<R> {
     }
 
     fn format(&self) -> String {
+        if matches!(self.parser, Parser::None) && !self.done {
+            return if self.ng { "pcapng" } else { "pcap" }.to_string();
+        }
         let kind = if self.ng { "pcapng" } else { "pcap" };
         let lts: Vec<u32> = if self.ng {
             self.ifaces.iter().map(|i| i.linktype).collect()
