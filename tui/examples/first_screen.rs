@@ -1,0 +1,45 @@
+//! Time to the first screen of `aptscope view` on a capture (`first_screen FILE`): opens it like
+//! the viewer does (background indexing), draws into an off-screen 120×40 terminal until a full
+//! screen of rows is shown, then waits for the index to finish. Prints both times as JSON.
+//! `bench/tui-first-screen.sh` runs it on a generated 10 M-frame capture.
+
+use aptscope_tui::{app::App, index, ui};
+use ratatui::{backend::TestBackend, Terminal};
+use std::time::{Duration, Instant};
+
+fn main() -> std::io::Result<()> {
+    let Some(path) = std::env::args().nth(1) else {
+        eprintln!("usage: first_screen FILE");
+        std::process::exit(2);
+    };
+    let t0 = Instant::now();
+    let shared = index::spawn(&path, Default::default())?;
+    let mut app = App::new(shared.clone(), "bench", true);
+    let Ok(mut term) = Terminal::new(TestBackend::new(120, 40));
+    let first = loop {
+        let _ = term.draw(|f| ui::draw(f, &mut app));
+        if app.len() >= 20 || shared.index.read().is_ok_and(|i| i.done) {
+            break t0.elapsed();
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    };
+    let frames_at_first = app.len();
+    while !shared.index.read().is_ok_and(|i| i.done) {
+        std::thread::sleep(Duration::from_millis(20));
+        app.tick();
+    }
+    let total = t0.elapsed();
+    // Scrolling to the end and drawing stays instant: only visible rows are decoded.
+    let t1 = Instant::now();
+    app.select(app.len().saturating_sub(1));
+    let _ = term.draw(|f| ui::draw(f, &mut app));
+    let jump = t1.elapsed();
+    let records = shared.index.read().map(|i| i.recs.len()).unwrap_or(0);
+    println!(
+        "{{\"first_screen_ms\":{:.1},\"records_at_first_screen\":{frames_at_first},\"index_s\":{:.2},\"records\":{records},\"jump_to_end_and_draw_ms\":{:.1}}}",
+        first.as_secs_f64() * 1e3,
+        total.as_secs_f64(),
+        jump.as_secs_f64() * 1e3
+    );
+    Ok(())
+}
