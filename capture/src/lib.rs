@@ -5,6 +5,7 @@
 #![warn(missing_docs)]
 
 pub mod info;
+pub mod live;
 pub mod mcap_io;
 pub mod model;
 pub mod open;

@@ -1,0 +1,5 @@
+//! Live traffic: device simulators, and taps between a host program and a device (being
+//! written).
+
+pub mod sim;
+pub mod tap;

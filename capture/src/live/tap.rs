@@ -1,0 +1,1 @@
+//! Taps (being written).
