@@ -2,6 +2,8 @@
 #![forbid(unsafe_code)]
 
 use aptscope_capture::info::summarize;
+use aptscope_capture::live::sim::{sim_apt_main, sim_elliptec_main};
+use aptscope_capture::live::tap::{sniff_main, tap_main, Flow, SniffOptions, TapOptions, TapStats};
 use aptscope_capture::open::{create, open, open_with_progress, Format, OpenOptions, Progress};
 use aptscope_capture::{Direction, Event};
 use aptscope_dissector::apt::{encode, Addr, FieldValue};
@@ -27,6 +29,57 @@ use std::rc::Rc;
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum SimCmd {
+    /// An APT controller.
+    Apt {
+        /// kdc101, tdc001, kpz101 or bsc203.
+        #[arg(long, default_value = "kdc101")]
+        model: String,
+        /// Symlink to the pseudo-terminal.
+        #[arg(long)]
+        pty: Option<std::path::PathBuf>,
+    },
+    /// An Elliptec bus.
+    Elliptec {
+        /// Modules by address: `0:ELL14,1:ELL9`.
+        #[arg(long, default_value = "0:ELL14")]
+        modules: String,
+        /// Symlink to the pseudo-terminal.
+        #[arg(long)]
+        pty: Option<std::path::PathBuf>,
+    },
+}
+
+/// Options shared by `tap` and `sniff`.
+#[derive(clap::Args)]
+struct LiveArgs {
+    /// Protocol on the line (sets the default line settings).
+    #[arg(long, value_enum, default_value_t = ProtoArg::Apt)]
+    proto: ProtoArg,
+    /// Baud rate (default 115200 for APT, 9600 for Elliptec).
+    #[arg(long)]
+    baud: Option<u32>,
+    /// Flow control: none, rtscts, xonxoff.
+    #[arg(long)]
+    flow: Option<String>,
+    /// Write the capture here (pcapng).
+    #[arg(short = 'w', long)]
+    write: Option<String>,
+    /// Overwrite the capture file if it exists.
+    #[arg(long)]
+    force: bool,
+    /// Wait for a vanished device to come back.
+    #[arg(long)]
+    reconnect: bool,
+    /// Do not print the live timeline.
+    #[arg(long)]
+    quiet: bool,
+    /// Stop after this long (`30s`).
+    #[arg(long, value_parser = parse_duration)]
+    duration: Option<u64>,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -104,6 +157,35 @@ enum Cmd {
         /// USB captures: only the device at BUS:ADDR.
         #[arg(long)]
         usb_device: Option<String>,
+    },
+    /// Simulate a controller on a pseudo-terminal: `sim apt --model kdc101` or
+    /// `sim elliptec --modules 0:ELL14,1:ELL9`.
+    Sim {
+        #[command(subcommand)]
+        what: SimCmd,
+    },
+    /// Man-in-the-middle tap: a pseudo-terminal for the host program, forwarded to the real
+    /// port; every chunk timestamped, decoded live, and written to a pcapng.
+    Tap {
+        /// The real serial port.
+        #[arg(long)]
+        device: String,
+        /// Symlink to create for the host program (else the pseudo-terminal path is printed).
+        #[arg(long)]
+        link: Option<String>,
+        #[command(flatten)]
+        live: LiveArgs,
+    },
+    /// Passive sniff of a Y-cable with two receive-only adapters, merged by time.
+    Sniff {
+        /// Adapter receiving what the host sends.
+        #[arg(long)]
+        host_tx: String,
+        /// Adapter receiving what the device sends.
+        #[arg(long)]
+        device_tx: String,
+        #[command(flatten)]
+        live: LiveArgs,
     },
     /// What a capture holds: format, streams, counts per direction, times (like capinfos).
     Info {
@@ -195,6 +277,40 @@ fn main() -> ExitCode {
             usb_device,
         } => open_opts(format.as_deref(), false, usb_device.as_deref())
             .and_then(|o| aptscope_tui::run(&file, o)),
+        Cmd::Sim { what } => match what {
+            SimCmd::Apt { model, pty } => sim_apt_main(&model, pty.as_deref()),
+            SimCmd::Elliptec { modules, pty } => sim_elliptec_main(&modules, pty.as_deref()),
+        },
+        Cmd::Tap { device, link, live } => live_opts(&live).and_then(|(proto, flow)| {
+            let mut o = TapOptions::new(device, link);
+            o.proto = proto;
+            o.baud = live.baud;
+            o.flow = flow;
+            o.write = live.write.clone();
+            o.force = live.force;
+            o.reconnect = live.reconnect;
+            o.quiet = live.quiet;
+            o.duration = live.duration.map(std::time::Duration::from_nanos);
+            o.signals = true;
+            tap_main(o).and_then(check_stats)
+        }),
+        Cmd::Sniff {
+            host_tx,
+            device_tx,
+            live,
+        } => live_opts(&live).and_then(|(proto, flow)| {
+            let mut o = SniffOptions::new(host_tx, device_tx);
+            o.proto = proto;
+            o.baud = live.baud;
+            o.flow = flow;
+            o.write = live.write.clone();
+            o.force = live.force;
+            o.reconnect = live.reconnect;
+            o.quiet = live.quiet;
+            o.duration = live.duration.map(std::time::Duration::from_nanos);
+            o.signals = true;
+            sniff_main(o).and_then(check_stats)
+        }),
         Cmd::Stats {
             file,
             format,
@@ -618,6 +734,29 @@ fn parse_duration(s: &str) -> Result<u64, String> {
         return Err(format!("`{s}` is not a duration"));
     }
     Ok((v * scale) as u64)
+}
+
+fn live_opts(l: &LiveArgs) -> io::Result<(Proto, Option<Flow>)> {
+    let proto = proto_of(l.proto).unwrap_or(Proto::Apt);
+    let flow = match &l.flow {
+        None => None,
+        Some(f) => Some(
+            Flow::parse(f)
+                .ok_or_else(|| bad(format!("unknown flow control {f} (none, rtscts, xonxoff)")))?,
+        ),
+    };
+    Ok((proto, flow))
+}
+
+/// A capture that does not hold every forwarded byte is a failure.
+fn check_stats(s: TapStats) -> io::Result<()> {
+    if s.file_matches() {
+        Ok(())
+    } else {
+        Err(io::Error::other(
+            "the capture file does not hold every forwarded byte (see the counts above)",
+        ))
+    }
 }
 
 fn bad(msg: String) -> io::Error {

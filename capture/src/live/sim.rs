@@ -1,1 +1,0 @@
-//! Device simulators (being written).

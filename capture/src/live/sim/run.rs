@@ -1,0 +1,248 @@
+//! Serving a simulator on a pseudo-terminal or a serial port.
+
+use super::Simulator;
+use nix::errno::Errno;
+use nix::fcntl::{fcntl, FcntlArg, OFlag};
+use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+use nix::pty::openpty;
+use nix::sys::signal::{SigSet, Signal};
+use nix::sys::signalfd::{SfdFlags, SignalFd};
+use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
+use std::io::{self, Read, Write};
+use std::os::fd::{AsFd, BorrowedFd, OwnedFd};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// Output not yet taken by the peer is dropped beyond this (like a full FTDI buffer).
+const MAX_PENDING: usize = 64 * 1024;
+
+fn io_err(e: Errno) -> io::Error {
+    io::Error::from(e)
+}
+
+/// A pseudo-terminal pair in raw mode: the simulator holds the master; programs open
+/// [`path`](Self::path) as if it were the controller's serial port.
+#[derive(Debug)]
+pub struct Pty {
+    master: OwnedFd,
+    slave: Option<OwnedFd>,
+    path: PathBuf,
+}
+
+impl Pty {
+    /// Open a new pair, put it in raw mode (no echo, no line editing, 8-bit clean).
+    pub fn open() -> io::Result<Pty> {
+        let r = openpty(None, None).map_err(io_err)?;
+        let mut t = tcgetattr(&r.slave).map_err(io_err)?;
+        cfmakeraw(&mut t);
+        tcsetattr(&r.slave, SetArg::TCSANOW, &t).map_err(io_err)?;
+        let path = nix::unistd::ttyname(&r.slave).map_err(io_err)?;
+        let fl = fcntl(&r.master, FcntlArg::F_GETFL).map_err(io_err)?;
+        let fl = OFlag::from_bits_truncate(fl) | OFlag::O_NONBLOCK;
+        fcntl(&r.master, FcntlArg::F_SETFL(fl)).map_err(io_err)?;
+        Ok(Pty {
+            master: r.master,
+            slave: Some(r.slave),
+            path,
+        })
+    }
+
+    /// The slave's path (`/dev/pts/N`).
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+/// Asks a running [`serve_pty`] to return (from another thread).
+#[derive(Debug)]
+pub struct StopHandle(OwnedFd);
+
+/// The receiving end of a [`StopHandle`], given to [`serve_pty`].
+#[derive(Debug)]
+pub struct StopSignal(OwnedFd);
+
+/// A connected stop handle and signal (a pipe).
+pub fn stop_pair() -> io::Result<(StopHandle, StopSignal)> {
+    let (r, w) = nix::unistd::pipe().map_err(io_err)?;
+    Ok((StopHandle(w), StopSignal(r)))
+}
+
+impl StopHandle {
+    /// Make the runner return (idempotent).
+    pub fn stop(&self) {
+        let _ = nix::unistd::write(&self.0, b"x");
+    }
+}
+
+/// Poll timeout until `deadline_ns` on the clock of `start` (rounded up to whole ms).
+fn timeout_until(deadline_ns: Option<u64>, now_ns: u64) -> PollTimeout {
+    match deadline_ns {
+        None => PollTimeout::NONE,
+        Some(d) => {
+            let ms = d.saturating_sub(now_ns).div_ceil(1_000_000);
+            PollTimeout::try_from(ms).unwrap_or(PollTimeout::MAX)
+        }
+    }
+}
+
+fn elapsed_ns(start: Instant) -> u64 {
+    u64::try_from(start.elapsed().as_nanos()).unwrap_or(u64::MAX)
+}
+
+/// Serve `sim` on `pty` until `stop` (or any of `extra_stops`) becomes readable, or the peer
+/// hangs up. The simulator's clock is the time since the call. Our own copy of the slave is
+/// kept open until the peer first sends something (so the line stays up before a program has
+/// opened it), then closed, so the peer closing its end is seen as a hang-up.
+pub fn serve_pty<S: Simulator + ?Sized>(
+    sim: &mut S,
+    mut pty: Pty,
+    stop: Option<&StopSignal>,
+    extra_stops: &[BorrowedFd<'_>],
+) -> io::Result<()> {
+    let start = Instant::now();
+    let mut pending: Vec<u8> = vec![];
+    let mut buf = [0u8; 4096];
+    loop {
+        let now = elapsed_ns(start);
+        while let Some(out) = sim.poll(now) {
+            pending.extend_from_slice(&out);
+        }
+        if pending.len() > MAX_PENDING {
+            let cut = pending.len() - MAX_PENDING;
+            pending.drain(..cut);
+        }
+        // Write what the pty takes now.
+        while !pending.is_empty() {
+            match nix::unistd::write(&pty.master, &pending) {
+                Ok(n) => {
+                    pending.drain(..n);
+                }
+                Err(Errno::EAGAIN) | Err(Errno::EINTR) => break,
+                Err(Errno::EIO) => return Ok(()), // peer gone
+                Err(e) => return Err(io_err(e)),
+            }
+        }
+        let timeout = timeout_until(sim.next_deadline(), elapsed_ns(start));
+        let mut ev = PollFlags::POLLIN;
+        if !pending.is_empty() {
+            ev |= PollFlags::POLLOUT;
+        }
+        let mut fds = vec![PollFd::new(pty.master.as_fd(), ev)];
+        if let Some(s) = stop {
+            fds.push(PollFd::new(s.0.as_fd(), PollFlags::POLLIN));
+        }
+        for fd in extra_stops {
+            fds.push(PollFd::new(*fd, PollFlags::POLLIN));
+        }
+        match poll(&mut fds, timeout) {
+            Ok(_) | Err(Errno::EINTR) => {}
+            Err(e) => return Err(io_err(e)),
+        }
+        let revents: Vec<PollFlags> = fds
+            .iter()
+            .map(|f| f.revents().unwrap_or(PollFlags::empty()))
+            .collect();
+        drop(fds);
+        if revents[1..].iter().any(|r| !r.is_empty()) {
+            return Ok(());
+        }
+        let m = revents[0];
+        if m.contains(PollFlags::POLLIN) {
+            match nix::unistd::read(&pty.master, &mut buf) {
+                Ok(0) | Err(Errno::EIO) => {
+                    if pty.slave.is_none() {
+                        return Ok(());
+                    }
+                }
+                Ok(n) => {
+                    sim.input(&buf[..n], elapsed_ns(start));
+                    // The peer is connected: from now on its hang-up ends the run.
+                    pty.slave = None;
+                }
+                Err(Errno::EAGAIN) | Err(Errno::EINTR) => {}
+                Err(e) => return Err(io_err(e)),
+            }
+        } else if m.intersects(PollFlags::POLLHUP | PollFlags::POLLERR) && pty.slave.is_none() {
+            return Ok(());
+        }
+    }
+}
+
+/// SIGINT and SIGTERM, blocked in this thread (threads started later inherit it) and readable
+/// from a descriptor, so the runner can end cleanly on them.
+fn termination_signals() -> io::Result<SignalFd> {
+    let mut set = SigSet::empty();
+    set.add(Signal::SIGINT);
+    set.add(Signal::SIGTERM);
+    set.thread_block().map_err(io_err)?;
+    SignalFd::with_flags(&set, SfdFlags::SFD_NONBLOCK | SfdFlags::SFD_CLOEXEC).map_err(io_err)
+}
+
+/// Serve `sim` on a new pseudo-terminal: print its path on stdout (and make `link` a symlink to
+/// it, replacing an older symlink, removed again on exit), then run until SIGINT/SIGTERM or
+/// until the program using it hangs up. Call it from the main thread before starting others:
+/// it blocks SIGINT/SIGTERM in the calling thread to receive them through a descriptor.
+pub fn run_on_pty<S: Simulator>(mut sim: S, link: Option<&Path>) -> io::Result<()> {
+    let sigs = termination_signals()?;
+    let pty = Pty::open()?;
+    let path = pty.path().to_path_buf();
+    if let Some(l) = link {
+        if std::fs::symlink_metadata(l).is_ok_and(|m| m.file_type().is_symlink()) {
+            std::fs::remove_file(l)?;
+        }
+        std::os::unix::fs::symlink(&path, l)?;
+    }
+    {
+        let mut out = io::stdout().lock();
+        match link {
+            Some(l) => writeln!(out, "{} -> {}", l.display(), path.display())?,
+            None => writeln!(out, "{}", path.display())?,
+        }
+        out.flush()?;
+    }
+    let r = serve_pty(&mut sim, pty, None, &[sigs.as_fd()]);
+    if let Some(l) = link {
+        let _ = std::fs::remove_file(l);
+    }
+    r
+}
+
+/// Serve `sim` on a real serial port `dev` at `baud` (8N1, no flow control), until SIGINT or
+/// SIGTERM. Reads wait at most until the simulator's next deadline (and 100 ms, to notice
+/// signals).
+pub fn run_on_port<S: Simulator>(mut sim: S, dev: &Path, baud: u32) -> io::Result<()> {
+    let sigs = termination_signals()?;
+    let name = dev.to_string_lossy();
+    let mut port = serialport::new(name.as_ref(), baud)
+        .data_bits(serialport::DataBits::Eight)
+        .parity(serialport::Parity::None)
+        .stop_bits(serialport::StopBits::One)
+        .flow_control(serialport::FlowControl::None)
+        .timeout(Duration::from_millis(100))
+        .open()
+        .map_err(io::Error::from)?;
+    let start = Instant::now();
+    let mut buf = [0u8; 4096];
+    loop {
+        if sigs.read_signal().map_err(io_err)?.is_some() {
+            return Ok(());
+        }
+        let now = elapsed_ns(start);
+        while let Some(out) = sim.poll(now) {
+            port.write_all(&out)?;
+        }
+        let wait = sim
+            .next_deadline()
+            .map_or(100_000_000, |d| d.saturating_sub(elapsed_ns(start)))
+            .clamp(1_000_000, 100_000_000);
+        port.set_timeout(Duration::from_nanos(wait))
+            .map_err(io::Error::from)?;
+        match port.read(&mut buf) {
+            Ok(0) => {}
+            Ok(n) => sim.input(&buf[..n], elapsed_ns(start)),
+            Err(e) if e.kind() == io::ErrorKind::TimedOut => {}
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+}

@@ -1,0 +1,598 @@
+//! Scripted sessions on virtual time, and one real pseudo-terminal session.
+
+use super::apt::build;
+use super::*;
+use aptscope_dissector::apt::{AptFrame, AptFramer, FieldValue, Item};
+use aptscope_dissector::Table;
+
+/// A decoded APT frame: time, name, source, destination, integer fields.
+#[derive(Debug, Clone)]
+struct Rx {
+    t: u64,
+    name: String,
+    src: u8,
+    dst: u8,
+    fields: Vec<(String, i64)>,
+}
+
+impl Rx {
+    fn get(&self, f: &str) -> i64 {
+        self.fields
+            .iter()
+            .find(|(n, _)| n == f)
+            .map(|(_, v)| *v)
+            .unwrap_or_else(|| panic!("{} has no {f}: {:?}", self.name, self.fields))
+    }
+}
+
+/// Everything the simulator sends from `from` to `to`, stepping from deadline to deadline.
+fn drive<S: Simulator>(sim: &mut S, from: u64, to: u64) -> Vec<(u64, Vec<u8>)> {
+    let mut out = vec![];
+    let mut t = from;
+    loop {
+        while let Some(b) = sim.poll(t) {
+            out.push((t, b));
+        }
+        match sim.next_deadline() {
+            Some(d) if d <= to => t = d.max(t + 1),
+            _ => break,
+        }
+    }
+    while let Some(b) = sim.poll(to) {
+        out.push((to, b));
+    }
+    out
+}
+
+fn decode_apt(chunks: &[(u64, Vec<u8>)]) -> Vec<Rx> {
+    let table = Table::global();
+    let mut out = vec![];
+    for (t, b) in chunks {
+        let mut fr = AptFramer::new(table);
+        fr.push(b);
+        fr.finish();
+        while let Some(item) = fr.next_item() {
+            let Item::Frame {
+                bytes, truncated, ..
+            } = item
+            else {
+                panic!("garbage in simulator output: {item:?}");
+            };
+            assert!(!truncated);
+            let f = AptFrame::decode(table, 0, bytes, false).expect("decodes");
+            assert!(!f.has_diags(), "{:?}", f.diags().collect::<Vec<_>>());
+            out.push(Rx {
+                t: *t,
+                name: f.name().unwrap_or("?").to_string(),
+                src: f.header().src_byte(),
+                dst: f.header().dst_byte(),
+                fields: f
+                    .fields()
+                    .filter_map(|(fd, v)| Some((fd.name.to_string(), v.as_i64()?)))
+                    .collect(),
+            });
+        }
+    }
+    out
+}
+
+fn req(name: &str, dst: u8, vals: &[(&str, i64)]) -> Vec<u8> {
+    let v: Vec<(&str, FieldValue)> = vals
+        .iter()
+        .map(|(k, x)| (*k, FieldValue::Int(*x)))
+        .collect();
+    build(name, None, dst, 0x01, &v).unwrap_or_else(|| panic!("cannot build {name}"))
+}
+
+/// Send `bytes` at `t` and collect what comes back until `until`.
+fn talk<S: Simulator>(sim: &mut S, bytes: &[u8], t: u64, until: u64) -> Vec<(u64, Vec<u8>)> {
+    sim.input(bytes, t);
+    drive(sim, t, until)
+}
+
+#[test]
+fn hw_get_info_has_the_models_serial_prefix() {
+    for (model, prefix, name) in [
+        (AptModel::Kdc101, 27, "KDC101"),
+        (AptModel::Tdc001, 83, "TDC001"),
+        (AptModel::Kpz101, 29, "KPZ101"),
+        (AptModel::Bsc203, 70, "BSC203"),
+    ] {
+        let mut sim = AptSim::new(model);
+        let dst = if model == AptModel::Bsc203 {
+            0x11
+        } else {
+            0x50
+        };
+        let out = talk(&mut sim, &req("HW_REQ_INFO", dst, &[]), 1000, SEC);
+        let rx = decode_apt(&out);
+        assert_eq!(rx.len(), 1, "{rx:?}");
+        assert_eq!(rx[0].name, "HW_GET_INFO");
+        assert_eq!((rx[0].src, rx[0].dst), (dst, 0x01));
+        assert_eq!(rx[0].get("serial_number") / 1_000_000, prefix);
+        // 90 bytes at 115200 baud after a 1 ms turnaround: answered within a few ms.
+        assert!(
+            rx[0].t > 1000 + MS && rx[0].t < 1000 + 20 * MS,
+            "{}",
+            rx[0].t
+        );
+        let raw = &out[0].1;
+        assert_eq!(&raw[10..16], name.as_bytes());
+    }
+}
+
+#[test]
+fn move_absolute_sends_updates_then_completes_at_the_target() {
+    let mut sim = AptSim::new(AptModel::Kdc101);
+    let mut rx = decode_apt(&talk(
+        &mut sim,
+        &req("HW_START_UPDATEMSGS", 0x50, &[]),
+        0,
+        0,
+    ));
+    assert!(rx.is_empty());
+    let target = 69_110; // 2 mm on a Z8 stage
+    let mv = req(
+        "MOT_MOVE_ABSOLUTE",
+        0x50,
+        &[("chan_ident", 1), ("absolute_position", target)],
+    );
+    rx.extend(decode_apt(&talk(&mut sim, &mv, 50 * MS, 10 * SEC)));
+    let done: Vec<&Rx> = rx
+        .iter()
+        .filter(|r| r.name == "MOT_MOVE_COMPLETED")
+        .collect();
+    assert_eq!(done.len(), 1, "{rx:?}");
+    let done = done[0];
+    assert_eq!(done.get("position"), target);
+    // 2 mm at 2 mm/s max and 1.5 mm/s²: a triangular profile of about 2.3 s.
+    let secs = (done.t - 50 * MS) as f64 / SEC as f64;
+    assert!((2.0..2.7).contains(&secs), "took {secs} s");
+    let ups: Vec<&Rx> = rx
+        .iter()
+        .filter(|r| r.name == "MOT_GET_DCSTATUSUPDATE")
+        .collect();
+    assert!(ups.len() >= 90, "{} updates in 10 s", ups.len());
+    for w in ups.windows(2) {
+        assert!(w[1].get("position") >= w[0].get("position"));
+        let dt = w[1].t - w[0].t;
+        assert!((99 * MS..=101 * MS).contains(&dt), "update period {dt}");
+    }
+    let moving: Vec<&&Rx> = ups.iter().filter(|r| r.t < done.t).collect();
+    assert!(moving.len() >= 15);
+    for r in &moving[1..] {
+        assert_ne!(r.get("status_bits") & 0x10, 0, "MOVING_CW while moving");
+        assert!(r.get("velocity") > 0);
+    }
+    let last = ups.last().unwrap();
+    assert_eq!(last.get("position"), target);
+    assert_eq!(last.get("status_bits") & 0x30, 0, "not moving at the end");
+    assert_ne!(last.get("status_bits") as u32 & 0x8000_0000, 0, "ENABLED");
+}
+
+#[test]
+fn home_ends_with_homed_and_the_homed_bit() {
+    let mut sim = AptSim::new(AptModel::Kdc101);
+    let rx = decode_apt(&talk(
+        &mut sim,
+        &req("MOT_MOVE_HOME", 0x50, &[("chan_ident", 1)]),
+        0,
+        5 * SEC,
+    ));
+    assert_eq!(rx.len(), 1, "{rx:?}");
+    assert_eq!(rx[0].name, "MOT_MOVE_HOMED");
+    assert_eq!(rx[0].get("chan_ident"), 1);
+    assert!((2 * SEC..3 * SEC).contains(&rx[0].t), "{}", rx[0].t);
+    let rx = decode_apt(&talk(
+        &mut sim,
+        &req("MOT_REQ_STATUSBITS", 0x50, &[("chan_ident", 1)]),
+        5 * SEC,
+        6 * SEC,
+    ));
+    assert_eq!(rx[0].name, "MOT_GET_STATUSBITS");
+    assert_ne!(rx[0].get("status_bits") & 0x400, 0, "HOMED");
+    assert_eq!(rx[0].get("status_bits") & 0x200, 0, "no longer HOMING");
+}
+
+#[test]
+fn stop_updatemsgs_stops_the_updates() {
+    let mut sim = AptSim::new(AptModel::Tdc001);
+    let rx = decode_apt(&talk(
+        &mut sim,
+        &req("HW_START_UPDATEMSGS", 0x50, &[]),
+        0,
+        SEC + 10 * MS,
+    ));
+    assert_eq!(rx.len(), 10, "{rx:?}");
+    assert!(rx.iter().all(|r| r.name == "MOT_GET_DCSTATUSUPDATE"));
+    let rx = decode_apt(&talk(
+        &mut sim,
+        &req("HW_STOP_UPDATEMSGS", 0x50, &[]),
+        SEC + 1,
+        5 * SEC,
+    ));
+    assert!(rx.is_empty(), "{rx:?}");
+    assert_eq!(sim.next_deadline(), None);
+}
+
+#[test]
+fn parameters_set_then_requested_come_back() {
+    let mut sim = AptSim::new(AptModel::Kdc101);
+    let set = req(
+        "MOT_SET_VELPARAMS",
+        0x50,
+        &[
+            ("chan_ident", 1),
+            ("min_vel", 0),
+            ("acceleration", 500),
+            ("max_vel", 700_000),
+        ],
+    );
+    sim.input(&set, 0);
+    let rx = decode_apt(&talk(
+        &mut sim,
+        &req("MOT_REQ_VELPARAMS", 0x50, &[("chan_ident", 1)]),
+        MS,
+        SEC,
+    ));
+    assert_eq!(rx[0].name, "MOT_GET_VELPARAMS");
+    assert_eq!(rx[0].get("max_vel"), 700_000);
+    assert_eq!(rx[0].get("acceleration"), 500);
+    for name in [
+        "MOT_REQ_JOGPARAMS",
+        "MOT_REQ_HOMEPARAMS",
+        "MOD_REQ_CHANENABLESTATE",
+    ] {
+        let rx = decode_apt(&talk(
+            &mut sim,
+            &req(name, 0x50, &[("chan_ident", 1)]),
+            SEC,
+            2 * SEC,
+        ));
+        assert_eq!(rx.len(), 1, "{name}: {rx:?}");
+        assert_eq!(rx[0].name, name.replacen("_REQ_", "_GET_", 1));
+    }
+    // Disabled: moves are ignored.
+    sim.input(
+        &req(
+            "MOD_SET_CHANENABLESTATE",
+            0x50,
+            &[("chan_ident", 1), ("enable_state", 2)],
+        ),
+        2 * SEC,
+    );
+    let mv = req(
+        "MOT_MOVE_RELATIVE",
+        0x50,
+        &[("chan_ident", 1), ("relative_distance", 1000)],
+    );
+    assert!(decode_apt(&talk(&mut sim, &mv, 3 * SEC, 10 * SEC)).is_empty());
+}
+
+#[test]
+fn kpz101_output_volts_and_status_updates() {
+    let mut sim = AptSim::new(AptModel::Kpz101);
+    sim.input(
+        &req(
+            "PZ_SET_OUTPUTVOLTS",
+            0x50,
+            &[("chan_ident", 1), ("voltage", 16383)],
+        ),
+        0,
+    );
+    let rx = decode_apt(&talk(
+        &mut sim,
+        &req("PZ_REQ_OUTPUTVOLTS", 0x50, &[("chan_ident", 1)]),
+        MS,
+        50 * MS,
+    ));
+    assert_eq!(rx[0].name, "PZ_GET_OUTPUTVOLTS");
+    assert_eq!(rx[0].get("voltage"), 16383);
+    let rx = decode_apt(&talk(
+        &mut sim,
+        &req("HW_START_UPDATEMSGS", 0x50, &[]),
+        SEC,
+        2 * SEC,
+    ));
+    assert!(rx.len() >= 9);
+    assert!(rx
+        .iter()
+        .all(|r| r.name == "PZ_GET_PZSTATUSUPDATE" && r.get("op_voltage") == 16383));
+}
+
+#[test]
+fn bsc203_answers_per_bay_from_the_bay() {
+    let mut sim = AptSim::new(AptModel::Bsc203);
+    for (bay, state) in [(0, 1), (1, 1), (2, 1), (3, 2)] {
+        let rx = decode_apt(&talk(
+            &mut sim,
+            &req("RACK_REQ_BAYUSED", 0x11, &[("bay_ident", bay)]),
+            0,
+            SEC,
+        ));
+        assert_eq!(rx.len(), 1);
+        assert_eq!((rx[0].name.as_str(), rx[0].src), ("RACK_GET_BAYUSED", 0x11));
+        assert_eq!(
+            (rx[0].get("bay_ident"), rx[0].get("bay_state")),
+            (bay, state)
+        );
+    }
+    for bay in 0x21..=0x23u8 {
+        let t0 = (bay as u64 - 0x20) * 10 * SEC;
+        let rx = decode_apt(&talk(&mut sim, &req("HW_REQ_INFO", bay, &[]), t0, t0 + SEC));
+        assert_eq!(rx.len(), 1, "bay {bay:#x}: {rx:?}");
+        assert_eq!((rx[0].name.as_str(), rx[0].src), ("HW_GET_INFO", bay));
+        assert_eq!(rx[0].get("serial_number") / 1_000_000, 70);
+        let rx = decode_apt(&talk(
+            &mut sim,
+            &req("MOT_REQ_VELPARAMS", bay, &[("chan_ident", 1)]),
+            t0 + SEC,
+            t0 + 2 * SEC,
+        ));
+        assert_eq!((rx[0].name.as_str(), rx[0].src), ("MOT_GET_VELPARAMS", bay));
+    }
+    // Bay 0x24 does not exist: silence.
+    assert!(decode_apt(&talk(
+        &mut sim,
+        &req("HW_REQ_INFO", 0x24, &[]),
+        40 * SEC,
+        41 * SEC
+    ))
+    .is_empty());
+    let mv = req(
+        "MOT_MOVE_RELATIVE",
+        0x22,
+        &[("chan_ident", 1), ("relative_distance", 204_800)],
+    );
+    let rx = decode_apt(&talk(&mut sim, &mv, 41 * SEC, 50 * SEC));
+    assert_eq!(rx.len(), 1, "{rx:?}");
+    assert_eq!(
+        (rx[0].name.as_str(), rx[0].src),
+        ("MOT_MOVE_COMPLETED", 0x22)
+    );
+    assert_eq!(rx[0].get("position"), 204_800);
+    assert_eq!(sim.position(0x22, 50 * SEC), Some(204_800));
+    assert_eq!(sim.position(0x21, 50 * SEC), Some(0));
+    // Updates from every bay, each from its address, in the stepper's long form.
+    let rx = decode_apt(&talk(
+        &mut sim,
+        &req("HW_START_UPDATEMSGS", 0x11, &[]),
+        50 * SEC,
+        51 * SEC + 10 * MS,
+    ));
+    for bay in 0x21..=0x23u8 {
+        let n = rx
+            .iter()
+            .filter(|r| r.src == bay && r.name == "MOT_GET_STATUSUPDATE")
+            .count();
+        assert_eq!(n, 10, "bay {bay:#x}: {rx:?}");
+    }
+}
+
+#[test]
+fn stop_ends_a_velocity_move_with_stopped() {
+    let mut sim = AptSim::new(AptModel::Kdc101);
+    let mv = req(
+        "MOT_MOVE_VELOCITY",
+        0x50,
+        &[("chan_ident", 1), ("direction", 1)],
+    );
+    assert!(decode_apt(&talk(&mut sim, &mv, 0, SEC)).is_empty());
+    let stop = req(
+        "MOT_MOVE_STOP",
+        0x50,
+        &[("chan_ident", 1), ("stop_mode", 2)],
+    );
+    let rx = decode_apt(&talk(&mut sim, &stop, SEC, 5 * SEC));
+    assert_eq!(rx.len(), 1, "{rx:?}");
+    assert_eq!(rx[0].name, "MOT_MOVE_STOPPED");
+    assert!(rx[0].get("position") > 0);
+}
+
+/// A small deterministic byte generator.
+fn noise(seed: u64, n: usize) -> Vec<u8> {
+    let mut x = seed;
+    (0..n)
+        .map(|_| {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (x >> 33) as u8
+        })
+        .collect()
+}
+
+#[test]
+fn random_input_never_panics() {
+    for seed in 0..40u64 {
+        let bytes = noise(seed, 3000);
+        let mut a =
+            AptSim::new([AptModel::Kdc101, AptModel::Bsc203, AptModel::Kpz101][seed as usize % 3]);
+        let mut e = EllSim::new(&parse_modules("0:ELL14,1:ELL9,2:ELL17").unwrap()).unwrap();
+        for (i, c) in bytes.chunks(7).enumerate() {
+            let t = i as u64 * 3 * MS;
+            a.input(c, t);
+            e.input(c, t);
+            while a.poll(t).is_some() {}
+            while e.poll(t).is_some() {}
+        }
+        drive(&mut a, 10 * SEC, 20 * SEC);
+        drive(&mut e, 10 * SEC, 20 * SEC);
+    }
+    // Every message of the table, with random data, to every address.
+    let table = Table::global();
+    let mut sim = AptSim::new(AptModel::Bsc203);
+    for (i, m) in table.msgs().iter().enumerate() {
+        for dst in [0x11u8, 0x21, 0x50] {
+            let mut b = noise(i as u64, 6 + 14);
+            b[0..2].copy_from_slice(&m.id.to_le_bytes());
+            b[4] = dst;
+            b[5] = 0x01;
+            if i % 2 == 0 {
+                b[4] |= 0x80;
+                b[2] = 14;
+                b[3] = 0;
+            } else {
+                b.truncate(6);
+            }
+            sim.input(&b, i as u64 * MS);
+        }
+    }
+    drive(&mut sim, 0, 100 * SEC);
+}
+
+// ---------------------------------------------------------------------------------- Elliptec
+
+fn ell_text(chunks: &[(u64, Vec<u8>)]) -> Vec<(u64, String)> {
+    chunks
+        .iter()
+        .map(|(t, b)| (*t, String::from_utf8_lossy(b).into_owned()))
+        .collect()
+}
+
+fn bus() -> EllSim {
+    EllSim::new(&parse_modules("0:ELL14,1:ELL9,2:ELL17").unwrap()).unwrap()
+}
+
+#[test]
+fn ell_in_identifies_each_module_at_9600_baud() {
+    let mut sim = bus();
+    let out = ell_text(&talk(&mut sim, b"0in", 0, SEC));
+    assert_eq!(out.len(), 1);
+    let (t, s) = &out[0];
+    assert!(
+        s.starts_with("0IN0E") && s.ends_with("016800023000\r\n"),
+        "{s}"
+    );
+    assert_eq!(s.len(), 35);
+    // 35 bytes at 9600 baud (≈1.04 ms each) after the turnaround.
+    assert!(*t >= 35 * 1_041_667 && *t < 45 * MS, "{t}");
+    let out = ell_text(&talk(&mut sim, b"1in\r\n", SEC, 2 * SEC));
+    assert!(out[0].1.starts_with("1IN09"), "{:?}", out);
+    // Nobody at address 5.
+    assert!(talk(&mut sim, b"5in", 2 * SEC, 3 * SEC).is_empty());
+    // Two commands back to back: the replies follow each other on the line.
+    let out = talk(&mut sim, b"0gs1gs", 3 * SEC, 4 * SEC);
+    let all: String = ell_text(&out).into_iter().map(|(_, s)| s).collect();
+    assert_eq!(all, "0GS00\r\n1GS00\r\n");
+    let last = out.last().unwrap().0;
+    assert!(last - 3 * SEC >= 14 * 1_041_667, "{}", last - 3 * SEC);
+}
+
+#[test]
+fn ell_move_absolute_then_position() {
+    let mut sim = bus();
+    sim.input(b"0ma00008C00", 0); // 90 degrees
+    assert_eq!(ell_text(&drive(&mut sim, 0, 50 * MS)), vec![]);
+    let busy = ell_text(&talk(&mut sim, b"0gs", 60 * MS, 100 * MS));
+    assert_eq!(busy[0].1, "0GS09\r\n");
+    let out = ell_text(&drive(&mut sim, 100 * MS, 5 * SEC));
+    assert_eq!(out.len(), 1);
+    assert_eq!(out[0].1, "0PO00008C00\r\n");
+    // 90° at 430°/s plus the start-up: about 260 ms.
+    assert!((200 * MS..400 * MS).contains(&out[0].0), "{}", out[0].0);
+    let out = ell_text(&talk(&mut sim, b"0gp", 5 * SEC, 6 * SEC));
+    assert_eq!(out[0].1, "0PO00008C00\r\n");
+    // Relative, home, velocity, an out-of-range move on the linear stage.
+    let out = ell_text(&talk(&mut sim, b"0mr00002300", 6 * SEC, 8 * SEC));
+    assert_eq!(out[0].1, "0PO0000AF00\r\n");
+    let out = ell_text(&talk(&mut sim, b"0ho0", 8 * SEC, 10 * SEC));
+    assert_eq!(out[0].1, "0PO00000000\r\n");
+    assert_eq!(
+        ell_text(&talk(&mut sim, b"0gv", 10 * SEC, 11 * SEC))[0].1,
+        "0GV64\r\n"
+    );
+    let out = ell_text(&talk(&mut sim, b"2ma0000F000", 11 * SEC, 12 * SEC));
+    assert_eq!(out[0].1, "2GS0C\r\n");
+    let out = ell_text(&talk(&mut sim, b"1fw", 12 * SEC, 14 * SEC));
+    assert_eq!(out[0].1, "1PO00000020\r\n");
+    let out = ell_text(&talk(&mut sim, b"0zz\r\n", 14 * SEC, 15 * SEC));
+    assert_eq!(out[0].1, "0GS03\r\n");
+}
+
+#[test]
+fn ell_change_address_takes_effect() {
+    let mut sim = bus();
+    let out = ell_text(&talk(&mut sim, b"0ca3", 0, SEC));
+    assert_eq!(out[0].1, "3GS00\r\n");
+    assert!(
+        talk(&mut sim, b"0gp", SEC, 2 * SEC).is_empty(),
+        "nobody at 0 now"
+    );
+    let out = ell_text(&talk(&mut sim, b"3in", 2 * SEC, 3 * SEC));
+    assert!(out[0].1.starts_with("3IN0E"));
+    assert_eq!(sim.addresses(), vec![3, 1, 2]);
+    // Back, with the manual's spacing.
+    let out = ell_text(&talk(&mut sim, b"3ca1", 3 * SEC, 4 * SEC));
+    assert_eq!(out[0].1, "1GS00\r\n");
+    // Now two modules answer at 1 (a bus collision, as on real hardware).
+    let out = ell_text(&talk(&mut sim, b"1gs", 4 * SEC, 5 * SEC));
+    let all: String = out.into_iter().map(|(_, s)| s).collect();
+    assert_eq!(all, "1GS00\r\n1GS00\r\n");
+}
+
+// ------------------------------------------------------------------------------ pseudo-terminal
+
+fn read_until(f: &mut std::fs::File, want: usize, timeout_ms: u16) -> Vec<u8> {
+    use nix::poll::{poll, PollFd, PollFlags};
+    use std::io::Read;
+    use std::os::fd::AsFd;
+    let mut got = vec![];
+    let mut buf = [0u8; 512];
+    while got.len() < want {
+        let mut fds = [PollFd::new(f.as_fd(), PollFlags::POLLIN)];
+        let n = poll(&mut fds, timeout_ms).expect("poll");
+        assert!(n > 0, "timed out with {} of {want} bytes", got.len());
+        let n = f.read(&mut buf).expect("read");
+        assert!(n > 0, "hang-up");
+        got.extend_from_slice(&buf[..n]);
+    }
+    got
+}
+
+#[test]
+fn pty_round_trip_hw_req_info() {
+    use std::io::Write;
+    let pty = Pty::open().expect("pty");
+    let path = pty.path().to_path_buf();
+    let (stop, signal) = stop_pair().expect("pipe");
+    let runner = std::thread::spawn(move || {
+        let mut sim = AptSim::new(AptModel::Kdc101);
+        serve_pty(&mut sim, pty, Some(&signal), &[])
+    });
+    let mut f = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&path)
+        .expect("open slave");
+    f.write_all(&req("HW_REQ_INFO", 0x50, &[])).expect("write");
+    let got = read_until(&mut f, 90, 5000);
+    assert_eq!(got.len(), 90);
+    let f2 = AptFrame::decode(Table::global(), 0, &got, false).expect("frame");
+    assert_eq!(f2.name(), Some("HW_GET_INFO"));
+    let serial = f2.field("serial_number").and_then(|(_, v)| v.as_i64());
+    assert_eq!(serial.map(|s| s / 1_000_000), Some(27));
+    stop.stop();
+    runner.join().expect("runner").expect("runner result");
+}
+
+#[test]
+fn pty_runner_ends_when_the_peer_hangs_up() {
+    use std::io::Write;
+    let pty = Pty::open().expect("pty");
+    let path = pty.path().to_path_buf();
+    let (_stop, signal) = stop_pair().expect("pipe");
+    let runner = std::thread::spawn(move || {
+        let mut sim = EllSim::new(&parse_modules("0:ELL14").unwrap()).unwrap();
+        serve_pty(&mut sim, pty, Some(&signal), &[])
+    });
+    let mut f = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&path)
+        .expect("open slave");
+    f.write_all(b"0gs").expect("write");
+    assert_eq!(read_until(&mut f, 7, 5000), b"0GS00\r\n");
+    drop(f);
+    runner.join().expect("runner").expect("runner result");
+}
