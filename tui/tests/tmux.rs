@@ -23,11 +23,13 @@ fn viewer() -> Option<Vec<String>> {
         .then(|| vec![bin.to_string_lossy().into_owned(), "view".into()])
 }
 
-fn wait_for(session: &str, what: &str) -> String {
+/// The screen once it shows every one of `what` (a capture can catch a redraw half done, so
+/// wait for all the parts of the expected state), or after 10 s.
+fn wait_for(session: &str, what: &[&str]) -> String {
     let start = Instant::now();
     loop {
         let screen = tmux(&["capture-pane", "-p", "-t", session]).unwrap_or_default();
-        if screen.contains(what) || start.elapsed() > Duration::from_secs(10) {
+        if what.iter().all(|w| screen.contains(w)) || start.elapsed() > Duration::from_secs(10) {
             return screen;
         }
         sleep(Duration::from_millis(100));
@@ -62,18 +64,21 @@ fn real_binary_under_tmux() {
         &line,
     ])
     .expect("tmux runs");
-    let screen = wait_for(&session, "HW_REQ_INFO");
+    let screen = wait_for(
+        &session,
+        &["HW_REQ_INFO", "Timeline 1/20", "MOD_SET_CHANENABLESTATE"],
+    );
     assert!(screen.contains("Timeline 1/20"), "{screen}");
     assert!(screen.contains("MOD_SET_CHANENABLESTATE"), "{screen}");
     // Go to record 19, jump to its request, filter, then quit.
     tmux(&["send-keys", "-t", &session, ":19", "Enter"]);
-    let screen = wait_for(&session, "Timeline 19/20");
+    let screen = wait_for(&session, &["Timeline 19/20", "Record 19"]);
     assert!(screen.contains("Record 19"), "{screen}");
     tmux(&["send-keys", "-t", &session, "p"]);
-    let screen = wait_for(&session, "Timeline 13/20");
+    let screen = wait_for(&session, &["Timeline 13/20", "Record 13"]);
     assert!(screen.contains("Record 13"), "{screen}");
     tmux(&["send-keys", "-t", &session, "/apt.name ~ HOME", "Enter"]);
-    let screen = wait_for(&session, "2 shown");
+    let screen = wait_for(&session, &["2 shown", "MOT_MOVE_HOMED"]);
     assert!(screen.contains("MOT_MOVE_HOMED"), "{screen}");
     assert!(!screen.contains("MOT_MOVE_ABSOLUTE"), "{screen}");
     tmux(&["send-keys", "-t", &session, "q"]);
