@@ -226,29 +226,43 @@ impl<R: Read> PcapReader<R> {
     }
 
     /// Whether a plausible block/record starts at `at` (for resynchronisation).
-    fn plausible_at(&self, at: usize) -> bool {
+    /// Whether a plausible block/record starts at `at` (for resynchronisation): `None` when
+    /// more bytes are needed to tell (never at end of file), so the answer does not depend on
+    /// where the last read ended.
+    fn plausible_at(&self, at: usize) -> Option<bool> {
+        let more = || if self.eof { Some(false) } else { None };
         if self.ng {
             let (Some(t), Some(l)) = (self.read_u32(at), self.read_u32(at + 4)) else {
-                return false;
+                return more();
             };
             let l = l as usize;
-            matches!(t, 1 | 3 | 5 | 6 | 0x0A0D0D0A)
+            if !(matches!(t, 1 | 3 | 5 | 6 | 0x0A0D0D0A)
                 && l >= 12
                 && l.is_multiple_of(4)
-                && l <= MAX_RECORD
-                && self.read_u32(at + l - 4) == Some(l as u32)
+                && l <= MAX_RECORD)
+            {
+                return Some(false);
+            }
+            match self.read_u32(at + l - 4) {
+                Some(end) => Some(end == l as u32),
+                None => more(),
+            }
         } else {
             let (Some(cap), Some(orig)) = (self.read_u32(at + 8), self.read_u32(at + 12)) else {
-                return false;
+                return more();
             };
             let snap = match &self.parser {
                 Parser::Legacy(p) => p.header().snaplen.max(65535),
                 _ => 65535,
             };
-            cap <= orig
-                && cap <= snap
-                && (cap as usize) < MAX_RECORD
-                && self.buf.len() >= at + 16 + cap as usize
+            if !(cap <= orig && cap <= snap && (cap as usize) < MAX_RECORD) {
+                return Some(false);
+            }
+            if self.buf.len() >= at + 16 + cap as usize {
+                Some(true)
+            } else {
+                more()
+            }
         }
     }
 
@@ -258,21 +272,24 @@ impl<R: Read> PcapReader<R> {
         // pcapng blocks are 4-byte aligned; pcap records are not.
         let mut at = self.start + if self.ng { 4 } else { 1 };
         loop {
-            while at + 16 <= self.buf.len() {
-                if self.plausible_at(at) {
-                    let skipped = at - self.start;
-                    self.queue.push_back(diag(
-                        from,
-                        kind,
-                        format!("{msg}; skipped {skipped} bytes to the next plausible record"),
-                    ));
-                    self.start = at;
-                    return;
+            while at < self.buf.len() {
+                match self.plausible_at(at) {
+                    Some(true) => {
+                        let skipped = at - self.start;
+                        self.queue.push_back(diag(
+                            from,
+                            kind,
+                            format!("{msg}; skipped {skipped} bytes to the next plausible record"),
+                        ));
+                        self.start = at;
+                        return;
+                    }
+                    Some(false) => at += if self.ng { 4 } else { 1 },
+                    None => break,
                 }
-                at += if self.ng { 4 } else { 1 };
             }
             let rel = at - self.start;
-            if !self.fill() {
+            if !self.fill() && at >= self.buf.len() {
                 let rest = self.buf.len() - self.start;
                 self.queue.push_back(diag(
                     from,
@@ -903,6 +920,57 @@ mod tests {
         assert_eq!(
             d.iter().map(|x| x.kind).collect::<Vec<_>>(),
             ["unknown_linktype"]
+        );
+    }
+
+    /// Yields at most `n` bytes per read, like a pipe.
+    struct Short<R>(R, usize);
+
+    impl<R: std::io::Read> std::io::Read for Short<R> {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            let n = buf.len().min(self.1);
+            self.0.read(&mut buf[..n])
+        }
+    }
+
+    #[test]
+    fn resynchronisation_does_not_depend_on_read_sizes() {
+        let mut bytes = std::fs::read(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../samples/kdc101-session.pcap"
+        ))
+        .expect("sample");
+        // Break the captured length of the third record: it runs past every later record.
+        let mut at = 24;
+        for _ in 0..2 {
+            let cap =
+                u32::from_le_bytes([bytes[at + 8], bytes[at + 9], bytes[at + 10], bytes[at + 11]])
+                    as usize;
+            at += 16 + cap;
+        }
+        bytes[at + 8..at + 12].copy_from_slice(&0x0200_0000u32.to_le_bytes());
+        let events = |r: &mut dyn Reader| {
+            let mut v = vec![];
+            while let Some(ev) = r.next_event() {
+                v.push(format!("{ev:?}"));
+            }
+            v
+        };
+        let whole = events(&mut PcapReader::new(
+            std::io::Cursor::new(bytes.clone()),
+            None,
+        ));
+        for n in [1, 7, 31, 64] {
+            let short = events(&mut PcapReader::new(
+                Short(std::io::Cursor::new(bytes.clone()), n),
+                None,
+            ));
+            assert_eq!(short, whole, "reads of {n} bytes");
+        }
+        assert!(whole.iter().any(|e| e.starts_with("Diag")), "{whole:?}");
+        assert!(
+            whole.iter().filter(|e| e.starts_with("Chunk")).count() >= 18,
+            "{whole:?}"
         );
     }
 }

@@ -107,7 +107,7 @@ fuzz_target!(|data: &[u8]| {
                 summary(&f, 6, &mut s);
                 let _ = f.channel();
                 // Pairing, with times that may be anywhere in the u64 range.
-                let ts = times.next();
+                let ts = times.next_time();
                 let p = pairer.observe(t, n, &f, None, ts);
                 s.clear();
                 json::apt_frame_paired(&mut s, n, &f, &p);

@@ -87,7 +87,7 @@ fuzz_target!(|data: &[u8]| {
                     );
                     let _ = d.to_string();
                 }
-                let ts = times.next();
+                let ts = times.next_time();
                 let o = bus.observe(n, &f, ts);
                 let scale = o.module.as_ref().and_then(|m| m.scale());
                 for (fd, v) in f.fields() {

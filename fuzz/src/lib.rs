@@ -17,7 +17,7 @@ impl Lcg {
         Lcg(s | 1)
     }
     /// Next value.
-    pub fn next(&mut self) -> u64 {
+    pub fn next_u64(&mut self) -> u64 {
         let mut x = self.0;
         x ^= x >> 12;
         x ^= x << 25;
@@ -27,7 +27,7 @@ impl Lcg {
     }
     /// A value in 1..=max (max ≥ 1).
     pub fn size(&mut self, max: usize) -> usize {
-        1 + (self.next() % max.max(1) as u64) as usize
+        1 + (self.next_u64() % max.max(1) as u64) as usize
     }
 }
 
@@ -209,17 +209,17 @@ impl Times {
     pub fn new(ctl: u8) -> Self {
         let mut rng = Lcg::new(&[ctl, 0x7e]);
         let ts = (ctl & 0x80 != 0).then(|| match (ctl >> 5) & 3 {
-            0 => rng.next(),
-            1 => u64::MAX - rng.next() % 20_000_000_000,
-            2 => rng.next() % 1_000_000_000_000,
+            0 => rng.next_u64(),
+            1 => u64::MAX - rng.next_u64() % 20_000_000_000,
+            2 => rng.next_u64() % 1_000_000_000_000,
             _ => 0,
         });
         Times { rng, ts }
     }
     /// The time of the next frame.
-    pub fn next(&mut self) -> Option<u64> {
-        if self.rng.next() % 3 == 0 {
-            let step = self.rng.next() >> (self.rng.next() % 64);
+    pub fn next_time(&mut self) -> Option<u64> {
+        if self.rng.next_u64().is_multiple_of(3) {
+            let step = self.rng.next_u64() >> (self.rng.next_u64() % 64);
             self.ts = self.ts.map(|t| t.wrapping_add(step));
         }
         self.ts
