@@ -37,6 +37,9 @@ use std::io::{self, BufRead, Cursor, Read};
 pub const MAX_LINE: usize = 256 * 1024;
 /// Largest chunk a reader produces; longer runs of bytes come as several chunks.
 pub const MAX_CHUNK: usize = 64 * 1024;
+/// Most bytes one `*` line of a hex dump may stand for.
+pub const MAX_REPEAT: u64 = 64 << 20;
+
 /// How much of a jpnevulator log is read ahead to learn the names of its interfaces.
 const HEAD_SCAN: usize = 64 * 1024;
 /// How many lines [`sniff`] looks at.
@@ -1479,6 +1482,17 @@ impl Dump {
         if let Some(star_off) = self.star.take() {
             let plen = self.prev.len() as u64;
             match self.expected {
+                // A dump of a serial capture does not repeat a line for gigabytes: a huge gap is
+                // damage, and expanding it would take minutes (found by fuzzing).
+                Some(exp) if offset >= exp && offset - exp > MAX_REPEAT => self.diag(
+                    star_off,
+                    "bad_repeat",
+                    format!(
+                        "a '*' line standing for {} bytes (more than {MAX_REPEAT}); not expanded",
+                        offset - exp
+                    ),
+                    sink,
+                ),
                 Some(exp) if offset >= exp && plen > 0 && (offset - exp).is_multiple_of(plen) => {
                     self.repeat_left = offset - exp;
                     self.pattern.clear();
