@@ -254,6 +254,22 @@ enum Cmd {
     },
 }
 
+/// Copies the options `tap` and `sniff` share into their options struct (two types with the
+/// same fields).
+macro_rules! live_fields {
+    ($o:ident, $live:ident, $proto:ident, $flow:ident) => {
+        $o.proto = $proto;
+        $o.baud = $live.baud;
+        $o.flow = $flow;
+        $o.write = $live.write.clone();
+        $o.force = $live.force;
+        $o.reconnect = $live.reconnect;
+        $o.quiet = $live.quiet;
+        $o.duration = $live.duration.map(std::time::Duration::from_nanos);
+        $o.signals = true;
+    };
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let r = match cli.cmd {
@@ -283,15 +299,7 @@ fn main() -> ExitCode {
         },
         Cmd::Tap { device, link, live } => live_opts(&live).and_then(|(proto, flow)| {
             let mut o = TapOptions::new(device, link);
-            o.proto = proto;
-            o.baud = live.baud;
-            o.flow = flow;
-            o.write = live.write.clone();
-            o.force = live.force;
-            o.reconnect = live.reconnect;
-            o.quiet = live.quiet;
-            o.duration = live.duration.map(std::time::Duration::from_nanos);
-            o.signals = true;
+            live_fields!(o, live, proto, flow);
             tap_main(o).and_then(check_stats)
         }),
         Cmd::Sniff {
@@ -300,15 +308,7 @@ fn main() -> ExitCode {
             live,
         } => live_opts(&live).and_then(|(proto, flow)| {
             let mut o = SniffOptions::new(host_tx, device_tx);
-            o.proto = proto;
-            o.baud = live.baud;
-            o.flow = flow;
-            o.write = live.write.clone();
-            o.force = live.force;
-            o.reconnect = live.reconnect;
-            o.quiet = live.quiet;
-            o.duration = live.duration.map(std::time::Duration::from_nanos);
-            o.signals = true;
+            live_fields!(o, live, proto, flow);
             sniff_main(o).and_then(check_stats)
         }),
         Cmd::Stats {

@@ -102,10 +102,6 @@ pub fn summarize(r: &mut dyn Reader, proto: Option<Proto>) -> Info {
     let mut sample: Vec<(usize, Vec<u8>)> = vec![];
     let mut sample_len = 0usize;
     let mut chosen = proto.map(|p| (p, true));
-    let new_framer = |p: Proto| match p {
-        Proto::Apt => Framer::Apt(AptFramer::new(Table::global())),
-        Proto::Elliptec => Framer::Ell(EllFramer::new()),
-    };
     while let Some(ev) = r.next_event() {
         match ev {
             Event::Stream(s) => info.streams.push(s),
@@ -148,20 +144,12 @@ pub fn summarize(r: &mut dyn Reader, proto: Option<Proto>) -> Info {
                         }
                     }
                     Some((p, _)) => {
-                        while framers.len() <= i {
-                            framers.push(new_framer(p));
-                        }
-                        push(&mut framers[i], c.bytes);
-                        count(&mut framers[i], &mut info.lanes[i]);
+                        feed(&mut framers, &mut info.lanes, i, p, c.bytes);
                     }
                 }
                 if let (Some((p, _)), false) = (chosen, sample.is_empty()) {
                     for (li, b) in std::mem::take(&mut sample) {
-                        while framers.len() <= li {
-                            framers.push(new_framer(p));
-                        }
-                        push(&mut framers[li], &b);
-                        count(&mut framers[li], &mut info.lanes[li]);
+                        feed(&mut framers, &mut info.lanes, li, p, &b);
                     }
                 }
             }
@@ -171,11 +159,7 @@ pub fn summarize(r: &mut dyn Reader, proto: Option<Proto>) -> Info {
         chosen = Some(decide(&sample));
         let p = chosen.map_or(Proto::Apt, |c| c.0);
         for (li, b) in std::mem::take(&mut sample) {
-            while framers.len() <= li {
-                framers.push(new_framer(p));
-            }
-            push(&mut framers[li], &b);
-            count(&mut framers[li], &mut info.lanes[li]);
+            feed(&mut framers, &mut info.lanes, li, p, &b);
         }
     }
     for (i, f) in framers.iter_mut().enumerate() {
@@ -190,11 +174,20 @@ pub fn summarize(r: &mut dyn Reader, proto: Option<Proto>) -> Info {
     info
 }
 
-fn push(f: &mut Framer, b: &[u8]) {
-    match f {
+/// Frame `b` on lane `i` (creating its framer for protocol `p` on first use) and count what
+/// comes out.
+fn feed(framers: &mut Vec<Framer>, lanes: &mut [LaneStats], i: usize, p: Proto, b: &[u8]) {
+    while framers.len() <= i {
+        framers.push(match p {
+            Proto::Apt => Framer::Apt(AptFramer::new(Table::global())),
+            Proto::Elliptec => Framer::Ell(EllFramer::new()),
+        });
+    }
+    match &mut framers[i] {
         Framer::Apt(a) => a.push(b),
         Framer::Ell(e) => e.push(b),
     }
+    count(&mut framers[i], &mut lanes[i]);
 }
 
 fn decide(sample: &[(usize, Vec<u8>)]) -> (Proto, bool) {
