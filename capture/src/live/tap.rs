@@ -973,17 +973,9 @@ impl Shared {
         }
     }
 
-    /// Count and hand over a chunk that crossed (never blocks on the display; on the file only
-    /// when its whole backlog is full).
-    fn record(&self, ts: u64, dir: Direction, bytes: &[u8]) {
-        let i = usize::from(dir == Direction::DeviceToHost);
-        self.fwd[i].fetch_add(bytes.len() as u64, Ordering::Relaxed);
-        self.chunks.fetch_add(1, Ordering::Relaxed);
-        let rec = Arc::new(Rec {
-            ts,
-            dir,
-            bytes: bytes.to_vec(),
-        });
+    /// Hand a chunk just read to the display, before it is forwarded: the reply it causes can
+    /// then never reach the display first. Never blocks (a full display skips, and says so).
+    fn show(&self, rec: &Arc<Rec>) {
         if let Some(tx) = &self.display {
             match tx.try_send(rec.clone()) {
                 Ok(()) => {}
@@ -993,6 +985,14 @@ impl Shared {
                 }
             }
         }
+    }
+
+    /// Count a chunk that crossed and hand it to the file (which blocks only when its whole
+    /// backlog is full).
+    fn record(&self, rec: Arc<Rec>) {
+        let i = usize::from(rec.dir == Direction::DeviceToHost);
+        self.fwd[i].fetch_add(rec.bytes.len() as u64, Ordering::Relaxed);
+        self.chunks.fetch_add(1, Ordering::Relaxed);
         if let Some(q) = &self.file {
             q.push(QItem::Chunk(rec));
         }
@@ -1149,7 +1149,12 @@ fn forward(
             Ok(n) => n,
             Err(e) => return FwdEnd::SrcGone(sh.clock.now(), e),
         };
-        let ts = sh.clock.now();
+        let rec = Arc::new(Rec {
+            ts: sh.clock.now(),
+            dir,
+            bytes: buf[..n].to_vec(),
+        });
+        sh.show(&rec);
         let mut done = 0;
         let mut failure = None;
         if let Some(d) = dst.as_deref_mut() {
@@ -1169,8 +1174,14 @@ fn forward(
         } else {
             done = n;
         }
-        if done > 0 {
-            sh.record(ts, dir, &buf[..done]);
+        if done == n {
+            sh.record(rec);
+        } else if done > 0 {
+            sh.record(Arc::new(Rec {
+                ts: rec.ts,
+                dir,
+                bytes: buf[..done].to_vec(),
+            }));
         }
         if let Some(f) = failure {
             sh.undelivered
