@@ -51,6 +51,12 @@ impl Pty {
     pub fn path(&self) -> &Path {
         &self.path
     }
+
+    /// Take the pair apart: the master (non-blocking), our copy of the slave (kept open so the
+    /// line stays up until a program opens the path) and the slave's path.
+    pub fn into_parts(self) -> (OwnedFd, Option<OwnedFd>, PathBuf) {
+        (self.master, self.slave, self.path)
+    }
 }
 
 /// Asks a running [`serve_pty`] to return (from another thread).
@@ -170,7 +176,7 @@ pub fn serve_pty<S: Simulator + ?Sized>(
 
 /// SIGINT and SIGTERM, blocked in this thread (threads started later inherit it) and readable
 /// from a descriptor, so the runner can end cleanly on them.
-fn termination_signals() -> io::Result<SignalFd> {
+pub fn termination_signals() -> io::Result<SignalFd> {
     let mut set = SigSet::empty();
     set.add(Signal::SIGINT);
     set.add(Signal::SIGTERM);

@@ -1,0 +1,441 @@
+//! Replaying as the host: the capture's host → device messages go to the device at their
+//! captured times (or after the expected replies, `--wait-replies`); everything that comes back
+//! is decoded, recorded and compared with the captured replies.
+
+use crate::diff::{compare, Exchange, Report};
+use crate::observe::Observer;
+use crate::port::{Clock, Link, RxEvent};
+use crate::safety::Moving;
+use crate::sched::{wait_until, SendTiming, Waited};
+use crate::script::{host_schedule, Script, Selection, Side, Timing};
+use aptscope_capture::{Chunk, Direction, StreamInfo, Writer};
+use aptscope_dissector::detect::Proto;
+use std::collections::{BTreeSet, HashMap};
+use std::io;
+
+/// Options of [`run_host`].
+#[derive(Debug, Clone)]
+pub struct HostOptions {
+    /// Speed and `--asap`.
+    pub timing: Timing,
+    /// Passes over the selection (`--loop`).
+    pub loops: u32,
+    /// Send each message only after the replies its captured request got (or a timeout).
+    pub wait_replies: bool,
+    /// How much longer than in the capture a reply may take before it counts as missing, ns.
+    pub reply_timeout_ns: u64,
+    /// On abort, stop the channels that replayed moves left moving (APT).
+    pub stop_on_abort: bool,
+    /// Fields not compared.
+    pub ignore: Vec<String>,
+    /// Render the live timeline.
+    pub display: bool,
+    /// … as NDJSON.
+    pub json: bool,
+}
+
+impl Default for HostOptions {
+    fn default() -> Self {
+        HostOptions {
+            timing: Timing::default(),
+            loops: 1,
+            wait_replies: false,
+            reply_timeout_ns: 2_000_000_000,
+            stop_on_abort: false,
+            ignore: vec![],
+            display: false,
+            json: false,
+        }
+    }
+}
+
+/// How a replay went.
+#[derive(Debug, Default)]
+pub struct Outcome {
+    /// Messages in the schedule.
+    pub planned: usize,
+    /// Messages sent.
+    pub sent: usize,
+    /// Send-time errors.
+    pub timing: SendTiming,
+    /// Captured against observed replies.
+    pub report: Report,
+    /// Why the replay stopped early (a signal, the line gone).
+    pub aborted: Option<String>,
+    /// The other side went away (when, why).
+    pub gone: Option<String>,
+    /// Stop commands sent on abort.
+    pub stops: Vec<String>,
+    /// What was observed that is not a message.
+    pub notes: Vec<String>,
+    /// Length of the replay, ns.
+    pub duration_ns: u64,
+    /// The recording failed (the replay went on).
+    pub record_error: Option<String>,
+}
+
+/// The live part shared by the host and device engines: decoding, recording, displaying.
+pub(crate) struct Session<'a> {
+    pub(crate) obs: Observer,
+    rec: Option<&'a mut dyn Writer>,
+    out: &'a mut dyn FnMut(&str),
+    pub(crate) gone: Option<String>,
+    pub(crate) record_error: Option<String>,
+    /// Observed replies by the observed request's record number.
+    pub(crate) replies: HashMap<u64, Vec<usize>>,
+    seen: usize,
+    clock: Clock,
+}
+
+impl<'a> Session<'a> {
+    pub(crate) fn new(
+        proto: Proto,
+        clock: Clock,
+        port: &str,
+        mut rec: Option<&'a mut dyn Writer>,
+        out: &'a mut dyn FnMut(&str),
+        display: bool,
+        json: bool,
+    ) -> Session<'a> {
+        let mut record_error = None;
+        if let Some(w) = rec.as_deref_mut() {
+            let info = StreamInfo {
+                id: 0,
+                name: port.to_string(),
+                settings: None,
+            };
+            if let Err(e) = w.stream(&info) {
+                record_error = Some(e.to_string());
+            }
+        }
+        Session {
+            obs: Observer::new(proto, display, json),
+            rec,
+            out,
+            gone: None,
+            record_error,
+            replies: HashMap::new(),
+            seen: 0,
+            clock,
+        }
+    }
+
+    /// Bytes that crossed at `t_ns`, sent by `side`: record, decode, display. Returns the index
+    /// of the first message they completed.
+    pub(crate) fn crossed(&mut self, side: Side, t_ns: u64, bytes: &[u8]) -> usize {
+        let ts = self.clock.epoch(t_ns);
+        if let (Some(w), None) = (self.rec.as_deref_mut(), &self.record_error) {
+            let c = Chunk {
+                ts_ns: Some(ts),
+                dir: match side {
+                    Side::Host => Direction::HostToDevice,
+                    Side::Device => Direction::DeviceToHost,
+                },
+                stream: 0,
+                bytes,
+            };
+            if let Err(e) = w.chunk(&c) {
+                self.record_error = Some(e.to_string());
+            }
+        }
+        let first = self.obs.feed(side, ts, bytes);
+        self.index_new();
+        self.show();
+        first
+    }
+
+    fn index_new(&mut self) {
+        let msgs = self.obs.msgs();
+        for (i, m) in msgs.iter().enumerate().skip(self.seen) {
+            if let (Side::Device, Some(p)) = (m.side, m.pair) {
+                self.replies.entry(p).or_default().push(i);
+            }
+        }
+        self.seen = msgs.len();
+    }
+
+    fn show(&mut self) {
+        for l in self.obs.lines.drain(..) {
+            (self.out)(&l);
+        }
+    }
+
+    pub(crate) fn event(&mut self, ev: RxEvent, remote: Side) {
+        match ev {
+            RxEvent::Data { t_ns, bytes } => {
+                self.crossed(remote, t_ns, &bytes);
+            }
+            RxEvent::Gone { t_ns, why } => {
+                if self.gone.is_none() {
+                    self.gone = Some(format!("{why} (at {:.3} s)", t_ns as f64 / 1e9));
+                }
+            }
+        }
+    }
+
+    pub(crate) fn finish(&mut self) {
+        self.obs.finish();
+        self.index_new();
+        self.show();
+        if let (Some(w), None) = (self.rec.as_deref_mut(), &self.record_error) {
+            if let Err(e) = w.finish() {
+                self.record_error = Some(e.to_string());
+            }
+        }
+    }
+}
+
+/// What a sent request waits for: its captured replies (name and channel) and how long.
+struct Expect {
+    want: Vec<(String, Option<i64>)>,
+    /// Latest captured reply after the request, ns.
+    captured_ns: u64,
+}
+
+fn expectation(script: &Script, idx: usize) -> Expect {
+    let req = &script.msgs[idx];
+    let mut e = Expect {
+        want: vec![],
+        captured_ns: 0,
+    };
+    for r in script.replies_to(idx) {
+        let m = &script.msgs[r];
+        e.want.push((m.name.clone(), m.channel()));
+        if let (Some(a), Some(b)) = (m.ts_ns, req.ts_ns) {
+            e.captured_ns = e.captured_ns.max(a.saturating_sub(b));
+        }
+    }
+    e
+}
+
+/// Whether every wanted reply has been observed for the observed request `obs_req`; the time of
+/// the last one (on the epoch clock) when so.
+fn answered(sess: &Session<'_>, obs_req: Option<usize>, e: &Expect) -> Option<u64> {
+    let msgs = sess.obs.msgs();
+    let req = msgs.get(obs_req?)?;
+    let got = sess.replies.get(&req.n).map(Vec::as_slice).unwrap_or(&[]);
+    let mut used = vec![false; got.len()];
+    let mut last = req.ts_ns.unwrap_or(0);
+    for (name, ch) in &e.want {
+        let k = got
+            .iter()
+            .enumerate()
+            .position(|(j, &i)| !used[j] && msgs[i].name == *name && msgs[i].channel() == *ch)?;
+        used[k] = true;
+        last = last.max(msgs[got[k]].ts_ns.unwrap_or(0));
+    }
+    Some(last)
+}
+
+/// Replay the host side of `script` (as selected) on `link`. Lines of the live timeline go to
+/// `out`; everything that crosses is recorded to `rec`; `abort` is asked often (a signal).
+pub fn run_host<'a>(
+    script: &Script,
+    sel: &Selection,
+    opts: &HostOptions,
+    link: &mut Link,
+    rec: Option<&'a mut dyn Writer>,
+    out: &'a mut dyn FnMut(&str),
+    abort: &mut dyn FnMut() -> Option<String>,
+) -> io::Result<Outcome> {
+    let timing = Timing {
+        asap: opts.timing.asap || !script.has_times(),
+        ..opts.timing
+    };
+    let plan = host_schedule(script, sel, timing, opts.loops);
+    let clock = link.clock;
+    let name = link.name.clone();
+    let mut sess = Session::new(
+        script.proto,
+        clock,
+        &name,
+        rec,
+        out,
+        opts.display,
+        opts.json,
+    );
+    let mut o = Outcome {
+        planned: plan.len(),
+        ..Outcome::default()
+    };
+    let mut exchanges: Vec<Exchange> = Vec::with_capacity(plan.len());
+    let mut sent_at: Vec<u64> = Vec::with_capacity(plan.len());
+    let mut moving: BTreeSet<(u64, crate::safety::Moving)> = BTreeSet::new();
+    let start = clock.now_ns();
+    let mut shift: u64 = 0;
+    let scale = |ns: u64| -> u64 {
+        if timing.asap {
+            0
+        } else {
+            (ns as f64 / timing.speed.max(1e-9)) as u64
+        }
+    };
+    for s in &plan {
+        let deadline = start.saturating_add(s.at_ns).saturating_add(shift);
+        let w = wait_until(
+            &clock,
+            deadline,
+            &link.rx,
+            &mut |ev| {
+                if let Some(ev) = ev {
+                    sess.event(ev, Side::Device);
+                }
+                false
+            },
+            abort,
+        );
+        if let Waited::Aborted(why) = w {
+            o.aborted = Some(why);
+            break;
+        }
+        if let Some(g) = &sess.gone {
+            o.aborted = Some(format!("the device went away: {g}"));
+            break;
+        }
+        let m = &script.msgs[s.idx];
+        let t = clock.now_ns();
+        o.timing.record(t.saturating_sub(deadline));
+        if let Err(e) = link.send(&m.raw) {
+            o.aborted = Some(format!("writing to {name} failed: {e}"));
+            break;
+        }
+        o.sent += 1;
+        let first = sess.crossed(Side::Host, t, &m.raw);
+        let obs_idx = sess
+            .obs
+            .msgs()
+            .get(first)
+            .filter(|x| x.side == Side::Host)
+            .map(|_| first);
+        exchanges.push(Exchange {
+            idx: s.idx,
+            lap: s.lap,
+            observed: obs_idx,
+        });
+        sent_at.push(t);
+        if let (Some(mv), Some(i)) = (Moving::of(m), obs_idx) {
+            moving.insert((sess.obs.msgs()[i].n, mv));
+        }
+        if opts.wait_replies {
+            let e = expectation(script, s.idx);
+            if e.want.is_empty() {
+                continue;
+            }
+            let limit = t
+                .saturating_add(e.captured_ns)
+                .saturating_add(opts.reply_timeout_ns);
+            let mut got: Option<u64> = None;
+            let w = wait_until(
+                &clock,
+                limit,
+                &link.rx,
+                &mut |ev| {
+                    if let Some(ev) = ev {
+                        sess.event(ev, Side::Device);
+                    }
+                    got = answered(&sess, obs_idx, &e);
+                    got.is_some() || sess.gone.is_some()
+                },
+                abort,
+            );
+            if let Waited::Aborted(why) = w {
+                o.aborted = Some(why);
+                break;
+            }
+            // Slower than in the capture: later messages keep their captured distance from
+            // this reply.
+            let arrived = got.map_or(clock.now_ns(), |ts| ts.saturating_sub(clock.epoch(0)));
+            let planned = start
+                .saturating_add(s.at_ns)
+                .saturating_add(shift)
+                .saturating_add(scale(e.captured_ns));
+            shift = shift.saturating_add(arrived.saturating_sub(planned));
+        }
+        moving.retain(|(n, _)| !sess.replies.contains_key(n));
+    }
+    if o.aborted.is_none() {
+        // Wait for the replies still due, and for the captured tail (status updates after the
+        // last request), whichever is later.
+        let tail = plan.last().map_or(0, |s| {
+            let last_ts = script
+                .msgs
+                .iter()
+                .filter(|m| sel.in_range(script, m))
+                .filter_map(|m| m.ts_ns)
+                .max();
+            let after = match (last_ts, script.msgs[s.idx].ts_ns) {
+                (Some(a), Some(b)) => a.saturating_sub(b),
+                _ => 0,
+            };
+            start
+                .saturating_add(s.at_ns)
+                .saturating_add(shift)
+                .saturating_add(scale(after))
+        });
+        let expects: Vec<(Option<usize>, Expect, u64)> = exchanges
+            .iter()
+            .zip(&sent_at)
+            .map(|(x, &t)| (x.observed, expectation(script, x.idx), t))
+            .filter(|(_, e, _)| !e.want.is_empty())
+            .collect();
+        let limit = expects
+            .iter()
+            .map(|(_, e, t)| {
+                t.saturating_add(e.captured_ns)
+                    .saturating_add(opts.reply_timeout_ns)
+            })
+            .max()
+            .unwrap_or(0)
+            .max(tail);
+        let mut pending: Vec<usize> = (0..expects.len()).collect();
+        let w = wait_until(
+            &clock,
+            limit,
+            &link.rx,
+            &mut |ev| {
+                if let Some(ev) = ev {
+                    sess.event(ev, Side::Device);
+                }
+                pending.retain(|&k| answered(&sess, expects[k].0, &expects[k].1).is_none());
+                (pending.is_empty() && clock.now_ns() >= tail) || sess.gone.is_some()
+            },
+            abort,
+        );
+        if let Waited::Aborted(why) = w {
+            o.aborted = Some(why);
+        }
+    }
+    moving.retain(|(n, _)| !sess.replies.contains_key(n));
+    if o.aborted.is_some() && opts.stop_on_abort {
+        let chans: BTreeSet<Moving> = moving.iter().map(|(_, m)| *m).collect();
+        for mv in chans {
+            if let Some(b) = mv.stop_command() {
+                let t = clock.now_ns();
+                if link.send(&b).is_ok() {
+                    sess.crossed(Side::Host, t, &b);
+                    o.stops
+                        .push(format!("MOT_MOVE_STOP ch{} to 0x{:02X}", mv.chan, mv.dst));
+                }
+            }
+        }
+        // Take what is already there (the stops' answers, if quick).
+        while let Ok(ev) = link.rx.try_recv() {
+            sess.event(ev, Side::Device);
+        }
+    }
+    o.duration_ns = clock.now_ns().saturating_sub(start);
+    sess.finish();
+    o.gone = sess.gone.clone();
+    o.record_error = sess.record_error.clone();
+    o.notes = sess.obs.notes().to_vec();
+    let laps = opts.loops.max(1);
+    o.report = compare(
+        script,
+        &exchanges,
+        sess.obs.msgs(),
+        &|m| sel.in_range(script, m),
+        if o.aborted.is_some() { 0 } else { laps },
+        &opts.ignore,
+    );
+    Ok(o)
+}

@@ -1,0 +1,126 @@
+//! Safety: which messages make something move (they ask for confirmation before going to a real
+//! port), and the stop commands sent on abort to channels still moving.
+
+use crate::script::Msg;
+use aptscope_dissector::apt::{encode, FieldValue};
+use aptscope_dissector::table::FormKind;
+use aptscope_dissector::Table;
+use serde_json::Value;
+use std::path::Path;
+
+/// Replies that end a move: a message answered by one of these starts a move.
+const END_OF_MOVE: &[&str] = &["MOT_MOVE_COMPLETED", "MOT_MOVE_HOMED", "MOT_MOVE_STOPPED"];
+
+/// Whether the APT message `name` starts a move (from the table: it is completed by an
+/// end-of-move message, and is not a stop).
+pub fn apt_starts_move(name: &str) -> bool {
+    let t = Table::global();
+    t.msg_by_name(name).is_some_and(|m| {
+        !m.name.ends_with("_STOP")
+            && t.replies_of(m)
+                .iter()
+                .any(|r| END_OF_MOVE.contains(&r.name))
+    })
+}
+
+/// Whether a host message makes hardware move or changes an output (asked for confirmation
+/// before a real port): APT moves, jogs, homing and piezo/laser/TEC outputs; Elliptec moves,
+/// homing, jogs and optimisation.
+pub fn is_motion(m: &Msg) -> bool {
+    let n = m.name.as_str();
+    if m.rec.get("proto").and_then(Value::as_str) == Some("ell") {
+        return n.contains("MOVE")
+            || n.contains("HOME")
+            || n.contains("FORWARD")
+            || n.contains("BACKWARD")
+            || n.contains("OPTIMIZE")
+            || n.contains("CLEAN");
+    }
+    apt_starts_move(n)
+        || n.contains("_MOVE_")
+        || n.contains("OUTPUTVOLTS")
+        || n.contains("OUTPUTPOS")
+        || n.contains("_JOG")
+        || (n.contains("_SET_") && (n.contains("ENABLE") || n.contains("OUTPUT")))
+}
+
+/// Whether `path` is a pseudo-terminal (a simulator or a tap), where no confirmation is needed.
+pub fn is_pseudo_terminal(path: &Path) -> bool {
+    let real = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+    let s = real.to_string_lossy();
+    s.starts_with("/dev/pts/")
+        || s.starts_with("/dev/pty")
+        || s.starts_with("/dev/tty") && {
+            // BSD-style /dev/ttyp0 … pseudo-terminals.
+            s.len() == 10 && s.as_bytes().get(8).is_some_and(|c| b"pqrs".contains(c))
+        }
+}
+
+/// A channel of a device that a replayed command set moving.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Moving {
+    /// Destination address of the move.
+    pub dst: u8,
+    /// Channel (1 when the message names none).
+    pub chan: i64,
+}
+
+impl Moving {
+    /// The channel an APT move command `m` sets moving, if it is one.
+    pub fn of(m: &Msg) -> Option<Moving> {
+        if !apt_starts_move(&m.name) {
+            return None;
+        }
+        let dst = m.rec.get("dst")?.get("addr")?.as_u64()? as u8;
+        Some(Moving {
+            dst,
+            chan: m.channel().unwrap_or(1),
+        })
+    }
+
+    /// MOT_MOVE_STOP (profiled) for this channel, from the host.
+    pub fn stop_command(&self) -> Option<Vec<u8>> {
+        let t = Table::global();
+        let m = t.msg_by_name("MOT_MOVE_STOP")?;
+        let form = m.forms.iter().find(|f| f.kind == FormKind::Header)?;
+        encode(
+            form,
+            &[
+                ("chan_ident", FieldValue::Int(self.chan)),
+                ("stop_mode", FieldValue::Int(2)),
+            ],
+            m.id,
+            self.dst,
+            0x01,
+        )
+        .ok()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn moves_come_from_the_table() {
+        assert!(apt_starts_move("MOT_MOVE_ABSOLUTE"));
+        assert!(apt_starts_move("MOT_MOVE_HOME"));
+        assert!(!apt_starts_move("MOT_MOVE_STOP"));
+        assert!(!apt_starts_move("HW_REQ_INFO"));
+    }
+
+    #[test]
+    fn stop_command_is_a_profiled_move_stop() {
+        let m = Moving { dst: 0x50, chan: 1 };
+        assert_eq!(
+            m.stop_command(),
+            Some(vec![0x65, 0x04, 0x01, 0x02, 0x50, 0x01])
+        );
+    }
+
+    #[test]
+    fn pseudo_terminals_are_recognised() {
+        assert!(is_pseudo_terminal(Path::new("/dev/pts/3")));
+        assert!(!is_pseudo_terminal(Path::new("/dev/ttyUSB0")));
+    }
+}
