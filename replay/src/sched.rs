@@ -24,8 +24,8 @@ pub enum Waited {
 }
 
 /// Wait until `deadline_ns` on `clock`, passing every event that arrives meanwhile to
-/// `handle(Some(event))`; `handle(None)` is asked whether the wait may end early (a condition
-/// holds), after events and at least every 50 ms, as is `abort`.
+/// `handle(Some(event))`, which returns whether the wait may end early (a condition holds);
+/// `handle(None)` asks the same without an event, at least every 50 ms, as `abort` is asked.
 pub fn wait_until(
     clock: &Clock,
     deadline_ns: u64,
@@ -47,8 +47,12 @@ pub fn wait_until(
         let left = deadline_ns - now;
         if left <= SPIN_NS {
             // Take what is already there, then spin to the deadline.
+            let mut done = false;
             while let Ok(ev) = rx.try_recv() {
-                handle(Some(ev));
+                done |= handle(Some(ev));
+            }
+            if done {
+                return Waited::Reached;
             }
             while clock.now_ns() < deadline_ns {
                 std::hint::spin_loop();
@@ -58,9 +62,12 @@ pub fn wait_until(
         let block = (left - SPIN_NS).min(SLICE_NS);
         match rx.recv_timeout(Duration::from_nanos(block)) {
             Ok(ev) => {
-                handle(Some(ev));
+                let mut done = handle(Some(ev));
                 while let Ok(ev) = rx.try_recv() {
-                    handle(Some(ev));
+                    done |= handle(Some(ev));
+                }
+                if done {
+                    return Waited::Reached;
                 }
             }
             Err(RecvTimeoutError::Timeout) => {}
