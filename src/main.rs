@@ -14,6 +14,7 @@ use aptscope_dissector::stats::Stats;
 use aptscope_dissector::table::Dir;
 use aptscope_dissector::table::{Form, FormKind, MsgDef};
 use aptscope_dissector::{json, Table};
+use aptscope_replay::{replay_main, ReplayOptions, Role};
 use clap::{Parser, Subcommand};
 use std::cell::RefCell;
 use std::io::{self, BufWriter, Write};
@@ -80,6 +81,12 @@ struct LiveArgs {
     /// Stop after this long (`30s`).
     #[arg(long, value_parser = parse_duration)]
     duration: Option<u64>,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum RoleArg {
+    Host,
+    Device,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -175,6 +182,94 @@ enum Cmd {
         link: Option<String>,
         #[command(flatten)]
         live: LiveArgs,
+    },
+    /// Replay a capture to a port with its timing, as the host (to a device or simulator) or
+    /// as the device (to a host program), and compare the replies with the captured ones.
+    Replay {
+        /// The capture (any readable format).
+        file: String,
+        /// Serial port to talk on (a simulator's or a tap's pseudo-terminal works too).
+        #[arg(long)]
+        port: Option<String>,
+        /// As device: create a pseudo-terminal for the host program, symlinked here.
+        #[arg(long)]
+        pty: Option<String>,
+        /// Which side of the capture to play.
+        #[arg(long = "as", value_enum, default_value_t = RoleArg::Host)]
+        role: RoleArg,
+        /// Protocol (default: detected from the capture).
+        #[arg(long, value_enum, default_value_t = ProtoArg::Auto)]
+        proto: ProtoArg,
+        /// Input format instead of detecting it.
+        #[arg(long, short = 'F')]
+        format: Option<String>,
+        /// Baud rate (default 115200 for APT, 9600 for Elliptec).
+        #[arg(long)]
+        baud: Option<u32>,
+        /// Flow control: none, rtscts, xonxoff (default: the protocol's).
+        #[arg(long)]
+        flow: Option<String>,
+        /// Time factor: 2.0 replays twice as fast.
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
+        /// Ignore the captured gaps.
+        #[arg(long)]
+        asap: bool,
+        /// Send each message only after the replies its captured request got (or a timeout).
+        #[arg(long)]
+        wait_replies: bool,
+        /// How much longer than captured a reply may take before it is missing.
+        #[arg(long, value_parser = parse_duration, default_value = "2s")]
+        reply_timeout: u64,
+        /// Replay only the messages this display filter accepts (host messages as host,
+        /// device messages as device).
+        #[arg(short = 'Y', long)]
+        filter: Option<String>,
+        /// From this record number or time (`12`, `2.5s`).
+        #[arg(long)]
+        from: Option<String>,
+        /// Up to this record number or time.
+        #[arg(long)]
+        to: Option<String>,
+        /// Replay the selection this many times.
+        #[arg(long = "loop", default_value_t = 1)]
+        loops: u32,
+        /// Stream to replay, when the capture has several.
+        #[arg(long)]
+        stream: Option<u32>,
+        /// Record the session (both directions) here; format from the extension, else pcapng.
+        #[arg(short = 'w', long)]
+        write: Option<String>,
+        /// Overwrite the recording if it exists.
+        #[arg(long)]
+        force: bool,
+        /// NDJSON timeline and a JSON report.
+        #[arg(long)]
+        json: bool,
+        /// Exit with 1 when replies differ from the capture.
+        #[arg(long)]
+        check: bool,
+        /// Do not compare this field (repeatable): `serial_number`, `src`.
+        #[arg(long)]
+        ignore: Vec<String>,
+        /// Count latency changes beyond this as differences.
+        #[arg(long, value_parser = parse_duration)]
+        latency_tolerance: Option<u64>,
+        /// Print what would be sent and when; send nothing.
+        #[arg(long)]
+        dry_run: bool,
+        /// Do not ask before motion commands go to a real port.
+        #[arg(long)]
+        yes: bool,
+        /// On Ctrl-C, send MOT_MOVE_STOP to channels the replay left moving.
+        #[arg(long)]
+        stop_on_abort: bool,
+        /// Do not print the live timeline.
+        #[arg(long)]
+        quiet: bool,
+        /// As device: stop after this long.
+        #[arg(long, value_parser = parse_duration)]
+        duration: Option<u64>,
     },
     /// Passive sniff of a Y-cable with two receive-only adapters, merged by time.
     Sniff {
@@ -301,6 +396,81 @@ fn main() -> ExitCode {
             let mut o = TapOptions::new(device, link);
             live_fields!(o, live, proto, flow);
             tap_main(o).and_then(check_stats)
+        }),
+        Cmd::Replay {
+            file,
+            port,
+            pty,
+            role,
+            proto,
+            format,
+            baud,
+            flow,
+            speed,
+            asap,
+            wait_replies,
+            reply_timeout,
+            filter,
+            from,
+            to,
+            loops,
+            stream,
+            write,
+            force,
+            json,
+            check,
+            ignore,
+            latency_tolerance,
+            dry_run,
+            yes,
+            stop_on_abort,
+            quiet,
+            duration,
+        } => open_opts(format.as_deref(), false, None).and_then(|open| {
+            let flow = match flow {
+                None => None,
+                Some(f) => Some(Flow::parse(&f).ok_or_else(|| {
+                    bad(format!("unknown flow control {f} (none, rtscts, xonxoff)"))
+                })?),
+            };
+            let o = ReplayOptions {
+                file,
+                open,
+                proto: proto_of(proto),
+                port,
+                pty,
+                role: match role {
+                    RoleArg::Host => Role::Host,
+                    RoleArg::Device => Role::Device,
+                },
+                baud,
+                flow,
+                speed,
+                asap,
+                wait_replies,
+                reply_timeout_ns: reply_timeout,
+                filter,
+                from,
+                to,
+                loops,
+                stream,
+                write,
+                force,
+                json,
+                check,
+                ignore,
+                latency_tolerance_ns: latency_tolerance,
+                dry_run,
+                yes,
+                stop_on_abort,
+                quiet,
+                duration_ns: duration,
+            };
+            match replay_main(o) {
+                Ok(true) => Ok(()),
+                Ok(false) => Err(io::Error::other("differences found (--check)")),
+                Err(e) => Err(e),
+            }
         }),
         Cmd::Sniff {
             host_tx,

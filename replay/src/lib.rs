@@ -11,6 +11,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod cli;
 pub mod device;
 pub mod diff;
 pub mod host;
@@ -20,6 +21,7 @@ pub mod safety;
 pub mod sched;
 pub mod script;
 
+pub use cli::{replay_main, ReplayOptions, Role};
 pub use device::{run_device, DeviceOptions, DeviceOutcome, Responder};
 pub use diff::Report;
 pub use host::{run_host, HostOptions, Outcome};

@@ -105,11 +105,16 @@ impl SendTiming {
         v.get(i.min(v.len() - 1)).copied()
     }
 
-    /// `send-time error: p50 0.012 ms, p99 0.210 ms, max 0.350 ms (N sends)`.
+    /// `send-time error: p50 1.2 µs, p99 210.0 µs, max 1.350 ms (N sends)`.
     pub fn summary(&self) -> String {
         let f = |p: f64| {
-            self.percentile(p)
-                .map_or("-".to_string(), |ns| format!("{:.3} ms", ns as f64 / 1e6))
+            self.percentile(p).map_or("-".to_string(), |ns| {
+                if ns < 1_000_000 {
+                    format!("{:.1} µs", ns as f64 / 1e3)
+                } else {
+                    format!("{:.3} ms", ns as f64 / 1e6)
+                }
+            })
         };
         format!(
             "send-time error: p50 {}, p99 {}, max {} ({} sends)",
@@ -147,7 +152,11 @@ mod tests {
         assert_eq!(t.percentile(0.0), Some(1000));
         assert_eq!(t.percentile(100.0), Some(100_000));
         assert_eq!(t.percentile(50.0), Some(51_000));
-        assert!(t.summary().contains("max 0.100 ms (100 sends)"));
+        assert!(
+            t.summary().contains("max 100.0 µs (100 sends)"),
+            "{}",
+            t.summary()
+        );
     }
 
     #[test]

@@ -288,7 +288,7 @@ pub enum Bound {
 }
 
 impl Bound {
-    /// `120` (record) or `2.5s`, `300ms`, `1m` (time from the capture's first message).
+    /// `120` (record) or `2.5s`, `300ms`, `2min` (time from the capture's first message).
     pub fn parse(s: &str) -> Result<Bound, String> {
         let t = s.trim();
         if let Ok(n) = t.parse::<u64>() {
@@ -298,13 +298,13 @@ impl Bound {
             (x, 1e6)
         } else if let Some(x) = t.strip_suffix("us") {
             (x, 1e3)
+        } else if let Some(x) = t.strip_suffix("min") {
+            (x, 60e9)
         } else if let Some(x) = t.strip_suffix('s') {
             (x, 1e9)
-        } else if let Some(x) = t.strip_suffix('m') {
-            (x, 60e9)
         } else {
             return Err(format!(
-                "`{s}`: give a record number (120) or a time (2.5s, 300ms, 1m)"
+                "`{s}`: give a record number (120) or a time (2.5s, 300ms, 2min)"
             ));
         };
         match num.trim().parse::<f64>() {
