@@ -439,7 +439,7 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
                     writeln!(out, "# recording failed: {e}")?;
                 }
             }
-            Ok(!(o.check && !r.unmatched.is_empty()))
+            Ok(!o.check || r.unmatched.is_empty())
         }
     }
 }

@@ -6,11 +6,13 @@
 use aptscope_capture::live::sim::Pty;
 use aptscope_capture::live::tap::{Flow, LineSettings};
 use nix::errno::Errno;
+use nix::fcntl::OFlag;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use serialport::SerialPort;
 use std::fs::File;
 use std::io::{self, Read, Write};
 use std::os::fd::{AsFd, OwnedFd};
+use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender};
@@ -73,89 +75,78 @@ pub enum RxEvent {
     },
 }
 
-enum Io {
-    Tty(serialport::TTYPort),
-    /// A pseudo-terminal master (non-blocking), with our copy of the slave until the peer
-    /// first speaks (so the line stays up before a program opens it).
-    Master(File, Option<OwnedFd>),
+/// One end of the line: a non-blocking descriptor waited on with `poll` (not the serialport
+/// crate's reads, whose `ppoll` unblocks every signal while it waits, so a Ctrl-C meant for the
+/// main thread's signalfd would kill the process).
+struct Io {
+    f: File,
+    /// Our copy of a pseudo-terminal's slave until the peer first speaks (so the line stays up
+    /// before a program opens it); `None` for a port.
+    slave: Option<OwnedFd>,
 }
 
 impl Io {
     /// Read what is there within [`READ_TICK`]: `Ok(None)` when nothing came.
     fn read_tick(&mut self, buf: &mut [u8]) -> io::Result<Option<usize>> {
-        match self {
-            Io::Tty(p) => match p.read(buf) {
-                Ok(0) => Err(io::Error::new(io::ErrorKind::UnexpectedEof, "end of file")),
-                Ok(n) => Ok(Some(n)),
-                Err(e) if e.kind() == io::ErrorKind::TimedOut => Ok(None),
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => Ok(None),
-                Err(e) => Err(e),
-            },
-            Io::Master(f, slave) => {
-                let mut fds = [PollFd::new(f.as_fd(), PollFlags::POLLIN)];
-                match poll(&mut fds, PollTimeout::from(READ_TICK.as_millis() as u16)) {
-                    Ok(0) | Err(Errno::EINTR) => return Ok(None),
-                    Ok(_) => {}
-                    Err(e) => return Err(io::Error::from(e)),
-                }
-                match f.read(buf) {
-                    Ok(0) => Err(io::Error::new(
-                        io::ErrorKind::UnexpectedEof,
-                        "the program closed the port",
-                    )),
-                    Ok(n) => {
-                        // The peer is connected: from now on its hang-up ends the line.
-                        *slave = None;
-                        Ok(Some(n))
-                    }
-                    Err(e) if e.kind() == io::ErrorKind::WouldBlock => Ok(None),
-                    Err(e) if e.kind() == io::ErrorKind::Interrupted => Ok(None),
-                    Err(e) if e.raw_os_error() == Some(Errno::EIO as i32) && slave.is_some() => {
-                        // No program has the slave open yet.
-                        thread::sleep(READ_TICK);
-                        Ok(None)
-                    }
-                    Err(e) if e.raw_os_error() == Some(Errno::EIO as i32) => Err(io::Error::new(
-                        io::ErrorKind::BrokenPipe,
-                        "the program closed the port",
-                    )),
-                    Err(e) => Err(e),
-                }
+        let mut fds = [PollFd::new(self.f.as_fd(), PollFlags::POLLIN)];
+        match poll(&mut fds, PollTimeout::from(READ_TICK.as_millis() as u16)) {
+            Ok(0) | Err(Errno::EINTR) => return Ok(None),
+            Ok(_) => {}
+            Err(e) => return Err(io::Error::from(e)),
+        }
+        match self.f.read(buf) {
+            Ok(0) => Err(io::Error::new(
+                io::ErrorKind::UnexpectedEof,
+                "end of file (hung up)",
+            )),
+            Ok(n) => {
+                // The peer is connected: from now on its hang-up ends the line.
+                self.slave = None;
+                Ok(Some(n))
             }
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => Ok(None),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => Ok(None),
+            Err(e) if e.raw_os_error() == Some(Errno::EIO as i32) && self.slave.is_some() => {
+                // No program has the pseudo-terminal open yet.
+                thread::sleep(READ_TICK);
+                Ok(None)
+            }
+            Err(e) if e.raw_os_error() == Some(Errno::EIO as i32) => Err(io::Error::new(
+                io::ErrorKind::BrokenPipe,
+                "the other side closed the line (I/O error)",
+            )),
+            Err(e) => Err(e),
         }
     }
 
     fn write_all(&mut self, mut b: &[u8]) -> io::Result<()> {
-        match self {
-            Io::Tty(p) => p.write_all(b),
-            Io::Master(f, _) => {
-                let give_up = Instant::now() + WRITE_WAIT;
-                while !b.is_empty() {
-                    match f.write(b) {
-                        Ok(n) => b = &b[n..],
-                        Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
-                            if Instant::now() > give_up {
-                                return Err(io::Error::new(
-                                    io::ErrorKind::TimedOut,
-                                    "the program does not read the port",
-                                ));
-                            }
-                            let mut fds = [PollFd::new(f.as_fd(), PollFlags::POLLOUT)];
-                            let _ = poll(&mut fds, PollTimeout::from(10u8));
-                        }
-                        Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                        Err(e) => return Err(e),
+        let give_up = Instant::now() + WRITE_WAIT;
+        while !b.is_empty() {
+            match self.f.write(b) {
+                Ok(n) => b = &b[n..],
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                    if Instant::now() > give_up {
+                        return Err(io::Error::new(
+                            io::ErrorKind::TimedOut,
+                            "the line does not take data (flow control, or nobody reads)",
+                        ));
                     }
+                    let mut fds = [PollFd::new(self.f.as_fd(), PollFlags::POLLOUT)];
+                    let _ = poll(&mut fds, PollTimeout::from(10u8));
                 }
-                Ok(())
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
             }
         }
+        Ok(())
     }
 }
 
 /// An open line: write with [`Link::send`], receive [`RxEvent`]s from [`Link::rx`].
 pub struct Link {
     tx: Io,
+    /// The configured port (its settings and exclusive lock last while it is open).
+    _port: Option<serialport::TTYPort>,
     /// What arrived, timestamped by the reader thread.
     pub rx: Receiver<RxEvent>,
     /// The clock every time of this link is on.
@@ -192,7 +183,7 @@ fn reader(mut io: Io, clock: Clock, tx: Sender<RxEvent>, stop: Arc<AtomicBool>) 
 }
 
 impl Link {
-    fn start(tx: Io, rx: Io, name: String) -> Link {
+    fn start(tx: Io, rx: Io, port: Option<serialport::TTYPort>, name: String) -> Link {
         let clock = Clock::start();
         let stop = Arc::new(AtomicBool::new(false));
         let (s, r) = mpsc::channel();
@@ -203,6 +194,7 @@ impl Link {
             .ok();
         Link {
             tx,
+            _port: port,
             rx: r,
             clock,
             stop,
@@ -220,7 +212,7 @@ impl Link {
             Flow::RtsCts => serialport::FlowControl::Hardware,
             Flow::XonXoff => serialport::FlowControl::Software,
         };
-        let port = serialport::new(name.as_str(), line.baud)
+        let mut port = serialport::new(name.as_str(), line.baud)
             .data_bits(serialport::DataBits::Eight)
             .parity(serialport::Parity::None)
             .stop_bits(serialport::StopBits::One)
@@ -228,11 +220,25 @@ impl Link {
             .timeout(READ_TICK)
             .open_native()
             .map_err(|e| io::Error::other(format!("{name}: {e}")))?;
-        let mut w = port.try_clone_native().map_err(io::Error::other)?;
-        w.set_timeout(WRITE_WAIT).map_err(io::Error::other)?;
+        // serialport configures the line and holds it exclusively; the I/O goes through our own
+        // descriptor, opened while the lock is briefly lifted.
+        port.set_exclusive(false).map_err(io::Error::other)?;
+        let f = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .custom_flags(libc_flags())
+            .open(path)
+            .map_err(|e| io::Error::new(e.kind(), format!("{name}: {e}")))?;
+        port.set_exclusive(true).map_err(io::Error::other)?;
         // Ignore anything sent before we were there.
         let _ = port.clear(serialport::ClearBuffer::Input);
-        Ok(Link::start(Io::Tty(w), Io::Tty(port), name))
+        let w = f.try_clone()?;
+        Ok(Link::start(
+            Io { f: w, slave: None },
+            Io { f, slave: None },
+            Some(port),
+            name,
+        ))
     }
 
     /// Open a new pseudo-terminal for a host program to open, linked at `link` (an older
@@ -250,7 +256,15 @@ impl Link {
         let wfile = rfile.try_clone()?;
         let name = link.unwrap_or(&path).to_string_lossy().into_owned();
         Ok((
-            Link::start(Io::Master(wfile, None), Io::Master(rfile, slave), name),
+            Link::start(
+                Io {
+                    f: wfile,
+                    slave: None,
+                },
+                Io { f: rfile, slave },
+                None,
+                name,
+            ),
             path,
         ))
     }
@@ -259,6 +273,11 @@ impl Link {
     pub fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
         self.tx.write_all(bytes)
     }
+}
+
+/// Non-blocking, and not the controlling terminal.
+fn libc_flags() -> i32 {
+    (OFlag::O_NOCTTY | OFlag::O_NONBLOCK).bits()
 }
 
 impl Drop for Link {

@@ -1,0 +1,303 @@
+//! `aptscope replay` end to end: real processes on real pseudo-terminals.
+
+use serde_json::Value;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_aptscope");
+const SAMPLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/samples/kdc101-session.pcapng");
+/// Generous: only reached when something is broken.
+const DEADLINE: Duration = Duration::from_secs(60);
+
+fn scratch(name: &str) -> PathBuf {
+    static N: AtomicUsize = AtomicUsize::new(0);
+    let d = std::env::temp_dir().join(format!(
+        "aptscope-replay-e2e-{}-{}-{name}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::SeqCst)
+    ));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A child process killed when the test ends, however it ends.
+struct Proc(Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Start `aptscope ARGS` with a pseudo-terminal link at `link`; wait for the link to appear.
+fn start_with_link(args: &[&str], link: &Path) -> Child {
+    let mut child = Command::new(BIN)
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let give_up = Instant::now() + DEADLINE;
+    while std::fs::read_link(link).is_err() {
+        if Instant::now() > give_up {
+            let _ = child.kill();
+            panic!("{} never appeared", link.display());
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    child
+}
+
+fn sim(dir: &Path) -> (Proc, PathBuf) {
+    let link = dir.join("kdc101");
+    let p = start_with_link(
+        &[
+            "sim",
+            "apt",
+            "--model",
+            "kdc101",
+            "--pty",
+            link.to_str().unwrap(),
+        ],
+        &link,
+    );
+    (Proc(p), link)
+}
+
+fn run(args: &[&str]) -> Output {
+    Command::new(BIN)
+        .args(args)
+        .stdin(Stdio::null())
+        .output()
+        .unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[test]
+fn dry_run_lists_the_schedule_and_sends_nothing() {
+    let o = run(&["replay", SAMPLE, "--dry-run"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let out = text(&o.stdout);
+    let lines: Vec<&str> = out.lines().filter(|l| l.starts_with('+')).collect();
+    assert_eq!(lines.len(), 7, "{out}");
+    assert!(lines[0].contains("HW_REQ_INFO  → HW_GET_INFO  [05 00 00 00 50 01]"));
+    assert!(lines[4].starts_with("+    0.204000 s"), "{}", lines[4]);
+    assert!(out.contains("# dry run: 7 messages to send (3 of them motion commands), nothing sent"));
+    // Twice as fast, from record 7 on, twice.
+    let o = run(&[
+        "replay",
+        SAMPLE,
+        "--dry-run",
+        "--json",
+        "--speed",
+        "2",
+        "--from",
+        "7",
+        "--loop",
+        "2",
+    ]);
+    let v: Vec<Value> = text(&o.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let names: Vec<&str> = v.iter().map(|x| x["name"].as_str().unwrap()).collect();
+    assert_eq!(
+        names,
+        ["MOT_MOVE_HOME", "MOT_MOVE_ABSOLUTE", "HW_STOP_UPDATEMSGS"].repeat(2)
+    );
+    assert_eq!(v[1]["at_s"], 1.025);
+    assert_eq!(v[3]["pass"], 2);
+    assert_eq!(v[0]["motion"], true);
+}
+
+#[test]
+fn motion_to_a_real_port_needs_confirmation() {
+    let o = run(&["replay", SAMPLE, "--port", "/dev/null"]);
+    assert!(!o.status.success());
+    let err = text(&o.stderr);
+    assert!(
+        err.contains("/dev/null is a real port and the replay sends motion commands: "),
+        "{err}"
+    );
+    assert!(
+        err.contains("MOT_MOVE_HOME ×1") && err.contains("give --yes"),
+        "{err}"
+    );
+    // A selection without motion goes through the check (and fails only to open the port).
+    let o = run(&[
+        "replay",
+        SAMPLE,
+        "--port",
+        "/dev/null",
+        "-Y",
+        "apt.name == \"HW_REQ_INFO\"",
+    ]);
+    assert!(!text(&o.stderr).contains("--yes"), "{}", text(&o.stderr));
+}
+
+#[test]
+fn host_and_device_replays_of_one_capture_agree() {
+    let dir = scratch("agree");
+    let link = dir.join("ttyAPT");
+    let dev = start_with_link(
+        &[
+            "replay",
+            SAMPLE,
+            "--as",
+            "device",
+            "--pty",
+            link.to_str().unwrap(),
+            "--quiet",
+            "--duration",
+            "60s",
+        ],
+        &link,
+    );
+    let rec = dir.join("seen.pcapng");
+    let o = run(&[
+        "replay",
+        SAMPLE,
+        "--port",
+        link.to_str().unwrap(),
+        "--check",
+        "--json",
+        "--quiet",
+        "-w",
+        rec.to_str().unwrap(),
+    ]);
+    assert!(
+        o.status.success(),
+        "{}\n{}",
+        text(&o.stdout),
+        text(&o.stderr)
+    );
+    let report: Value = serde_json::from_str(text(&o.stdout).lines().last().unwrap()).unwrap();
+    assert_eq!(report["type"], "replay");
+    assert_eq!(report["failures"], 0, "{report}");
+    assert_eq!(report["matched"], 4);
+    assert_eq!(report["sent"], 7);
+    assert_eq!(
+        report["unsolicited"]["MOT_GET_DCSTATUSUPDATE"],
+        serde_json::json!({"captured": 9, "observed": 9})
+    );
+    // The device side saw the host hang up and reports every request answered.
+    let out = dev.wait_with_output_bounded();
+    assert!(
+        out.contains("7 from the host, 7 answered from the capture"),
+        "{out}"
+    );
+    // The recording decodes to the captured conversation.
+    let d = run(&["decode", rec.to_str().unwrap(), "--json"]);
+    let frames = text(&d.stdout)
+        .lines()
+        .filter(|l| l.contains("\"type\":\"frame\""))
+        .count();
+    assert_eq!(frames, 20);
+}
+
+trait Bounded {
+    fn wait_with_output_bounded(self) -> String;
+}
+
+impl Bounded for Child {
+    /// Wait for the process to end by itself (within [`DEADLINE`]) and return its stdout.
+    fn wait_with_output_bounded(mut self) -> String {
+        let give_up = Instant::now() + DEADLINE;
+        loop {
+            if self.try_wait().unwrap().is_some() {
+                break;
+            }
+            if Instant::now() > give_up {
+                let _ = self.kill();
+                panic!("did not end");
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let o = self.wait_with_output().unwrap();
+        text(&o.stdout)
+    }
+}
+
+#[test]
+fn check_fails_when_the_device_answers_differently() {
+    // The sample is not from this simulator: its move takes longer than captured.
+    let dir = scratch("check");
+    let (_sim, link) = sim(&dir);
+    let o = run(&[
+        "replay",
+        SAMPLE,
+        "--port",
+        link.to_str().unwrap(),
+        "--check",
+        "--reply-timeout",
+        "200ms",
+        "--quiet",
+    ]);
+    assert!(!o.status.success());
+    let out = text(&o.stdout);
+    assert!(
+        out.contains("MISSING  MOT_MOVE_COMPLETED ch1 (reply to #13 MOT_MOVE_ABSOLUTE ch1)"),
+        "{out}"
+    );
+    assert!(text(&o.stderr).contains("differences found (--check)"));
+}
+
+#[test]
+fn ctrl_c_stops_sending_and_stops_the_moving_channel() {
+    let dir = scratch("abort");
+    let (_sim, link) = sim(&dir);
+    let rec = dir.join("aborted.pcapng");
+    let child = Command::new(BIN)
+        .args([
+            "replay",
+            SAMPLE,
+            "--port",
+            link.to_str().unwrap(),
+            "--stop-on-abort",
+            "-w",
+            rec.to_str().unwrap(),
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut p = Proc(child);
+    let pid = nix::unistd::Pid::from_raw(p.0.id() as i32);
+    let stdout = p.0.stdout.take().unwrap();
+    let mut lines = BufReader::new(stdout).lines();
+    // Homing takes the simulator 2 s: interrupt it in the middle.
+    for l in lines.by_ref() {
+        let l = l.unwrap();
+        if l.contains("MOT_MOVE_HOME ") {
+            break;
+        }
+    }
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).unwrap();
+    let rest: Vec<String> = lines.map(|l| l.unwrap()).collect();
+    let rest = rest.join("\n");
+    let status = p.0.wait().unwrap();
+    assert!(status.success(), "{rest}");
+    assert!(rest.contains("# aborted: SIGINT"), "{rest}");
+    assert!(
+        rest.contains("# sent on abort: MOT_MOVE_STOP ch1 to 0x50"),
+        "{rest}"
+    );
+    assert!(rest.contains("# sent 5 of 7 messages"), "{rest}");
+    // The recording ends with the stop, and nothing of the capture after it was sent.
+    let d = run(&["decode", rec.to_str().unwrap()]);
+    let host: Vec<String> = text(&d.stdout)
+        .lines()
+        .filter(|l| l.contains("host →"))
+        .map(str::to_string)
+        .collect();
+    assert!(host.last().unwrap().contains("MOT_MOVE_STOP"), "{host:?}");
+    assert!(!host.iter().any(|l| l.contains("MOT_MOVE_ABSOLUTE")));
+}
