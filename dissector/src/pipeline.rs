@@ -315,6 +315,16 @@ impl Pipeline {
             self.first_ts = ctx.ts_ns;
         }
         let i = self.lane(&ctx);
+        if self.proto == Some(Proto::Elliptec) && ctx.dir.is_some() {
+            // The other direction speaks: the host's last command is over, terminator or not.
+            for j in 0..self.lanes.len() {
+                let l = &self.lanes[j];
+                if j != i && l.stream == ctx.stream && l.dir.is_some() && l.dir != ctx.dir {
+                    self.lanes[j].ell.cut();
+                    self.drain(j, emit)?;
+                }
+            }
+        }
         let lane = &mut self.lanes[i];
         if ctx.ts_ns.is_some() {
             lane.ts = ctx.ts_ns;

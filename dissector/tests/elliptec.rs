@@ -382,3 +382,58 @@ fn bad_input() {
     assert_eq!((fs.len(), garbage), (0, 5));
     assert_eq!(frames(b""), (vec![], 0));
 }
+
+/// Hosts send commands without a terminator: with directions known, a command is framed when
+/// the module starts answering, so it comes before its reply and pairs with it.
+#[test]
+fn an_unterminated_host_command_is_framed_when_the_module_answers() {
+    use aptscope_dissector::detect::Proto;
+    use aptscope_dissector::pipeline::{Ctx, Format, Pipeline};
+    use aptscope_dissector::table::Dir;
+    let mut p = Pipeline::new(Some(Proto::Elliptec), Format::Json);
+    let mut out: Vec<serde_json::Value> = vec![];
+    let mut emit = |l: &str| -> Result<(), ()> {
+        out.push(serde_json::from_str(l).unwrap());
+        Ok(())
+    };
+    let ctx = |dir, t| Ctx {
+        stream: 0,
+        dir: Some(dir),
+        ts_ns: Some(t),
+    };
+    p.push_chunk(ctx(Dir::HostToDevice, 1_000), b"0gp", &mut emit)
+        .unwrap();
+    p.push_chunk(
+        ctx(Dir::DeviceToHost, 5_000_000),
+        b"0PO00002000\r\n",
+        &mut emit,
+    )
+    .unwrap();
+    // The host's next command arrives in two pieces: the first is not cut by anything.
+    p.push_chunk(ctx(Dir::HostToDevice, 9_000_000), b"1g", &mut emit)
+        .unwrap();
+    p.push_chunk(ctx(Dir::HostToDevice, 9_100_000), b"s", &mut emit)
+        .unwrap();
+    p.push_chunk(ctx(Dir::DeviceToHost, 12_000_000), b"1GS00\r\n", &mut emit)
+        .unwrap();
+    p.finish(&mut emit).unwrap();
+    let frames: Vec<(String, Option<u64>)> = out
+        .iter()
+        .filter(|v| v["type"] == "frame")
+        .map(|v| (v["text"].as_str().unwrap().to_string(), v["pair"].as_u64()))
+        .collect();
+    assert_eq!(
+        frames,
+        [
+            ("0gp".to_string(), None),
+            ("0PO00002000\r\n".to_string(), Some(1)),
+            ("1gs".to_string(), None),
+            ("1GS00\r\n".to_string(), Some(3)),
+        ]
+    );
+    assert!(
+        out.iter()
+            .all(|v| v["diag"].as_array().is_none_or(|d| d.is_empty())),
+        "{out:?}"
+    );
+}

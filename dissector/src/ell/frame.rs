@@ -141,7 +141,9 @@ fn term_len(b: &[u8], eof: bool) -> Option<usize> {
     }
 }
 
-fn step(b: &[u8], eof: bool) -> Step {
+/// `cut`: the host's command is over (the other direction spoke), so a host command whose data
+/// is complete ends where the bytes end, without waiting for an optional terminator.
+fn step(b: &[u8], eof: bool, cut: bool) -> Step {
     let h = match head(b) {
         None => return Step::Skip,
         Some(Err(())) => return if eof { Step::Skip } else { Step::NeedMore },
@@ -193,7 +195,7 @@ fn step(b: &[u8], eof: bool) -> Step {
                 Step::NeedMore
             };
         }
-        return match term_len(&data[n..], eof) {
+        return match term_len(&data[n..], eof || cut) {
             Some(t) => Step::Frame(h.data_at + n + t, false),
             None => Step::NeedMore,
         };
@@ -228,6 +230,7 @@ pub struct EllFramer {
     garbage: Option<usize>,
     base: u64,
     eof: bool,
+    cut: bool,
 }
 
 impl EllFramer {
@@ -248,6 +251,15 @@ impl EllFramer {
             }
         }
         self.buf.extend_from_slice(data);
+        self.cut = false;
+    }
+
+    /// Say that the other side of the line has spoken since the last [`push`](Self::push): a
+    /// host command complete but for its optional terminator is framed now, not when the host's
+    /// next bytes arrive (hosts often send no terminator). Only the Pipeline's knowledge of
+    /// directions can tell this; the bytes alone cannot.
+    pub fn cut(&mut self) {
+        self.cut = true;
     }
 
     /// Declare the end of the stream.
@@ -281,7 +293,7 @@ impl EllFramer {
                 }
                 return None;
             }
-            let s = step(&self.buf[self.pos..], self.eof);
+            let s = step(&self.buf[self.pos..], self.eof, self.cut);
             match s {
                 Step::Skip => {
                     if self.garbage.is_none() {
