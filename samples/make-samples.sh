@@ -93,3 +93,6 @@ cd ..
 cargo run -q -p aptscope-capture --example make_samples
 python3 samples/make-textlogs.py
 if command -v hexdump >/dev/null; then hexdump -C samples/kdc101-session.bin > samples/kdc101-session.hexdump.txt; fi
+
+# Scripted host sessions against the simulators, recorded on a virtual clock (samples/sessions/).
+cargo run -q -p aptscope-capture --example record_sessions -- samples/sessions

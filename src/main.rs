@@ -36,7 +36,8 @@ struct Cli {
 enum SimCmd {
     /// An APT controller.
     Apt {
-        /// kdc101, tdc001, kpz101 or bsc203.
+        /// kdc101, tdc001, kpz101, bsc203 (three bays), tls001 (laser), ttc001 (TEC) or kpa101
+        /// (quad detector).
         #[arg(long, default_value = "kdc101")]
         model: String,
         /// Symlink to the pseudo-terminal.

@@ -36,6 +36,22 @@ const HOMED: u32 = 0x400;
 const ENABLED: u32 = 0x8000_0000;
 // pz_status bits.
 const PZ_ACTUATOR_CONNECTED: u32 = 0x1;
+// la_status bits (dissector/msgs/50_laser_tec.apt).
+const LA_OUTPUT_ENABLED: u32 = 0x1;
+const LA_KEYSWITCH_ENABLED: u32 = 0x2;
+const LA_CLOSED_LOOP: u32 = 0x4;
+const LA_UNITS_MW: u32 = 0x20;
+// tec_status bits.
+const TEC_OUTPUT_ENABLED: u32 = 0x1;
+const TEC_DISP_TACT: u32 = 0x10;
+/// Laser diode current as a fraction of full scale per unit of power setpoint (TLS001 model).
+const LA_CURRENT_PER_POWER: f64 = 0.6;
+/// TEC output current while holding the setpoint (mA).
+const TEC_HOLD_MA: i64 = 420;
+/// The beam's offset on the quad detector (XDIFF, YDIFF, SUM raw), and the residual error in
+/// closed loop.
+const QUAD_BEAM: (i64, i64, i64) = (1200, -800, 45_000);
+const QUAD_RESIDUAL: (i64, i64) = (3, -2);
 
 /// The controllers the simulator can be.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -48,16 +64,30 @@ pub enum AptModel {
     Kpz101,
     /// Three-bay benchtop stepper controller: motherboard at 0x11, bays at 0x21–0x23.
     Bsc203,
+    /// T-Cube laser source (LA_ PARAMS sub-messages, LA_ENABLEOUTPUT/DISABLEOUTPUT).
+    Tls001,
+    /// T-Cube TEC controller (TEC_ PARAMS sub-messages).
+    Ttc001,
+    /// K-Cube position aligner with a quad detector (QUAD_ PARAMS sub-messages).
+    Kpa101,
 }
 
 impl AptModel {
-    /// Parse `kdc101`, `tdc001`, `kpz101`, `bsc203` (any case).
+    /// The names [`parse`](Self::parse) accepts.
+    pub const NAMES: &'static [&'static str] = &[
+        "kdc101", "tdc001", "kpz101", "bsc203", "tls001", "ttc001", "kpa101",
+    ];
+
+    /// Parse `kdc101`, `tdc001`, `kpz101`, `bsc203`, `tls001`, `ttc001`, `kpa101` (any case).
     pub fn parse(s: &str) -> Option<AptModel> {
         Some(match s.trim().to_ascii_lowercase().as_str() {
             "kdc101" => AptModel::Kdc101,
             "tdc001" => AptModel::Tdc001,
             "kpz101" => AptModel::Kpz101,
             "bsc203" => AptModel::Bsc203,
+            "tls001" => AptModel::Tls001,
+            "ttc001" => AptModel::Ttc001,
+            "kpa101" => AptModel::Kpa101,
             _ => return None,
         })
     }
@@ -69,6 +99,9 @@ impl AptModel {
             AptModel::Tdc001 => "TDC001",
             AptModel::Kpz101 => "KPZ101",
             AptModel::Bsc203 => "BSC203",
+            AptModel::Tls001 => "TLS001",
+            AptModel::Ttc001 => "TTC001",
+            AptModel::Kpa101 => "KPA101",
         }
     }
 
@@ -79,7 +112,15 @@ impl AptModel {
             AptModel::Tdc001 => 83,
             AptModel::Kpz101 => 29,
             AptModel::Bsc203 => 70,
+            AptModel::Tls001 => 86,
+            AptModel::Ttc001 => 87,
+            AptModel::Kpa101 => 69,
         }
+    }
+
+    /// Whether the controller drives a motor (moves and homing); the others ignore motion.
+    fn has_motor(self) -> bool {
+        matches!(self, AptModel::Kdc101 | AptModel::Tdc001 | AptModel::Bsc203)
     }
 
     /// Motion scaling: position counts per mm, travel in mm, and the factors from counts/s and
@@ -88,7 +129,12 @@ impl AptModel {
         match self {
             // Z8 stage on a DC servo controller: 34 554.96 counts/mm, T = 2048/6e6 s;
             // velocity = counts/s × T × 65536, acceleration = counts/s² × T² × 65536.
-            AptModel::Kdc101 | AptModel::Tdc001 | AptModel::Kpz101 => Scaling {
+            AptModel::Kdc101
+            | AptModel::Tdc001
+            | AptModel::Kpz101
+            | AptModel::Tls001
+            | AptModel::Ttc001
+            | AptModel::Kpa101 => Scaling {
                 counts_per_mm: 34_554.96,
                 travel_mm: 25.0,
                 vel: 22.369_621,
@@ -257,8 +303,10 @@ type Params = Vec<(&'static str, FieldValue)>;
 struct Unit {
     addr: u8,
     serial: u32,
-    piezo: bool,
+    motor: bool,
     enabled: bool,
+    /// Laser output on (LA_ENABLEOUTPUT).
+    output: bool,
     homed: bool,
     pos: i64,
     motion: Option<Motion>,
@@ -266,6 +314,9 @@ struct Unit {
     next_update: Option<u64>,
     /// Stored parameters by GET message name (answers REQ_, updated by SET_).
     params: Vec<(&'static str, Params)>,
+    /// Sub-message parameter blocks: GET message name, sub-message id, fields (answers
+    /// REQ_PARAMS for that id, updated by SET_PARAMS).
+    subs: Vec<(&'static str, u16, Params)>,
 }
 
 impl Unit {
@@ -274,6 +325,20 @@ impl Unit {
             .iter()
             .find(|(n, _)| *n == get)?
             .1
+            .iter()
+            .find(|(f, _)| *f == field)
+            .and_then(|(_, v)| match v {
+                FieldValue::Int(i) => Some(*i),
+                FieldValue::Float(x) => Some(*x as i64),
+                _ => None,
+            })
+    }
+
+    fn sub_param(&self, get: &str, id: u16, field: &str) -> Option<i64> {
+        self.subs
+            .iter()
+            .find(|(n, i, _)| *n == get && *i == id)?
+            .2
             .iter()
             .find(|(f, _)| *f == field)
             .and_then(|(_, v)| match v {
@@ -336,7 +401,10 @@ impl AptSim {
         };
         for (i, addr) in addrs.into_iter().enumerate() {
             let piezo = model == AptModel::Kpz101;
-            let params: Vec<(&'static str, Params)> = if piezo {
+            let subs = sub_params(model);
+            let params: Vec<(&'static str, Params)> = if !model.has_motor() && !piezo {
+                vec![]
+            } else if piezo {
                 vec![
                     ("PZ_GET_OUTPUTVOLTS", vec![("voltage", int(0))]),
                     ("PZ_GET_POSCONTROLMODE", vec![("mode", int(1))]),
@@ -403,13 +471,15 @@ impl AptSim {
             units.push(Unit {
                 addr,
                 serial: serial + i as u32 * (model == AptModel::Bsc203) as u32,
-                piezo,
+                motor: model.has_motor(),
                 enabled: true,
+                output: false,
                 homed: false,
                 pos: 0,
                 motion: None,
                 next_update: None,
                 params,
+                subs,
             });
         }
         AptSim {
@@ -590,9 +660,15 @@ impl AptSim {
                 let b = self.dc_status(ui, now, "MOT_GET_DCSTATUSUPDATE", chan);
                 self.send(now, b);
             }
-            "MOT_REQ_STATUSUPDATE" => {
+            "MOT_REQ_STATUSUPDATE"
+            | "LA_REQ_STATUSUPDATE"
+            | "TEC_REQ_STATUSUPDATE"
+            | "QUAD_REQ_STATUSUPDATE" => {
                 let b = self.status_update(ui, now);
                 self.send(now, b);
+            }
+            "LA_ENABLEOUTPUT" | "LA_DISABLEOUTPUT" if self.model == AptModel::Tls001 => {
+                self.units[ui].output = name == "LA_ENABLEOUTPUT";
             }
             "PZ_REQ_PZSTATUSBITS" => {
                 let b = build(
@@ -609,19 +685,23 @@ impl AptSim {
             }
             "MOT_MOVE_HOME" => {
                 let u = &self.units[ui];
-                if u.piezo || !u.enabled {
+                if !u.motor || !u.enabled {
                     return;
                 }
                 let from = self.position(addr, now).unwrap_or(0);
                 let hv = sc.counts_s(u.param("MOT_GET_HOMEPARAMS", "home_velocity").unwrap_or(1));
                 let secs = HOME_BASE_NS as f64 / SEC as f64 + from.unsigned_abs() as f64 / hv;
-                let mo = Motion::linear(Kind::Home, now, from, 0, secs, chan);
+                let mut mo = Motion::linear(Kind::Home, now, from, 0, secs, chan);
+                if from == 0 {
+                    // Already at zero: the search for the reverse limit switch still runs CCW.
+                    mo.dir = -1;
+                }
                 self.units[ui].motion = Some(mo);
                 self.units[ui].homed = false;
             }
             "MOT_MOVE_ABSOLUTE" | "MOT_MOVE_RELATIVE" | "MOT_MOVE_JOG" | "MOT_MOVE_VELOCITY" => {
                 let u = &self.units[ui];
-                if u.piezo || !u.enabled {
+                if !u.motor || !u.enabled {
                     return;
                 }
                 let from = self.position(addr, now).unwrap_or(0);
@@ -723,6 +803,10 @@ impl AptSim {
     /// SET_x stores its fields for GET_x; REQ_x answers with GET_x when it is modelled.
     fn generic(&mut self, ui: usize, f: &AptFrame<'_, '_>, now: u64) {
         let Some(m) = f.msg else { return };
+        if m.subs.is_some() {
+            self.sub_message(ui, f, now);
+            return;
+        }
         let chan = f.channel().filter(|c| *c > 0).unwrap_or(1);
         let addr = self.units[ui].addr;
         if m.name.contains("_SET_") {
@@ -764,6 +848,149 @@ impl AptSim {
             vals.extend(p.iter().cloned());
             let b = build(gname, None, HOST, addr, &vals);
             self.send(now, b);
+        }
+    }
+
+    /// `x_SET_PARAMS` stores the sub-message's fields for `x_GET_PARAMS` (blocks the model
+    /// has only); `x_REQ_PARAMS` answers the block named by its sub-message id, with live
+    /// readings where the block has them.
+    fn sub_message(&mut self, ui: usize, f: &AptFrame<'_, '_>, now: u64) {
+        let Some(m) = f.msg else { return };
+        let (get, set) = if m.name.contains("_SET_") {
+            (m.name.replacen("_SET_", "_GET_", 1), true)
+        } else if m.name.contains("_REQ_") {
+            (m.name.replacen("_REQ_", "_GET_", 1), false)
+        } else {
+            return;
+        };
+        let Some(gm) = Table::global().msg_by_name(&get) else {
+            return;
+        };
+        let id = f
+            .field("sub_id")
+            .and_then(|(_, v)| v.as_i64())
+            .and_then(|i| u16::try_from(i).ok())
+            .or(f.sub.map(|s| s.id));
+        let Some(id) = id else { return };
+        let addr = self.units[ui].addr;
+        let Some(si) = self.units[ui]
+            .subs
+            .iter()
+            .position(|(n, i, _)| *n == gm.name && *i == id)
+        else {
+            return;
+        };
+        if set {
+            let mut new: Params = vec![];
+            for (field, v) in f.fields() {
+                if field.name == "sub_id" {
+                    continue;
+                }
+                let fv = match (field.ty, v) {
+                    (Ty::Prim(_), Value::F(x)) => FieldValue::Float(x),
+                    (Ty::Prim(_), v) => match v.as_i64() {
+                        Some(i) => FieldValue::Int(i),
+                        None => continue,
+                    },
+                    _ => continue,
+                };
+                new.push((field.name, fv));
+            }
+            let slot = &mut self.units[ui].subs[si].2;
+            for (name, fv) in new {
+                if let Some(s) = slot.iter_mut().find(|(n, _)| *n == name) {
+                    s.1 = fv;
+                }
+            }
+        } else {
+            let mut vals = self.units[ui].subs[si].2.clone();
+            for (name, v) in self.live(ui, gm.name, id) {
+                if let Some(s) = vals.iter_mut().find(|(n, _)| *n == name) {
+                    s.1 = v;
+                }
+            }
+            let b = build_sub(gm.name, id, HOST, addr, &vals);
+            self.send(now, b);
+        }
+    }
+
+    /// Readings of a sub-message block that come from the unit's state, not from SET_PARAMS.
+    fn live(&self, ui: usize, get: &str, id: u16) -> Params {
+        match (get, id) {
+            ("LA_GET_PARAMS", 3) => {
+                let (c, p, _) = self.laser(ui);
+                vec![("laser_current", int(c)), ("laser_power", int(p))]
+            }
+            ("LA_GET_PARAMS", 7) => vec![("status_bits", int(self.laser(ui).2 as i64))],
+            ("TEC_GET_PARAMS", 3) => {
+                let (i, ta, ts, _) = self.tec(ui);
+                vec![("i_tec", int(i)), ("t_act", int(ta)), ("t_set", int(ts))]
+            }
+            ("TEC_GET_PARAMS", 7) => vec![("status_bits", int(self.tec(ui).3 as i64))],
+            ("QUAD_GET_PARAMS", 3) => {
+                let q = self.quad(ui);
+                vec![
+                    ("x_diff", int(q.0)),
+                    ("y_diff", int(q.1)),
+                    ("sum", int(q.2)),
+                    ("x_pos", int(q.3)),
+                    ("y_pos", int(q.4)),
+                ]
+            }
+            ("QUAD_GET_PARAMS", 9) => vec![("status_bits", int(self.quad(ui).5 as i64))],
+            _ => vec![],
+        }
+    }
+
+    /// Laser current and power (0..32767) and status bits: the power follows the setpoint while
+    /// the output is on.
+    fn laser(&self, ui: usize) -> (i64, i64, u32) {
+        let u = &self.units[ui];
+        let sp = u.sub_param("LA_GET_PARAMS", 1, "setpoint").unwrap_or(0);
+        let mut bits = LA_KEYSWITCH_ENABLED | LA_CLOSED_LOOP | LA_UNITS_MW;
+        if u.output {
+            bits |= LA_OUTPUT_ENABLED;
+            let c = (sp as f64 * LA_CURRENT_PER_POWER).round() as i64;
+            (c, sp, bits)
+        } else {
+            (0, 0, bits)
+        }
+    }
+
+    /// TEC current (mA), actual and set temperature, status bits: the element holds its
+    /// setpoint.
+    fn tec(&self, ui: usize) -> (i64, i64, i64, u32) {
+        let u = &self.units[ui];
+        let ts = u.sub_param("TEC_GET_PARAMS", 1, "t_set").unwrap_or(0);
+        let lim = u
+            .sub_param("TEC_GET_PARAMS", 5, "i_lim")
+            .unwrap_or(TEC_HOLD_MA);
+        let disp = match u.sub_param("TEC_GET_PARAMS", 0x0B, "disp_mode") {
+            Some(1) => 0x20,
+            Some(2) => 0x40,
+            Some(3) => 0x80,
+            _ => TEC_DISP_TACT,
+        };
+        (TEC_HOLD_MA.min(lim), ts, ts, TEC_OUTPUT_ENABLED | disp)
+    }
+
+    /// Quad detector XDIFF, YDIFF, SUM, position outputs XPOS, YPOS and status bits, by
+    /// operating mode: monitor (outputs 0), open loop (outputs as set), closed loop (the
+    /// outputs cancel the beam's offset).
+    fn quad(&self, ui: usize) -> (i64, i64, i64, i64, i64, u32) {
+        let u = &self.units[ui];
+        let (bx, by, sum) = QUAD_BEAM;
+        match u.sub_param("QUAD_GET_PARAMS", 7, "mode") {
+            Some(2) => {
+                let x = u.sub_param("QUAD_GET_PARAMS", 0x0D, "x_pos").unwrap_or(0);
+                let y = u.sub_param("QUAD_GET_PARAMS", 0x0D, "y_pos").unwrap_or(0);
+                (bx, by, sum, x, y, 0x2)
+            }
+            Some(3) | Some(4) => {
+                let (rx, ry) = QUAD_RESIDUAL;
+                (rx, ry, sum, -2 * bx, -2 * by, 0x4)
+            }
+            _ => (bx, by, sum, 0, 0, 0x1),
         }
     }
 
@@ -899,6 +1126,52 @@ impl AptSim {
                     ],
                 )
             }
+            AptModel::Tls001 => {
+                let (c, p, bits) = self.laser(ui);
+                build(
+                    "LA_GET_STATUSUPDATE",
+                    None,
+                    HOST,
+                    u.addr,
+                    &[
+                        ("laser_current", int(c)),
+                        ("laser_power", int(p)),
+                        ("status_bits", int(bits as i64)),
+                    ],
+                )
+            }
+            AptModel::Ttc001 => {
+                let (i, ta, ts, bits) = self.tec(ui);
+                build(
+                    "TEC_GET_STATUSUPDATE",
+                    None,
+                    HOST,
+                    u.addr,
+                    &[
+                        ("i_tec", int(i)),
+                        ("t_act", int(ta)),
+                        ("t_set", int(ts)),
+                        ("status_bits", int(bits as i64)),
+                    ],
+                )
+            }
+            AptModel::Kpa101 => {
+                let q = self.quad(ui);
+                build(
+                    "QUAD_GET_STATUSUPDATE",
+                    None,
+                    HOST,
+                    u.addr,
+                    &[
+                        ("x_diff", int(q.0)),
+                        ("y_diff", int(q.1)),
+                        ("sum", int(q.2)),
+                        ("x_pos", int(q.3)),
+                        ("y_pos", int(q.4)),
+                        ("status_bits", int(q.5 as i64)),
+                    ],
+                )
+            }
             _ => self.dc_status(ui, now, "MOT_GET_DCSTATUSUPDATE", 1),
         }
     }
@@ -1028,4 +1301,174 @@ pub(crate) fn build(
         .cloned()
         .collect();
     encode(form, &vals, m.id, dst, src).ok()
+}
+
+/// Encode sub-message `id` of the group of `get` (an `x_GET_PARAMS`) from `src` to `dst`, with
+/// the sub-message id first and the fields its form has; `None` if the table has no such block.
+pub(crate) fn build_sub(
+    get: &str,
+    id: u16,
+    dst: u8,
+    src: u8,
+    vals: &[(&str, FieldValue)],
+) -> Option<Vec<u8>> {
+    let t = Table::global();
+    let m = t.msg_by_name(get)?;
+    let sub = t.sub(m.subs?, id)?;
+    let form = sub.forms.iter().find(|f| {
+        vals.iter()
+            .all(|(k, _)| f.fields.iter().any(|x| x.name == *k))
+    })?;
+    let mut v: Vec<(&str, FieldValue)> = vec![("sub_id", int(id as i64))];
+    v.extend(
+        vals.iter()
+            .filter(|(k, _)| *k != "sub_id" && form.fields.iter().any(|x| x.name == *k))
+            .cloned(),
+    );
+    encode(form, &v, m.id, dst, src).ok()
+}
+
+/// The sub-message parameter blocks a model answers, with their power-on values.
+fn sub_params(model: AptModel) -> Vec<(&'static str, u16, Params)> {
+    let f = FieldValue::Float;
+    match model {
+        AptModel::Tls001 => {
+            let g = "LA_GET_PARAMS";
+            vec![
+                (g, 0x01, vec![("setpoint", int(0))]),
+                (
+                    g,
+                    0x03,
+                    vec![("laser_current", int(0)), ("laser_power", int(0))],
+                ),
+                (g, 0x05, vec![("laser_source", int(0))]),
+                (g, 0x07, vec![("status_bits", int(0))]),
+                (
+                    g,
+                    0x09,
+                    // 50 mA, 2.5 mW, 635 nm.
+                    vec![
+                        ("max_current", int(5000)),
+                        ("max_power", int(25_000)),
+                        ("wavelength", int(635)),
+                    ],
+                ),
+                (
+                    g,
+                    0x0B,
+                    vec![("disp_intensity", int(255)), ("disp_units", int(2))],
+                ),
+            ]
+        }
+        AptModel::Ttc001 => {
+            let g = "TEC_GET_PARAMS";
+            vec![
+                (g, 0x01, vec![("t_set", int(2500))]),
+                (
+                    g,
+                    0x03,
+                    vec![("i_tec", int(0)), ("t_act", int(0)), ("t_set", int(0))],
+                ),
+                (g, 0x05, vec![("sensor", int(1)), ("i_lim", int(1000))]),
+                (g, 0x07, vec![("status_bits", int(0))]),
+                (
+                    g,
+                    0x09,
+                    vec![
+                        ("p_gain", int(0x5332)),
+                        ("i_gain", int(0x6665)),
+                        ("d_gain", int(0x4CCC)),
+                    ],
+                ),
+                (
+                    g,
+                    0x0B,
+                    vec![("disp_intensity", int(255)), ("disp_mode", int(0))],
+                ),
+            ]
+        }
+        AptModel::Kpa101 => {
+            let g = "QUAD_GET_PARAMS";
+            vec![
+                (
+                    g,
+                    0x01,
+                    vec![
+                        ("p_gain", int(21_298)),
+                        ("i_gain", int(26_213)),
+                        ("d_gain", int(19_660)),
+                    ],
+                ),
+                (
+                    g,
+                    0x03,
+                    vec![
+                        ("x_diff", int(0)),
+                        ("y_diff", int(0)),
+                        ("sum", int(0)),
+                        ("x_pos", int(0)),
+                        ("y_pos", int(0)),
+                    ],
+                ),
+                (
+                    g,
+                    0x05,
+                    vec![
+                        ("x_pos_demand_min", int(-32_767)),
+                        ("y_pos_demand_min", int(-32_767)),
+                        ("x_pos_demand_max", int(32_767)),
+                        ("y_pos_demand_max", int(32_767)),
+                        ("lv_out_route", int(2)),
+                        ("open_loop_pos_demands", int(1)),
+                        ("x_pos_demand_fb_sense", int(32_767)),
+                        ("y_pos_demand_fb_sense", int(32_767)),
+                    ],
+                ),
+                (g, 0x07, vec![("mode", int(1))]),
+                (g, 0x09, vec![("status_bits", int(0))]),
+                (
+                    g,
+                    0x0B,
+                    vec![
+                        ("disp_intensity", int(255)),
+                        ("disp_mode", int(1)),
+                        ("disp_dim_timeout", int(0)),
+                    ],
+                ),
+                (g, 0x0D, vec![("x_pos", int(0)), ("y_pos", int(0))]),
+                (
+                    g,
+                    0x0E,
+                    vec![
+                        ("pid_consts_p", f(65.7)),
+                        ("pid_consts_i", f(80.3)),
+                        ("pid_consts_d", f(60.9)),
+                        ("pid_consts_dfc", f(500.0)),
+                        ("filter_fc", f(500.0)),
+                        ("filter_q", f(5.0)),
+                        ("notch_filter_on", int(2)),
+                        ("pid_deriv_filter_on", int(1)),
+                    ],
+                ),
+                (
+                    g,
+                    0x0F,
+                    vec![
+                        ("trig1_mode", int(0x0B)),
+                        ("trig1_polarity", int(1)),
+                        ("trig1_sum_min", int(10)),
+                        ("trig1_sum_max", int(90)),
+                        ("trig1_diff_threshold", int(50)),
+                        ("trig2_mode", int(0x0A)),
+                        ("trig2_polarity", int(1)),
+                        ("trig2_sum_min", int(10)),
+                        ("trig2_sum_max", int(90)),
+                        ("trig2_diff_threshold", int(50)),
+                    ],
+                ),
+                (g, 0x10, vec![("dig_ops", int(0))]),
+            ]
+        }
+        _ => vec![],
+    }
 }

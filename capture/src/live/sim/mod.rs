@@ -1,4 +1,5 @@
-//! Device simulators: a Thorlabs APT controller ([`AptSim`]: KDC101, TDC001, KPZ101, BSC203) and
+//! Device simulators: a Thorlabs APT controller ([`AptSim`]: KDC101, TDC001, KPZ101, BSC203,
+//! TLS001 laser source, TTC001 TEC controller, KPA101 position aligner) and
 //! an Elliptec multi-drop bus ([`EllSim`]), each a sans-io core driven by bytes and a clock in
 //! nanoseconds, plus runners that serve a core on a pseudo-terminal ([`run_on_pty`]) or a real
 //! serial port ([`run_on_port`]).
@@ -15,7 +16,9 @@ mod run;
 
 pub use apt::{AptModel, AptSim};
 pub use ell::{parse_modules, EllModel, EllSim};
-pub use run::{run_on_port, run_on_pty, serve_pty, stop_pair, Pty, StopHandle, StopSignal};
+pub use run::{
+    run_on_port, run_on_pty, serve_pty, stop_pair, termination_signals, Pty, StopHandle, StopSignal,
+};
 
 use std::collections::VecDeque;
 use std::io;
@@ -103,12 +106,13 @@ fn invalid(msg: String) -> io::Error {
 }
 
 /// `aptscope sim apt --model MODEL [--pty LINK]`: simulate an APT controller (`kdc101`,
-/// `tdc001`, `kpz101`, `bsc203`) on a new pseudo-terminal, print its path (and link it at
+/// `tdc001`, `kpz101`, `bsc203`, `tls001`, `ttc001`, `kpa101`) on a new pseudo-terminal, print its path (and link it at
 /// `pty`), and serve it until SIGINT/SIGTERM or until the program using it hangs up.
 pub fn sim_apt_main(model: &str, pty: Option<&Path>) -> io::Result<()> {
     let m = AptModel::parse(model).ok_or_else(|| {
         invalid(format!(
-            "unknown model `{model}` (kdc101, tdc001, kpz101, bsc203)"
+            "unknown model `{model}` ({})",
+            AptModel::NAMES.join(", ")
         ))
     })?;
     run_on_pty(AptSim::new(m), pty)

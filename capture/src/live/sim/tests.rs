@@ -97,6 +97,9 @@ fn hw_get_info_has_the_models_serial_prefix() {
         (AptModel::Tdc001, 83, "TDC001"),
         (AptModel::Kpz101, 29, "KPZ101"),
         (AptModel::Bsc203, 70, "BSC203"),
+        (AptModel::Tls001, 86, "TLS001"),
+        (AptModel::Ttc001, 87, "TTC001"),
+        (AptModel::Kpa101, 69, "KPA101"),
     ] {
         let mut sim = AptSim::new(model);
         let dst = if model == AptModel::Bsc203 {
@@ -406,8 +409,15 @@ fn noise(seed: u64, n: usize) -> Vec<u8> {
 fn random_input_never_panics() {
     for seed in 0..40u64 {
         let bytes = noise(seed, 3000);
-        let mut a =
-            AptSim::new([AptModel::Kdc101, AptModel::Bsc203, AptModel::Kpz101][seed as usize % 3]);
+        let models = [
+            AptModel::Kdc101,
+            AptModel::Bsc203,
+            AptModel::Kpz101,
+            AptModel::Tls001,
+            AptModel::Ttc001,
+            AptModel::Kpa101,
+        ];
+        let mut a = AptSim::new(models[seed as usize % models.len()]);
         let mut e = EllSim::new(&parse_modules("0:ELL14,1:ELL9,2:ELL17").unwrap()).unwrap();
         for (i, c) in bytes.chunks(7).enumerate() {
             let t = i as u64 * 3 * MS;
@@ -421,7 +431,45 @@ fn random_input_never_panics() {
     }
     // Every message of the table, with random data, to every address.
     let table = Table::global();
-    let mut sim = AptSim::new(AptModel::Bsc203);
+    for model in [
+        AptModel::Bsc203,
+        AptModel::Tls001,
+        AptModel::Ttc001,
+        AptModel::Kpa101,
+    ] {
+        every_message_with_random_data(table, model);
+    }
+    // Every sub-message of every PARAMS group, set with random data, then requested.
+    for model in [AptModel::Tls001, AptModel::Ttc001, AptModel::Kpa101] {
+        let mut sim = AptSim::new(model);
+        for (i, sub) in table.subs().iter().enumerate() {
+            for form in &sub.forms {
+                let aptscope_dissector::table::FormKind::Data(n) = form.kind else {
+                    continue;
+                };
+                for m in table.msgs().iter().filter(|m| m.subs == Some(sub.group)) {
+                    let mut b = noise(i as u64 + 7, 6 + n as usize);
+                    b[0..2].copy_from_slice(&m.id.to_le_bytes());
+                    b[2..4].copy_from_slice(&n.to_le_bytes());
+                    b[4] = 0x50 | 0x80;
+                    b[5] = 0x01;
+                    b[6..8].copy_from_slice(&sub.id.to_le_bytes());
+                    sim.input(&b, i as u64 * MS);
+                    let mut r = vec![0u8; 6];
+                    r[0..2].copy_from_slice(&m.id.to_le_bytes());
+                    r[2] = sub.id as u8;
+                    r[4] = 0x50;
+                    r[5] = 0x01;
+                    sim.input(&r, i as u64 * MS);
+                }
+            }
+        }
+        drive(&mut sim, 0, 100 * SEC);
+    }
+}
+
+fn every_message_with_random_data(table: &Table, model: AptModel) {
+    let mut sim = AptSim::new(model);
     for (i, m) in table.msgs().iter().enumerate() {
         for dst in [0x11u8, 0x21, 0x50] {
             let mut b = noise(i as u64, 6 + 14);
@@ -529,6 +577,153 @@ fn ell_change_address_takes_effect() {
     let out = ell_text(&talk(&mut sim, b"1gs", 4 * SEC, 5 * SEC));
     let all: String = out.into_iter().map(|(_, s)| s).collect();
     assert_eq!(all, "1GS00\r\n1GS00\r\n");
+}
+
+// ------------------------------------------------------------------- laser, TEC, quad (PARAMS)
+
+/// A frame from the table as `aptscope encode` builds it (`NAME:SUB` for sub-messages).
+fn enc(name: &str, args: &str) -> Vec<u8> {
+    crate::live::session::apt_frame(name, args, 0x50).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Send each frame in turn (10 ms apart) and decode everything that comes back.
+fn exchange<S: Simulator>(sim: &mut S, frames: &[Vec<u8>]) -> Vec<Rx> {
+    let mut out = vec![];
+    for (i, f) in frames.iter().enumerate() {
+        let t = 1000 + i as u64 * 10 * MS;
+        out.extend(talk(sim, f, t, t + 10 * MS - 1));
+    }
+    decode_apt(&out)
+}
+
+#[test]
+fn model_names_parse_and_are_listed() {
+    for n in AptModel::NAMES {
+        let m = AptModel::parse(n).unwrap_or_else(|| panic!("{n}"));
+        assert_eq!(m.name().to_ascii_lowercase(), *n);
+    }
+    assert_eq!(AptModel::parse("KLD101"), None);
+}
+
+#[test]
+fn tls001_remembers_the_setpoint_and_reports_power_while_the_output_is_on() {
+    let mut sim = AptSim::new(AptModel::Tls001);
+    let rx = exchange(
+        &mut sim,
+        &[
+            enc("LA_REQ_PARAMS", "sub_id=9"),
+            enc("LA_SET_PARAMS:SETPOINT", "setpoint=16384"),
+            enc("LA_REQ_PARAMS", "sub_id=1"),
+            enc("LA_REQ_PARAMS", "sub_id=3"),
+            enc("LA_ENABLEOUTPUT", ""),
+            enc("LA_REQ_PARAMS", "sub_id=3"),
+            enc("LA_REQ_PARAMS", "sub_id=7"),
+            enc("LA_REQ_STATUSUPDATE", ""),
+            enc("LA_DISABLEOUTPUT", ""),
+            enc("LA_REQ_PARAMS", "sub_id=7"),
+            // A block the model does not have, and a move it cannot make: no answer.
+            enc("LA_REQ_PARAMS", "sub_id=13"),
+            req("MOT_MOVE_HOME", 0x50, &[("chan_ident", 1)]),
+        ],
+    );
+    let names: Vec<&str> = rx.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "LA_GET_PARAMS",
+            "LA_GET_PARAMS",
+            "LA_GET_PARAMS",
+            "LA_GET_PARAMS",
+            "LA_GET_PARAMS",
+            "LA_GET_STATUSUPDATE",
+            "LA_GET_PARAMS"
+        ]
+    );
+    assert!(rx.iter().all(|r| (r.src, r.dst) == (0x50, 0x01)));
+    assert_eq!(rx[0].get("sub_id"), 9);
+    assert_eq!(rx[0].get("wavelength"), 635);
+    assert_eq!((rx[1].get("sub_id"), rx[1].get("setpoint")), (1, 16384));
+    // Output off: no power; on: the setpoint.
+    assert_eq!(
+        (rx[2].get("laser_power"), rx[2].get("laser_current")),
+        (0, 0)
+    );
+    assert_eq!(rx[3].get("laser_power"), 16384);
+    assert!(rx[3].get("laser_current") > 0);
+    assert_eq!(rx[4].get("status_bits") & 1, 1);
+    assert_eq!(rx[5].get("laser_power"), 16384);
+    assert_eq!(rx[6].get("status_bits") & 1, 0);
+}
+
+#[test]
+fn ttc001_holds_the_set_temperature() {
+    let mut sim = AptSim::new(AptModel::Ttc001);
+    let rx = exchange(
+        &mut sim,
+        &[
+            enc("TEC_SET_PARAMS:TEMP_SETPOINT", "t_set=2000"),
+            enc("TEC_REQ_PARAMS", "sub_id=1"),
+            enc(
+                "TEC_SET_PARAMS:LOOP_PARAMS",
+                "p_gain=100 i_gain=200 d_gain=300",
+            ),
+            enc("TEC_REQ_PARAMS", "sub_id=9"),
+            enc("TEC_REQ_PARAMS", "sub_id=3"),
+            enc("TEC_REQ_PARAMS", "sub_id=7"),
+            enc("TEC_REQ_STATUSUPDATE", ""),
+        ],
+    );
+    let names: Vec<&str> = rx.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(names[..4], ["TEC_GET_PARAMS"; 4]);
+    assert_eq!(names[4], "TEC_GET_STATUSUPDATE");
+    assert_eq!(rx[0].get("t_set"), 2000);
+    assert_eq!(
+        (
+            rx[1].get("p_gain"),
+            rx[1].get("i_gain"),
+            rx[1].get("d_gain")
+        ),
+        (100, 200, 300)
+    );
+    assert_eq!((rx[2].get("t_act"), rx[2].get("t_set")), (2000, 2000));
+    assert_eq!(rx[3].get("status_bits") & 1, 1);
+    assert_eq!(rx[4].get("t_act"), 2000);
+}
+
+#[test]
+fn kpa101_operating_mode_drives_readings_and_status() {
+    let mut sim = AptSim::new(AptModel::Kpa101);
+    let rx = exchange(
+        &mut sim,
+        &[
+            enc("QUAD_REQ_PARAMS", "sub_id=9"),
+            enc(
+                "QUAD_SET_PARAMS:POS_DEMAND_OUTPUTS",
+                "x_pos=-2400 y_pos=1600",
+            ),
+            enc("QUAD_SET_PARAMS:OPER_MODE", "mode=OPEN_LOOP"),
+            enc("QUAD_REQ_PARAMS", "sub_id=3"),
+            enc("QUAD_SET_PARAMS:OPER_MODE", "mode=CLOSED_LOOP"),
+            enc("QUAD_REQ_PARAMS", "sub_id=7"),
+            enc("QUAD_REQ_PARAMS", "sub_id=9"),
+            enc("QUAD_REQ_PARAMS", "sub_id=14"),
+            enc("HW_START_UPDATEMSGS", ""),
+        ],
+    );
+    let names: Vec<&str> = rx.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(names, ["QUAD_GET_PARAMS"; 5]);
+    assert_eq!(rx[0].get("status_bits"), 0x1); // monitor
+    assert_eq!((rx[1].get("x_pos"), rx[1].get("y_pos")), (-2400, 1600));
+    assert!(rx[1].get("x_diff") != 0);
+    assert_eq!(rx[2].get("mode"), 3);
+    assert_eq!(rx[3].get("status_bits"), 0x4); // closed loop
+    assert_eq!(rx[4].get("sub_id"), 14);
+    // Status updates every 100 ms.
+    let t = 1000 + 9 * 10 * MS;
+    let ups = decode_apt(&drive(&mut sim, t, t + 350 * MS));
+    assert_eq!(ups.len(), 3, "{ups:?}");
+    assert!(ups.iter().all(|u| u.name == "QUAD_GET_STATUSUPDATE"));
+    assert_eq!(ups[0].get("status_bits"), 0x4);
 }
 
 // ------------------------------------------------------------------------------ pseudo-terminal
