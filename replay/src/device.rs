@@ -351,12 +351,12 @@ pub fn run_device<'a>(
             }
             queue.pop();
             let t = clock.now_ns();
-            o.timing.record(t.saturating_sub(due));
             let raw = &script.msgs[i].raw;
             if let Err(e) = link.send(raw) {
                 sess.gone = Some(format!("writing to {name} failed: {e}"));
                 break;
             }
+            o.timing.record(clock.now_ns().saturating_sub(due));
             o.sent += 1;
             sess.crossed(Side::Device, t, raw);
         }

@@ -54,9 +54,21 @@ impl Msg {
     }
 }
 
-/// `NAME`, `NAME chN`, `NAME @A` (Elliptec address) for a decoded record.
+/// `NAME`, `NAME chN`, `NAME @A` (Elliptec address), `NAME SUB` (sub-message) for a decoded
+/// record.
 pub fn label_of(rec: &Value) -> String {
-    let name = rec.get("name").and_then(Value::as_str).unwrap_or("?");
+    let mut name = rec
+        .get("name")
+        .and_then(Value::as_str)
+        .unwrap_or("?")
+        .to_string();
+    if let Some(sub) = rec
+        .get("sub")
+        .and_then(|s| s.get("name"))
+        .and_then(Value::as_str)
+    {
+        name = format!("{name} {sub}");
+    }
     if let Some(c) = rec.get("channel").and_then(Value::as_i64) {
         format!("{name} ch{c}")
     } else if let Some(a) = rec.get("addr").and_then(Value::as_str) {
