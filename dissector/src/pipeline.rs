@@ -141,6 +141,27 @@ impl Pipeline {
         self.feed(ctx, chunk, emit)
     }
 
+    /// Say that the sender of `dir` on `stream` has paused (a live source knows: its write is
+    /// over): an Elliptec host command complete but for its optional terminator is framed now
+    /// instead of when the next byte comes. APT frames need no such hint.
+    pub fn cut<E>(
+        &mut self,
+        stream: u32,
+        dir: Dir,
+        emit: &mut impl FnMut(&str) -> Result<(), E>,
+    ) -> Result<(), E> {
+        if self.proto != Some(Proto::Elliptec) {
+            return Ok(());
+        }
+        for j in 0..self.lanes.len() {
+            if self.lanes[j].stream == stream && self.lanes[j].dir == Some(dir) {
+                self.lanes[j].ell.cut();
+                self.drain(j, emit)?;
+            }
+        }
+        Ok(())
+    }
+
     /// Report a problem of the input itself (a bad character in hex text, a corrupt capture
     /// record), with its offset in the file.
     pub fn input_diag<E>(

@@ -41,20 +41,28 @@ impl Observer {
             ts_ns: Some(ts_ns),
         };
         let (coll, lines, show) = (&mut self.coll, &mut self.lines, self.show_json);
-        let _ = self
-            .json
-            .push_chunk(ctx, bytes, &mut |l: &str| -> Result<(), ()> {
-                coll.line(l);
-                if show {
-                    lines.push(l.to_string());
-                }
-                Ok(())
-            });
+        let mut emit_json = |l: &str| -> Result<(), ()> {
+            coll.line(l);
+            if show {
+                lines.push(l.to_string());
+            }
+            Ok(())
+        };
+        let _ = self.json.push_chunk(ctx, bytes, &mut emit_json);
+        // A host's write is one command: frame it now, terminator or not (an impersonated
+        // device must answer an Elliptec command that has none).
+        if side == Side::Host {
+            let _ = self.json.cut(0, Dir::HostToDevice, &mut emit_json);
+        }
         if let Some(t) = &mut self.text {
-            let _ = t.push_chunk(ctx, bytes, &mut |l: &str| -> Result<(), ()> {
+            let mut emit_text = |l: &str| -> Result<(), ()> {
                 lines.push(l.to_string());
                 Ok(())
-            });
+            };
+            let _ = t.push_chunk(ctx, bytes, &mut emit_text);
+            if side == Side::Host {
+                let _ = t.cut(0, Dir::HostToDevice, &mut emit_text);
+            }
         }
         first
     }

@@ -10,7 +10,7 @@ use aptscope_dissector::detect::Proto;
 use aptscope_dissector::Table;
 use aptscope_replay::diff::Kind;
 use aptscope_replay::{
-    run_device, run_host, DeviceOptions, HostOptions, Link, Script, Selection, Side,
+    run_device, run_host, DeviceOptions, DeviceOutcome, HostOptions, Link, Script, Selection, Side,
 };
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -279,13 +279,11 @@ fn wait_replies_sends_after_each_reply() {
     assert!(o.report.matched >= 5);
 }
 
-/// The scripted host: send each captured request and read back the bytes the capture says the
-/// device sent until the next request.
-#[test]
-fn replaying_as_the_device_answers_every_request_with_the_captured_reply() {
-    let dir = scratch("device");
-    let (script, _) = captured(&dir);
-    let link_path = dir.join("ttyAPT");
+/// The scripted host: send each captured request (passed through `strip`) and read back the
+/// bytes the capture says the device sent until the next request; returns the number of
+/// requests and the device's outcome.
+fn impersonate(script: &Script, dir: &Path, strip: fn(&[u8]) -> &[u8]) -> (usize, DeviceOutcome) {
+    let link_path = dir.join("tty");
     let (mut link, _slave) = Link::open_pty(Some(&link_path)).unwrap();
     let s2 = script.clone();
     let dev = thread::spawn(move || {
@@ -319,7 +317,7 @@ fn replaying_as_the_device_answers_every_request_with_the_captured_reply() {
             .take_while(|x| x.side == Side::Device)
             .flat_map(|x| x.raw.clone())
             .collect();
-        host.write_all(&m.raw).unwrap();
+        host.write_all(strip(&m.raw)).unwrap();
         let mut got = vec![];
         let give_up = Instant::now() + Duration::from_secs(30);
         let mut buf = [0u8; 512];
@@ -330,13 +328,43 @@ fn replaying_as_the_device_answers_every_request_with_the_captured_reply() {
                 Err(e) => panic!("{e}"),
             }
         }
-        assert_eq!(got, want, "answer to {} (record {})", m.name, m.n);
+        assert_eq!(
+            String::from_utf8_lossy(&got),
+            String::from_utf8_lossy(&want),
+            "answer to {} (record {})",
+            m.name,
+            m.n
+        );
     }
     drop(host);
-    let o = dev.join().unwrap();
+    (requests, dev.join().unwrap())
+}
+
+#[test]
+fn replaying_as_the_device_answers_every_request_with_the_captured_reply() {
+    let dir = scratch("device");
+    let (script, _) = captured(&dir);
+    let (requests, o) = impersonate(&script, &dir, |b| b);
     assert!(o.gone.is_some(), "ends when the host closes the port");
     assert_eq!(o.requests, requests);
     assert_eq!(o.answered, requests, "{}", o.text());
     assert_eq!(o.reused, 0);
     assert!(o.unmatched.is_empty());
+}
+
+/// Elliptec hosts usually send no terminator: each command is still answered at once, by the
+/// same command to the same address (the address change included).
+#[test]
+fn an_elliptec_bus_is_impersonated_for_a_host_that_sends_no_terminators() {
+    let dir = scratch("ell");
+    let sample = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../samples/sessions/elliptec.pcapng"
+    );
+    let script = Script::load(sample, OpenOptions::default(), None).unwrap();
+    assert_eq!(script.proto, Proto::Elliptec);
+    let (requests, o) = impersonate(&script, &dir, |b| b.strip_suffix(b"\r\n").unwrap_or(b));
+    assert!(requests >= 10);
+    assert_eq!(o.answered, requests, "{}", o.text());
+    assert_eq!(o.reused, 0, "{}", o.text());
 }
