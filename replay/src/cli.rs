@@ -409,6 +409,11 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
                     }
                 )?;
             }
+            if let Some(g) = &r.gone {
+                return Err(io::Error::other(format!(
+                    "the device went away during the replay: {g}"
+                )));
+            }
             Ok(!(o.check && fails > 0))
         }
         Role::Device => {
