@@ -259,10 +259,55 @@ pub fn open_with_progress(
             inner: f,
             read: progress.read.clone(),
         });
-        return finish_open(input, opts, p);
+        let (reader, format, p) = finish_open(input, opts, p)?;
+        // A name that promises a container the content is not: say so, rather than silently
+        // decoding the container's headers as garbage.
+        let named = Format::from_extension(path).filter(|f| {
+            matches!(f, Format::Pcap | Format::PcapNg | Format::Mcap)
+                && opts.format.is_none()
+                && *f != format
+                && !(matches!(f, Format::Pcap | Format::PcapNg)
+                    && matches!(format, Format::Pcap | Format::PcapNg))
+        });
+        let reader: Box<dyn Reader> = match named {
+            Some(n) => Box::new(Prefixed {
+                first: Some(ReadDiag {
+                    offset: 0,
+                    kind: "format_mismatch",
+                    msg: format!(
+                        "the name says {} but the content does not start like one; read as {} \
+                         (--format {} to force)",
+                        n.name(),
+                        format.name(),
+                        n.name()
+                    ),
+                }),
+                inner: reader,
+            }),
+            None => reader,
+        };
+        return Ok((reader, format, p));
     };
     let head_input = std::mem::replace(&mut input, Box::new(io::empty()));
     finish_open(head_input, opts, progress)
+}
+
+/// A reader that reports one diagnostic before the events of another.
+struct Prefixed {
+    first: Option<ReadDiag>,
+    inner: Box<dyn Reader>,
+}
+
+impl Reader for Prefixed {
+    fn next_event(&mut self) -> Option<Event<'_>> {
+        match self.first.take() {
+            Some(d) => Some(Event::Diag(d)),
+            None => self.inner.next_event(),
+        }
+    }
+    fn format(&self) -> String {
+        self.inner.format()
+    }
 }
 
 fn finish_open(
