@@ -162,6 +162,9 @@ enum Cmd {
         /// Input format instead of detecting it.
         #[arg(long, short = 'F')]
         format: Option<String>,
+        /// Protocol (default: detected from the first 4 KiB).
+        #[arg(long, value_enum, default_value_t = ProtoArg::Auto)]
+        proto: ProtoArg,
         /// USB captures: only the device at BUS:ADDR.
         #[arg(long)]
         usb_device: Option<String>,
@@ -386,9 +389,10 @@ fn main() -> ExitCode {
         Cmd::View {
             file,
             format,
+            proto,
             usb_device,
         } => open_opts(format.as_deref(), false, usb_device.as_deref())
-            .and_then(|o| aptscope_tui::run(&file, o)),
+            .and_then(|o| aptscope_tui::run_as(&file, o, proto_of(proto))),
         Cmd::Sim { what } => match what {
             SimCmd::Apt { model, pty } => sim_apt_main(&model, pty.as_deref()),
             SimCmd::Elliptec { modules, pty } => sim_elliptec_main(&modules, pty.as_deref()),

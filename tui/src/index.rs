@@ -156,6 +156,15 @@ impl Shared {
 /// Open a capture and index it in a background thread. The returned [`Shared`] fills as the
 /// thread goes.
 pub fn spawn(path: &str, opts: OpenOptions) -> std::io::Result<Arc<Shared>> {
+    spawn_as(path, opts, None)
+}
+
+/// [`spawn`], decoding as `proto` instead of detecting the protocol when it is given.
+pub fn spawn_as(
+    path: &str,
+    opts: OpenOptions,
+    proto: Option<Proto>,
+) -> std::io::Result<Arc<Shared>> {
     // Readers are not `Send`: open in the indexing thread, hand back the shared index.
     let (tx, rx) = std::sync::mpsc::channel();
     let path = path.to_string();
@@ -164,7 +173,7 @@ pub fn spawn(path: &str, opts: OpenOptions) -> std::io::Result<Arc<Shared>> {
         .spawn(move || match opened(&path, opts) {
             Ok((shared, reader)) => {
                 let _ = tx.send(Ok(shared.clone()));
-                Indexer::new(shared).run(reader);
+                Indexer::new(shared, proto).run(reader);
             }
             Err(e) => {
                 let _ = tx.send(Err(e));
@@ -192,7 +201,7 @@ fn opened(path: &str, opts: OpenOptions) -> std::io::Result<Opened> {
 /// Open and index a capture completely, in the calling thread (tests, small files).
 pub fn load(path: &str, opts: OpenOptions) -> std::io::Result<Arc<Shared>> {
     let (shared, reader) = opened(path, opts)?;
-    Indexer::new(shared.clone()).run(reader);
+    Indexer::new(shared.clone(), None).run(reader);
     Ok(shared)
 }
 
@@ -232,10 +241,15 @@ struct Indexer {
 }
 
 impl Indexer {
-    fn new(shared: Arc<Shared>) -> Self {
+    /// An indexer; `proto` given: no detection.
+    fn new(shared: Arc<Shared>, proto: Option<Proto>) -> Self {
+        if let (Some(p), Ok(mut ix)) = (proto, shared.index.write()) {
+            ix.proto = Some(p);
+            ix.proto_certain = true;
+        }
         Indexer {
             shared,
-            proto: None,
+            proto,
             sample: vec![],
             sample_len: 0,
             lanes: vec![],

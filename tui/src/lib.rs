@@ -43,7 +43,16 @@ impl Drop for Guard {
 /// Open `path` (any readable capture format) and run the interactive viewer until the user
 /// quits. The first screen shows at once; the index builds in the background.
 pub fn run(path: &str, opts: OpenOptions) -> io::Result<()> {
-    let shared = index::spawn(path, opts)?;
+    run_as(path, opts, None)
+}
+
+/// [`run`], decoding as `proto` (APT or Elliptec) instead of detecting it when given.
+pub fn run_as(
+    path: &str,
+    opts: OpenOptions,
+    proto: Option<aptscope_dissector::detect::Proto>,
+) -> io::Result<()> {
+    let shared = index::spawn_as(path, opts, proto)?;
     let title = std::path::Path::new(path)
         .file_name()
         .map_or_else(|| path.to_string(), |n| n.to_string_lossy().into_owned());

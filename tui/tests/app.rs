@@ -285,3 +285,22 @@ fn mouse_wheel_and_click() {
     assert_eq!(a.focus, Pane::Detail);
     assert_eq!(a.detail_sel, 2);
 }
+
+#[test]
+fn a_forced_protocol_is_used_without_detection() {
+    use aptscope_dissector::detect::Proto;
+    let shared = aptscope_tui::index::spawn_as(
+        &sample("kdc101-session.bin"),
+        OpenOptions::default(),
+        Some(Proto::Elliptec),
+    )
+    .expect("opens");
+    let give_up = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while !shared.index.read().is_ok_and(|ix| ix.done) {
+        assert!(std::time::Instant::now() < give_up, "indexing never ended");
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    let ix = shared.index.read().expect("lock");
+    assert_eq!(ix.proto, Some(Proto::Elliptec));
+    assert!(ix.proto_certain);
+}
