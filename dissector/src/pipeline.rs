@@ -50,6 +50,9 @@ pub struct Pipeline {
     /// Chunks held back until the protocol is known.
     sample: Vec<(Ctx, Vec<u8>)>,
     sample_len: usize,
+    /// Input and file diagnostics met while the sample is held, with the number of sample
+    /// chunks before them: emitted in their place among the sample's records.
+    held: Vec<(usize, String)>,
     lanes: Vec<Lane>,
     buses: Vec<(u32, Bus)>,
     pairers: Vec<(u32, AptPairer)>,
@@ -72,6 +75,7 @@ impl Pipeline {
             proto,
             sample: vec![],
             sample_len: 0,
+            held: vec![],
             lanes: vec![],
             buses: vec![],
             pairers: vec![],
@@ -178,7 +182,7 @@ impl Pipeline {
             }
             Format::Text => text::input_diag_line(&mut self.line, d),
         }
-        emit(&self.line)
+        self.emit_or_hold(emit)
     }
 
     /// Report a capture-file problem given as text (kind and message) at a file offset.
@@ -202,13 +206,17 @@ impl Pipeline {
                 let _ = write!(self.line, "     - {offset:>#10x}  !! file: {kind}: {msg}");
             }
         }
-        emit(&self.line)
+        self.emit_or_hold(emit)
     }
 
     /// End of capture: flush what is left and report commands that got no reply.
     pub fn finish<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
         if self.proto.is_none() {
             if self.sample.is_empty() {
+                // Nothing to detect from: only the diagnostics.
+                for (_, line) in std::mem::take(&mut self.held) {
+                    emit(&line)?;
+                }
                 return Ok(());
             }
             self.choose(emit)?;
@@ -237,9 +245,26 @@ impl Pipeline {
         self.render_expired("apt", &left, emit)
     }
 
+    /// Emit the diagnostic line in `self.line`, or hold it while the protocol is not known (its
+    /// place is after the sample chunks held so far).
+    fn emit_or_hold<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
+        if self.proto.is_none() {
+            self.held.push((self.sample.len(), self.line.clone()));
+            return Ok(());
+        }
+        emit(&self.line)
+    }
+
     fn replay_sample<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
-        for (ctx, bytes) in std::mem::take(&mut self.sample) {
+        let mut held = std::mem::take(&mut self.held).into_iter().peekable();
+        for (i, (ctx, bytes)) in std::mem::take(&mut self.sample).into_iter().enumerate() {
+            while let Some((_, line)) = held.next_if(|(at, _)| *at <= i) {
+                emit(&line)?;
+            }
             self.feed(ctx, &bytes, emit)?;
+        }
+        for (_, line) in held {
+            emit(&line)?;
         }
         self.sample_len = 0;
         Ok(())
@@ -555,5 +580,40 @@ impl Pipeline {
             self.emit_record(emit)?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Diagnostics met while the protocol is being detected keep their place among the frames.
+    #[test]
+    fn file_diagnostics_during_detection_keep_their_place() {
+        let mut p = Pipeline::new(None, Format::Json);
+        let mut out: Vec<String> = vec![];
+        let mut emit = |l: &str| -> Result<(), ()> {
+            out.push(l.to_string());
+            Ok(())
+        };
+        let identify = [0x23, 0x02, 0x01, 0x00, 0x50, 0x01];
+        p.push(&identify, None, &mut emit).unwrap();
+        p.file_diag(40, "truncated_record", "cut", &mut emit)
+            .unwrap();
+        p.push(&identify, None, &mut emit).unwrap();
+        p.finish(&mut emit).unwrap();
+        let kinds: Vec<&str> = out
+            .iter()
+            .map(|l| {
+                if l.contains("\"type\":\"input\"") {
+                    "diag"
+                } else if l.contains("\"type\":\"frame\"") {
+                    "frame"
+                } else {
+                    "other"
+                }
+            })
+            .collect();
+        assert_eq!(kinds, ["other", "frame", "diag", "frame"], "{out:?}");
     }
 }
