@@ -25,7 +25,8 @@
 //!   for display, counted, and a `# display skipped …` line says so (the file still has them).
 //! - **Stopping**: SIGINT, SIGTERM and SIGHUP are received through a `signalfd` (Linux; the
 //!   signals are blocked in the tap's threads while it runs and the previous mask restored
-//!   after), or [`StopHandle::stop`], or the end of [`TapOptions::duration`]. The file is then
+//!   after; a handler that only records them covers the serial port crate's waits, which
+//!   unblock every signal), or [`StopHandle::stop`], or the end of [`TapOptions::duration`]. The file is then
 //!   finished, and the byte counts per direction are printed and checked against what was
 //!   forwarded.
 //! - **Device gone** (read/write error or end of file on the port): reported with the time, the
@@ -212,7 +213,9 @@ pub struct TapOptions {
     pub quiet: bool,
     /// Stop after this long.
     pub duration: Option<Duration>,
-    /// Stop on SIGINT/SIGTERM/SIGHUP (Linux; blocks them in the calling thread while running).
+    /// Stop on SIGINT/SIGTERM/SIGHUP (Linux; blocks them in the calling thread while running,
+    /// and installs process-wide handlers for them that, once the tap is done, end the process
+    /// as the default action would).
     pub signals: bool,
     /// Stops the tap from another thread.
     pub stop: StopHandle,
@@ -611,25 +614,75 @@ mod signals {
     use nix::sys::signalfd::{SfdFlags, SignalFd};
     use std::io;
     use std::os::fd::AsFd;
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    use std::sync::Arc;
+
+    const SIGNALS: [Signal; 3] = [Signal::SIGINT, Signal::SIGTERM, Signal::SIGHUP];
 
     /// SIGINT, SIGTERM and SIGHUP, blocked in this thread (and the threads it starts) and read
     /// from a signalfd; the previous mask comes back on drop.
+    ///
+    /// Blocking alone is not enough: the serial port crate waits with `ppoll` and an *empty*
+    /// signal mask, so a signal arriving while a port is being waited on is delivered to that
+    /// thread, and with the default disposition it would kill the tap (no summary, unfinished
+    /// file). So a handler is installed too; it only records the signal (`caught`), which
+    /// [`Signals::wait`] looks at along with the signalfd.
     pub struct Signals {
         fd: SignalFd,
         old: SigSet,
+        caught: Arc<AtomicUsize>,
+        hooks: Vec<signal_hook::SigId>,
+        /// Set when done: the signals have their default effect again.
+        restored: Arc<AtomicBool>,
     }
 
     impl Signals {
         pub fn install() -> io::Result<Signals> {
+            let caught = Arc::new(AtomicUsize::new(0));
+            let restored = Arc::new(AtomicBool::new(false));
+            let unhook = |hooks: &mut Vec<signal_hook::SigId>| {
+                for id in hooks.drain(..) {
+                    signal_hook::low_level::unregister(id);
+                }
+            };
+            // `hooks` record the signal while we run; `defaults` end the process as before once
+            // we are done (they stay installed, armed by `restored`).
+            let (mut hooks, mut defaults) = (vec![], vec![]);
             let mut set = SigSet::empty();
-            for s in [Signal::SIGINT, Signal::SIGTERM, Signal::SIGHUP] {
+            for s in SIGNALS {
                 set.add(s);
+                let r = signal_hook::flag::register_conditional_default(s as i32, restored.clone())
+                    .and_then(|id| {
+                        defaults.push(id);
+                        signal_hook::flag::register_usize(s as i32, caught.clone(), s as usize)
+                    });
+                match r {
+                    Ok(id) => hooks.push(id),
+                    Err(e) => {
+                        unhook(&mut hooks);
+                        unhook(&mut defaults);
+                        return Err(e);
+                    }
+                }
             }
-            let old = set.thread_swap_mask(SigmaskHow::SIG_BLOCK)?;
-            match SignalFd::with_flags(&set, SfdFlags::SFD_NONBLOCK | SfdFlags::SFD_CLOEXEC) {
-                Ok(fd) => Ok(Signals { fd, old }),
+            let r = set.thread_swap_mask(SigmaskHow::SIG_BLOCK).and_then(|old| {
+                SignalFd::with_flags(&set, SfdFlags::SFD_NONBLOCK | SfdFlags::SFD_CLOEXEC)
+                    .map(|fd| (fd, old))
+                    .inspect_err(|_| {
+                        let _ = old.thread_set_mask();
+                    })
+            });
+            match r {
+                Ok((fd, old)) => Ok(Signals {
+                    fd,
+                    old,
+                    caught,
+                    hooks,
+                    restored,
+                }),
                 Err(e) => {
-                    let _ = old.thread_set_mask();
+                    unhook(&mut hooks);
+                    unhook(&mut defaults);
                     Err(e.into())
                 }
             }
@@ -637,27 +690,45 @@ mod signals {
 
         /// A signal received within `timeout`, by name.
         pub fn wait(&self, timeout: Duration) -> Option<String> {
-            if !wait_fd(self.fd.as_fd(), PollFlags::POLLIN, timeout).unwrap_or(false) {
-                return None;
+            if let Some(s) = self.caught() {
+                return Some(s);
             }
-            self.take()
+            if !wait_fd(self.fd.as_fd(), PollFlags::POLLIN, timeout).unwrap_or(false) {
+                return self.caught();
+            }
+            self.take().or_else(|| self.caught())
+        }
+
+        /// A signal the handler recorded.
+        fn caught(&self) -> Option<String> {
+            match self.caught.swap(0, Ordering::SeqCst) {
+                0 => None,
+                n => Some(name(n as i32)),
+            }
         }
 
         fn take(&self) -> Option<String> {
             let si = self.fd.read_signal().ok()??;
-            Some(
-                Signal::try_from(si.ssi_signo as i32)
-                    .map(|s| s.as_str().to_string())
-                    .unwrap_or_else(|_| format!("signal {}", si.ssi_signo)),
-            )
+            Some(name(si.ssi_signo as i32))
         }
+    }
+
+    fn name(signo: i32) -> String {
+        Signal::try_from(signo)
+            .map(|s| s.as_str().to_string())
+            .unwrap_or_else(|_| format!("signal {signo}"))
     }
 
     impl Drop for Signals {
         fn drop(&mut self) {
-            // Consume what is pending so unblocking does not deliver it (and kill us).
+            // Consume what is pending so unblocking does not deliver it.
             while self.take().is_some() {}
+            // From now on the signals end the process again, as by default.
+            self.restored.store(true, Ordering::SeqCst);
             let _ = self.old.thread_set_mask();
+            for id in self.hooks.drain(..) {
+                signal_hook::low_level::unregister(id);
+            }
         }
     }
 }

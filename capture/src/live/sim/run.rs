@@ -11,6 +11,8 @@ use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
 use std::io::{self, Read, Write};
 use std::os::fd::{AsFd, BorrowedFd, OwnedFd};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Output not yet taken by the peer is dropped beyond this (like a full FTDI buffer).
@@ -207,7 +209,8 @@ pub fn run_on_pty<S: Simulator>(mut sim: S, link: Option<&Path>) -> io::Result<(
         out.flush()?;
     }
     let r = serve_pty(&mut sim, pty, None, &[sigs.as_fd()]);
-    if let Some(l) = link {
+    // Only while it is still ours: a simulator started since at the same path has replaced it.
+    if let Some(l) = link.filter(|l| std::fs::read_link(l).is_ok_and(|t| t == path)) {
         let _ = std::fs::remove_file(l);
     }
     r
@@ -218,6 +221,13 @@ pub fn run_on_pty<S: Simulator>(mut sim: S, link: Option<&Path>) -> io::Result<(
 /// signals).
 pub fn run_on_port<S: Simulator>(mut sim: S, dev: &Path, baud: u32) -> io::Result<()> {
     let sigs = termination_signals()?;
+    // The serial port crate waits with `ppoll` and an empty signal mask, which unblocks them:
+    // one arriving then is delivered, so a handler records it rather than the default action
+    // ending the process uncleanly.
+    let caught = Arc::new(AtomicBool::new(false));
+    for s in [Signal::SIGINT, Signal::SIGTERM] {
+        signal_hook::flag::register(s as i32, caught.clone())?;
+    }
     let name = dev.to_string_lossy();
     let mut port = serialport::new(name.as_ref(), baud)
         .data_bits(serialport::DataBits::Eight)
@@ -230,7 +240,7 @@ pub fn run_on_port<S: Simulator>(mut sim: S, dev: &Path, baud: u32) -> io::Resul
     let start = Instant::now();
     let mut buf = [0u8; 4096];
     loop {
-        if sigs.read_signal().map_err(io_err)?.is_some() {
+        if caught.load(Ordering::SeqCst) || sigs.read_signal().map_err(io_err)?.is_some() {
             return Ok(());
         }
         let now = elapsed_ns(start);
@@ -250,5 +260,74 @@ pub fn run_on_port<S: Simulator>(mut sim: S, dev: &Path, baud: u32) -> io::Resul
             Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
             Err(e) => return Err(e),
         }
+    }
+}
+
+#[cfg(test)]
+mod port_tests {
+    use super::*;
+    use crate::live::sim::{AptModel, AptSim};
+    use std::sync::mpsc;
+
+    /// Generous: only reached when something is broken.
+    const DEADLINE: Duration = Duration::from_secs(60);
+
+    /// A pseudo-terminal standing in for a serial port: the test holds the master (the far end
+    /// of the cable), `run_on_port` opens the slave's path. Returns when the simulator's reply
+    /// to HW_REQ_INFO has come back (asked again until then: the port may not be open yet).
+    fn serve() -> (OwnedFd, mpsc::Receiver<io::Result<()>>) {
+        let pty = openpty(None, None).unwrap();
+        let path = nix::unistd::ttyname(&pty.slave).unwrap();
+        // Raw before the runner opens it (as it will make it): no echo of what comes early.
+        let mut t = tcgetattr(&pty.slave).unwrap();
+        cfmakeraw(&mut t);
+        tcsetattr(&pty.slave, SetArg::TCSANOW, &t).unwrap();
+        let fl = fcntl(&pty.master, FcntlArg::F_GETFL).unwrap();
+        let fl = OFlag::from_bits_truncate(fl) | OFlag::O_NONBLOCK;
+        fcntl(&pty.master, FcntlArg::F_SETFL(fl)).unwrap();
+        drop(pty.slave);
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = tx.send(run_on_port(AptSim::new(AptModel::Kdc101), &path, 115_200));
+        });
+        let master = pty.master;
+        let t0 = Instant::now();
+        let mut got = vec![];
+        let mut asked: Option<Instant> = None;
+        let mut buf = [0u8; 256];
+        while got.len() < 90 {
+            assert!(t0.elapsed() < DEADLINE, "no reply: {got:02x?}");
+            if got.is_empty() && asked.is_none_or(|t| t.elapsed() > Duration::from_millis(500)) {
+                let _ = nix::unistd::write(&master, &[0x05, 0x00, 0x00, 0x00, 0x50, 0x01]);
+                asked = Some(Instant::now());
+            }
+            let mut fds = [PollFd::new(master.as_fd(), PollFlags::POLLIN)];
+            let _ = poll(&mut fds, PollTimeout::from(50u16));
+            if let Ok(n) = nix::unistd::read(&master, &mut buf) {
+                got.extend_from_slice(&buf[..n]);
+            }
+        }
+        assert_eq!(got[..2], [0x06, 0x00], "HW_GET_INFO: {got:02x?}");
+        assert_eq!(&got[10..16], b"KDC101");
+        (master, rx)
+    }
+
+    /// One test, not two: a SIGINT reaches every runner of the process.
+    #[test]
+    fn run_on_port_serves_a_serial_port_and_ends_when_it_vanishes_or_on_sigint() {
+        let (master, done) = serve();
+        drop(master); // the cable is pulled
+        let r = done.recv_timeout(DEADLINE).expect("run_on_port hangs");
+        assert!(r.is_err(), "a vanished port is an error");
+
+        let (_master, done) = serve();
+        // The runner blocks SIGINT in its thread only, and the serial port crate unblocks it
+        // while waiting: sent to the process, it lands in the runner's handler (or, should it
+        // reach a thread without one, would end the test binary: the bug this guards).
+        nix::sys::signal::kill(nix::unistd::getpid(), Signal::SIGINT).unwrap();
+        let r = done
+            .recv_timeout(DEADLINE)
+            .expect("run_on_port ignored SIGINT");
+        assert!(r.is_ok(), "{r:?}");
     }
 }

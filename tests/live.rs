@@ -1,0 +1,798 @@
+//! End-to-end tests of the live tools through the real binary and real pseudo-terminals:
+//! a host (this test) ⇄ `aptscope tap` ⇄ `aptscope sim`, each a process of its own, stopped
+//! with real signals. Every wait is a poll against a generous deadline that only a broken
+//! build reaches.
+
+use aptscope_capture::open::{open, Format, OpenOptions};
+use aptscope_capture::{Direction, Event};
+use nix::fcntl::OFlag;
+use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+use nix::sys::signal::{kill, Signal};
+use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
+use nix::unistd::Pid;
+use std::fs::File;
+use std::io::{self, Read, Write};
+use std::os::fd::AsFd;
+use std::os::unix::fs::OpenOptionsExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::{self, JoinHandle};
+use std::time::{Duration, Instant};
+
+/// Only reached when something is broken (a loaded 2-core CI machine is slow, not stuck).
+const DEADLINE: Duration = Duration::from_secs(60);
+/// How often conditions are looked at again.
+const POLL: Duration = Duration::from_millis(10);
+
+/// Wait for `cond` until the deadline; panics with `what` (and `ctx()`) when it never holds.
+fn wait_for(what: &str, ctx: impl Fn() -> String, mut cond: impl FnMut() -> bool) {
+    let t0 = Instant::now();
+    while !cond() {
+        assert!(
+            t0.elapsed() < DEADLINE,
+            "timed out waiting for {what}\n{}",
+            ctx()
+        );
+        thread::sleep(POLL);
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A fresh scratch directory.
+fn scratch(name: &str) -> PathBuf {
+    static N: AtomicUsize = AtomicUsize::new(0);
+    let d = std::env::temp_dir().join(format!(
+        "aptscope-live-{}-{}-{name}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::SeqCst)
+    ));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+// ---------------------------------------------------------------------------------------------
+// Processes
+
+/// A running `aptscope`, its standard error collected as it comes; killed if still running
+/// when dropped (a failing test leaves nothing behind).
+struct Proc {
+    name: String,
+    child: Child,
+    stdout: Arc<Mutex<String>>,
+    stderr: Arc<Mutex<String>>,
+    readers: Vec<JoinHandle<()>>,
+    status: Option<ExitStatus>,
+}
+
+/// Collect what `pipe` gives into `sink` as it comes.
+fn collect(mut pipe: impl Read + Send + 'static, sink: Arc<Mutex<String>>) -> JoinHandle<()> {
+    thread::spawn(move || {
+        let mut buf = [0u8; 4096];
+        while let Ok(n) = pipe.read(&mut buf) {
+            if n == 0 {
+                break;
+            }
+            lock(&sink).push_str(&String::from_utf8_lossy(&buf[..n]));
+        }
+    })
+}
+
+impl Proc {
+    fn spawn(args: &[&str]) -> Proc {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_aptscope"))
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("run aptscope");
+        let (stdout, stderr) = Default::default();
+        let readers = vec![
+            collect(child.stdout.take().expect("stdout"), Arc::clone(&stdout)),
+            collect(child.stderr.take().expect("stderr"), Arc::clone(&stderr)),
+        ];
+        Proc {
+            name: args[..2.min(args.len())].join(" "),
+            child,
+            stdout,
+            stderr,
+            readers,
+            status: None,
+        }
+    }
+
+    fn pid(&self) -> Pid {
+        Pid::from_raw(self.child.id() as i32)
+    }
+
+    fn signal(&self, sig: Signal) {
+        kill(self.pid(), sig).expect("send signal");
+    }
+
+    /// What it wrote on standard output so far.
+    fn stdout(&self) -> String {
+        lock(&self.stdout).clone()
+    }
+
+    /// What it wrote on standard error so far.
+    fn stderr(&self) -> String {
+        lock(&self.stderr).clone()
+    }
+
+    /// Wait until its standard error contains `s`.
+    fn wait_stderr(&self, s: &str) {
+        wait_for(
+            &format!("`{s}` from {}", self.name),
+            || self.stderr(),
+            || self.stderr().contains(s),
+        );
+    }
+
+    /// Wait for it to exit (failing, not hanging, when it does not), then for the rest of its
+    /// standard error.
+    fn wait_exit(&mut self) -> ExitStatus {
+        if let Some(s) = self.status {
+            return s;
+        }
+        let t0 = Instant::now();
+        let status = loop {
+            if let Some(s) = self.child.try_wait().expect("try_wait") {
+                break s;
+            }
+            if t0.elapsed() > DEADLINE {
+                let _ = self.child.kill();
+                let _ = self.child.wait();
+                panic!("{} did not exit\n{}", self.name, self.stderr());
+            }
+            thread::sleep(POLL);
+        };
+        self.status = Some(status);
+        for r in self.readers.drain(..) {
+            let _ = r.join();
+        }
+        status
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        if self.status.is_none() && matches!(self.child.try_wait(), Ok(None)) {
+            let _ = self.child.kill();
+        }
+        let _ = self.child.wait();
+    }
+}
+
+/// `aptscope sim …` with `--pty LINK`, once its link is there (it says so on standard output
+/// when it is).
+fn start_sim_with(args: &[&str], link: &Path) -> Proc {
+    let mut args = args.to_vec();
+    args.extend(["--pty", link.to_str().unwrap()]);
+    let p = Proc::spawn(&args);
+    let said = format!("{} -> /dev/", link.display());
+    wait_for(
+        "the simulator's link",
+        || format!("{}{}", p.stdout(), p.stderr()),
+        || p.stdout().contains(&said),
+    );
+    assert!(std::fs::read_link(link).is_ok());
+    p
+}
+
+/// `aptscope sim apt --model kdc101 --pty LINK`, once its link is there.
+fn start_sim(link: &Path) -> Proc {
+    start_sim_with(&["sim", "apt", "--model", "kdc101"], link)
+}
+
+/// `aptscope tap --device DEV --link HOST -w CAP --quiet [extra]`, once its link is there.
+fn start_tap(dir: &Path, extra: &[&str]) -> Proc {
+    let (dev, host, cap) = (dir.join("dev"), dir.join("host"), dir.join("cap.pcapng"));
+    let mut args = vec![
+        "tap",
+        "--device",
+        dev.to_str().unwrap(),
+        "--link",
+        host.to_str().unwrap(),
+        "-w",
+        cap.to_str().unwrap(),
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    let p = Proc::spawn(&args);
+    p.wait_stderr("aptscope tap: host side");
+    assert!(std::fs::read_link(&host).is_ok(), "{}", p.stderr());
+    p
+}
+
+// ---------------------------------------------------------------------------------------------
+// The host program
+
+/// The host's serial port: the tap's link opened like a program would (no controlling
+/// terminal, raw mode), non-blocking and waited on with poll.
+fn open_host(path: &Path) -> File {
+    let f = File::options()
+        .read(true)
+        .write(true)
+        .custom_flags((OFlag::O_NOCTTY | OFlag::O_NONBLOCK).bits())
+        .open(path)
+        .unwrap_or_else(|e| panic!("open {}: {e}", path.display()));
+    let mut t = tcgetattr(&f).unwrap();
+    cfmakeraw(&mut t);
+    tcsetattr(&f, SetArg::TCSANOW, &t).unwrap();
+    f
+}
+
+fn ready(f: &File, ev: PollFlags) -> bool {
+    let mut fds = [PollFd::new(f.as_fd(), ev)];
+    matches!(poll(&mut fds, PollTimeout::from(100u16)), Ok(n) if n > 0)
+}
+
+/// Write `bytes` back to back; returns how many were written before the other side went away
+/// (all of them normally).
+fn send(mut f: File, bytes: Vec<u8>) -> JoinHandle<usize> {
+    thread::spawn(move || {
+        let t0 = Instant::now();
+        let mut done = 0;
+        while done < bytes.len() {
+            assert!(t0.elapsed() < DEADLINE, "host write timed out at {done}");
+            if !ready(&f, PollFlags::POLLOUT) {
+                continue;
+            }
+            match f.write(&bytes[done..]) {
+                Ok(n) => done += n,
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(_) => break,
+            }
+        }
+        done
+    })
+}
+
+/// Everything the host receives, read as it comes until `stop` or the other side goes away.
+struct Receiver {
+    got: Arc<Mutex<Vec<u8>>>,
+    stop: Arc<AtomicBool>,
+    handle: Option<JoinHandle<()>>,
+}
+
+impl Receiver {
+    fn start(mut f: File) -> Receiver {
+        let got = Arc::new(Mutex::new(vec![]));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (g, s) = (got.clone(), stop.clone());
+        let handle = thread::spawn(move || {
+            let mut buf = vec![0u8; 8192];
+            while !s.load(Ordering::SeqCst) {
+                if !ready(&f, PollFlags::POLLIN) {
+                    continue;
+                }
+                match f.read(&mut buf) {
+                    Ok(0) => break,
+                    Ok(n) => lock(&g).extend_from_slice(&buf[..n]),
+                    Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
+                    Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                    Err(_) => break, // EIO: the tap is gone
+                }
+            }
+        });
+        Receiver {
+            got,
+            stop,
+            handle: Some(handle),
+        }
+    }
+
+    fn got(&self) -> Vec<u8> {
+        lock(&self.got).clone()
+    }
+
+    fn len(&self) -> usize {
+        lock(&self.got).len()
+    }
+
+    fn finish(mut self) -> Vec<u8> {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(h) = self.handle.take() {
+            h.join().unwrap();
+        }
+        self.got()
+    }
+}
+
+impl Drop for Receiver {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Traffic
+
+const HW_REQ_INFO: u16 = 0x0005;
+const MOD_IDENTIFY: u16 = 0x0223;
+const MOT_SET_VELPARAMS: u16 = 0x0413;
+const MOT_REQ_VELPARAMS: u16 = 0x0414;
+const MOT_REQ_DCSTATUSUPDATE: u16 = 0x0490;
+const MOT_REQ_STATUSBITS: u16 = 0x0429;
+const MOT_REQ_POSCOUNTER: u16 = 0x0411;
+
+/// A header-only request to the controller (0x50) from the host, channel 1.
+fn req(id: u16) -> [u8; 6] {
+    let [a, b] = id.to_le_bytes();
+    [a, b, 0x01, 0x00, 0x50, 0x01]
+}
+
+/// The id of the reply the simulator sends to a request.
+fn reply_id(id: u16) -> u16 {
+    match id {
+        HW_REQ_INFO => 0x0006,
+        MOT_REQ_VELPARAMS => 0x0415,
+        MOT_REQ_DCSTATUSUPDATE => 0x0491,
+        MOT_REQ_STATUSBITS => 0x042A,
+        MOT_REQ_POSCOUNTER => 0x0412,
+        _ => unreachable!(),
+    }
+}
+
+/// About `target` bytes of back-to-back valid frames: groups of MOT_SET_VELPARAMS (no reply,
+/// remembered), a MOD_IDENTIFY (no reply) and the requests `reqs` (each answered); returns the
+/// bytes and the reply ids expected, in order, with the acceleration each MOT_GET_VELPARAMS
+/// must carry (the last one set before it).
+fn traffic(target: usize, reqs: &[u16]) -> (Vec<u8>, Vec<(u16, Option<i32>)>) {
+    let mut v = Vec::with_capacity(target + 8192);
+    let mut replies = vec![];
+    let mut acc = 0i32;
+    while v.len() < target {
+        for _ in 0..250 {
+            acc = acc.wrapping_add(7919) & 0x3fff_ffff;
+            let [a, b] = MOT_SET_VELPARAMS.to_le_bytes();
+            v.extend_from_slice(&[a, b, 14, 0, 0xd0, 0x01, 1, 0]);
+            v.extend_from_slice(&0i32.to_le_bytes());
+            v.extend_from_slice(&acc.to_le_bytes());
+            v.extend_from_slice(&(acc / 3).to_le_bytes());
+        }
+        v.extend_from_slice(&req(MOD_IDENTIFY));
+        for &r in reqs {
+            v.extend_from_slice(&req(r));
+            replies.push((reply_id(r), (r == MOT_REQ_VELPARAMS).then_some(acc)));
+        }
+    }
+    (v, replies)
+}
+
+/// Split an APT byte stream into frames (only whole ones).
+fn frames(b: &[u8]) -> Vec<&[u8]> {
+    let mut out = vec![];
+    let mut i = 0;
+    while i + 6 <= b.len() {
+        let len = if b[i + 4] & 0x80 != 0 {
+            6 + u16::from_le_bytes([b[i + 2], b[i + 3]]) as usize
+        } else {
+            6
+        };
+        if i + len > b.len() {
+            break;
+        }
+        out.push(&b[i..i + len]);
+        i += len;
+    }
+    out
+}
+
+fn msg_id(f: &[u8]) -> u16 {
+    u16::from_le_bytes([f[0], f[1]])
+}
+
+/// Occurrences of `pat` in `hay`.
+fn count(hay: &[u8], pat: &[u8]) -> usize {
+    hay.windows(pat.len()).filter(|w| *w == pat).count()
+}
+
+/// Requests of every kind the simulator answers (~150 bytes of replies per group: a
+/// megabyte's worth takes the simulated 115200-baud line about 3 s to answer).
+const ALL_REQS: [u16; 5] = [
+    HW_REQ_INFO,
+    MOT_REQ_VELPARAMS,
+    MOT_REQ_DCSTATUSUPDATE,
+    MOT_REQ_STATUSBITS,
+    MOT_REQ_POSCOUNTER,
+];
+
+/// The header of MOT_GET_POSCOUNTER from the controller to the host.
+const GET_POSCOUNTER_HDR: [u8; 6] = [0x12, 0x04, 0x06, 0x00, 0x81, 0x50];
+
+// ---------------------------------------------------------------------------------------------
+// The capture
+
+/// A capture read back: bytes per direction (in order) and the reader's diagnostics.
+struct Capture {
+    h2d: Vec<u8>,
+    d2h: Vec<u8>,
+    chunks: usize,
+    diags: Vec<(&'static str, String)>,
+}
+
+fn read_capture(path: &Path) -> Capture {
+    let (mut r, f) = open(path.to_str().unwrap(), OpenOptions::default()).unwrap();
+    assert_eq!(f, Format::PcapNg);
+    let mut c = Capture {
+        h2d: vec![],
+        d2h: vec![],
+        chunks: 0,
+        diags: vec![],
+    };
+    let mut last_ts = 0;
+    while let Some(e) = r.next_event() {
+        match e {
+            Event::Stream(_) => {}
+            Event::Chunk(ch) => {
+                let ts = ch.ts_ns.expect("every chunk has a time");
+                assert!(ts >= last_ts, "chunks out of time order");
+                last_ts = ts;
+                c.chunks += 1;
+                match ch.dir {
+                    Direction::HostToDevice => c.h2d.extend_from_slice(ch.bytes),
+                    Direction::DeviceToHost => c.d2h.extend_from_slice(ch.bytes),
+                    Direction::Unknown => panic!("a chunk without direction"),
+                }
+            }
+            Event::Diag(d) => c.diags.push((d.kind, d.to_string())),
+        }
+    }
+    c
+}
+
+/// `aptscope decode --json FILE`: exits cleanly; returns the records.
+fn decode_json(path: &Path) -> Vec<serde_json::Value> {
+    let o = Command::new(env!("CARGO_BIN_EXE_aptscope"))
+        .args(["decode", "--json", path.to_str().unwrap()])
+        .output()
+        .expect("run aptscope decode");
+    assert!(
+        o.status.success(),
+        "decode failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not JSON ({e}): {l}")))
+        .collect()
+}
+
+/// Whether `long` starts with `short` (asserted with [`first_difference`] rather than two
+/// megabyte dumps).
+fn is_prefix(short: &[u8], long: &[u8]) -> bool {
+    short.len() <= long.len() && long[..short.len()] == *short
+}
+
+fn first_difference(a: &[u8], b: &[u8]) -> String {
+    let i = a.iter().zip(b).take_while(|(x, y)| x == y).count();
+    format!(
+        "lengths {} and {}, first difference at {i}",
+        a.len(),
+        b.len()
+    )
+}
+
+// ---------------------------------------------------------------------------------------------
+// Tests
+
+#[test]
+fn a_megabyte_burst_through_the_tap_is_recorded_exactly_and_ctrl_c_leaves_a_valid_file() {
+    let dir = scratch("burst");
+    let mut sim = start_sim(&dir.join("dev"));
+    let mut tap = start_tap(&dir, &[]);
+    let host = open_host(&dir.join("host"));
+    let rx = Receiver::start(host.try_clone().unwrap());
+
+    let (sent, expected) = traffic(1 << 20, &ALL_REQS);
+    let writer = send(host, sent.clone());
+    // Every request answered (the simulator paces its replies at 115200 baud: ~3 s).
+    wait_for(
+        "every reply",
+        || format!("{} bytes received\n{}", rx.len(), tap.stderr()),
+        || frames(&rx.got()).len() >= expected.len(),
+    );
+    assert_eq!(writer.join().unwrap(), sent.len());
+
+    tap.signal(Signal::SIGINT);
+    let status = tap.wait_exit();
+    let err = tap.stderr();
+    assert!(status.success(), "tap: {status}\n{err}");
+    let got = rx.finish();
+
+    // The host got exactly the replies, in order, and each velocity reply carries the
+    // parameters set just before its request.
+    let fs = frames(&got);
+    assert_eq!(fs.concat().len(), got.len(), "a partial frame at the end");
+    assert_eq!(fs.len(), expected.len());
+    for (i, (f, (id, acc))) in fs.iter().zip(&expected).enumerate() {
+        assert_eq!(msg_id(f), *id, "reply {i}");
+        if let Some(acc) = acc {
+            assert_eq!(f[12..16], acc.to_le_bytes(), "reply {i}: acceleration");
+        }
+    }
+
+    // The tap counted what crossed and checked it against its file.
+    assert!(err.contains("SIGINT: stopping"), "{err}");
+    let counts = format!(
+        "host → device {} bytes, device → host {} bytes",
+        sent.len(),
+        got.len()
+    );
+    assert!(err.contains(&format!("aptscope tap: {counts}")), "{err}");
+    assert!(
+        err.contains(&format!("aptscope tap: file: {counts}")),
+        "{err}"
+    );
+    assert!(err.contains("matches what was forwarded"), "{err}");
+    assert!(!err.contains("gone at"), "{err}");
+
+    // The file holds exactly those bytes, in order, with their direction.
+    let cap = read_capture(&dir.join("cap.pcapng"));
+    assert!(cap.diags.is_empty(), "{:?}", cap.diags);
+    assert!(
+        cap.h2d == sent,
+        "h2d: {}",
+        first_difference(&cap.h2d, &sent)
+    );
+    assert!(cap.d2h == got, "d2h: {}", first_difference(&cap.d2h, &got));
+
+    // And the decoder agrees: every frame whole, in the right direction, no framing problem.
+    // (Pairing may flag replies: a burst leaves ~1000 requests waiting at once, beyond the
+    // pairer's bound of 256 waiting requests, by design.)
+    let recs = decode_json(&dir.join("cap.pcapng"));
+    let frames_of = |dir: &str| {
+        recs.iter()
+            .filter(|r| r["type"] == "frame" && r["dir"] == dir)
+            .count()
+    };
+    assert_eq!(frames_of("h2d"), frames(&sent).len());
+    assert_eq!(frames_of("d2h"), expected.len());
+    let pairing = ["duplicate_reply", "unsolicited", "no_reply"];
+    let flagged: Vec<_> = recs
+        .iter()
+        .filter(|r| {
+            r["type"] == "garbage"
+                || r["diag"]
+                    .as_array()
+                    .is_some_and(|d| d.iter().any(|k| !pairing.iter().any(|p| k["kind"] == *p)))
+        })
+        .take(5)
+        .collect();
+    assert!(flagged.is_empty(), "{flagged:?}");
+
+    // The simulator ends by itself when the tap hangs up, and removes its link.
+    let st = sim.wait_exit();
+    assert!(st.success(), "sim: {st}\n{}", sim.stderr());
+    assert!(std::fs::symlink_metadata(dir.join("dev")).is_err());
+    // So does the tap's link.
+    assert!(std::fs::symlink_metadata(dir.join("host")).is_err());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn kill_9_of_the_tap_leaves_a_readable_prefix() {
+    let dir = scratch("kill9");
+    let mut sim = start_sim(&dir.join("dev"));
+    let mut tap = start_tap(&dir, &[]);
+    let host = open_host(&dir.join("host"));
+    let rx = Receiver::start(host.try_clone().unwrap());
+    let (sent, expected) = traffic(1 << 20, &ALL_REQS);
+    let writer = send(host, sent.clone());
+
+    // Mid-stream: replies still coming, and some of the file flushed.
+    let cap_path = dir.join("cap.pcapng");
+    wait_for(
+        "replies and a flushed file",
+        || tap.stderr(),
+        || {
+            frames(&rx.got()).len() >= 10
+                && std::fs::metadata(&cap_path).is_ok_and(|m| m.len() > 100_000)
+        },
+    );
+    tap.signal(Signal::SIGKILL);
+    let st = tap.wait_exit();
+    assert!(!st.success());
+    let _ = writer.join().unwrap();
+    let got = rx.finish();
+    assert!(
+        frames(&got).len() < expected.len(),
+        "killed after the stream ended"
+    );
+
+    // Readable up to its last complete block: at worst a truncated tail.
+    let cap = read_capture(&cap_path);
+    for (kind, d) in &cap.diags {
+        assert_eq!(*kind, "truncated_record", "{d}");
+    }
+    assert!(cap.diags.len() <= 1, "{:?}", cap.diags);
+    assert!(cap.chunks > 0 && !cap.h2d.is_empty());
+    assert!(
+        is_prefix(&cap.h2d, &sent),
+        "h2d: {}",
+        first_difference(&cap.h2d, &sent)
+    );
+    // What the file says the host got and what it did get agree (either may be ahead: the
+    // file lags by up to a second, and a hang-up may flush what the host had not read yet).
+    let n = cap.d2h.len().min(got.len());
+    assert!(
+        cap.d2h[..n] == got[..n],
+        "d2h: {}",
+        first_difference(&cap.d2h, &got)
+    );
+    assert!(decode_json(&cap_path).iter().any(|r| r["type"] == "frame"));
+
+    // The simulator sees the hang-up and ends.
+    let st = sim.wait_exit();
+    assert!(st.success(), "sim: {st}\n{}", sim.stderr());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_device_vanishing_mid_stream_is_reported_with_its_time_and_ends_the_tap() {
+    let dir = scratch("devgone");
+    let mut sim = start_sim(&dir.join("dev"));
+    let mut tap = start_tap(&dir, &[]);
+    let host = open_host(&dir.join("host"));
+    let rx = Receiver::start(host.try_clone().unwrap());
+    let (sent, expected) = traffic(1 << 20, &ALL_REQS);
+    let writer = send(host, sent.clone());
+    wait_for(
+        "some replies",
+        || tap.stderr(),
+        || frames(&rx.got()).len() >= 10,
+    );
+
+    // The cable is pulled.
+    sim.signal(Signal::SIGKILL);
+    sim.wait_exit();
+    let t0 = Instant::now();
+    let status = tap.wait_exit();
+    let err = tap.stderr();
+    assert!(status.success(), "tap: {status}\n{err}");
+    assert!(t0.elapsed() < Duration::from_secs(30), "slow to notice");
+    let dev = dir.join("dev");
+    let gone = format!("aptscope: {} gone at ", dev.display());
+    let line = err
+        .lines()
+        .find(|l| l.starts_with(&gone))
+        .unwrap_or_else(|| panic!("no `gone` report:\n{err}"));
+    // `gone at HH:MM:SS.mmm UTC (+S.sss s): error`
+    let time = &line[gone.len()..];
+    assert!(
+        time.len() > 16 && time.as_bytes()[2] == b':' && time[12..].starts_with(" UTC"),
+        "{line}"
+    );
+    assert!(err.contains("matches what was forwarded"), "{err}");
+    let _ = writer.join().unwrap();
+    let got = rx.finish();
+    assert!(
+        frames(&got).len() < expected.len(),
+        "the sim was killed too late"
+    );
+
+    let cap = read_capture(&dir.join("cap.pcapng"));
+    assert!(cap.diags.is_empty(), "{:?}", cap.diags);
+    assert!(
+        is_prefix(&cap.h2d, &sent),
+        "{}",
+        first_difference(&cap.h2d, &sent)
+    );
+    assert!(
+        is_prefix(&got, &cap.d2h),
+        "{}",
+        first_difference(&got, &cap.d2h)
+    );
+    assert!(std::fs::symlink_metadata(dir.join("host")).is_err());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn with_reconnect_traffic_continues_in_the_same_file_after_the_device_comes_back() {
+    let dir = scratch("reconnect");
+    let dev = dir.join("dev");
+    let mut sim = start_sim(&dev);
+    let mut tap = start_tap(&dir, &["--reconnect"]);
+    let host = open_host(&dir.join("host"));
+    let rx = Receiver::start(host.try_clone().unwrap());
+
+    // Before: requests the second simulator never sees.
+    let (a, _) = traffic(200_000, &[HW_REQ_INFO, MOT_REQ_STATUSBITS]);
+    assert_eq!(
+        send(host.try_clone().unwrap(), a.clone()).join().unwrap(),
+        a.len()
+    );
+    wait_for(
+        "some replies",
+        || tap.stderr(),
+        || frames(&rx.got()).len() >= 4,
+    );
+    sim.signal(Signal::SIGKILL);
+    sim.wait_exit();
+    tap.wait_stderr(&format!("{} gone at", dev.display()));
+    tap.wait_stderr("waiting for");
+    let before = rx.len();
+
+    // The device comes back under the same name.
+    let mut sim2 = start_sim(&dev);
+    tap.wait_stderr("back at");
+    let (b, b_replies) = traffic(100_000, &[MOT_REQ_POSCOUNTER]);
+    assert_eq!(send(host, b.clone()).join().unwrap(), b.len());
+    wait_for(
+        "the replies after the reconnection",
+        || tap.stderr(),
+        || count(&rx.got()[before..], &GET_POSCOUNTER_HDR) >= b_replies.len(),
+    );
+
+    tap.signal(Signal::SIGTERM);
+    let status = tap.wait_exit();
+    let err = tap.stderr();
+    assert!(status.success(), "tap: {status}\n{err}");
+    assert!(err.contains("SIGTERM: stopping"), "{err}");
+    assert!(err.contains("matches what was forwarded"), "{err}");
+    assert_eq!(err.matches(" gone at ").count(), 2, "{err}"); // the report and the summary
+    let got = rx.finish();
+
+    let cap = read_capture(&dir.join("cap.pcapng"));
+    assert!(cap.diags.is_empty(), "{:?}", cap.diags);
+    // h2d: what reached the first device (a prefix of A), then all of B.
+    assert!(cap.h2d.ends_with(&b), "h2d lacks the second part");
+    let first = &cap.h2d[..cap.h2d.len() - b.len()];
+    assert!(!first.is_empty() && is_prefix(first, &a));
+    assert!(cap.d2h == got, "d2h: {}", first_difference(&cap.d2h, &got));
+    assert_eq!(count(&got, &GET_POSCOUNTER_HDR), b_replies.len());
+
+    let st = sim2.wait_exit();
+    assert!(st.success(), "sim: {st}\n{}", sim2.stderr());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_simulator_exits_cleanly_on_sigint_and_sigterm_and_removes_its_link() {
+    let dir = scratch("sim-signals");
+    for sig in [Signal::SIGINT, Signal::SIGTERM] {
+        let link = dir.join("dev");
+        let mut sim = start_sim(&link);
+        let target = std::fs::read_link(&link).unwrap();
+        assert!(target.starts_with("/dev/pts"), "{}", target.display());
+        sim.signal(sig);
+        let st = sim.wait_exit();
+        assert!(st.success(), "{sig}: {st}\n{}", sim.stderr());
+        assert!(
+            std::fs::symlink_metadata(&link).is_err(),
+            "{sig}: link left"
+        );
+    }
+    // Elliptec too.
+    let link = dir.join("ell");
+    let mut sim = start_sim_with(&["sim", "elliptec", "--modules", "0:ELL14,1:ELL9"], &link);
+    sim.signal(Signal::SIGINT);
+    assert!(sim.wait_exit().success(), "{}", sim.stderr());
+    assert!(std::fs::symlink_metadata(&link).is_err());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_simulator_leaves_a_link_it_no_longer_owns() {
+    // A restarted simulator took over the link: the old one ending must not remove it.
+    let dir = scratch("sim-link");
+    let link = dir.join("dev");
+    let mut old = start_sim(&link);
+    let mut new = start_sim(&link);
+    let target = std::fs::read_link(&link).unwrap();
+    old.signal(Signal::SIGINT);
+    assert!(old.wait_exit().success(), "{}", old.stderr());
+    assert_eq!(std::fs::read_link(&link).ok(), Some(target));
+    new.signal(Signal::SIGINT);
+    assert!(new.wait_exit().success(), "{}", new.stderr());
+    assert!(std::fs::symlink_metadata(&link).is_err());
+    let _ = std::fs::remove_dir_all(&dir);
+}
