@@ -2,7 +2,7 @@
 #![forbid(unsafe_code)]
 
 use aptscope_capture::info::summarize;
-use aptscope_capture::live::sim::{sim_apt_main, sim_elliptec_main};
+use aptscope_capture::live::sim::{sim_apt_main, sim_elliptec_main, SimLine};
 use aptscope_capture::live::tap::{sniff_main, tap_main, Flow, SniffOptions, TapOptions, TapStats};
 use aptscope_capture::open::{create, open, open_with_progress, Format, OpenOptions, Progress};
 use aptscope_capture::{Direction, Event};
@@ -41,8 +41,14 @@ enum SimCmd {
         #[arg(long, default_value = "kdc101")]
         model: String,
         /// Symlink to the pseudo-terminal.
-        #[arg(long)]
+        #[arg(long, conflicts_with = "port")]
         pty: Option<std::path::PathBuf>,
+        /// Serve on this serial port instead (a null-modem cable to the host's port).
+        #[arg(long)]
+        port: Option<std::path::PathBuf>,
+        /// Baud rate on --port.
+        #[arg(long, default_value_t = 115_200)]
+        baud: u32,
     },
     /// An Elliptec bus.
     Elliptec {
@@ -50,8 +56,14 @@ enum SimCmd {
         #[arg(long, default_value = "0:ELL14")]
         modules: String,
         /// Symlink to the pseudo-terminal.
-        #[arg(long)]
+        #[arg(long, conflicts_with = "port")]
         pty: Option<std::path::PathBuf>,
+        /// Serve on this serial port instead.
+        #[arg(long)]
+        port: Option<std::path::PathBuf>,
+        /// Baud rate on --port.
+        #[arg(long, default_value_t = 9_600)]
+        baud: u32,
     },
 }
 
@@ -394,8 +406,18 @@ fn main() -> ExitCode {
         } => open_opts(format.as_deref(), false, usb_device.as_deref())
             .and_then(|o| aptscope_tui::run_as(&file, o, proto_of(proto))),
         Cmd::Sim { what } => match what {
-            SimCmd::Apt { model, pty } => sim_apt_main(&model, pty.as_deref()),
-            SimCmd::Elliptec { modules, pty } => sim_elliptec_main(&modules, pty.as_deref()),
+            SimCmd::Apt {
+                model,
+                pty,
+                port,
+                baud,
+            } => sim_apt_main(&model, sim_line(pty.as_deref(), port.as_deref(), baud)),
+            SimCmd::Elliptec {
+                modules,
+                pty,
+                port,
+                baud,
+            } => sim_elliptec_main(&modules, sim_line(pty.as_deref(), port.as_deref(), baud)),
         },
         Cmd::Tap { device, link, live } => live_opts(&live).and_then(|(proto, flow)| {
             let mut o = TapOptions::new(device, link);
@@ -538,6 +560,17 @@ fn main() -> ExitCode {
             eprintln!("aptscope: {e}");
             ExitCode::FAILURE
         }
+    }
+}
+
+fn sim_line<'a>(
+    pty: Option<&'a std::path::Path>,
+    port: Option<&'a std::path::Path>,
+    baud: u32,
+) -> SimLine<'a> {
+    match port {
+        Some(p) => SimLine::Port(p, baud),
+        None => SimLine::Pty(pty),
     }
 }
 

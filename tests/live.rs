@@ -796,3 +796,55 @@ fn a_simulator_leaves_a_link_it_no_longer_owns() {
     assert!(std::fs::symlink_metadata(&link).is_err());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `sim apt --port DEV` serves a serial port (here a pseudo-terminal's slave, the test holding
+/// the far end of the "cable") and ends cleanly on SIGINT, even while it waits on the port.
+#[test]
+fn a_simulator_on_a_serial_port_answers_and_ends_cleanly_on_sigint() {
+    let pty = nix::pty::openpty(None, None).expect("openpty");
+    let mut t = tcgetattr(&pty.slave).expect("tcgetattr");
+    cfmakeraw(&mut t);
+    tcsetattr(&pty.slave, SetArg::TCSANOW, &t).expect("tcsetattr");
+    let path = nix::unistd::ttyname(&pty.slave).expect("ttyname");
+    let fl = nix::fcntl::fcntl(&pty.master, nix::fcntl::FcntlArg::F_GETFL).expect("flags");
+    nix::fcntl::fcntl(
+        &pty.master,
+        nix::fcntl::FcntlArg::F_SETFL(OFlag::from_bits_truncate(fl) | OFlag::O_NONBLOCK),
+    )
+    .expect("non-blocking");
+    let mut sim = Proc::spawn(&[
+        "sim",
+        "apt",
+        "--model",
+        "kdc101",
+        "--port",
+        path.to_str().unwrap(),
+    ]);
+    let master = File::from(pty.master);
+    // Ask until the simulator has the port open and answers.
+    let mut got = vec![];
+    let mut asked: Option<Instant> = None;
+    wait_for(
+        "HW_GET_INFO from the simulator on the port",
+        || sim.stderr(),
+        || {
+            if got.is_empty() && asked.is_none_or(|t| t.elapsed() > Duration::from_millis(300)) {
+                let _ = (&master).write_all(&req(HW_REQ_INFO));
+                asked = Some(Instant::now());
+            }
+            let mut buf = [0u8; 256];
+            if ready(&master, PollFlags::POLLIN) {
+                if let Ok(n) = (&master).read(&mut buf) {
+                    got.extend_from_slice(&buf[..n]);
+                }
+            }
+            got.len() >= 90
+        },
+    );
+    assert_eq!(&got[..2], &[0x06, 0x00], "{got:02x?}");
+    assert_eq!(&got[10..16], b"KDC101");
+    sim.signal(Signal::SIGINT);
+    let status = sim.wait_exit();
+    assert!(status.success(), "{status:?}\n{}", sim.stderr());
+    drop(pty.slave);
+}

@@ -263,7 +263,8 @@ pub fn open_with_progress(
         // A name that promises a container the content is not: say so, rather than silently
         // decoding the container's headers as garbage.
         let named = Format::from_extension(path).filter(|f| {
-            matches!(f, Format::Pcap | Format::PcapNg | Format::Mcap)
+            p.total != Some(0)
+                && matches!(f, Format::Pcap | Format::PcapNg | Format::Mcap)
                 && opts.format.is_none()
                 && *f != format
                 && !(matches!(f, Format::Pcap | Format::PcapNg)

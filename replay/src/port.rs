@@ -3,16 +3,15 @@
 //! thread timestamps what arrives and hands it over a channel, so the sender's clock is never
 //! held up by a read.
 
+use aptscope_capture::live::serial::{open_serial, SerialFd};
 use aptscope_capture::live::sim::Pty;
-use aptscope_capture::live::tap::{Flow, LineSettings};
+use aptscope_capture::live::tap::LineSettings;
 use nix::errno::Errno;
-use nix::fcntl::OFlag;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use serialport::SerialPort;
 use std::fs::File;
 use std::io::{self, Read, Write};
 use std::os::fd::{AsFd, OwnedFd};
-use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender};
@@ -146,7 +145,7 @@ impl Io {
 pub struct Link {
     tx: Io,
     /// The configured port (its settings and exclusive lock last while it is open).
-    _port: Option<serialport::TTYPort>,
+    _port: Option<SerialFd>,
     /// What arrived, timestamped by the reader thread.
     pub rx: Receiver<RxEvent>,
     /// The clock every time of this link is on.
@@ -183,7 +182,7 @@ fn reader(mut io: Io, clock: Clock, tx: Sender<RxEvent>, stop: Arc<AtomicBool>) 
 }
 
 impl Link {
-    fn start(tx: Io, rx: Io, port: Option<serialport::TTYPort>, name: String) -> Link {
+    fn start(tx: Io, rx: Io, port: Option<SerialFd>, name: String) -> Link {
         let clock = Clock::start();
         let stop = Arc::new(AtomicBool::new(false));
         let (s, r) = mpsc::channel();
@@ -207,31 +206,10 @@ impl Link {
     /// protocol needs it (8N1 at `line.baud`, with its flow control).
     pub fn open_port(path: &Path, line: LineSettings) -> io::Result<Link> {
         let name = path.to_string_lossy().into_owned();
-        let flow = match line.flow {
-            Flow::None => serialport::FlowControl::None,
-            Flow::RtsCts => serialport::FlowControl::Hardware,
-            Flow::XonXoff => serialport::FlowControl::Software,
-        };
-        let mut port = serialport::new(name.as_str(), line.baud)
-            .data_bits(serialport::DataBits::Eight)
-            .parity(serialport::Parity::None)
-            .stop_bits(serialport::StopBits::One)
-            .flow_control(flow)
-            .timeout(READ_TICK)
-            .open_native()
-            .map_err(|e| io::Error::other(format!("{name}: {e}")))?;
-        // serialport configures the line and holds it exclusively; the I/O goes through our own
-        // descriptor, opened while the lock is briefly lifted.
-        port.set_exclusive(false).map_err(io::Error::other)?;
-        let f = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .custom_flags(libc_flags())
-            .open(path)
-            .map_err(|e| io::Error::new(e.kind(), format!("{name}: {e}")))?;
-        port.set_exclusive(true).map_err(io::Error::other)?;
+        let mut port = open_serial(&name, &line)?;
         // Ignore anything sent before we were there.
-        let _ = port.clear(serialport::ClearBuffer::Input);
+        let _ = port.port().clear(serialport::ClearBuffer::Input);
+        let f = port.file.try_clone()?;
         let w = f.try_clone()?;
         Ok(Link::start(
             Io { f: w, slave: None },
@@ -273,11 +251,6 @@ impl Link {
     pub fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
         self.tx.write_all(bytes)
     }
-}
-
-/// Non-blocking, and not the controlling terminal.
-fn libc_flags() -> i32 {
-    (OFlag::O_NOCTTY | OFlag::O_NONBLOCK).bits()
 }
 
 impl Drop for Link {

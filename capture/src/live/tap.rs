@@ -25,8 +25,7 @@
 //!   for display, counted, and a `# display skipped …` line says so (the file still has them).
 //! - **Stopping**: SIGINT, SIGTERM and SIGHUP are received through a `signalfd` (Linux; the
 //!   signals are blocked in the tap's threads while it runs and the previous mask restored
-//!   after; a handler that only records them covers the serial port crate's waits, which
-//!   unblock every signal), or [`StopHandle::stop`], or the end of [`TapOptions::duration`]. The file is then
+//!   after), or [`StopHandle::stop`], or the end of [`TapOptions::duration`]. The file is then
 //!   finished, and the byte counts per direction are printed and checked against what was
 //!   forwarded.
 //! - **Device gone** (read/write error or end of file on the port): reported with the time, the
@@ -36,6 +35,7 @@
 //!   device late) and counted in [`TapStats::discarded_h2d`].
 #![forbid(unsafe_code)]
 
+use crate::live::serial::{self, SerialFd};
 use crate::model::{Chunk, Direction, StreamInfo, Writer};
 use crate::pcap::PcapNgOut;
 use aptscope_dissector::detect::Proto;
@@ -95,7 +95,7 @@ impl Flow {
         })
     }
 
-    fn to_serialport(self) -> serialport::FlowControl {
+    pub(crate) fn to_serialport(self) -> serialport::FlowControl {
         match self {
             Flow::None => serialport::FlowControl::None,
             Flow::RtsCts => serialport::FlowControl::Hardware,
@@ -213,9 +213,7 @@ pub struct TapOptions {
     pub quiet: bool,
     /// Stop after this long.
     pub duration: Option<Duration>,
-    /// Stop on SIGINT/SIGTERM/SIGHUP (Linux; blocks them in the calling thread while running,
-    /// and installs process-wide handlers for them that, once the tap is done, end the process
-    /// as the default action would).
+    /// Stop on SIGINT/SIGTERM/SIGHUP (Linux; blocks them in the calling thread while running).
     pub signals: bool,
     /// Stops the tap from another thread.
     pub stop: StopHandle,
@@ -504,47 +502,41 @@ impl Port for FdPort {
     }
 }
 
-/// A real serial port (its own timeout is [`TICK`]).
-struct SerialPort(serialport::TTYPort);
+/// A real serial port: our polled descriptor (see [`crate::live::serial`]), and the configured
+/// port it belongs to, kept open as long as either handle is.
+struct SerialPort {
+    fd: FdPort,
+    hold: Arc<Mutex<SerialFd>>,
+}
 
 impl Port for SerialPort {
     fn read_tick(&mut self, buf: &mut [u8]) -> io::Result<usize> {
-        match self.0.read(buf) {
-            Ok(0) => Err(eof()),
-            Ok(n) => Ok(n),
-            Err(e) if transient(&e) => Ok(0),
-            Err(e) => Err(e),
-        }
+        self.fd.read_tick(buf)
     }
     fn write_tick(&mut self, buf: &[u8]) -> io::Result<usize> {
-        match self.0.write(buf) {
-            Ok(n) => Ok(n),
-            Err(e) if transient(&e) => Ok(0),
-            Err(e) => Err(e),
-        }
+        self.fd.write_tick(buf)
     }
-}
-
-/// Open a serial port (exclusively) with `settings`.
-fn open_serial(path: &str, settings: &LineSettings) -> io::Result<SerialPort> {
-    serialport::new(path, settings.baud)
-        .data_bits(serialport::DataBits::Eight)
-        .parity(serialport::Parity::None)
-        .stop_bits(serialport::StopBits::One)
-        .flow_control(settings.flow.to_serialport())
-        .timeout(TICK)
-        .open_native()
-        .map(SerialPort)
-        .map_err(|e| io::Error::new(io::Error::from(e.clone()).kind(), format!("{path}: {e}")))
 }
 
 /// The device side: a read handle and a write handle.
 type DevicePair = (Box<dyn Port>, Box<dyn Port>);
 
+/// Open a serial port (exclusively) with `settings`.
+fn open_serial(path: &str, settings: &LineSettings) -> io::Result<SerialPort> {
+    let s = serial::open_serial(path, settings)?;
+    Ok(SerialPort {
+        fd: FdPort::new(OwnedFd::from(s.file.try_clone()?))?,
+        hold: Arc::new(Mutex::new(s)),
+    })
+}
+
 fn open_device(path: &str, settings: &LineSettings) -> io::Result<DevicePair> {
     let r = open_serial(path, settings)?;
-    let w = r.0.try_clone_native().map_err(io::Error::from)?;
-    Ok((Box::new(r), Box::new(SerialPort(w))))
+    let w = SerialPort {
+        fd: r.fd.try_clone()?,
+        hold: r.hold.clone(),
+    };
+    Ok((Box::new(r), Box::new(w)))
 }
 
 /// The host side: a raw-mode pseudo-terminal whose slave the host program opens.
@@ -614,75 +606,25 @@ mod signals {
     use nix::sys::signalfd::{SfdFlags, SignalFd};
     use std::io;
     use std::os::fd::AsFd;
-    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-    use std::sync::Arc;
-
-    const SIGNALS: [Signal; 3] = [Signal::SIGINT, Signal::SIGTERM, Signal::SIGHUP];
 
     /// SIGINT, SIGTERM and SIGHUP, blocked in this thread (and the threads it starts) and read
     /// from a signalfd; the previous mask comes back on drop.
-    ///
-    /// Blocking alone is not enough: the serial port crate waits with `ppoll` and an *empty*
-    /// signal mask, so a signal arriving while a port is being waited on is delivered to that
-    /// thread, and with the default disposition it would kill the tap (no summary, unfinished
-    /// file). So a handler is installed too; it only records the signal (`caught`), which
-    /// [`Signals::wait`] looks at along with the signalfd.
     pub struct Signals {
         fd: SignalFd,
         old: SigSet,
-        caught: Arc<AtomicUsize>,
-        hooks: Vec<signal_hook::SigId>,
-        /// Set when done: the signals have their default effect again.
-        restored: Arc<AtomicBool>,
     }
 
     impl Signals {
         pub fn install() -> io::Result<Signals> {
-            let caught = Arc::new(AtomicUsize::new(0));
-            let restored = Arc::new(AtomicBool::new(false));
-            let unhook = |hooks: &mut Vec<signal_hook::SigId>| {
-                for id in hooks.drain(..) {
-                    signal_hook::low_level::unregister(id);
-                }
-            };
-            // `hooks` record the signal while we run; `defaults` end the process as before once
-            // we are done (they stay installed, armed by `restored`).
-            let (mut hooks, mut defaults) = (vec![], vec![]);
             let mut set = SigSet::empty();
-            for s in SIGNALS {
+            for s in [Signal::SIGINT, Signal::SIGTERM, Signal::SIGHUP] {
                 set.add(s);
-                let r = signal_hook::flag::register_conditional_default(s as i32, restored.clone())
-                    .and_then(|id| {
-                        defaults.push(id);
-                        signal_hook::flag::register_usize(s as i32, caught.clone(), s as usize)
-                    });
-                match r {
-                    Ok(id) => hooks.push(id),
-                    Err(e) => {
-                        unhook(&mut hooks);
-                        unhook(&mut defaults);
-                        return Err(e);
-                    }
-                }
             }
-            let r = set.thread_swap_mask(SigmaskHow::SIG_BLOCK).and_then(|old| {
-                SignalFd::with_flags(&set, SfdFlags::SFD_NONBLOCK | SfdFlags::SFD_CLOEXEC)
-                    .map(|fd| (fd, old))
-                    .inspect_err(|_| {
-                        let _ = old.thread_set_mask();
-                    })
-            });
-            match r {
-                Ok((fd, old)) => Ok(Signals {
-                    fd,
-                    old,
-                    caught,
-                    hooks,
-                    restored,
-                }),
+            let old = set.thread_swap_mask(SigmaskHow::SIG_BLOCK)?;
+            match SignalFd::with_flags(&set, SfdFlags::SFD_NONBLOCK | SfdFlags::SFD_CLOEXEC) {
+                Ok(fd) => Ok(Signals { fd, old }),
                 Err(e) => {
-                    unhook(&mut hooks);
-                    unhook(&mut defaults);
+                    let _ = old.thread_set_mask();
                     Err(e.into())
                 }
             }
@@ -690,45 +632,27 @@ mod signals {
 
         /// A signal received within `timeout`, by name.
         pub fn wait(&self, timeout: Duration) -> Option<String> {
-            if let Some(s) = self.caught() {
-                return Some(s);
-            }
             if !wait_fd(self.fd.as_fd(), PollFlags::POLLIN, timeout).unwrap_or(false) {
-                return self.caught();
+                return None;
             }
-            self.take().or_else(|| self.caught())
-        }
-
-        /// A signal the handler recorded.
-        fn caught(&self) -> Option<String> {
-            match self.caught.swap(0, Ordering::SeqCst) {
-                0 => None,
-                n => Some(name(n as i32)),
-            }
+            self.take()
         }
 
         fn take(&self) -> Option<String> {
             let si = self.fd.read_signal().ok()??;
-            Some(name(si.ssi_signo as i32))
+            Some(
+                Signal::try_from(si.ssi_signo as i32)
+                    .map(|s| s.as_str().to_string())
+                    .unwrap_or_else(|_| format!("signal {}", si.ssi_signo)),
+            )
         }
-    }
-
-    fn name(signo: i32) -> String {
-        Signal::try_from(signo)
-            .map(|s| s.as_str().to_string())
-            .unwrap_or_else(|_| format!("signal {signo}"))
     }
 
     impl Drop for Signals {
         fn drop(&mut self) {
-            // Consume what is pending so unblocking does not deliver it.
+            // Consume what is pending so unblocking does not deliver it (and kill us).
             while self.take().is_some() {}
-            // From now on the signals end the process again, as by default.
-            self.restored.store(true, Ordering::SeqCst);
             let _ = self.old.thread_set_mask();
-            for id in self.hooks.drain(..) {
-                signal_hook::low_level::unregister(id);
-            }
         }
     }
 }

@@ -105,24 +105,41 @@ fn invalid(msg: String) -> io::Error {
     io::Error::new(io::ErrorKind::InvalidInput, msg)
 }
 
-/// `aptscope sim apt --model MODEL [--pty LINK]`: simulate an APT controller (`kdc101`,
-/// `tdc001`, `kpz101`, `bsc203`, `tls001`, `ttc001`, `kpa101`) on a new pseudo-terminal, print its path (and link it at
-/// `pty`), and serve it until SIGINT/SIGTERM or until the program using it hangs up.
-pub fn sim_apt_main(model: &str, pty: Option<&Path>) -> io::Result<()> {
+/// Where a simulator serves.
+#[derive(Debug, Clone, Copy)]
+pub enum SimLine<'a> {
+    /// A new pseudo-terminal, symlinked here when given.
+    Pty(Option<&'a Path>),
+    /// A real serial port at this baud rate.
+    Port(&'a Path, u32),
+}
+
+fn serve<S: Simulator>(sim: S, line: SimLine<'_>) -> io::Result<()> {
+    match line {
+        SimLine::Pty(link) => run_on_pty(sim, link),
+        SimLine::Port(dev, baud) => run_on_port(sim, dev, baud),
+    }
+}
+
+/// `aptscope sim apt --model MODEL [--pty LINK | --port DEV]`: simulate an APT controller
+/// (`kdc101`, `tdc001`, `kpz101`, `bsc203`, `tls001`, `ttc001`, `kpa101`) on a new
+/// pseudo-terminal (its path printed, and linked at `LINK`) or a serial port, until
+/// SIGINT/SIGTERM or until the program using the pseudo-terminal hangs up.
+pub fn sim_apt_main(model: &str, line: SimLine<'_>) -> io::Result<()> {
     let m = AptModel::parse(model).ok_or_else(|| {
         invalid(format!(
             "unknown model `{model}` ({})",
             AptModel::NAMES.join(", ")
         ))
     })?;
-    run_on_pty(AptSim::new(m), pty)
+    serve(AptSim::new(m), line)
 }
 
-/// `aptscope sim elliptec --modules 0:ELL14,1:ELL9 [--pty LINK]`: simulate an Elliptec bus with
-/// these modules on a new pseudo-terminal, as [`sim_apt_main`] does.
-pub fn sim_elliptec_main(modules: &str, pty: Option<&Path>) -> io::Result<()> {
+/// `aptscope sim elliptec --modules 0:ELL14,1:ELL9 [--pty LINK | --port DEV]`: simulate an
+/// Elliptec bus with these modules, as [`sim_apt_main`] does.
+pub fn sim_elliptec_main(modules: &str, line: SimLine<'_>) -> io::Result<()> {
     let mods = parse_modules(modules).map_err(invalid)?;
-    run_on_pty(EllSim::new(&mods).map_err(invalid)?, pty)
+    serve(EllSim::new(&mods).map_err(invalid)?, line)
 }
 
 #[cfg(test)]
