@@ -546,8 +546,8 @@ fn a_megabyte_burst_through_the_tap_is_recorded_exactly_and_ctrl_c_leaves_a_vali
     assert!(cap.d2h == got, "d2h: {}", first_difference(&cap.d2h, &got));
 
     // And the decoder agrees: every frame whole, in the right direction, no framing problem.
-    // (Pairing may flag replies: a burst leaves ~1000 requests waiting at once, beyond the
-    // pairer's bound of 256 waiting requests, by design.)
+    // (Pairing may flag replies: a burst leaves ~1000 requests waiting at once, and the last
+    // replies come more than the 2 s request timeout after their requests.)
     let recs = decode_json(&dir.join("cap.pcapng"));
     let frames_of = |dir: &str| {
         recs.iter()

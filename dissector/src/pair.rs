@@ -7,7 +7,7 @@
 
 use crate::apt::AptFrame;
 use crate::table::{Dir, MsgDef, Table};
-use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 
 /// A request still waiting.
 #[derive(Debug, Clone)]
@@ -59,8 +59,10 @@ pub struct PairInfo {
     pub expired: Vec<Unanswered>,
 }
 
-/// Bound on requests waiting (a device that never answers must not grow memory).
-const MAX_PENDING: usize = 256;
+/// Bound on requests waiting (a device that never answers must not grow memory). High enough
+/// that a host flooding requests faster than the line answers keeps its pairing: past it, the
+/// oldest is given up and every later reply would pair one request too late.
+const MAX_PENDING: usize = 4096;
 const RECENT: usize = 64;
 
 /// Default timeouts: the spec gives none for replies; requests are answered within milliseconds,
@@ -93,7 +95,9 @@ pub struct AptPairer {
     pending: BTreeMap<u64, Pending>,
     /// Record numbers of the waiting requests that expect each message id, oldest first: a reply
     /// looks only at the requests it can answer.
-    by_reply: HashMap<u16, Vec<u64>>,
+    by_reply: HashMap<u16, VecDeque<u64>>,
+    /// Waiting requests with a time, by the time they expire (the timeout fixed when they came).
+    deadlines: BTreeSet<(u64, u64)>,
     recent: VecDeque<Answered>,
     /// Overrides the per-message default timeout.
     pub timeout_ns: Option<u64>,
@@ -107,16 +111,27 @@ impl AptPairer {
 
     fn insert(&mut self, p: Pending) {
         for id in &p.expects {
-            self.by_reply.entry(*id).or_default().push(p.n);
+            self.by_reply.entry(*id).or_default().push_back(p.n);
+        }
+        if let Some(d) = self.deadline(&p) {
+            self.deadlines.insert((d, p.n));
         }
         self.pending.insert(p.n, p);
     }
 
     fn remove(&mut self, n: u64) -> Option<Pending> {
         let p = self.pending.remove(&n)?;
+        if let Some(d) = self.deadline(&p) {
+            self.deadlines.remove(&(d, n));
+        }
         for id in &p.expects {
             if let Some(v) = self.by_reply.get_mut(id) {
-                v.retain(|x| *x != n);
+                // Requests are mostly answered in order: the front, at no cost.
+                if v.front() == Some(&n) {
+                    v.pop_front();
+                } else {
+                    v.retain(|x| *x != n);
+                }
                 if v.is_empty() {
                     self.by_reply.remove(id);
                 }
@@ -125,18 +140,18 @@ impl AptPairer {
         Some(p)
     }
 
+    /// When a waiting request expires, if it has a time.
+    fn deadline(&self, p: &Pending) -> Option<u64> {
+        p.ts.map(|t| t.saturating_add(self.timeout_ns.unwrap_or(p.timeout_ns)))
+    }
+
     fn expire(&mut self, now: Option<u64>, out: &mut Vec<Unanswered>) {
         let Some(now) = now else { return };
-        let fixed = self.timeout_ns;
-        let late: Vec<u64> = self
-            .pending
-            .values()
-            .filter(|p| {
-                p.ts.is_some_and(|t| now > t.saturating_add(fixed.unwrap_or(p.timeout_ns)))
-            })
-            .map(|p| p.n)
-            .collect();
-        for n in late {
+        while let Some(&(d, n)) = self.deadlines.first() {
+            if d >= now {
+                break;
+            }
+            self.deadlines.pop_first();
             if let Some(p) = self.remove(n) {
                 out.push(Unanswered {
                     n: p.n,
@@ -194,7 +209,8 @@ impl AptPairer {
         }
         let src = h.src_byte();
         let chan_ok = |c: Option<i64>| c.is_none() || chan.is_none() || c == chan;
-        let candidates: &[u64] = self.by_reply.get(&m.id).map_or(&[], |v| v.as_slice());
+        let empty = VecDeque::new();
+        let candidates = self.by_reply.get(&m.id).unwrap_or(&empty);
         let usable = |k: &&u64| self.pending.get(k).is_some_and(|p| chan_ok(p.chan));
         let found = candidates
             .iter()
@@ -205,7 +221,10 @@ impl AptPairer {
         match found.and_then(|k| self.remove(k)) {
             Some(p) => {
                 // The same message also answers other waiting requests to that device and
-                // channel (MOVE_STOPPED completes a move and the stop that ended it).
+                // channel (MOVE_STOPPED completes a move and the stop that ended it; one
+                // MOVE_COMPLETED ends a move and the moves it superseded). A GET answers one
+                // REQ: repeated requests wait for their own replies.
+                let one_to_one = m.name.contains("_GET_");
                 let also: Vec<u64> = self
                     .by_reply
                     .get(&m.id)
@@ -213,9 +232,11 @@ impl AptPairer {
                         v.iter()
                             .copied()
                             .filter(|k| {
-                                self.pending
-                                    .get(k)
-                                    .is_some_and(|q| q.device == p.device && q.chan == p.chan)
+                                self.pending.get(k).is_some_and(|q| {
+                                    q.device == p.device
+                                        && q.chan == p.chan
+                                        && !(one_to_one && q.name == p.name)
+                                })
                             })
                             .collect()
                     })
@@ -263,6 +284,7 @@ impl AptPairer {
     /// End of stream: every request still waiting got no reply.
     pub fn finish(&mut self) -> Vec<Unanswered> {
         self.by_reply.clear();
+        self.deadlines.clear();
         std::mem::take(&mut self.pending)
             .into_values()
             .map(|p| Unanswered {
@@ -418,5 +440,44 @@ mod tests {
             p.finish().iter().map(|u| (u.n, u.name)).collect::<Vec<_>>(),
             [(2, "HW_REQ_INFO")]
         );
+    }
+
+    /// A host flooding requests (a thousand waiting at once) keeps every reply paired with its
+    /// own request, in order.
+    #[test]
+    fn a_burst_of_waiting_requests_pairs_in_order() {
+        let t = Table::global();
+        let mut p = AptPairer::new();
+        let req = frame(
+            t,
+            "MOT_REQ_VELPARAMS",
+            &[("chan_ident", 1)],
+            0x50,
+            0x01,
+            false,
+        );
+        let rep = frame(
+            t,
+            "MOT_GET_VELPARAMS",
+            &[("chan_ident", 1)],
+            0x01,
+            0x50,
+            true,
+        );
+        let (fq, fr) = (
+            AptFrame::decode(t, 0, &req, false).expect("frame"),
+            AptFrame::decode(t, 0, &rep, false).expect("frame"),
+        );
+        let n = 1000u64;
+        for i in 1..=n {
+            let info = p.observe(t, i, &fq, Some(Dir::HostToDevice), Some(i));
+            assert!(info.expired.is_empty());
+        }
+        for i in 1..=n {
+            let info = p.observe(t, n + i, &fr, Some(Dir::DeviceToHost), Some(n + i));
+            assert_eq!(info.pair, Some(i));
+            assert!(!info.duplicate && !info.unsolicited && info.expired.is_empty());
+        }
+        assert!(p.finish().is_empty());
     }
 }
