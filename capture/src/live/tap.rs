@@ -1074,6 +1074,11 @@ fn display_loop(rx: Receiver<Arc<Rec>>, proto: Proto, out: &mut dyn Write, sh: &
         if p.push_chunk(ctx, &r.bytes, &mut emit).is_err() {
             *broken = true;
         }
+        // Live, a host's read is its write: show an Elliptec command sent without terminator
+        // now, not when the host next writes (a module that never answers would hide it).
+        if ctx.dir == Some(Dir::HostToDevice) && p.cut(0, Dir::HostToDevice, &mut emit).is_err() {
+            *broken = true;
+        }
     };
     loop {
         match rx.recv_timeout(TICK) {
