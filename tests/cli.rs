@@ -171,7 +171,7 @@ fn hex_input_with_a_non_hex_character_is_reported_at_its_text_offset() {
         })
         .collect();
     // The `O` is reported, and the `5` it left alone is dropped rather than shifting later bytes.
-    assert_eq!(input, [("bad_hex", 13), ("odd_hex_digit", 12)]);
+    assert_eq!(input, [("odd_hex_digit", 12), ("bad_hex", 13)]);
     let last = recs
         .iter()
         .rfind(|r| r["type"] == "frame")

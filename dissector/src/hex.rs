@@ -10,6 +10,9 @@ pub struct HexDecoder {
     pending: Option<(u8, u64)>,
     /// Text offset of the next character.
     offset: u64,
+    /// Bad characters met after the pending nibble: reported once it is resolved, so
+    /// diagnostics stay in offset order.
+    held: Vec<Diag>,
 }
 
 fn nibble(c: u8) -> Option<u8> {
@@ -36,35 +39,46 @@ impl HexDecoder {
             self.offset += 1;
             match nibble(c) {
                 Some(n) => match self.pending.take() {
-                    Some((hi, _)) => out.push(hi << 4 | n),
+                    Some((hi, _)) => {
+                        out.push(hi << 4 | n);
+                        diags.append(&mut self.held);
+                    }
                     None => self.pending = Some((n, at)),
                 },
                 // A separator ends a byte: a lone digit before it is reported and dropped, so one
                 // typo does not shift every later byte by a nibble.
                 None if c.is_ascii_whitespace() || matches!(c, b',' | b':' | b';') => {
-                    if let Some((_, at)) = self.pending.take() {
-                        diags.push(Diag {
-                            offset: at,
-                            kind: DiagKind::OddHexDigit,
-                        });
+                    self.resolve_lone(diags);
+                }
+                None => {
+                    let d = Diag {
+                        offset: at,
+                        kind: DiagKind::BadHex { ch: c as char },
+                    };
+                    if self.pending.is_some() {
+                        self.held.push(d);
+                    } else {
+                        diags.push(d);
                     }
                 }
-                None => diags.push(Diag {
-                    offset: at,
-                    kind: DiagKind::BadHex { ch: c as char },
-                }),
             }
         }
     }
 
     /// End of text: a lone last digit is reported.
     pub fn finish(&mut self, diags: &mut Vec<Diag>) {
+        self.resolve_lone(diags);
+    }
+
+    /// A pending digit with no partner is reported, then what was held behind it.
+    fn resolve_lone(&mut self, diags: &mut Vec<Diag>) {
         if let Some((_, at)) = self.pending.take() {
             diags.push(Diag {
                 offset: at,
                 kind: DiagKind::OddHexDigit,
             });
         }
+        diags.append(&mut self.held);
     }
 }
 
@@ -84,10 +98,21 @@ mod tests {
         assert_eq!(
             got,
             [
-                (10, DiagKind::BadHex { ch: 'O' }),
                 (9, DiagKind::OddHexDigit),
+                (10, DiagKind::BadHex { ch: 'O' }),
                 (19, DiagKind::OddHexDigit)
             ]
         );
+    }
+
+    #[test]
+    fn diagnostics_stay_in_offset_order() {
+        let mut d = HexDecoder::new();
+        let (mut out, mut diags) = (vec![], vec![]);
+        d.push(b"5O 5Oa 7", &mut out, &mut diags);
+        d.finish(&mut diags);
+        let offs: Vec<u64> = diags.iter().map(|x| x.offset).collect();
+        assert_eq!(offs, [0, 1, 4, 7], "{diags:?}");
+        assert_eq!(out, [0x5a]);
     }
 }
