@@ -288,8 +288,11 @@ impl<R: Read> PcapReader<R> {
                     None => break,
                 }
             }
+            // Reading more moves the buffer (consumed bytes are dropped): re-base `at` first.
             let rel = at - self.start;
-            if !self.fill() && at >= self.buf.len() {
+            let more = self.fill();
+            at = self.start + rel;
+            if !more && at >= self.buf.len() {
                 let rest = self.buf.len() - self.start;
                 self.queue.push_back(diag(
                     from,
@@ -299,7 +302,6 @@ impl<R: Read> PcapReader<R> {
                 self.start = self.buf.len();
                 return;
             }
-            at = self.start + rel;
         }
     }
 

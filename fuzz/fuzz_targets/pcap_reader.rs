@@ -3,9 +3,9 @@
 //! Input: `[max_read, seed, flags, file...]`: the file is handed out in reads of at most
 //! `max_read` bytes (0: as much as asked), `flags & 1` restricts USB captures to device
 //! `1:(flags >> 1)`. Checks (see `drain_reader`): the reader ends, diagnostics have snake_case
-//! kinds and offsets within the file, streams are announced once before their chunks. With
-//! `APTSCOPE_FUZZ_STRICT=1`, also that the events do not depend on how the file is read (they
-//! do after a corrupt block: `fuzz/artifacts-found/pcap-resync-short-reads`).
+//! kinds and offsets within the file, streams are announced once before their chunks, and the
+//! events do not depend on how the file is read (they once did after a corrupt block:
+//! `fuzz/artifacts-found/pcap-resync-short-reads`; `APTSCOPE_FUZZ_LENIENT=1` skips this).
 #![no_main]
 
 use aptscope_capture::pcap::PcapReader;
