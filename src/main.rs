@@ -181,8 +181,8 @@ enum Cmd {
         #[arg(long)]
         usb_device: Option<String>,
     },
-    /// Simulate a controller on a pseudo-terminal: `sim apt --model kdc101` or
-    /// `sim elliptec --modules 0:ELL14,1:ELL9`.
+    /// Simulate a controller on a pseudo-terminal (or a serial port, --port):
+    /// `sim apt --model kdc101` or `sim elliptec --modules 0:ELL14,1:ELL9`.
     Sim {
         #[command(subcommand)]
         what: SimCmd,
