@@ -7,7 +7,7 @@ use aptscope_capture::pcap::{PcapNgOut, PcapReader};
 use aptscope_capture::usb::synth_usbmon;
 use aptscope_capture::{Direction, OwnedChunk, StreamInfo};
 use aptscope_dissector::{synth, Table};
-use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use criterion::{criterion_group, Criterion, Throughput};
 use pcap_file::pcap::{PcapHeader, PcapPacket, PcapWriter};
 use pcap_file::{DataLink, TsResolution};
 use std::hint::black_box;
@@ -47,14 +47,54 @@ fn read_all(r: &mut dyn Reader) -> u64 {
     n
 }
 
-fn benches(c: &mut Criterion) {
-    let cs = chunks(16 << 20);
-    let payload: u64 = cs.iter().map(|c| c.bytes.len() as u64).sum();
-    let port = StreamInfo {
+/// Write `cs` as MCAP (raw and decoded channels).
+#[inline(never)]
+fn mcap_write_once(cs: &[OwnedChunk], port: &StreamInfo) -> Vec<u8> {
+    let mut w = McapWriter::new(Cursor::new(Vec::with_capacity(64 << 20)), None).expect("mcap");
+    w.stream(port).expect("stream");
+    for ch in cs {
+        w.chunk(&ch.as_chunk()).expect("chunk");
+    }
+    w.finish().expect("finish");
+    w.into_inner().expect("finished").into_inner()
+}
+
+fn port() -> StreamInfo {
+    StreamInfo {
         id: 0,
         name: "/dev/ttyUSB0".into(),
         settings: None,
+    }
+}
+
+/// `APTSCOPE_MCAP_ONCE=<MiB>`: write that much once and exit (and save the file to
+/// `APTSCOPE_MCAP_OUT` when set), instead of running criterion, for a repeatable instruction
+/// count on a fixed input: `APTSCOPE_MCAP_ONCE=1 valgrind --tool=callgrind --separate-threads=yes
+/// target/release/deps/capture-<hash>`. The write costs `mcap_write_once` (inclusive) in the
+/// main thread's profile plus the whole of the `mcap-writer` thread's.
+fn mcap_once() -> bool {
+    let Ok(mib) = std::env::var("APTSCOPE_MCAP_ONCE") else {
+        return false;
     };
+    let mib: usize = mib.parse().expect("APTSCOPE_MCAP_ONCE=<MiB>");
+    let cs = chunks(mib << 20);
+    let payload: usize = cs.iter().map(|c| c.bytes.len()).sum();
+    let mcap = mcap_write_once(&cs, &port());
+    eprintln!(
+        "{} chunks, {payload} payload bytes -> {} bytes of MCAP",
+        cs.len(),
+        mcap.len()
+    );
+    if let Ok(path) = std::env::var("APTSCOPE_MCAP_OUT") {
+        std::fs::write(path, &mcap).expect("write MCAP");
+    }
+    true
+}
+
+fn benches(c: &mut Criterion) {
+    let cs = chunks(16 << 20);
+    let payload: u64 = cs.iter().map(|c| c.bytes.len() as u64).sum();
+    let port = port();
     let mut pcapng = vec![];
     {
         let mut w = PcapNgOut::new(&mut pcapng).expect("writer");
@@ -99,19 +139,17 @@ fn benches(c: &mut Criterion) {
             b.iter(|| black_box(read_all(&mut PcapReader::new(Cursor::new(&usb[..]), None))))
         });
         g.bench_function("mcap_write", |b| {
-            b.iter(|| {
-                let mut w =
-                    McapWriter::new(Cursor::new(Vec::with_capacity(64 << 20)), None).expect("mcap");
-                w.stream(&port).expect("stream");
-                for ch in &cs {
-                    w.chunk(&ch.as_chunk()).expect("chunk");
-                }
-                w.finish().expect("finish");
-            })
+            b.iter(|| black_box(mcap_write_once(&cs, &port)))
         });
         g.finish();
     }
 }
 
 criterion_group!(capture, benches);
-criterion_main!(capture);
+
+fn main() {
+    if !mcap_once() {
+        capture();
+        Criterion::default().configure_from_args().final_summary();
+    }
+}

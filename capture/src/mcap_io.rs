@@ -42,6 +42,7 @@ use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use mcap::{McapError, WriteOptions};
 use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
 use std::fmt::Write as _;
+use std::hash::BuildHasherDefault;
 use std::io::{self, Read, Seek, Write};
 
 /// The MCAP magic, at the start and the end of every file.
@@ -66,6 +67,10 @@ fn finished_err() -> io::Error {
     io::Error::other("MCAP writer already finished")
 }
 
+fn failed_err() -> io::Error {
+    io::Error::other("MCAP writer stopped after an earlier error")
+}
+
 // ---------------------------------------------------------------------------------------------
 // Writer
 // ---------------------------------------------------------------------------------------------
@@ -77,10 +82,21 @@ const DETECT_HOLD_CHUNKS: usize = 4096;
 
 /// An MCAP capture writer: raw lossless channels plus decoded JSON channels (see the module
 /// documentation for the layout).
-pub struct McapWriter<W: Write + Seek> {
-    w: Option<mcap::Writer<W>>,
+///
+/// The calling thread frames, decodes and renders the records; a writer thread owns the
+/// [`mcap::Writer`] and does the MCAP encoding and the zstd compression (about 70 % of the
+/// instructions), so the two overlap when a second core is free. The writer thread makes exactly the calls a single-threaded
+/// writer would, in the same order, so the file is the same. An I/O error of the writer thread
+/// is returned by a later [`chunk`](Writer::chunk) or by [`finish`](Writer::finish) (as with a
+/// `BufWriter`); dropping the writer without `finish` still closes the file as
+/// [`mcap::Writer`] does.
+pub struct McapWriter<W: Write + Seek + Send + 'static> {
+    sink: Option<Sink>,
+    thread: Option<std::thread::JoinHandle<io::Result<W>>>,
+    /// An error stopped the writer thread (and was returned).
+    failed: bool,
     inner: Option<W>,
-    raw: HashMap<(u32, Direction, bool), u16>,
+    raw: HashMap<(u32, Direction, bool), u16, FastHash>,
     streams: BTreeMap<u32, StreamInfo>,
     seq: u32,
     chunks: u64,
@@ -88,14 +104,18 @@ pub struct McapWriter<W: Write + Seek> {
     dec: Decoder,
 }
 
-impl<W: Write + Seek> McapWriter<W> {
+impl<W: Write + Seek + Send + 'static> McapWriter<W> {
     /// A writer with zstd-compressed chunks. `proto` chooses the decoder of the decoded
     /// channels; `None` detects it from the first 4 KiB of the first lane with data.
+    ///
+    /// zstd runs single-threaded: a chunk (1 MiB) is smaller than one job of zstd's
+    /// multi-threaded mode, so its worker threads never overlapped with anything and only
+    /// added a copy and locking per write; the writer thread is what runs in parallel now.
     pub fn new(w: W, proto: Option<Proto>) -> io::Result<Self> {
         Self::with_options(
             w,
             proto,
-            WriteOptions::new().library(format!(
+            WriteOptions::new().compression_threads(0).library(format!(
                 "aptscope {}; {}",
                 env!("CARGO_PKG_VERSION"),
                 mcap::LIBRARY_IDENTIFIER
@@ -123,10 +143,13 @@ impl<W: Write + Seek> McapWriter<W> {
             metadata: meta,
         })
         .map_err(mcap_err)?;
+        let (sink, thread) = Sink::start(mw)?;
         Ok(McapWriter {
-            w: Some(mw),
+            sink: Some(sink),
+            thread: Some(thread),
+            failed: false,
             inner: None,
-            raw: HashMap::new(),
+            raw: HashMap::default(),
             streams: BTreeMap::new(),
             seq: 0,
             chunks: 0,
@@ -136,15 +159,50 @@ impl<W: Write + Seek> McapWriter<W> {
     }
 
     /// The underlying writer, once [`finish`](Writer::finish) has run.
-    pub fn into_inner(self) -> Option<W> {
-        self.inner
+    pub fn into_inner(mut self) -> Option<W> {
+        self.inner.take()
+    }
+
+    /// Why there is no sink.
+    fn no_sink(&self) -> io::Error {
+        if self.failed {
+            failed_err()
+        } else {
+            finished_err()
+        }
+    }
+
+    /// Run `f` on the sink; when it fails because the writer thread stopped, return the
+    /// thread's error instead (and have no sink from then on).
+    fn with_sink<T>(
+        &mut self,
+        f: impl FnOnce(&mut Sink, &mut Decoder) -> io::Result<T>,
+    ) -> io::Result<T> {
+        let Some(sink) = self.sink.as_mut() else {
+            return Err(self.no_sink());
+        };
+        match f(sink, &mut self.dec) {
+            Ok(x) => Ok(x),
+            Err(e) => Err(self.stop(e)),
+        }
+    }
+
+    /// Stop the writer thread after `e` and return the error that explains it best: the
+    /// thread's own, when it has one.
+    fn stop(&mut self, e: io::Error) -> io::Error {
+        self.sink = None;
+        self.failed = true;
+        match self.thread.take().map(|t| t.join()) {
+            Some(Ok(Err(te))) => te,
+            Some(Err(_)) => io::Error::other("MCAP writer thread panicked"),
+            _ => e,
+        }
     }
 
     fn raw_channel(&mut self, stream: u32, dir: Direction, timed: bool) -> io::Result<u16> {
         if let Some(&id) = self.raw.get(&(stream, dir, timed)) {
             return Ok(id);
         }
-        let w = self.w.as_mut().ok_or_else(finished_err)?;
         let mut meta = BTreeMap::new();
         meta.insert("stream".to_string(), stream.to_string());
         meta.insert("direction".to_string(), dir.as_str().to_string());
@@ -159,96 +217,335 @@ impl<W: Write + Seek> McapWriter<W> {
             }
         }
         let topic = format!("/serial/{stream}/{}", dir.as_str());
-        let id = w
-            .add_channel(0, &topic, RAW_ENCODING, &meta)
-            .map_err(mcap_err)?;
+        let id = self.with_sink(|s, _| s.add_channel(0, topic, RAW_ENCODING, meta))?;
         self.raw.insert((stream, dir, timed), id);
         Ok(id)
     }
 }
 
-impl<W: Write + Seek> Writer for McapWriter<W> {
+impl<W: Write + Seek + Send + 'static> Drop for McapWriter<W> {
+    fn drop(&mut self) {
+        // Hand over what was written so far and hang up; the thread then closes the file (as
+        // dropping an `mcap::Writer` does).
+        if let Some(mut sink) = self.sink.take() {
+            let _ = sink.flush();
+        }
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl<W: Write + Seek + Send + 'static> Writer for McapWriter<W> {
     fn stream(&mut self, s: &StreamInfo) -> io::Result<()> {
-        let w = self.w.as_mut().ok_or_else(finished_err)?;
+        if self.sink.is_none() {
+            return Err(self.no_sink());
+        }
         let mut meta = BTreeMap::new();
         meta.insert("id".to_string(), s.id.to_string());
         meta.insert("name".to_string(), s.name.clone());
         if let Some(x) = &s.settings {
             meta.insert("settings".to_string(), x.clone());
         }
-        w.write_metadata(&Metadata {
-            name: "aptscope.stream".into(),
-            metadata: meta,
-        })
-        .map_err(mcap_err)?;
+        self.with_sink(|w, _| {
+            w.metadata(Metadata {
+                name: "aptscope.stream".into(),
+                metadata: meta,
+            })
+        })?;
         self.streams.insert(s.id, s.clone());
         Ok(())
     }
 
     fn chunk(&mut self, c: &Chunk<'_>) -> io::Result<()> {
         let ch = self.raw_channel(c.stream, c.dir, c.ts_ns.is_some())?;
-        let w = self.w.as_mut().ok_or_else(finished_err)?;
         let t = c.ts_ns.unwrap_or(0);
-        w.write_to_known_channel(
-            &MessageHeader {
-                channel_id: ch,
-                sequence: self.seq,
-                log_time: t,
-                publish_time: t,
-            },
-            c.bytes,
-        )
-        .map_err(mcap_err)?;
+        let seq = self.seq;
+        self.with_sink(|w, dec| {
+            w.message(ch, seq, t, c.bytes)?;
+            dec.chunk(c, w)
+        })?;
         self.seq = self.seq.wrapping_add(1);
         self.chunks += 1;
         if c.ts_ns.is_none() {
             self.untimed += 1;
         }
-        self.dec.chunk(c, w)
+        Ok(())
     }
 
     fn finish(&mut self) -> io::Result<()> {
-        let Some(mut w) = self.w.take() else {
-            return Ok(());
-        };
-        self.dec.finish(&mut w)?;
-        if let Some(p) = self.dec.proto {
-            let mut m = BTreeMap::new();
-            m.insert("proto".to_string(), p.name().to_string());
-            m.insert("how".to_string(), self.dec.how.to_string());
-            if let Some((a, e)) = self.dec.scores {
-                m.insert("apt".to_string(), format!("{a:.3}"));
-                m.insert("elliptec".to_string(), format!("{e:.3}"));
+        if self.sink.is_none() {
+            return if self.failed {
+                Err(failed_err())
+            } else {
+                Ok(())
+            };
+        }
+        let (untimed, chunks) = (self.untimed, self.chunks);
+        self.with_sink(|w, dec| {
+            dec.finish(w)?;
+            if let Some(p) = dec.proto {
+                let mut m = BTreeMap::new();
+                m.insert("proto".to_string(), p.name().to_string());
+                m.insert("how".to_string(), dec.how.to_string());
+                if let Some((a, e)) = dec.scores {
+                    m.insert("apt".to_string(), format!("{a:.3}"));
+                    m.insert("elliptec".to_string(), format!("{e:.3}"));
+                }
+                w.metadata(Metadata {
+                    name: "aptscope.decode".into(),
+                    metadata: m,
+                })?;
             }
-            w.write_metadata(&Metadata {
-                name: "aptscope.decode".into(),
-                metadata: m,
-            })
-            .map_err(mcap_err)?;
-        }
-        if self.untimed > 0 {
-            let mut m = BTreeMap::new();
-            m.insert(
-                "missing".to_string(),
-                format!(
-                    "{} of {} chunks have no capture time: their messages have log_time 0 \
-                     (channels with metadata time=missing)",
-                    self.untimed, self.chunks
-                ),
-            );
-            m.insert("chunks_without_time".to_string(), self.untimed.to_string());
-            m.insert("chunks".to_string(), self.chunks.to_string());
-            w.write_metadata(&Metadata {
-                name: "aptscope.times".into(),
-                metadata: m,
-            })
-            .map_err(mcap_err)?;
-        }
-        w.finish().map_err(mcap_err)?;
-        let mut inner = w.into_inner();
+            if untimed > 0 {
+                let mut m = BTreeMap::new();
+                m.insert(
+                    "missing".to_string(),
+                    format!(
+                        "{untimed} of {chunks} chunks have no capture time: their messages have \
+                         log_time 0 (channels with metadata time=missing)"
+                    ),
+                );
+                m.insert("chunks_without_time".to_string(), untimed.to_string());
+                m.insert("chunks".to_string(), chunks.to_string());
+                w.metadata(Metadata {
+                    name: "aptscope.times".into(),
+                    metadata: m,
+                })?;
+            }
+            w.flush()
+        })?;
+        // Hang up: the thread finishes the file and hands the writer back.
+        self.sink = None;
+        let res = match self.thread.take().map(|t| t.join()) {
+            Some(Ok(r)) => r,
+            Some(Err(_)) => Err(io::Error::other("MCAP writer thread panicked")),
+            None => Err(finished_err()),
+        };
+        self.failed = res.is_err();
+        let mut inner = res?;
         inner.flush()?;
         self.inner = Some(inner);
         Ok(())
+    }
+}
+
+// --- the writer thread -----------------------------------------------------------------------
+
+/// One call to make on the [`mcap::Writer`].
+enum Op {
+    /// `add_schema` (jsonschema), which must return `id`.
+    Schema {
+        id: u16,
+        name: String,
+        body: String,
+    },
+    /// `add_channel`, which must return `id`.
+    Channel {
+        id: u16,
+        schema: u16,
+        topic: String,
+        encoding: &'static str,
+        meta: BTreeMap<String, String>,
+    },
+    /// `write_to_known_channel`; the message is the next `len` bytes of the batch's data.
+    Message {
+        channel: u16,
+        sequence: u32,
+        log_time: u64,
+        len: usize,
+    },
+    Metadata(Metadata),
+}
+
+/// Calls to make, in order, with the messages' bytes back to back.
+#[derive(Default)]
+struct Batch {
+    ops: Vec<Op>,
+    data: Vec<u8>,
+}
+
+/// Send a batch to the writer thread once it holds this many message bytes …
+const BATCH_BYTES: usize = 256 * 1024;
+/// … or this many calls.
+const BATCH_OPS: usize = 4096;
+/// Full batches on their way to the writer thread (bounds the memory to a few batches).
+const BATCHES_IN_FLIGHT: usize = 2;
+
+/// The calling thread's end of the writer thread: it batches the calls, and assigns schema
+/// and channel ids exactly as [`mcap::Writer::add_schema`] and
+/// [`mcap::Writer::add_channel`] will (sequentially from 1, identical content deduplicated),
+/// so no call waits for an answer. The writer thread checks every id.
+struct Sink {
+    batch: Batch,
+    tx: std::sync::mpsc::SyncSender<Batch>,
+    /// Emptied batches, back from the writer thread for reuse.
+    spare: std::sync::mpsc::Receiver<Batch>,
+    schemas: HashMap<(String, String), u16>,
+    channels: u16,
+}
+
+impl Sink {
+    fn start<W: Write + Seek + Send + 'static>(
+        mut w: mcap::Writer<W>,
+    ) -> io::Result<(Sink, std::thread::JoinHandle<io::Result<W>>)> {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Batch>(BATCHES_IN_FLIGHT);
+        let (spare_tx, spare) = std::sync::mpsc::channel::<Batch>();
+        let thread = std::thread::Builder::new()
+            .name("mcap-writer".into())
+            .spawn(move || {
+                for mut b in rx {
+                    run_batch(&mut w, &mut b).map_err(mcap_err)?;
+                    b.ops.clear();
+                    b.data.clear();
+                    let _ = spare_tx.send(b);
+                }
+                // Hung up: finish or drop; either way close the file as `mcap::Writer` does.
+                w.finish().map_err(mcap_err)?;
+                Ok(w.into_inner())
+            })?;
+        let sink = Sink {
+            batch: Batch {
+                ops: Vec::with_capacity(BATCH_OPS),
+                data: Vec::with_capacity(BATCH_BYTES + 4096),
+            },
+            tx,
+            spare,
+            schemas: HashMap::new(),
+            channels: 0,
+        };
+        Ok((sink, thread))
+    }
+
+    fn push(&mut self, op: Op) -> io::Result<()> {
+        self.batch.ops.push(op);
+        if self.batch.ops.len() >= BATCH_OPS || self.batch.data.len() >= BATCH_BYTES {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    /// Hand the batch to the writer thread.
+    fn flush(&mut self) -> io::Result<()> {
+        if self.batch.ops.is_empty() {
+            return Ok(());
+        }
+        let next = self.spare.try_recv().unwrap_or_else(|_| Batch {
+            ops: Vec::with_capacity(BATCH_OPS),
+            data: Vec::with_capacity(BATCH_BYTES + 4096),
+        });
+        let full = std::mem::replace(&mut self.batch, next);
+        self.tx
+            .send(full)
+            .map_err(|_| io::Error::other("MCAP writer thread stopped"))
+    }
+
+    fn add_schema(&mut self, name: String, body: String) -> io::Result<u16> {
+        let key = (name, body);
+        if let Some(&id) = self.schemas.get(&key) {
+            return Ok(id);
+        }
+        let id = u16::try_from(self.schemas.len() + 1)
+            .map_err(|_| mcap_err(McapError::TooManySchemas))?;
+        self.schemas.insert(key.clone(), id);
+        let (name, body) = key;
+        self.push(Op::Schema { id, name, body })?;
+        Ok(id)
+    }
+
+    /// Every channel we add has a distinct topic or metadata, so each gets a new id.
+    fn add_channel(
+        &mut self,
+        schema: u16,
+        topic: String,
+        encoding: &'static str,
+        meta: BTreeMap<String, String>,
+    ) -> io::Result<u16> {
+        self.channels = self
+            .channels
+            .checked_add(1)
+            .ok_or_else(|| mcap_err(McapError::TooManyChannels))?;
+        let id = self.channels;
+        self.push(Op::Channel {
+            id,
+            schema,
+            topic,
+            encoding,
+            meta,
+        })?;
+        Ok(id)
+    }
+
+    fn message(
+        &mut self,
+        channel: u16,
+        sequence: u32,
+        log_time: u64,
+        data: &[u8],
+    ) -> io::Result<()> {
+        self.batch.data.extend_from_slice(data);
+        self.push(Op::Message {
+            channel,
+            sequence,
+            log_time,
+            len: data.len(),
+        })
+    }
+
+    fn metadata(&mut self, m: Metadata) -> io::Result<()> {
+        self.push(Op::Metadata(m))
+    }
+}
+
+/// Make a batch's calls on the MCAP writer (in the writer thread).
+fn run_batch<W: Write + Seek>(w: &mut mcap::Writer<W>, b: &mut Batch) -> Result<(), McapError> {
+    let mut at = 0;
+    for op in b.ops.drain(..) {
+        match op {
+            Op::Message {
+                channel,
+                sequence,
+                log_time,
+                len,
+            } => {
+                w.write_to_known_channel(
+                    &MessageHeader {
+                        channel_id: channel,
+                        sequence,
+                        log_time,
+                        publish_time: log_time,
+                    },
+                    &b.data[at..at + len],
+                )?;
+                at += len;
+            }
+            Op::Schema { id, name, body } => {
+                let got = w.add_schema(&name, "jsonschema", body.as_bytes())?;
+                check_id("schema", &name, id, got)?;
+            }
+            Op::Channel {
+                id,
+                schema,
+                topic,
+                encoding,
+                meta,
+            } => {
+                let got = w.add_channel(schema, &topic, encoding, &meta)?;
+                check_id("channel", &topic, id, got)?;
+            }
+            Op::Metadata(m) => w.write_metadata(&m)?,
+        }
+    }
+    Ok(())
+}
+
+fn check_id(what: &str, name: &str, want: u16, got: u16) -> Result<(), McapError> {
+    if want == got {
+        Ok(())
+    } else {
+        Err(McapError::Io(io::Error::other(format!(
+            "internal error: MCAP {what} {name} got id {got}, not {want}"
+        ))))
     }
 }
 
@@ -271,9 +568,12 @@ struct StreamDec {
 }
 
 /// Where decoded records go: the MCAP writer and the decoded channels made so far.
-struct Out<'a, W: Write + Seek> {
-    w: &'a mut mcap::Writer<W>,
+struct Out<'a> {
+    w: &'a mut Sink,
     topics: &'a mut HashMap<String, u16>,
+    /// Channel ids by [`TopicKey`]: the per-record lookup, without building or hashing the
+    /// topic string.
+    ids: &'a mut HashMap<TopicKey, u16, FastHash>,
     line: &'a mut String,
     topic: &'a mut String,
     expired: &'a mut Vec<Expired>,
@@ -281,41 +581,89 @@ struct Out<'a, W: Write + Seek> {
     n: &'a mut u64,
 }
 
-impl<W: Write + Seek> Out<'_, W> {
-    /// Write `self.line` on `self.topic`, making the channel (with `schema()`) on first use.
+/// What a decoded record's channel is known by on the hot path: a fixed topic, or the address
+/// and length of the `&'static` name of the message (APT) or command (Elliptec) whose topic it
+/// is. Two keys
+/// may map to one topic (see [`Out::write`]); one key never maps to two.
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+enum TopicKey {
+    AptUnknown,
+    AptGarbage,
+    AptMsg(usize, usize),
+    EllUnknown,
+    EllGarbage,
+    EllCmd(usize, usize),
+    EllDiag,
+}
+
+/// A multiply-rotate hasher (as in rustc's FxHash) for the per-chunk and per-record lookups:
+/// their keys are small integers, tags and addresses we make, so SipHash's flooding resistance
+/// buys nothing and costs more than the rest of a lookup.
+#[derive(Default)]
+struct KeyHasher(u64);
+
+type FastHash = BuildHasherDefault<KeyHasher>;
+
+impl std::hash::Hasher for KeyHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(b as u64);
+        }
+    }
+    fn write_u64(&mut self, x: u64) {
+        self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+    fn write_u8(&mut self, x: u8) {
+        self.write_u64(x.into());
+    }
+    fn write_u32(&mut self, x: u32) {
+        self.write_u64(x.into());
+    }
+    fn write_usize(&mut self, x: usize) {
+        self.write_u64(x as u64);
+    }
+    fn write_isize(&mut self, x: isize) {
+        self.write_u64(x as u64);
+    }
+}
+
+impl Out<'_> {
+    /// Write `self.line` on the channel of `key`. On the key's first use, `topic` names the
+    /// channel; the channel (with `schema()`) is made on the topic's first use.
     fn write(
         &mut self,
+        key: TopicKey,
         seq: u64,
         log_time: u64,
+        topic: impl FnOnce(&mut String),
         schema: impl FnOnce() -> (String, String),
     ) -> io::Result<()> {
-        let id = match self.topics.get(self.topic.as_str()) {
+        let id = match self.ids.get(&key) {
             Some(&id) => id,
             None => {
-                let (name, body) = schema();
-                let sid = self
-                    .w
-                    .add_schema(&name, "jsonschema", body.as_bytes())
-                    .map_err(mcap_err)?;
-                let id = self
-                    .w
-                    .add_channel(sid, self.topic.as_str(), "json", &BTreeMap::new())
-                    .map_err(mcap_err)?;
-                self.topics.insert(self.topic.clone(), id);
+                self.topic.clear();
+                topic(self.topic);
+                let id = match self.topics.get(self.topic.as_str()) {
+                    Some(&id) => id,
+                    None => {
+                        let (name, body) = schema();
+                        let sid = self.w.add_schema(name, body)?;
+                        let id =
+                            self.w
+                                .add_channel(sid, self.topic.clone(), "json", BTreeMap::new())?;
+                        self.topics.insert(self.topic.clone(), id);
+                        id
+                    }
+                };
+                self.ids.insert(key, id);
                 id
             }
         };
         self.w
-            .write_to_known_channel(
-                &MessageHeader {
-                    channel_id: id,
-                    sequence: seq as u32,
-                    log_time,
-                    publish_time: log_time,
-                },
-                self.line.as_bytes(),
-            )
-            .map_err(mcap_err)
+            .message(id, seq as u32, log_time, self.line.as_bytes())
     }
 }
 
@@ -325,13 +673,46 @@ fn close_json(line: &mut String, ts: Option<u64>, stream: u32, dir: Option<&str>
     if line.ends_with('}') {
         line.pop();
         if let Some(d) = dir {
-            let _ = write!(line, ",\"dir\":\"{d}\"");
+            line.push_str(",\"dir\":\"");
+            line.push_str(d);
+            line.push('"');
         }
         if let Some(t) = ts {
-            let _ = write!(line, ",\"ts_ns\":{t}");
+            line.push_str(",\"ts_ns\":");
+            push_uint(line, t);
         }
-        let _ = write!(line, ",\"stream\":{stream}}}");
+        line.push_str(",\"stream\":");
+        push_uint(line, stream.into());
+        line.push('}');
     }
+}
+
+/// Append `x` in decimal, two digits per division (`write!` costs several times more on this
+/// per-record path, and capture times have 19 digits).
+fn push_uint(out: &mut String, mut x: u64) {
+    const PAIRS: &[u8; 200] = b"0001020304050607080910111213141516171819\
+        2021222324252627282930313233343536373839\
+        4041424344454647484950515253545556575859\
+        6061626364656667686970717273747576777879\
+        8081828384858687888990919293949596979899";
+    let mut buf = [0u8; 20];
+    let mut i = buf.len();
+    while x >= 100 {
+        let p = (x % 100) as usize * 2;
+        x /= 100;
+        i -= 2;
+        buf[i..i + 2].copy_from_slice(&PAIRS[p..p + 2]);
+    }
+    if x >= 10 {
+        let p = x as usize * 2;
+        i -= 2;
+        buf[i..i + 2].copy_from_slice(&PAIRS[p..p + 2]);
+    } else {
+        i -= 1;
+        buf[i] = b'0' + x as u8;
+    }
+    // Only ASCII digits were written.
+    out.push_str(std::str::from_utf8(&buf[i..]).unwrap_or_default());
 }
 
 struct Decoder {
@@ -342,9 +723,10 @@ struct Decoder {
     held_bytes: usize,
     first_lane: Option<(u32, Direction)>,
     first_lane_bytes: usize,
-    lanes: HashMap<(u32, Direction), Lane>,
-    streams: HashMap<u32, StreamDec>,
+    lanes: HashMap<(u32, Direction), Lane, FastHash>,
+    streams: HashMap<u32, StreamDec, FastHash>,
     topics: HashMap<String, u16>,
+    ids: HashMap<TopicKey, u16, FastHash>,
     line: String,
     topic: String,
     expired: Vec<Expired>,
@@ -361,9 +743,10 @@ impl Decoder {
             held_bytes: 0,
             first_lane: None,
             first_lane_bytes: 0,
-            lanes: HashMap::new(),
-            streams: HashMap::new(),
+            lanes: HashMap::default(),
+            streams: HashMap::default(),
             topics: HashMap::new(),
+            ids: HashMap::default(),
             line: String::with_capacity(1024),
             topic: String::with_capacity(64),
             expired: vec![],
@@ -371,7 +754,7 @@ impl Decoder {
         }
     }
 
-    fn chunk<W: Write + Seek>(&mut self, c: &Chunk<'_>, w: &mut mcap::Writer<W>) -> io::Result<()> {
+    fn chunk(&mut self, c: &Chunk<'_>, w: &mut Sink) -> io::Result<()> {
         if self.proto.is_some() {
             return self.push(c.stream, c.dir, c.bytes, c.ts_ns, w);
         }
@@ -394,7 +777,7 @@ impl Decoder {
     }
 
     /// Detect the protocol on the first lane's sample and decode what was held back.
-    fn decide<W: Write + Seek>(&mut self, w: &mut mcap::Writer<W>) -> io::Result<()> {
+    fn decide(&mut self, w: &mut Sink) -> io::Result<()> {
         let held = std::mem::take(&mut self.held);
         let Some(first) = self.first_lane else {
             // No data at all: nothing to decode.
@@ -426,13 +809,13 @@ impl Decoder {
         Ok(())
     }
 
-    fn push<W: Write + Seek>(
+    fn push(
         &mut self,
         stream: u32,
         dir: Direction,
         bytes: &[u8],
         ts: Option<u64>,
-        w: &mut mcap::Writer<W>,
+        w: &mut Sink,
     ) -> io::Result<()> {
         let proto = self.proto.unwrap_or(Proto::Apt);
         let lane = self.lanes.entry((stream, dir)).or_insert_with(|| Lane {
@@ -453,6 +836,7 @@ impl Decoder {
         let mut out = Out {
             w,
             topics: &mut self.topics,
+            ids: &mut self.ids,
             line: &mut self.line,
             topic: &mut self.topic,
             expired: &mut self.expired,
@@ -461,7 +845,7 @@ impl Decoder {
         drain(lane, st, stream, dir, &mut out)
     }
 
-    fn finish<W: Write + Seek>(&mut self, w: &mut mcap::Writer<W>) -> io::Result<()> {
+    fn finish(&mut self, w: &mut Sink) -> io::Result<()> {
         if self.proto.is_none() {
             self.decide(w)?;
         }
@@ -479,6 +863,7 @@ impl Decoder {
             let mut out = Out {
                 w: &mut *w,
                 topics: &mut self.topics,
+                ids: &mut self.ids,
                 line: &mut self.line,
                 topic: &mut self.topic,
                 expired: &mut self.expired,
@@ -504,6 +889,7 @@ impl Decoder {
             let mut out = Out {
                 w: &mut *w,
                 topics: &mut self.topics,
+                ids: &mut self.ids,
                 line: &mut self.line,
                 topic: &mut self.topic,
                 expired: &mut self.expired,
@@ -517,12 +903,12 @@ impl Decoder {
 
 /// Write the records the lane's framer has ready. They get the lane's latest capture time
 /// (the time of the chunk that completed them) as `log_time` (0 when unknown).
-fn drain<W: Write + Seek>(
+fn drain(
     lane: &mut Lane,
     st: &mut StreamDec,
     stream: u32,
     dir: Direction,
-    out: &mut Out<'_, W>,
+    out: &mut Out<'_>,
 ) -> io::Result<()> {
     let table = Table::global();
     let ts = lane.ts;
@@ -534,7 +920,6 @@ fn drain<W: Write + Seek>(
                 *out.n += 1;
                 let n = *out.n;
                 out.line.clear();
-                out.topic.clear();
                 match item {
                     AptItem::Frame {
                         offset,
@@ -555,9 +940,14 @@ fn drain<W: Write + Seek>(
                             .unwrap_or("unknown");
                         json::apt_frame(out.line, n, &f);
                         close_json(out.line, ts, stream, Some(d));
-                        out.topic.push_str("/apt/");
-                        out.topic.push_str(m.map_or("unknown", |m| m.name));
-                        out.write(n, t, || match m {
+                        let key = m.map_or(TopicKey::AptUnknown, |m| {
+                            TopicKey::AptMsg(m.name.as_ptr() as usize, m.name.len())
+                        });
+                        let topic = |s: &mut String| {
+                            s.push_str("/apt/");
+                            s.push_str(m.map_or("unknown", |m| m.name));
+                        };
+                        out.write(key, n, t, topic, || match m {
                             Some(m) => (format!("aptscope.apt.{}", m.name), apt_schema(table, m)),
                             None => ("aptscope.apt.unknown".into(), apt_unknown_schema()),
                         })?;
@@ -569,8 +959,8 @@ fn drain<W: Write + Seek>(
                     } => {
                         json::apt_garbage(out.line, n, offset, bytes, kind);
                         close_json(out.line, ts, stream, Some(cap_dir.unwrap_or("unknown")));
-                        out.topic.push_str("/apt/garbage");
-                        out.write(n, t, || {
+                        let topic = |s: &mut String| s.push_str("/apt/garbage");
+                        out.write(TopicKey::AptGarbage, n, t, topic, || {
                             ("aptscope.apt.garbage".into(), garbage_schema("apt"))
                         })?;
                     }
@@ -582,7 +972,6 @@ fn drain<W: Write + Seek>(
                 *out.n += 1;
                 let n = *out.n;
                 out.line.clear();
-                out.topic.clear();
                 match item {
                     EllItem::Frame {
                         offset,
@@ -602,10 +991,15 @@ fn drain<W: Write + Seek>(
                         out.expired.extend(o.expired.iter().copied());
                         json::ell_frame(out.line, n, &f, &o);
                         close_json(out.line, ts, stream, None);
-                        out.topic.push_str("/ell/");
                         let cmd = f.cmd;
-                        out.topic.push_str(cmd.map_or("unknown", |c| c.code));
-                        out.write(n, t, || match cmd {
+                        let key = cmd.map_or(TopicKey::EllUnknown, |c| {
+                            TopicKey::EllCmd(c.code.as_ptr() as usize, c.code.len())
+                        });
+                        let topic = |s: &mut String| {
+                            s.push_str("/ell/");
+                            s.push_str(cmd.map_or("unknown", |c| c.code));
+                        };
+                        out.write(key, n, t, topic, || match cmd {
                             Some(c) => (format!("aptscope.ell.{}", c.code), ell_schema(Some(c))),
                             None => ("aptscope.ell.unknown".into(), ell_schema(None)),
                         })?;
@@ -613,8 +1007,8 @@ fn drain<W: Write + Seek>(
                     EllItem::Garbage { offset, bytes, .. } => {
                         json::ell_garbage(out.line, n, offset, bytes);
                         close_json(out.line, ts, stream, None);
-                        out.topic.push_str("/ell/garbage");
-                        out.write(n, t, || {
+                        let topic = |s: &mut String| s.push_str("/ell/garbage");
+                        out.write(TopicKey::EllGarbage, n, t, topic, || {
                             ("aptscope.ell.garbage".into(), garbage_schema("ell"))
                         })?;
                     }
@@ -629,11 +1023,10 @@ fn drain<W: Write + Seek>(
 }
 
 /// Write the `no_reply` diagnostics collected in `out.expired` on `/ell/diag`.
-fn late_diags<W: Write + Seek>(out: &mut Out<'_, W>, stream: u32, t: u64) -> io::Result<()> {
+fn late_diags(out: &mut Out<'_>, stream: u32, t: u64) -> io::Result<()> {
     let list = std::mem::take(out.expired);
     for e in &list {
         out.line.clear();
-        out.topic.clear();
         json::late_diag(
             out.line,
             "ell",
@@ -644,8 +1037,10 @@ fn late_diags<W: Write + Seek>(out: &mut Out<'_, W>, stream: u32, t: u64) -> io:
             },
         );
         close_json(out.line, None, stream, None);
-        out.topic.push_str("/ell/diag");
-        out.write(e.n, t, || ("aptscope.ell.diag".into(), late_diag_schema()))?;
+        let topic = |s: &mut String| s.push_str("/ell/diag");
+        out.write(TopicKey::EllDiag, e.n, t, topic, || {
+            ("aptscope.ell.diag".into(), late_diag_schema())
+        })?;
     }
     Ok(())
 }
@@ -2183,6 +2578,87 @@ mod tests {
     use crate::model::OwnedChunk;
     use proptest::prelude::*;
     use std::io::Cursor;
+
+    #[test]
+    fn push_uint_matches_display() {
+        let mut xs = vec![0, 1, 9, 10, 11, 99, 100, 101, 999, 1000, 65_535, u64::MAX];
+        xs.extend((0..64).map(|b| 1u64 << b));
+        xs.extend((1..20).map(|e| 10u64.pow(e) - 1));
+        xs.push(1_700_000_000_123_456_789);
+        for x in xs {
+            let mut s = String::from("x");
+            push_uint(&mut s, x);
+            assert_eq!(s, format!("x{x}"));
+        }
+    }
+
+    /// A seekable writer into a shared buffer that fails once it holds `limit` bytes.
+    #[derive(Clone)]
+    struct Shared {
+        buf: std::sync::Arc<std::sync::Mutex<Cursor<Vec<u8>>>>,
+        limit: usize,
+    }
+
+    impl Write for Shared {
+        fn write(&mut self, b: &[u8]) -> io::Result<usize> {
+            let mut c = self.buf.lock().unwrap();
+            if c.get_ref().len() + b.len() > self.limit {
+                return Err(io::Error::new(io::ErrorKind::StorageFull, "disk full"));
+            }
+            c.write(b)
+        }
+        fn flush(&mut self) -> io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl Seek for Shared {
+        fn seek(&mut self, to: io::SeekFrom) -> io::Result<u64> {
+            self.buf.lock().unwrap().seek(to)
+        }
+    }
+
+    fn shared(limit: usize) -> Shared {
+        Shared {
+            buf: Default::default(),
+            limit,
+        }
+    }
+
+    #[test]
+    fn a_write_error_of_the_writer_thread_is_returned() {
+        let out = shared(50_000);
+        let opts = WriteOptions::new().compression(None).chunk_size(Some(4096));
+        let mut w = McapWriter::with_options(out, Some(Proto::Apt), opts).unwrap();
+        let chunks = some_chunks(2000);
+        let mut err = None;
+        for c in &chunks {
+            if let Err(e) = w.chunk(&c.as_chunk()) {
+                err = Some(e);
+                break;
+            }
+        }
+        let err = err.or_else(|| w.finish().err()).expect("an error");
+        assert_eq!(err.kind(), io::ErrorKind::StorageFull, "{err}");
+        // From then on, calls fail without a panic or a hang.
+        assert!(w.chunk(&chunks[0].as_chunk()).is_err());
+        let err = w.finish().unwrap_err();
+        assert!(err.to_string().contains("earlier error"), "{err}");
+        assert!(w.into_inner().is_none());
+    }
+
+    #[test]
+    fn dropping_without_finish_still_closes_the_file() {
+        let out = shared(usize::MAX);
+        let mut w = McapWriter::new(out.clone(), None).unwrap();
+        for c in &some_chunks(50) {
+            w.chunk(&c.as_chunk()).unwrap();
+        }
+        drop(w);
+        let bytes = out.buf.lock().unwrap().get_ref().clone();
+        assert!(bytes.ends_with(MAGIC));
+        assert_eq!(read(&bytes).chunks, some_chunks(50));
+    }
 
     // --- a small JSON parser, to check what we write --------------------------------------
 
