@@ -37,9 +37,14 @@ pub fn hex(out: &mut String, b: &[u8]) {
     const H: &[u8; 16] = b"0123456789abcdef";
     out.reserve(b.len() * 2 + 2);
     out.push('"');
-    for &x in b {
-        out.push(H[(x >> 4) as usize] as char);
-        out.push(H[(x & 15) as usize] as char);
+    // Through a stack buffer: pushing chars one by one costs a UTF-8 encode each.
+    let mut buf = [0u8; 128];
+    for part in b.chunks(buf.len() / 2) {
+        for (i, &x) in part.iter().enumerate() {
+            buf[2 * i] = H[(x >> 4) as usize];
+            buf[2 * i + 1] = H[(x & 15) as usize];
+        }
+        out.push_str(std::str::from_utf8(&buf[..2 * part.len()]).unwrap_or_default());
     }
     out.push('"');
 }
@@ -60,12 +65,11 @@ pub fn diags(out: &mut String, ds: impl Iterator<Item = Diag>) {
         if i > 0 {
             out.push(',');
         }
-        let _ = write!(
-            out,
-            "{{\"kind\":\"{}\",\"offset\":{},\"msg\":",
-            d.kind.name(),
-            d.offset
-        );
+        out.push_str("{\"kind\":\"");
+        out.push_str(d.kind.name());
+        out.push_str("\",\"offset\":");
+        uint(out, d.offset);
+        out.push_str(",\"msg\":");
         string(out, &d.kind.to_string());
         out.push('}');
     }
@@ -165,7 +169,7 @@ pub fn uint(out: &mut String, mut x: u64) {
             break;
         }
     }
-    out.extend(buf[i..].iter().map(|&b| b as char));
+    out.push_str(std::str::from_utf8(&buf[i..]).unwrap_or_default());
 }
 
 /// Append a signed integer.
@@ -204,18 +208,20 @@ pub fn apt_frame_paired(out: &mut String, n: u64, f: &AptFrame<'_, '_>, p: &crat
     match f.msg {
         Some(m) => {
             string(out, m.name);
-            let _ = write!(out, ",\"msg_dir\":\"{}\"", m.dir.as_str());
+            out.push_str(",\"msg_dir\":\"");
+            out.push_str(m.dir.as_str());
+            out.push('"');
         }
         None => out.push_str("null"),
     }
     addr(out, "src", h.src());
     addr(out, "dst", h.dst());
-    let _ = write!(
-        out,
-        ",\"data_flag\":{},\"data_len\":{}",
-        h.has_data(),
-        h.data_len()
-    );
+    out.push_str(if h.has_data() {
+        ",\"data_flag\":true,\"data_len\":"
+    } else {
+        ",\"data_flag\":false,\"data_len\":"
+    });
+    uint(out, h.data_len() as u64);
     if let Some(form) = f.form {
         if !form.note.is_empty() {
             out.push_str(",\"form_note\":");
@@ -223,10 +229,15 @@ pub fn apt_frame_paired(out: &mut String, n: u64, f: &AptFrame<'_, '_>, p: &crat
         }
     }
     if let Some(c) = f.channel() {
-        let _ = write!(out, ",\"channel\":{c}");
+        out.push_str(",\"channel\":");
+        int(out, c);
     }
     if let Some(s) = f.sub {
-        let _ = write!(out, ",\"sub\":{{\"id\":{},\"name\":\"{}\"}}", s.id, s.name);
+        out.push_str(",\"sub\":{\"id\":");
+        uint(out, s.id as u64);
+        out.push_str(",\"name\":");
+        string(out, s.name);
+        out.push('}');
     }
     out.push_str(",\"fields\":{");
     let mut phys = String::new();

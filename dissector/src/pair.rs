@@ -88,14 +88,28 @@ fn is_spontaneous(m: &MsgDef) -> bool {
         || m.name == "LD_POTROTATING"
 }
 
+/// A waiting request as a reply sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Waiting {
+    n: u64,
+    device: u8,
+    chan: Option<i64>,
+    name: &'static str,
+}
+
+/// How many of the oldest waiting requests a reply looks at: replies come in order, so its
+/// request is at the front; a bound keeps a flood of unanswered requests (a capture of one
+/// direction) from making each reply a scan of thousands.
+const SCAN: usize = 256;
+
 /// APT pairing state for one stream.
 #[derive(Debug, Default)]
 pub struct AptPairer {
     /// Waiting requests by record number (oldest first).
     pending: BTreeMap<u64, Pending>,
-    /// Record numbers of the waiting requests that expect each message id, oldest first: a reply
-    /// looks only at the requests it can answer.
-    by_reply: HashMap<u16, VecDeque<u64>>,
+    /// The waiting requests that expect each message id, oldest first, with what a reply is
+    /// matched on: a reply looks only at the requests it can answer, without map lookups.
+    by_reply: HashMap<u16, VecDeque<Waiting>>,
     /// Waiting requests with a time, by the time they expire (the timeout fixed when they came).
     deadlines: BTreeSet<(u64, u64)>,
     recent: VecDeque<Answered>,
@@ -110,8 +124,14 @@ impl AptPairer {
     }
 
     fn insert(&mut self, p: Pending) {
+        let w = Waiting {
+            n: p.n,
+            device: p.device,
+            chan: p.chan,
+            name: p.name,
+        };
         for id in &p.expects {
-            self.by_reply.entry(*id).or_default().push_back(p.n);
+            self.by_reply.entry(*id).or_default().push_back(w);
         }
         if let Some(d) = self.deadline(&p) {
             self.deadlines.insert((d, p.n));
@@ -127,10 +147,10 @@ impl AptPairer {
         for id in &p.expects {
             if let Some(v) = self.by_reply.get_mut(id) {
                 // Requests are mostly answered in order: the front, at no cost.
-                if v.front() == Some(&n) {
+                if v.front().is_some_and(|w| w.n == n) {
                     v.pop_front();
                 } else {
-                    v.retain(|x| *x != n);
+                    v.retain(|w| w.n != n);
                 }
                 if v.is_empty() {
                     self.by_reply.remove(id);
@@ -211,13 +231,14 @@ impl AptPairer {
         let chan_ok = |c: Option<i64>| c.is_none() || chan.is_none() || c == chan;
         let empty = VecDeque::new();
         let candidates = self.by_reply.get(&m.id).unwrap_or(&empty);
-        let usable = |k: &&u64| self.pending.get(k).is_some_and(|p| chan_ok(p.chan));
+        let usable = |w: &&Waiting| chan_ok(w.chan);
         let found = candidates
             .iter()
+            .take(SCAN)
             .filter(usable)
-            .find(|k| self.pending.get(k).is_some_and(|p| p.device == src))
-            .or_else(|| candidates.iter().find(usable))
-            .copied();
+            .find(|w| w.device == src)
+            .or_else(|| candidates.iter().take(SCAN).find(usable))
+            .map(|w| w.n);
         match found.and_then(|k| self.remove(k)) {
             Some(p) => {
                 // The same message also answers other waiting requests to that device and
@@ -230,14 +251,13 @@ impl AptPairer {
                     .get(&m.id)
                     .map(|v| {
                         v.iter()
-                            .copied()
-                            .filter(|k| {
-                                self.pending.get(k).is_some_and(|q| {
-                                    q.device == p.device
-                                        && q.chan == p.chan
-                                        && !(one_to_one && q.name == p.name)
-                                })
+                            .take(SCAN)
+                            .filter(|q| {
+                                q.device == p.device
+                                    && q.chan == p.chan
+                                    && !(one_to_one && q.name == p.name)
                             })
+                            .map(|q| q.n)
                             .collect()
                     })
                     .unwrap_or_default();
