@@ -9,9 +9,8 @@ use aptscope_capture::{Direction, Event};
 use aptscope_dissector::apt::{encode, Addr, FieldValue};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::filter::Filter;
-use aptscope_dissector::pipeline::{Ctx, Format as PFormat, Pipeline};
+use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
 use aptscope_dissector::stats::Stats;
-use aptscope_dissector::table::Dir;
 use aptscope_dissector::table::{Form, FormKind, MsgDef};
 use aptscope_dissector::{json, Table};
 use aptscope_replay::{replay_main, ReplayOptions, Role};
@@ -608,14 +607,6 @@ fn open_opts(format: Option<&str>, hex: bool, usb: Option<&str>) -> io::Result<O
     Ok(OpenOptions { format, usb_device })
 }
 
-fn dir_of(d: Direction) -> Option<Dir> {
-    match d {
-        Direction::HostToDevice => Some(Dir::HostToDevice),
-        Direction::DeviceToHost => Some(Dir::DeviceToHost),
-        Direction::Unknown => None,
-    }
-}
-
 fn compile_filter(src: &str) -> io::Result<Filter> {
     Filter::parse(src).map_err(|e| bad(format!("bad filter: {e}\n{}", e.caret(src))))
 }
@@ -629,14 +620,7 @@ fn run_pipeline(
 ) -> io::Result<()> {
     while let Some(ev) = reader.next_event() {
         match ev {
-            Event::Chunk(c) => {
-                let ctx = Ctx {
-                    stream: c.stream,
-                    dir: dir_of(c.dir),
-                    ts_ns: c.ts_ns,
-                };
-                p.push_chunk(ctx, c.bytes, emit)?;
-            }
+            Event::Chunk(c) => p.push_chunk(c.ctx(), c.bytes, emit)?,
             Event::Diag(d) => p.file_diag(d.offset, d.kind, &d.msg, emit)?,
             Event::Stream(s) => {
                 let line = if as_json {

@@ -1,6 +1,8 @@
 //! The capture model: a capture is a sequence of chunks, each with a timestamp, a direction, a
 //! stream (port or USB device) and bytes. Readers produce [`Event`]s; writers consume chunks.
 
+use aptscope_dissector::pipeline::Ctx;
+use aptscope_dissector::table::Dir;
 use std::fmt;
 
 /// Which way bytes went.
@@ -23,6 +25,15 @@ impl Direction {
             Direction::Unknown => "unknown",
         }
     }
+    /// The dissector's direction (`None` when not recorded).
+    pub fn dir(self) -> Option<Dir> {
+        match self {
+            Direction::HostToDevice => Some(Dir::HostToDevice),
+            Direction::DeviceToHost => Some(Dir::DeviceToHost),
+            Direction::Unknown => None,
+        }
+    }
+
     /// Parse `h2d`/`d2h`/`unknown` (and `tx`/`rx`, `out`/`in`).
     pub fn parse(s: &str) -> Option<Direction> {
         Some(match s {
@@ -63,6 +74,15 @@ pub struct OwnedChunk {
 }
 
 impl Chunk<'_> {
+    /// Where and when the chunk was captured, as the decoding pipeline takes it.
+    pub fn ctx(&self) -> Ctx {
+        Ctx {
+            stream: self.stream,
+            dir: self.dir.dir(),
+            ts_ns: self.ts_ns,
+        }
+    }
+
     /// Copy into an [`OwnedChunk`].
     pub fn to_owned(&self) -> OwnedChunk {
         OwnedChunk {

@@ -10,8 +10,7 @@ use aptscope_capture::live::session::{
 };
 use aptscope_capture::{Direction, OwnedChunk};
 use aptscope_dissector::detect::Proto;
-use aptscope_dissector::pipeline::{Ctx, Format as OutFormat, Pipeline};
-use aptscope_dissector::table::Dir;
+use aptscope_dissector::pipeline::{Format as OutFormat, Pipeline};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -90,16 +89,8 @@ fn diag_kinds(path: &Path) -> (Vec<String>, Vec<OwnedChunk>) {
         Ok(())
     };
     for c in &chunks {
-        let ctx = Ctx {
-            stream: c.stream,
-            dir: match c.dir {
-                Direction::HostToDevice => Some(Dir::HostToDevice),
-                Direction::DeviceToHost => Some(Dir::DeviceToHost),
-                Direction::Unknown => None,
-            },
-            ts_ns: c.ts_ns,
-        };
-        p.push_chunk(ctx, &c.bytes, &mut emit).expect("push");
+        p.push_chunk(c.as_chunk().ctx(), &c.bytes, &mut emit)
+            .expect("push");
     }
     p.finish(&mut emit).expect("finish");
     for l in &lines {

@@ -3,11 +3,10 @@
 //! `--from/--to`, `--loop`) and the schedule built from it.
 
 use aptscope_capture::open::{open, OpenOptions};
-use aptscope_capture::{Direction, Event};
+use aptscope_capture::Event;
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::filter::Filter;
-use aptscope_dissector::pipeline::{Ctx, Format, Pipeline};
-use aptscope_dissector::table::Dir;
+use aptscope_dissector::pipeline::{Format, Pipeline};
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::io;
@@ -111,14 +110,6 @@ fn unhex(s: &str) -> Option<Vec<u8>> {
         .step_by(2)
         .map(|i| u8::from_str_radix(s.get(i..i + 2)?, 16).ok())
         .collect()
-}
-
-fn dir_of(d: Direction) -> Option<Dir> {
-    match d {
-        Direction::HostToDevice => Some(Dir::HostToDevice),
-        Direction::DeviceToHost => Some(Dir::DeviceToHost),
-        Direction::Unknown => None,
-    }
 }
 
 /// Turns the records of a pipeline into messages and notes.
@@ -233,15 +224,7 @@ impl Script {
         };
         while let Some(ev) = reader.next_event() {
             let _ = match ev {
-                Event::Chunk(ch) => p.push_chunk(
-                    Ctx {
-                        stream: ch.stream,
-                        dir: dir_of(ch.dir),
-                        ts_ns: ch.ts_ns,
-                    },
-                    ch.bytes,
-                    &mut emit,
-                ),
+                Event::Chunk(ch) => p.push_chunk(ch.ctx(), ch.bytes, &mut emit),
                 Event::Diag(d) => p.file_diag(d.offset, d.kind, &d.msg, &mut emit),
                 Event::Stream(_) => Ok(()),
             };

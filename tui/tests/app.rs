@@ -196,9 +196,8 @@ fn background_index_and_follow() {
 
 #[test]
 fn records_equal_the_pipeline_ndjson() {
-    use aptscope_capture::model::{Direction, Event};
-    use aptscope_dissector::pipeline::{Ctx, Format, Pipeline};
-    use aptscope_dissector::table::Dir;
+    use aptscope_capture::model::Event;
+    use aptscope_dissector::pipeline::{Format, Pipeline};
     for name in [
         "kdc101-session.pcapng",
         "damaged.bin",
@@ -217,16 +216,7 @@ fn records_equal_the_pipeline_ndjson() {
         };
         while let Some(ev) = r.next_event() {
             if let Event::Chunk(c) = ev {
-                let dir = match c.dir {
-                    Direction::HostToDevice => Some(Dir::HostToDevice),
-                    Direction::DeviceToHost => Some(Dir::DeviceToHost),
-                    Direction::Unknown => None,
-                };
-                let ctx = Ctx {
-                    stream: c.stream,
-                    dir,
-                    ts_ns: c.ts_ns,
-                };
+                let ctx = c.ctx();
                 p.push_chunk(ctx, c.bytes, &mut emit).expect("push");
             }
         }

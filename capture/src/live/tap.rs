@@ -1065,10 +1065,7 @@ fn display_loop(rx: Receiver<Arc<Rec>>, proto: Proto, out: &mut dyn Write, sh: &
         }
         let ctx = Ctx {
             stream: 0,
-            dir: Some(match r.dir {
-                Direction::HostToDevice => Dir::HostToDevice,
-                _ => Dir::DeviceToHost,
-            }),
+            dir: r.dir.dir(),
             ts_ns: Some(r.ts),
         };
         if p.push_chunk(ctx, &r.bytes, &mut emit).is_err() {
