@@ -4,7 +4,7 @@
 //! request's captured replies at their captured latency; unsolicited messages (status updates)
 //! follow the request that preceded them in the capture, at their captured distance from it.
 
-use crate::host::Session;
+use crate::observe::Session;
 use crate::port::Link;
 use crate::sched::{wait_until, SendTiming, Waited};
 use crate::script::{Msg, Script, Selection, Side};
