@@ -78,7 +78,7 @@ struct LiveArgs {
     /// Flow control: none, rtscts, xonxoff.
     #[arg(long)]
     flow: Option<String>,
-    /// Write the capture here (pcapng).
+    /// Write the capture here: pcapng, or pcap when it ends in .pcap.
     #[arg(short = 'w', long)]
     write: Option<String>,
     /// Overwrite the capture file if it exists.

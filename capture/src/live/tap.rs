@@ -1,7 +1,7 @@
 //! Live taps: a pseudo-terminal man-in-the-middle between a host program and a serial device
 //! ([`tap_main`]), and a passive sniff of a Y-cable with two receive-only adapters
 //! ([`sniff_main`]). Every chunk is timestamped with its direction, written losslessly to a
-//! pcapng capture, and decoded live on a display that may lag (and then skips, and says so).
+//! pcapng (or pcap) capture, and decoded live on a display that may lag (and then skips, and says so).
 //!
 //! # Threads and policies
 //!
@@ -17,7 +17,7 @@
 //!   file stays complete, and [`TapStats::backpressure_waits`] counts it) rather than drop bytes
 //!   from the file. Only when writing the file fails (disk full …) are chunks no longer queued;
 //!   they are counted in [`TapStats::file_lost`] and the error is reported.
-//! - The **writer** merges the two directions by time (a 100 ms window), writes pcapng blocks
+//! - The **writer** merges the two directions by time (a 100 ms window), writes pcapng (or pcap) blocks
 //!   and flushes them to the kernel every 256 chunks or every second, so a `kill -9` leaves a
 //!   file readable up to its last complete block.
 //! - **Display** (lossy): chunks go through a channel of [`DISPLAY_QUEUE`] chunks that the
@@ -37,7 +37,8 @@
 
 use crate::live::serial::{self, SerialFd};
 use crate::model::{Chunk, Direction, StreamInfo, Writer};
-use crate::pcap::PcapNgOut;
+use crate::open::Format;
+use crate::pcap::{PcapNgOut, PcapOut};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::pipeline::{Ctx, Format as OutFormat, Pipeline};
 use aptscope_dissector::table::Dir;
@@ -203,7 +204,7 @@ pub struct TapOptions {
     pub baud: Option<u32>,
     /// Flow control override.
     pub flow: Option<Flow>,
-    /// Write the capture (pcapng) here.
+    /// Write the capture here: pcapng, or pcap by the `.pcap` extension.
     pub write: Option<String>,
     /// Overwrite an existing capture.
     pub force: bool,
@@ -252,7 +253,7 @@ pub struct SniffOptions {
     pub baud: Option<u32>,
     /// Flow control override (normally none: receive-only adapters see no handshake).
     pub flow: Option<Flow>,
-    /// Write the capture (pcapng) here.
+    /// Write the capture here: pcapng, or pcap by the `.pcap` extension.
     pub write: Option<String>,
     /// Overwrite an existing capture.
     pub force: bool,
@@ -804,9 +805,9 @@ impl Write for SharedFile {
     }
 }
 
-/// The capture file: a pcapng writer (one stream) over a [`SharedFile`].
+/// The capture file: a pcapng or pcap writer (one stream) over a [`SharedFile`].
 struct FileSink {
-    out: PcapNgOut<SharedFile>,
+    out: Box<dyn Writer + Send>,
     file: SharedFile,
 }
 
@@ -814,6 +815,22 @@ impl FileSink {
     /// Create `path` (refusing to overwrite unless `force`, as [`crate::open::create`] does;
     /// built here rather than with it to be able to flush periodically) and declare `stream`.
     fn create(path: &str, force: bool, stream: &StreamInfo) -> io::Result<FileSink> {
+        // Streaming formats only: every block is whole once flushed, so a killed tap leaves a
+        // readable file. MCAP needs its footer (and text formats lose the times): convert.
+        let format = match Format::from_extension(path) {
+            None | Some(Format::PcapNg) => Format::PcapNg,
+            Some(Format::Pcap) => Format::Pcap,
+            Some(other) => {
+                return Err(io::Error::new(
+                    io::ErrorKind::InvalidInput,
+                    format!(
+                        "{path}: the tap writes pcapng or pcap (readable up to the last block if \
+                         it is killed), not {}; record a .pcapng and `aptscope convert` it",
+                        other.name()
+                    ),
+                ))
+            }
+        };
         let f = if force {
             File::create(path)
         } else {
@@ -830,7 +847,10 @@ impl FileSink {
             }
         })?;
         let file = SharedFile(Arc::new(Mutex::new(BufWriter::with_capacity(1 << 16, f))));
-        let mut out = PcapNgOut::new(file.clone())?;
+        let mut out: Box<dyn Writer + Send> = match format {
+            Format::Pcap => Box::new(PcapOut::new(file.clone())?),
+            _ => Box::new(PcapNgOut::new(file.clone())?),
+        };
         out.stream(stream)?;
         let mut sink = FileSink { out, file };
         sink.flush()?;
@@ -1727,7 +1747,8 @@ mod tests {
     /// The capture's bytes per direction, its streams, and whether it had diagnostics.
     fn read_back(path: &Path) -> (Vec<u8>, Vec<u8>, Vec<StreamInfo>, Vec<String>) {
         let (mut r, f) = open(path.to_str().unwrap(), OpenOptions::default()).unwrap();
-        assert_eq!(f, crate::open::Format::PcapNg);
+        let want = crate::open::Format::from_extension(path.to_str().unwrap());
+        assert_eq!(Some(f), want);
         let (mut h2d, mut d2h, mut streams, mut diags) = (vec![], vec![], vec![], vec![]);
         while let Some(e) = r.next_event() {
             match e {
@@ -2010,6 +2031,36 @@ mod tests {
         let mut o = tap_opts(dir.join("nope").to_str().unwrap(), &dir);
         o.force = true;
         assert!(Tap::new(o).is_err());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn writes_pcap_by_extension_and_refuses_non_streaming_formats() {
+        let dir = scratch("pcap");
+        let (mut dev, dev_path) = fake_device();
+        let mut opts = tap_opts(&dev_path, &dir);
+        opts.write = Some(dir.join("cap.pcap").to_string_lossy().into());
+        let stop = opts.stop.clone();
+        let tap = Tap::new(opts).unwrap();
+        let done = within(move || tap.run(None));
+        let mut host = open_host(&dir.join("ttyAPT"));
+        let a = apt_moves(48);
+        send(&mut host, &a);
+        assert_eq!(recv(&mut dev, a.len()), a);
+        let b = apt_status(40);
+        send(&mut dev, &b);
+        assert_eq!(recv(&mut host, b.len()), b);
+        stop.stop();
+        assert!(done().unwrap().file_matches());
+        let (h2d, d2h, _, diags) = read_back(&dir.join("cap.pcap"));
+        assert!(diags.is_empty(), "{diags:?}");
+        assert_eq!((h2d, d2h), (a, b));
+
+        let mut o = tap_opts(&dev_path, &dir);
+        o.write = Some(dir.join("cap.mcap").to_string_lossy().into());
+        let e = Tap::new(o).err().unwrap();
+        assert!(e.to_string().contains("pcapng or pcap"), "{e}");
+        assert!(!dir.join("cap.mcap").exists(), "nothing created");
         let _ = std::fs::remove_dir_all(&dir);
     }
 
