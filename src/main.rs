@@ -6,12 +6,12 @@ use aptscope_capture::live::sim::{sim_apt_main, sim_elliptec_main, SimLine};
 use aptscope_capture::live::tap::{sniff_main, tap_main, Flow, SniffOptions, TapOptions, TapStats};
 use aptscope_capture::open::{create, open, open_with_progress, Format, OpenOptions, Progress};
 use aptscope_capture::{Direction, Event};
-use aptscope_dissector::apt::{encode, Addr, FieldValue};
+use aptscope_dissector::apt::{encode_named, Addr, Named};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::filter::Filter;
 use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
 use aptscope_dissector::stats::Stats;
-use aptscope_dissector::table::{Form, FormKind, MsgDef};
+use aptscope_dissector::table::{Form, MsgDef};
 use aptscope_dissector::{json, Table};
 use aptscope_replay::{replay_main, ReplayOptions, Role};
 use clap::{Parser, Subcommand};
@@ -785,14 +785,6 @@ fn convert(
     Ok(())
 }
 
-fn form_label(f: &Form) -> String {
-    match f.kind {
-        FormKind::Header => "hdr".into(),
-        FormKind::Data(n) => n.to_string(),
-        FormKind::Sub => "sub".into(),
-    }
-}
-
 fn messages(as_json: bool, verbose: bool) -> io::Result<()> {
     let table = Table::global();
     let mut out = BufWriter::new(io::stdout().lock());
@@ -813,7 +805,7 @@ fn messages(as_json: bool, verbose: bool) -> io::Result<()> {
     let mut msgs: Vec<&MsgDef> = table.msgs().iter().collect();
     msgs.sort_by_key(|m| m.id);
     for m in msgs {
-        let forms: Vec<String> = m.forms.iter().map(form_label).collect();
+        let forms: Vec<String> = m.forms.iter().map(Form::label).collect();
         let replies: Vec<&str> = table.replies_of(m).iter().map(|r| r.name).collect();
         let reply = if replies.is_empty() {
             String::new()
@@ -838,12 +830,12 @@ fn messages(as_json: bool, verbose: bool) -> io::Result<()> {
                     .iter()
                     .map(|x| format!("{}:{}", x.name, x.ty.name()))
                     .collect();
-                writeln!(out, "        [{}] {}", form_label(f), fields.join(" "))?;
+                writeln!(out, "        [{}] {}", f.label(), fields.join(" "))?;
             }
         }
     }
     for s in table.subs() {
-        let forms: Vec<String> = s.forms.iter().map(form_label).collect();
+        let forms: Vec<String> = s.forms.iter().map(Form::label).collect();
         writeln!(
             out,
             "  sub {:<6} 0x{:04X}  {:<32} {}",
@@ -974,67 +966,6 @@ fn encode_cmd(
                 .ok_or_else(|| bad(format!("`{v}` is not name=value")))
         })
         .collect::<Result<_, _>>()?;
-    let sub_def = match (sub, m.subs) {
-        (Some(s), Some(g)) => Some(
-            table
-                .sub_by_name(g, s)
-                .ok_or_else(|| bad(format!("no sub-message {s} in group {g}")))?,
-        ),
-        (Some(_), None) => return Err(bad(format!("{} has no sub-messages", m.name))),
-        (None, _) => None,
-    };
-    let has_all = |f: &Form| {
-        pairs
-            .iter()
-            .all(|(k, _)| f.fields.iter().any(|x| x.name == *k))
-    };
-    // Candidate forms: the sub's data forms for SET/GET of a sub group, else the message's own.
-    let mut cands: Vec<&Form> = m.forms.iter().filter(|f| f.kind != FormKind::Sub).collect();
-    if let Some(s) = sub_def {
-        if m.forms.iter().any(|f| f.kind == FormKind::Sub) {
-            cands = s.forms.iter().collect();
-        }
-    }
-    let chosen = match form {
-        Some("hdr") => cands.iter().find(|f| f.kind == FormKind::Header),
-        Some(n) => {
-            let n: u16 = n
-                .parse()
-                .map_err(|_| bad(format!("--form takes hdr or a length, not {n}")))?;
-            cands.iter().find(|f| f.kind == FormKind::Data(n))
-        }
-        None => cands
-            .iter()
-            .find(|f| has_all(f) && (!pairs.is_empty() || f.kind == FormKind::Header))
-            .or_else(|| cands.iter().find(|f| has_all(f))),
-    }
-    .ok_or_else(|| {
-        let labels: Vec<String> = cands.iter().map(|f| form_label(f)).collect();
-        bad(format!(
-            "no form of {} fits (forms: {}; use --sub for sub-messages)",
-            m.name,
-            labels.join(", ")
-        ))
-    })?;
-    let mut vals: Vec<(&str, FieldValue)> = vec![];
-    if let Some(s) = sub_def {
-        if chosen.fields.iter().any(|f| f.name == "sub_id")
-            && !pairs.iter().any(|(k, _)| *k == "sub_id")
-        {
-            vals.push(("sub_id", FieldValue::Int(s.id as i64)));
-        }
-    }
-    for (k, v) in &pairs {
-        let f = chosen
-            .fields
-            .iter()
-            .find(|f| f.name == *k)
-            .ok_or_else(|| bad(format!("no field {k}")))?;
-        vals.push((
-            k,
-            FieldValue::from_text(table, f, v).map_err(|e| bad(e.to_string()))?,
-        ));
-    }
     let to_host = m.dir == aptscope_dissector::table::Dir::DeviceToHost;
     let addr = |s: Option<&str>, default: Addr| -> io::Result<u8> {
         match s {
@@ -1049,8 +980,18 @@ fn encode_cmd(
     } else {
         (Addr::Usb, Addr::Host)
     };
-    let bytes = encode(chosen, &vals, m.id, addr(dest, dd)?, addr(source, ds)?)
-        .map_err(|e| bad(e.to_string()))?;
+    let bytes = encode_named(
+        table,
+        &Named {
+            name,
+            sub,
+            values: &pairs,
+            form,
+            dst: addr(dest, dd)?,
+            src: addr(source, ds)?,
+        },
+    )
+    .map_err(|e| bad(e.to_string()))?;
     let hex: Vec<String> = bytes.iter().map(|b| format!("{b:02X}")).collect();
     println!("{}", hex.join(" "));
     Ok(())

@@ -2,8 +2,7 @@
 //! port), and the stop commands sent on abort to channels still moving.
 
 use crate::script::Msg;
-use aptscope_dissector::apt::{encode, FieldValue};
-use aptscope_dissector::table::FormKind;
+use aptscope_dissector::apt::{encode_named, Named};
 use aptscope_dissector::Table;
 use serde_json::Value;
 use std::path::Path;
@@ -80,18 +79,17 @@ impl Moving {
 
     /// MOT_MOVE_STOP (profiled) for this channel, from the host.
     pub fn stop_command(&self) -> Option<Vec<u8>> {
-        let t = Table::global();
-        let m = t.msg_by_name("MOT_MOVE_STOP")?;
-        let form = m.forms.iter().find(|f| f.kind == FormKind::Header)?;
-        encode(
-            form,
-            &[
-                ("chan_ident", FieldValue::Int(self.chan)),
-                ("stop_mode", FieldValue::Int(2)),
-            ],
-            m.id,
-            self.dst,
-            0x01,
+        let chan = self.chan.to_string();
+        encode_named(
+            Table::global(),
+            &Named {
+                name: "MOT_MOVE_STOP",
+                sub: None,
+                values: &[("chan_ident", &chan), ("stop_mode", "PROFILED")],
+                form: Some("hdr"),
+                dst: self.dst,
+                src: 0x01,
+            },
         )
         .ok()
     }

@@ -18,10 +18,9 @@ use super::sim::{parse_modules, serve_pty, stop_pair, AptModel, AptSim, EllSim, 
 use super::tap::{tap_main, TapOptions, TapStats};
 use crate::model::{Direction, Event, OwnedChunk, StreamInfo};
 use crate::open::{create, open, Format, OpenOptions};
-use aptscope_dissector::apt::{encode, AptFrame, AptFramer, FieldValue, Item as AptItem};
+use aptscope_dissector::apt::{encode_named, AptFrame, AptFramer, Item as AptItem, Named};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::ell::{EllFrame, EllFramer, Item as EllItem};
-use aptscope_dissector::table::{Form, FormKind};
 use aptscope_dissector::Table;
 use std::io::{self, Read, Write};
 use std::os::unix::fs::OpenOptionsExt;
@@ -168,14 +167,10 @@ pub struct Recording {
 /// are `field=value` pairs separated by spaces (values as `encode` reads them: numbers, enum
 /// labels, flags joined by `|`); the frame goes from the host to `dst`.
 pub fn apt_frame(name: &str, args: &str, dst: u8) -> Result<Vec<u8>, String> {
-    let table = Table::global();
     let (mname, sub) = match name.split_once(':') {
         Some((m, s)) => (m, Some(s)),
         None => (name, None),
     };
-    let m = table
-        .msg_by_name(mname)
-        .ok_or_else(|| format!("no message named {mname}"))?;
     let pairs: Vec<(&str, &str)> = args
         .split_whitespace()
         .map(|a| {
@@ -183,50 +178,18 @@ pub fn apt_frame(name: &str, args: &str, dst: u8) -> Result<Vec<u8>, String> {
                 .ok_or_else(|| format!("`{a}` is not name=value"))
         })
         .collect::<Result<_, _>>()?;
-    let sub_def = match (sub, m.subs) {
-        (Some(s), Some(g)) => Some(
-            table
-                .sub_by_name(g, s)
-                .ok_or_else(|| format!("no sub-message {s} in group {g}"))?,
-        ),
-        (Some(_), None) => return Err(format!("{} has no sub-messages", m.name)),
-        (None, _) => None,
-    };
-    let mut cands: Vec<&Form> = m.forms.iter().filter(|f| f.kind != FormKind::Sub).collect();
-    if let Some(s) = sub_def {
-        if m.forms.iter().any(|f| f.kind == FormKind::Sub) {
-            cands = s.forms.iter().collect();
-        }
-    }
-    let has_all = |f: &&&Form| {
-        pairs
-            .iter()
-            .all(|(k, _)| f.fields.iter().any(|x| x.name == *k))
-    };
-    let form = cands
-        .iter()
-        .find(|f| has_all(f) && (!pairs.is_empty() || f.kind == FormKind::Header))
-        .or_else(|| cands.iter().find(has_all))
-        .ok_or_else(|| format!("no form of {name} has the fields {args}"))?;
-    let mut vals: Vec<(&str, FieldValue)> = vec![];
-    if let Some(s) = sub_def {
-        if form.fields.iter().any(|f| f.name == "sub_id") && !pairs.iter().any(|p| p.0 == "sub_id")
-        {
-            vals.push(("sub_id", FieldValue::Int(i64::from(s.id))));
-        }
-    }
-    for (k, v) in &pairs {
-        let f = form
-            .fields
-            .iter()
-            .find(|f| f.name == *k)
-            .ok_or_else(|| format!("{name} has no field {k}"))?;
-        vals.push((
-            k,
-            FieldValue::from_text(table, f, v).map_err(|e| e.to_string())?,
-        ));
-    }
-    encode(form, &vals, m.id, dst, HOST).map_err(|e| format!("{name}: {e}"))
+    encode_named(
+        Table::global(),
+        &Named {
+            name: mname,
+            sub,
+            values: &pairs,
+            form: None,
+            dst,
+            src: HOST,
+        },
+    )
+    .map_err(|e| format!("{name}: {e}"))
 }
 
 /// A host script being written; the first error (a message the table cannot encode) is kept

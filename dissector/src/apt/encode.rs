@@ -42,6 +42,26 @@ pub enum EncodeError {
     },
     /// Encoding needs a header-only or data form; `form sub` is only a placeholder.
     SubFormNeedsSub,
+    /// No message of this name in the table.
+    UnknownMessage(String),
+    /// No sub-message of this name in the message's group.
+    UnknownSub {
+        /// The group (`la`, `tec`, …).
+        group: String,
+        /// What was asked for.
+        name: String,
+    },
+    /// A sub-message was named for a message without sub-messages.
+    NoSubs(String),
+    /// A form was asked for that is neither `hdr` nor a length.
+    BadForm(String),
+    /// No form of the message has every field given (or the form asked for).
+    NoForm {
+        /// The message.
+        msg: String,
+        /// Its forms (`hdr, 14`).
+        forms: String,
+    },
 }
 
 impl fmt::Display for EncodeError {
@@ -61,6 +81,16 @@ impl fmt::Display for EncodeError {
             EncodeError::SubFormNeedsSub => write!(
                 f,
                 "this message's data is a sub-message: name the sub-message"
+            ),
+            EncodeError::UnknownMessage(m) => write!(f, "no message named {m}"),
+            EncodeError::UnknownSub { group, name } => {
+                write!(f, "no sub-message {name} in group {group}")
+            }
+            EncodeError::NoSubs(m) => write!(f, "{m} has no sub-messages"),
+            EncodeError::BadForm(x) => write!(f, "a form is hdr or a length, not {x}"),
+            EncodeError::NoForm { msg, forms } => write!(
+                f,
+                "no form of {msg} fits (forms: {forms}; name a sub-message for sub-messages)"
             ),
         }
     }
@@ -277,4 +307,141 @@ pub fn encode(
     };
     out[..HEADER_LEN].copy_from_slice(&emit_header(msg_id, params, data_len > 0, dst, src));
     Ok(out)
+}
+
+/// A message to build by name, its field values as text (numbers, `0x` hex, enum labels,
+/// flags `A|B`), as `aptscope encode` and scripted sessions give them.
+#[derive(Debug, Clone, Copy)]
+pub struct Named<'a> {
+    /// Message name (`MOT_MOVE_ABSOLUTE`).
+    pub name: &'a str,
+    /// Sub-message name, for the PARAMS messages of LA_, TEC_, QUAD_, PZMOT_ ….
+    pub sub: Option<&'a str>,
+    /// `(field, value)` pairs; fields not given are 0.
+    pub values: &'a [(&'a str, &'a str)],
+    /// The form: `hdr` or a data length; `None`: the first form that has every field given
+    /// (the header form when none is given).
+    pub form: Option<&'a str>,
+    /// Destination address.
+    pub dst: u8,
+    /// Source address.
+    pub src: u8,
+}
+
+/// Build the frame described by `n` from the table: the message, its sub-message, the form,
+/// and each value read as its field's type.
+pub fn encode_named(table: &Table, n: &Named<'_>) -> Result<Vec<u8>, EncodeError> {
+    let m = table
+        .msg_by_name(n.name)
+        .ok_or_else(|| EncodeError::UnknownMessage(n.name.to_string()))?;
+    let sub = match (n.sub, m.subs) {
+        (Some(s), Some(g)) => {
+            Some(
+                table
+                    .sub_by_name(g, s)
+                    .ok_or_else(|| EncodeError::UnknownSub {
+                        group: g.to_string(),
+                        name: s.to_string(),
+                    })?,
+            )
+        }
+        (Some(_), None) => return Err(EncodeError::NoSubs(m.name.to_string())),
+        (None, _) => None,
+    };
+    // Candidate forms: the sub-message's for a message whose data is a sub-message.
+    let mut cands: Vec<&Form> = m.forms.iter().filter(|f| f.kind != FormKind::Sub).collect();
+    if let Some(s) = sub {
+        if m.forms.iter().any(|f| f.kind == FormKind::Sub) {
+            cands = s.forms.iter().collect();
+        }
+    }
+    let has_all = |f: &&&Form| {
+        n.values
+            .iter()
+            .all(|(k, _)| f.fields.iter().any(|x| x.name == *k))
+    };
+    let chosen = match n.form {
+        Some("hdr") => cands.iter().find(|f| f.kind == FormKind::Header),
+        Some(x) => {
+            let len: u16 = x.parse().map_err(|_| EncodeError::BadForm(x.to_string()))?;
+            cands.iter().find(|f| f.kind == FormKind::Data(len))
+        }
+        None => cands
+            .iter()
+            .find(|f| has_all(f) && (!n.values.is_empty() || f.kind == FormKind::Header))
+            .or_else(|| cands.iter().find(has_all)),
+    }
+    .ok_or_else(|| EncodeError::NoForm {
+        msg: m.name.to_string(),
+        forms: cands
+            .iter()
+            .map(|f| f.label())
+            .collect::<Vec<_>>()
+            .join(", "),
+    })?;
+    let mut vals: Vec<(&str, FieldValue)> = vec![];
+    if let Some(s) = sub {
+        if chosen.fields.iter().any(|f| f.name == "sub_id")
+            && !n.values.iter().any(|(k, _)| *k == "sub_id")
+        {
+            vals.push(("sub_id", FieldValue::Int(i64::from(s.id))));
+        }
+    }
+    for (k, v) in n.values {
+        let f = chosen
+            .fields
+            .iter()
+            .find(|f| f.name == *k)
+            .ok_or_else(|| EncodeError::UnknownField(k.to_string()))?;
+        vals.push((k, FieldValue::from_text(table, f, v)?));
+    }
+    encode(chosen, &vals, m.id, n.dst, n.src)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn named<'a>(
+        name: &'a str,
+        sub: Option<&'a str>,
+        values: &'a [(&'a str, &'a str)],
+    ) -> Named<'a> {
+        Named {
+            name,
+            sub,
+            values,
+            form: None,
+            dst: 0x50,
+            src: 0x01,
+        }
+    }
+
+    #[test]
+    fn builds_by_name_with_forms_and_sub_messages() {
+        let t = Table::global();
+        let stop = named(
+            "MOT_MOVE_STOP",
+            None,
+            &[("chan_ident", "CH1"), ("stop_mode", "PROFILED")],
+        );
+        assert_eq!(
+            encode_named(t, &stop),
+            Ok(vec![0x65, 0x04, 0x01, 0x02, 0x50, 0x01])
+        );
+        // A sub-message: its id comes first in the data.
+        let sp = named("LA_SET_PARAMS", Some("SETPOINT"), &[("setpoint", "1638")]);
+        let b = encode_named(t, &sp).expect("encodes");
+        assert_eq!(&b[6..8], &[0x01, 0x00], "{b:02x?}");
+        // What cannot be built says why.
+        let e = |n: &Named<'_>| encode_named(t, n).expect_err("refused").to_string();
+        assert!(e(&named("NO_SUCH", None, &[])).contains("no message named NO_SUCH"));
+        assert!(e(&named("HW_REQ_INFO", Some("X"), &[])).contains("has no sub-messages"));
+        assert!(e(&named("MOT_MOVE_STOP", None, &[("speed", "1")])).contains("no form of"));
+        let hdr = Named {
+            form: Some("12x"),
+            ..stop
+        };
+        assert!(e(&hdr).contains("a form is hdr or a length"));
+    }
 }

@@ -202,6 +202,17 @@ pub struct Form {
     pub fields: Vec<Field>,
 }
 
+impl Form {
+    /// `hdr`, the data length (`14`), or `sub`: how listings and `--form` name the form.
+    pub fn label(&self) -> String {
+        match self.kind {
+            FormKind::Header => "hdr".into(),
+            FormKind::Data(n) => n.to_string(),
+            FormKind::Sub => "sub".into(),
+        }
+    }
+}
+
 /// A byte string from the spec with the values it should decode to.
 #[derive(Debug, Clone)]
 pub struct Example {
