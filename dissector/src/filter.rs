@@ -141,6 +141,33 @@ impl Filter {
     pub fn as_str(&self) -> &str {
         &self.text
     }
+
+    /// The top-level record keys [`Filter::matches`] can read (sorted, without duplicates): a
+    /// record reduced to these keys, each with its whole value, matches exactly when the full
+    /// record does. Empty for the empty filter.
+    pub fn record_keys(&self) -> Vec<&str> {
+        let (mut keys, fallback) = self.record_keys_split();
+        if !fallback.is_empty() {
+            keys.push("fields");
+            keys.sort_unstable();
+            keys.dedup();
+        }
+        keys
+    }
+
+    /// [`Filter::record_keys`] in two parts (each sorted, without duplicates): the keys read
+    /// directly, and the protocol-prefixed names that are looked up in `fields` only when the
+    /// record has no such key. When a record has every key of the second list, `fields` is
+    /// read only if the first list has it.
+    pub fn record_keys_split(&self) -> (Vec<&str>, Vec<&str>) {
+        let (mut keys, mut fallback) = (vec![], vec![]);
+        self.expr.record_keys(&mut keys, &mut fallback);
+        for v in [&mut keys, &mut fallback] {
+            v.sort_unstable();
+            v.dedup();
+        }
+        (keys, fallback)
+    }
 }
 
 impl std::str::FromStr for Filter {
@@ -346,6 +373,39 @@ fn diag_kinds(rec: &Value) -> impl Iterator<Item = &str> {
 }
 
 impl Expr {
+    /// The top-level keys [`Expr::eval`] reads (see [`Filter::record_keys`]).
+    fn record_keys<'a>(&'a self, out: &mut Vec<&'a str>, fallback: &mut Vec<&'a str>) {
+        let f = match self {
+            Expr::All => return,
+            Expr::Or(xs) | Expr::And(xs) => {
+                return xs.iter().for_each(|x| x.record_keys(out, fallback))
+            }
+            Expr::Not(x) => return x.record_keys(out, fallback),
+            Expr::Test(Test::Proto(_)) => return out.push("proto"),
+            Expr::Test(Test::Diag(_)) => return out.extend(["proto", "diag", "type"]),
+            Expr::Test(Test::Unpaired(_)) => return out.extend(["proto", "unpaired", "diag"]),
+            Expr::Test(Test::Paired(_)) => return out.extend(["proto", "pair"]),
+            Expr::Test(
+                Test::Exists(f)
+                | Test::Cmp(f, ..)
+                | Test::Contains(f, _)
+                | Test::Matches(f, _)
+                | Test::In(f, _),
+            ) => f,
+        };
+        if f.proto.is_some() {
+            out.push("proto");
+        }
+        if f.ts_seconds {
+            return out.push("ts_ns");
+        }
+        let first = f.path.first().map_or("", String::as_str);
+        out.push(first);
+        if f.fields_fallback {
+            fallback.push(first);
+        }
+    }
+
     fn eval(&self, rec: &Value) -> bool {
         match self {
             Expr::All => true,
