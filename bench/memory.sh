@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Peak RSS of `aptscope decode --json` on 10 MB and 100 MB synthetic streams: it must be the same
-# (streaming, constant memory). Usage: bench/memory.sh
+# Peak RSS of `aptscope decode --json` (and of `aptscope stats`) on 10 MB and 100 MB synthetic
+# streams: it must be the same (streaming, constant memory). Usage: bench/memory.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build -q --release --bin aptscope
@@ -13,6 +13,8 @@ for mb in 10 100; do
   rss=$( { /usr/bin/time -f %M target/release/aptscope decode --json "$tmp/s.bin" > /dev/null; } 2>&1 )
   end=$(date +%s.%N)
   printf '%4s MB input: peak RSS %6s KiB, %.1f MB/s\n' "$mb" "$rss" "$(echo "$mb / ($end - $start)" | bc -l)"
+  rss=$( { /usr/bin/time -f %M target/release/aptscope stats "$tmp/s.bin" > /dev/null; } 2>&1 )
+  printf '%4s MB input: peak RSS %6s KiB (stats)\n' "$mb" "$rss"
 done
 
 # The same through capture files: a 100 MB stream converted to pcapng and MCAP, then decoded.

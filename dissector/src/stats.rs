@@ -3,7 +3,7 @@
 //! decoded records (the NDJSON objects), so what a filter selects is what is counted.
 
 use serde_json::Value;
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::fmt::Write;
 
 /// Count and bytes.
@@ -44,22 +44,44 @@ pub struct Stats {
     /// Bin width in ns.
     pub bin_ns: u64,
     first_ts: Option<u64>,
-    /// Request record number → message key (to attribute reply latency to the request).
-    requests: HashMap<u64, String>,
+    /// Recent request record number → message key (to attribute reply latency to the request);
+    /// bounded, so a long capture keeps flat memory.
+    requests: BTreeMap<u64, String>,
+    /// Reused to build keys without an allocation per record.
+    scratch: String,
 }
 
-fn key(rec: &Value) -> String {
+/// Requests remembered for their replies' latency: far more than the pairer can have waiting.
+const MAX_REQUESTS: usize = 1 << 16;
+
+/// Write the message key of `rec` (`apt NAME`, `ell cmd NAME`) into `out`.
+fn key_into(out: &mut String, rec: &Value) {
+    out.clear();
     match rec["proto"].as_str() {
-        Some("ell") => format!(
-            "ell {} {}",
-            rec["cmd"].as_str().unwrap_or("?"),
-            rec["name"].as_str().unwrap_or("UNKNOWN")
-        ),
-        _ => match rec["name"].as_str() {
-            Some(n) => format!("apt {n}"),
-            None => format!("apt {}", rec["msgid_hex"].as_str().unwrap_or("?")),
-        },
+        Some("ell") => {
+            out.push_str("ell ");
+            out.push_str(rec["cmd"].as_str().unwrap_or("?"));
+            out.push(' ');
+            out.push_str(rec["name"].as_str().unwrap_or("UNKNOWN"));
+        }
+        _ => {
+            out.push_str("apt ");
+            out.push_str(
+                rec["name"]
+                    .as_str()
+                    .or_else(|| rec["msgid_hex"].as_str())
+                    .unwrap_or("?"),
+            );
+        }
     }
+}
+
+/// The entry of `k` in `map`, created only when missing (no key allocation for a known one).
+fn entry<'m, T: Default>(map: &'m mut BTreeMap<String, T>, k: &str) -> Option<&'m mut T> {
+    if !map.contains_key(k) {
+        map.insert(k.to_string(), T::default());
+    }
+    map.get_mut(k)
 }
 
 /// The value at fraction `q` of sorted data (nearest rank).
@@ -84,7 +106,8 @@ impl Stats {
             bins: BTreeMap::new(),
             bin_ns: bin_ns.max(1),
             first_ts: None,
-            requests: HashMap::new(),
+            requests: BTreeMap::new(),
+            scratch: String::new(),
         }
     }
 
@@ -92,10 +115,9 @@ impl Stats {
     pub fn add(&mut self, rec: &Value) {
         if let Some(ds) = rec["diag"].as_array() {
             for d in ds {
-                *self
-                    .diags
-                    .entry(d["kind"].as_str().unwrap_or("?").to_string())
-                    .or_default() += 1;
+                if let Some(c) = entry(&mut self.diags, d["kind"].as_str().unwrap_or("?")) {
+                    *c += 1;
+                }
             }
         }
         let len = rec["len"].as_u64().unwrap_or(0);
@@ -110,37 +132,53 @@ impl Stats {
         }
         self.frames.count += 1;
         self.frames.bytes += len;
-        let k = key(rec);
-        let m = self.messages.entry(k.clone()).or_default();
-        m.tally.count += 1;
-        m.tally.bytes += len;
-        if let Some(n) = rec["n"].as_u64() {
-            self.requests.insert(n, k);
+        key_into(&mut self.scratch, rec);
+        if let Some(m) = entry(&mut self.messages, &self.scratch) {
+            m.tally.count += 1;
+            m.tally.bytes += len;
         }
-        if let (Some(p), Some(l)) = (rec["pair"].as_u64(), rec["latency_ms"].as_f64()) {
+        let pair = rec["pair"].as_u64();
+        let from_device = rec["dir"].as_str().or_else(|| rec["msg_dir"].as_str()) == Some("d2h");
+        // Only what can be a request is remembered (a reply names its request in `pair`).
+        if let (Some(n), None, false) = (rec["n"].as_u64(), pair, from_device) {
+            self.requests.insert(n, self.scratch.clone());
+            if self.requests.len() > MAX_REQUESTS {
+                self.requests.pop_first();
+            }
+        }
+        if let (Some(p), Some(l)) = (pair, rec["latency_ms"].as_f64()) {
             if let Some(req) = self.requests.get(&p) {
                 if let Some(s) = self.messages.get_mut(req) {
                     s.latencies.push(l);
                 }
             }
         }
-        let addr = match rec["proto"].as_str() {
-            Some("ell") => format!("ell {}", rec["addr"].as_str().unwrap_or("?")),
-            _ => format!(
-                "apt {} → {}",
-                rec["src"]["name"].as_str().unwrap_or("?"),
-                rec["dst"]["name"].as_str().unwrap_or("?")
-            ),
-        };
-        let a = self.addresses.entry(addr).or_default();
-        a.count += 1;
-        a.bytes += len;
-        let d = self
-            .directions
-            .entry(rec["dir"].as_str().unwrap_or("unknown").to_string())
-            .or_default();
-        d.count += 1;
-        d.bytes += len;
+        self.scratch.clear();
+        match rec["proto"].as_str() {
+            Some("ell") => {
+                self.scratch.push_str("ell ");
+                self.scratch.push_str(rec["addr"].as_str().unwrap_or("?"));
+            }
+            _ => {
+                self.scratch.push_str("apt ");
+                self.scratch
+                    .push_str(rec["src"]["name"].as_str().unwrap_or("?"));
+                self.scratch.push_str(" → ");
+                self.scratch
+                    .push_str(rec["dst"]["name"].as_str().unwrap_or("?"));
+            }
+        }
+        if let Some(a) = entry(&mut self.addresses, &self.scratch) {
+            a.count += 1;
+            a.bytes += len;
+        }
+        if let Some(d) = entry(
+            &mut self.directions,
+            rec["dir"].as_str().unwrap_or("unknown"),
+        ) {
+            d.count += 1;
+            d.bytes += len;
+        }
         if let Some(ts) = rec["ts_ns"].as_u64() {
             let first = *self.first_ts.get_or_insert(ts);
             let bin = ts.saturating_sub(first) / self.bin_ns * self.bin_ns;
@@ -313,5 +351,30 @@ mod tests {
         let j: Value = serde_json::from_str(&st.to_json()).expect("valid JSON");
         assert_eq!(j["messages"]["apt HW_REQ_INFO"]["latency_ms"]["p99"], 4.0);
         assert!(st.to_text().contains("apt HW_REQ_INFO"));
+    }
+}
+
+#[cfg(test)]
+mod bounded {
+    use super::*;
+    use serde_json::json;
+
+    /// A long capture of requests (a one-direction capture, say) keeps flat memory, and a
+    /// reply still finds a recent request for its latency.
+    #[test]
+    fn remembered_requests_are_bounded() {
+        let mut s = Stats::new(1_000_000_000);
+        let n = 3 * MAX_REQUESTS as u64;
+        for i in 1..=n {
+            s.add(&json!({"type": "frame", "n": i, "len": 6, "proto": "apt",
+                "name": "HW_REQ_INFO", "msg_dir": "h2d"}));
+        }
+        assert_eq!(s.requests.len(), MAX_REQUESTS);
+        s.add(
+            &json!({"type": "frame", "n": n + 1, "len": 90, "proto": "apt",
+            "name": "HW_GET_INFO", "msg_dir": "d2h", "pair": n, "latency_ms": 2.5}),
+        );
+        assert_eq!(s.requests.len(), MAX_REQUESTS, "a reply is not a request");
+        assert_eq!(s.latency("apt HW_REQ_INFO").map(|l| l.0), Some(1));
     }
 }
