@@ -21,7 +21,60 @@ pub struct MsgStat {
     /// Count and bytes.
     pub tally: Tally,
     /// Latencies of the replies to this message (when it is a request), in ms.
-    pub latencies: Vec<f64>,
+    pub latencies: Latencies,
+}
+
+/// Latencies kept in bounded memory: exact count, minimum and maximum; quantiles from every
+/// value up to [`LATENCY_SAMPLE`] of them, then from a uniform sample of that size (reservoir
+/// sampling with a fixed seed, so the same capture gives the same figures).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Latencies {
+    n: u64,
+    min: f64,
+    max: f64,
+    sample: Vec<f64>,
+    rng: u64,
+}
+
+/// Latencies kept per message for quantiles.
+pub const LATENCY_SAMPLE: usize = 1 << 16;
+
+impl Latencies {
+    /// Add one latency (ms).
+    pub fn push(&mut self, x: f64) {
+        if self.n == 0 {
+            self.min = x;
+            self.max = x;
+        } else {
+            self.min = self.min.min(x);
+            self.max = self.max.max(x);
+        }
+        self.n += 1;
+        if self.sample.len() < LATENCY_SAMPLE {
+            self.sample.push(x);
+            return;
+        }
+        // Algorithm R: keep the new value with probability LATENCY_SAMPLE / n.
+        let mut r = self.rng.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        self.rng = r;
+        r = (r ^ (r >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        r = (r ^ (r >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        r ^= r >> 31;
+        let j = r % self.n;
+        if let Some(slot) = self.sample.get_mut(j as usize) {
+            *slot = x;
+        }
+    }
+
+    /// How many latencies were added.
+    pub fn len(&self) -> u64 {
+        self.n
+    }
+
+    /// Whether none was.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
 }
 
 /// Statistics over decoded records.
@@ -188,18 +241,18 @@ impl Stats {
 
     /// Latency summary of a message: (n, min, median, p99, max) in ms.
     pub fn latency(&self, key: &str) -> Option<(usize, f64, f64, f64, f64)> {
-        let m = self.messages.get(key)?;
-        if m.latencies.is_empty() {
+        let l = &self.messages.get(key)?.latencies;
+        if l.is_empty() {
             return None;
         }
-        let mut v = m.latencies.clone();
+        let mut v = l.sample.clone();
         v.sort_by(f64::total_cmp);
         Some((
-            v.len(),
-            v[0],
+            l.n as usize,
+            l.min,
             quantile(&v, 0.5),
             quantile(&v, 0.99),
-            v[v.len() - 1],
+            l.max,
         ))
     }
 
@@ -376,5 +429,22 @@ mod bounded {
         );
         assert_eq!(s.requests.len(), MAX_REQUESTS, "a reply is not a request");
         assert_eq!(s.latency("apt HW_REQ_INFO").map(|l| l.0), Some(1));
+    }
+
+    #[test]
+    fn latencies_beyond_the_sample_keep_exact_extremes_and_close_quantiles() {
+        let mut l = Latencies::default();
+        let n = 4 * LATENCY_SAMPLE as u64;
+        // 0.0 … n-1 in a scrambled order.
+        for i in 0..n {
+            l.push(((i * 7919) % n) as f64);
+        }
+        assert_eq!(l.len(), n);
+        assert_eq!((l.min, l.max), (0.0, (n - 1) as f64));
+        assert_eq!(l.sample.len(), LATENCY_SAMPLE);
+        let mut v = l.sample.clone();
+        v.sort_by(f64::total_cmp);
+        let med = quantile(&v, 0.5) / n as f64;
+        assert!((0.48..0.52).contains(&med), "median at {med}");
     }
 }
