@@ -74,7 +74,7 @@ impl Responder {
             prelude: vec![],
             speed: if speed > 0.0 { speed } else { 1.0 },
         };
-        let t0 = script.msgs.iter().find_map(|m| m.ts_ns);
+        let t0 = script.first_ts();
         let mut prev_host: Option<usize> = None;
         for (i, m) in script.msgs.iter().enumerate() {
             if !sel.in_range(script, m) {
@@ -383,12 +383,7 @@ mod tests {
         for l in lines {
             c.line(l);
         }
-        Script {
-            proto: Proto::Apt,
-            msgs: c.msgs,
-            notes: c.notes,
-            format: "t".into(),
-        }
+        Script::new(Proto::Apt, c.msgs, c.notes, "t".into())
     }
 
     fn rec(n: u64, name: &str, raw: &str, dir: &str, ts: u64, pair: Option<u64>) -> String {

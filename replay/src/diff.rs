@@ -472,12 +472,7 @@ mod tests {
     fn run(captured: &[String], observed: &[String], ignore: &[String]) -> Report {
         let c: Vec<&str> = captured.iter().map(String::as_str).collect();
         let o: Vec<&str> = observed.iter().map(String::as_str).collect();
-        let script = Script {
-            proto: Proto::Apt,
-            msgs: msgs(&c),
-            notes: vec![],
-            format: "t".into(),
-        };
+        let script = Script::new(Proto::Apt, msgs(&c), vec![], "t".into());
         let obs = msgs(&o);
         let ex: Vec<Exchange> = script
             .msgs

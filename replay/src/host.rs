@@ -151,13 +151,7 @@ pub fn run_host<'a>(
     let mut moving: BTreeSet<(u64, crate::safety::Moving)> = BTreeSet::new();
     let start = clock.now_ns();
     let mut shift: u64 = 0;
-    let scale = |ns: u64| -> u64 {
-        if timing.asap {
-            0
-        } else {
-            (ns as f64 / timing.speed.max(1e-9)) as u64
-        }
-    };
+    let scale = |ns| timing.scale(ns);
     for s in &plan {
         let deadline = start.saturating_add(s.at_ns).saturating_add(shift);
         let w = wait_until(
@@ -246,13 +240,7 @@ pub fn run_host<'a>(
         // Wait for the replies still due, and for the captured tail (status updates after the
         // last request), whichever is later.
         let tail = plan.last().map_or(0, |s| {
-            let last_ts = script
-                .msgs
-                .iter()
-                .filter(|m| sel.in_range(script, m))
-                .filter_map(|m| m.ts_ns)
-                .max();
-            let after = match (last_ts, script.msgs[s.idx].ts_ns) {
+            let after = match (script.last_ts_in(sel), script.msgs[s.idx].ts_ns) {
                 (Some(a), Some(b)) => a.saturating_sub(b),
                 _ => 0,
             };

@@ -88,6 +88,8 @@ pub struct Script {
     pub notes: Vec<String>,
     /// The capture's format name.
     pub format: String,
+    /// Time of the first message that has one (ranges by time count from it).
+    first_ts: Option<u64>,
 }
 
 /// Which side a decoded record came from: the capture's direction when it has one, else the
@@ -231,17 +233,43 @@ impl Script {
         }
         let _ = p.finish(&mut emit);
         let proto = c.proto.or(p.proto()).unwrap_or(Proto::Apt);
-        Ok(Script {
+        Ok(Script::new(
             proto,
-            msgs: c.msgs,
-            notes: c.notes,
-            format: format.name().to_string(),
-        })
+            c.msgs,
+            c.notes,
+            format.name().to_string(),
+        ))
+    }
+
+    /// A script of these messages, in capture order.
+    pub fn new(proto: Proto, msgs: Vec<Msg>, notes: Vec<String>, format: String) -> Script {
+        let first_ts = msgs.iter().find_map(|m| m.ts_ns);
+        Script {
+            proto,
+            msgs,
+            notes,
+            format,
+            first_ts,
+        }
     }
 
     /// Whether the capture has times for its messages.
     pub fn has_times(&self) -> bool {
-        self.msgs.iter().any(|m| m.ts_ns.is_some())
+        self.first_ts.is_some()
+    }
+
+    /// Time of the first message that has one.
+    pub fn first_ts(&self) -> Option<u64> {
+        self.first_ts
+    }
+
+    /// Time of the last message in `sel`'s range (what a pass of the replay lasts until).
+    pub fn last_ts_in(&self, sel: &Selection) -> Option<u64> {
+        self.msgs
+            .iter()
+            .filter(|m| sel.in_range(self, m))
+            .filter_map(|m| m.ts_ns)
+            .max()
     }
 
     /// The streams that hold messages, with their message counts.
@@ -326,7 +354,7 @@ pub struct Selection {
 impl Selection {
     /// Whether message `m` is in the range and stream (the filter aside).
     pub fn in_range(&self, script: &Script, m: &Msg) -> bool {
-        let t0 = script.msgs.iter().find_map(|m| m.ts_ns);
+        let t0 = script.first_ts;
         let rel = |m: &Msg| match (m.ts_ns, t0) {
             (Some(t), Some(z)) => Some(t.saturating_sub(z)),
             _ => None,
@@ -398,6 +426,17 @@ pub struct Timing {
     pub asap: bool,
 }
 
+impl Timing {
+    /// A captured duration as replayed: divided by the speed, or nothing with `asap`.
+    pub fn scale(&self, ns: u64) -> u64 {
+        if self.asap {
+            0
+        } else {
+            (ns as f64 / self.speed.max(1e-9)) as u64
+        }
+    }
+}
+
 impl Default for Timing {
     fn default() -> Self {
         Timing {
@@ -418,23 +457,11 @@ pub fn host_schedule(script: &Script, sel: &Selection, timing: Timing, loops: u3
     };
     let t0 = script.msgs[first].ts_ns;
     // A pass lasts until the last message in range (its replies and updates included).
-    let last_ts = script
-        .msgs
-        .iter()
-        .filter(|m| sel.in_range(script, m))
-        .filter_map(|m| m.ts_ns)
-        .max();
-    let span = match (t0, last_ts) {
+    let span = match (t0, script.last_ts_in(sel)) {
         (Some(a), Some(b)) => b.saturating_sub(a),
         _ => 0,
     };
-    let scale = |ns: u64| -> u64 {
-        if timing.asap {
-            0
-        } else {
-            (ns as f64 / timing.speed.max(1e-9)) as u64
-        }
-    };
+    let scale = |ns| timing.scale(ns);
     let mut out = Vec::with_capacity(chosen.len() * loops.max(1) as usize);
     for lap in 0..loops.max(1) {
         let base = (lap as u64).saturating_mul(scale(span.saturating_add(LAP_GAP_NS)));
@@ -462,12 +489,7 @@ mod tests {
         for l in lines {
             c.line(l);
         }
-        Script {
-            proto: Proto::Apt,
-            msgs: c.msgs,
-            notes: c.notes,
-            format: "test".into(),
-        }
+        Script::new(Proto::Apt, c.msgs, c.notes, "test".into())
     }
 
     const S: &[&str] = &[

@@ -368,3 +368,63 @@ fn an_elliptec_bus_is_impersonated_for_a_host_that_sends_no_terminators() {
     assert_eq!(o.answered, requests, "{}", o.text());
     assert_eq!(o.reused, 0, "{}", o.text());
 }
+
+/// Bad input from the host is reported and decoding carries on: line noise before a request
+/// (still answered), and a frame cut short when the host hangs up. (A header cut short and
+/// followed at once by a whole frame is ambiguous in APT, which has no sync bytes: the framer
+/// resynchronises where the bytes frame, as a controller would.)
+#[test]
+fn an_impersonated_device_survives_garbage_from_the_host() {
+    let dir = scratch("garbage");
+    let (script, _) = captured(&dir);
+    let link_path = dir.join("tty");
+    let (mut link, _slave) = Link::open_pty(Some(&link_path)).unwrap();
+    let s2 = script.clone();
+    let dev = thread::spawn(move || {
+        run_device(
+            &s2,
+            &Selection::default(),
+            &DeviceOptions::default(),
+            &mut link,
+            None,
+            &mut |_| {},
+            &mut || None,
+        )
+        .unwrap()
+    });
+    let mut host = serialport::new(link_path.to_str().unwrap(), 115_200)
+        .timeout(Duration::from_millis(50))
+        .open_native()
+        .unwrap();
+    // Noise, then the request.
+    host.write_all(&[0xff, 0x00, 0x13, 0x37]).unwrap();
+    host.write_all(&enc("HW_REQ_INFO", &[])).unwrap();
+    let want = script.msgs[1].raw.clone();
+    assert_eq!(script.msgs[1].name, "HW_GET_INFO");
+    let mut got = vec![];
+    let give_up = Instant::now() + Duration::from_secs(30);
+    let mut buf = [0u8; 512];
+    while got.len() < want.len() && Instant::now() < give_up {
+        match host.read(&mut buf) {
+            Ok(n) => got.extend_from_slice(&buf[..n]),
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+            Err(e) => panic!("{e}"),
+        }
+    }
+    assert_eq!(got, want);
+    // A request cut after 3 bytes, and the host goes away.
+    host.write_all(&[0x05, 0x00, 0x00]).unwrap();
+    drop(host);
+    let o = dev.join().unwrap();
+    assert_eq!((o.requests, o.answered), (1, 1), "{}", o.text());
+    assert!(
+        o.notes.iter().any(|n| n.starts_with("garbage @0")),
+        "the noise is reported at its offset: {:?}",
+        o.notes
+    );
+    assert!(
+        o.notes.iter().any(|n| n.contains("@10")),
+        "the cut request is reported at its offset: {:?}",
+        o.notes
+    );
+}
