@@ -191,7 +191,7 @@ pub fn compare(
         let mut obs: Vec<usize> = obs_req
             .and_then(|o| by_req.get(&o.n).cloned())
             .unwrap_or_default();
-        for c in script.replies_to(ex.idx) {
+        for &c in script.replies_to(ex.idx) {
             let cm = &script.msgs[c];
             let found = obs.iter().position(|&o| same_kind(cm, &observed[o]));
             let Some(pos) = found else {

@@ -86,7 +86,7 @@ fn expectation(script: &Script, idx: usize) -> Expect {
         want: vec![],
         captured_ns: 0,
     };
-    for r in script.replies_to(idx) {
+    for &r in script.replies_to(idx) {
         let m = &script.msgs[r];
         e.want.push((m.name.clone(), m.channel()));
         if let (Some(a), Some(b)) = (m.ts_ns, req.ts_ns) {

@@ -8,7 +8,7 @@ use aptscope_dissector::detect::Proto;
 use aptscope_dissector::filter::Filter;
 use aptscope_dissector::pipeline::{Format, Pipeline};
 use serde_json::Value;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::io;
 
 /// Who sent a message.
@@ -90,6 +90,8 @@ pub struct Script {
     pub format: String,
     /// Time of the first message that has one (ranges by time count from it).
     first_ts: Option<u64>,
+    /// Indices of the replies to each request, by the request's record number.
+    replies: HashMap<u64, Vec<usize>>,
 }
 
 /// Which side a decoded record came from: the capture's direction when it has one, else the
@@ -244,12 +246,19 @@ impl Script {
     /// A script of these messages, in capture order.
     pub fn new(proto: Proto, msgs: Vec<Msg>, notes: Vec<String>, format: String) -> Script {
         let first_ts = msgs.iter().find_map(|m| m.ts_ns);
+        let mut replies: HashMap<u64, Vec<usize>> = HashMap::new();
+        for (j, m) in msgs.iter().enumerate() {
+            if let (Side::Device, Some(p)) = (m.side, m.pair) {
+                replies.entry(p).or_default().push(j);
+            }
+        }
         Script {
             proto,
             msgs,
             notes,
             format,
             first_ts,
+            replies,
         }
     }
 
@@ -287,17 +296,11 @@ impl Script {
     }
 
     /// Indices of the replies to message `i`, in capture order.
-    pub fn replies_to(&self, i: usize) -> Vec<usize> {
-        let Some(req) = self.msgs.get(i) else {
-            return vec![];
-        };
+    pub fn replies_to(&self, i: usize) -> &[usize] {
         self.msgs
-            .iter()
-            .enumerate()
-            .skip(i + 1)
-            .filter(|(_, m)| m.side == Side::Device && m.pair == Some(req.n))
-            .map(|(j, _)| j)
-            .collect()
+            .get(i)
+            .and_then(|req| self.replies.get(&req.n))
+            .map_or(&[], Vec::as_slice)
     }
 }
 
@@ -510,7 +513,7 @@ mod tests {
             "side from the table's direction"
         );
         assert_eq!(s.msgs[0].raw, vec![5, 0, 0, 0, 0x50, 1]);
-        assert_eq!(s.replies_to(0), vec![1]);
+        assert_eq!(s.replies_to(0), [1]);
         assert_eq!(s.notes.len(), 1);
         assert!(s.notes[0].contains("@8"), "{:?}", s.notes);
     }
