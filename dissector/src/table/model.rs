@@ -241,6 +241,8 @@ pub struct MsgDef {
     pub reply: Vec<&'static str>,
     /// Sub-message group, when the data packet starts with a sub-message id.
     pub subs: Option<&'static str>,
+    /// Which revisions of the spec define it ([`Revs`]).
+    pub revs: Revs,
     /// One-line description.
     pub doc: &'static str,
     /// Every length the message exists in.
@@ -251,6 +253,46 @@ pub struct MsgDef {
     pub file: &'static str,
     /// Line in that file.
     pub line: usize,
+}
+
+/// A set of revisions of the APT spec (`rev=` in the table; both when absent).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Revs(pub u8);
+
+impl Revs {
+    /// Issue 23, 21 August 2018.
+    pub const ISSUE_23: Revs = Revs(1);
+    /// The revision dated 9 December 2025.
+    pub const REV_2025: Revs = Revs(2);
+    /// Both revisions.
+    pub const BOTH: Revs = Revs(3);
+    /// Parse a `rev=` value: `23`, `2025` or `23,2025`.
+    pub fn parse(s: &str) -> Option<Revs> {
+        let mut r = 0;
+        for p in s.split(',') {
+            r |= match p {
+                "23" => 1,
+                "2025" => 2,
+                _ => return None,
+            };
+        }
+        (r != 0).then_some(Revs(r))
+    }
+    /// Whether `other`'s revisions are all in this set.
+    pub fn contains(self, other: Revs) -> bool {
+        self.0 & other.0 == other.0
+    }
+    /// The names of the revisions, as listings show them (`["23", "2025"]`).
+    pub fn names(self) -> Vec<&'static str> {
+        let mut v = vec![];
+        if self.0 & 1 != 0 {
+            v.push("23");
+        }
+        if self.0 & 2 != 0 {
+            v.push("2025");
+        }
+        v
+    }
 }
 
 /// One sub-message of a group (LA_, TEC_, QUAD_, PZMOT_ … PARAMS).

@@ -284,6 +284,7 @@ impl Parser {
             dir,
             reply: vec![],
             subs: None,
+            revs: Revs::BOTH,
             doc: "",
             forms: vec![],
             examples: vec![],
@@ -294,6 +295,10 @@ impl Parser {
             match a.split_once('=') {
                 Some(("reply", v)) => m.reply = v.split(',').filter(|s| !s.is_empty()).collect(),
                 Some(("subs", v)) if is_ident(v) => m.subs = Some(v),
+                Some(("rev", v)) => match Revs::parse(v) {
+                    Some(r) => m.revs = r,
+                    None => self.err(file, ln, format!("bad rev `{v}` (23, 2025 or 23,2025)")),
+                },
                 _ => self.err(file, ln, format!("unknown msg attribute `{a}`")),
             }
         }
