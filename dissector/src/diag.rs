@@ -106,6 +106,11 @@ pub enum DiagKind {
         /// Record number of the request.
         request: u64,
     },
+    /// The device's model (from its HW_GET_INFO) does not list this message in the spec.
+    NotForModel {
+        /// The model, zero-padded ASCII.
+        model: [u8; 8],
+    },
 }
 
 impl DiagKind {
@@ -132,6 +137,7 @@ impl DiagKind {
             DiagKind::NoReply { .. } => "no_reply",
             DiagKind::Unsolicited => "unsolicited",
             DiagKind::DuplicateReply { .. } => "duplicate_reply",
+            DiagKind::NotForModel { .. } => "not_for_model",
         }
     }
 }
@@ -196,6 +202,15 @@ impl fmt::Display for DiagKind {
             DiagKind::NoReply { cmd } => write!(f, "no reply to record {cmd}"),
             DiagKind::Unsolicited => write!(f, "reply without a pending command"),
             DiagKind::DuplicateReply { request } => write!(f, "second reply to record {request}"),
+            DiagKind::NotForModel { model } => {
+                let end = model.iter().position(|&c| c == 0).unwrap_or(model.len());
+                let m = String::from_utf8_lossy(&model[..end]);
+                write!(
+                    f,
+                    "the spec does not list this message for {} (the device's HW_GET_INFO model)",
+                    m.trim()
+                )
+            }
         }
     }
 }

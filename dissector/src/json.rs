@@ -282,6 +282,7 @@ pub fn apt_frame_paired(out: &mut String, n: u64, f: &AptFrame<'_, '_>, p: &crat
         p.pair
             .filter(|_| p.duplicate)
             .map(|request| DiagKind::DuplicateReply { request }),
+        p.not_for_model.map(|model| DiagKind::NotForModel { model }),
     ];
     let extra = extra.into_iter().flatten().map(|kind| Diag {
         offset: f.offset,

@@ -6,7 +6,8 @@
 //! "unsolicited": after HW_START_UPDATEMSGS they come by design.
 
 use crate::apt::AptFrame;
-use crate::table::{Dir, MsgDef, Table};
+use crate::apt::Value;
+use crate::table::{DeviceProfile, Dir, MsgDef, Table};
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 
 /// A request still waiting.
@@ -57,6 +58,9 @@ pub struct PairInfo {
     pub duplicate: bool,
     /// Requests whose timeout passed before this frame.
     pub expired: Vec<Unanswered>,
+    /// The device's model (named earlier by its HW_GET_INFO) does not implement this message,
+    /// according to the spec's device lists.
+    pub not_for_model: Option<[u8; 8]>,
 }
 
 /// Bound on requests waiting (a device that never answers must not grow memory). High enough
@@ -113,6 +117,8 @@ pub struct AptPairer {
     /// Waiting requests with a time, by the time they expire (the timeout fixed when they came).
     deadlines: BTreeSet<(u64, u64)>,
     recent: VecDeque<Answered>,
+    /// What each device address (by its HW_GET_INFO) implements.
+    models: Vec<(u8, [u8; 8], Option<DeviceProfile>)>,
     /// Overrides the per-message default timeout.
     pub timeout_ns: Option<u64>,
 }
@@ -200,6 +206,17 @@ impl AptPairer {
             Some(d) => d == Dir::HostToDevice,
             None => m.dir != Dir::DeviceToHost && h.src_byte() == 0x01,
         };
+        self.check_model(
+            table,
+            f,
+            m,
+            if from_host {
+                h.dst_byte()
+            } else {
+                h.src_byte()
+            },
+            &mut info,
+        );
         if from_host {
             let expects = table.reply_ids(m);
             if !expects.is_empty() {
@@ -299,6 +316,41 @@ impl AptPairer {
             }
         }
         info
+    }
+
+    /// Learn a device's model from its HW_GET_INFO; flag messages its model does not implement.
+    fn check_model(
+        &mut self,
+        table: &Table,
+        f: &AptFrame<'_, '_>,
+        m: &MsgDef,
+        device: u8,
+        info: &mut PairInfo,
+    ) {
+        if m.name == "HW_GET_INFO" {
+            let model = f
+                .fields()
+                .find(|(fd, _)| fd.name == "model_number")
+                .and_then(|(_, v)| match v {
+                    Value::Str(b) => Some(b),
+                    _ => None,
+                });
+            if let Some(b) = model {
+                let mut name = [0u8; 8];
+                let end = b.iter().position(|&c| c == 0).unwrap_or(b.len()).min(8);
+                name[..end].copy_from_slice(&b[..end]);
+                let text = String::from_utf8_lossy(&name[..end]).into_owned();
+                let profile = table.device_profile(&text);
+                self.models.retain(|(a, _, _)| *a != device);
+                self.models.push((device, name, profile));
+            }
+            return;
+        }
+        if let Some((_, name, Some(p))) = self.models.iter().find(|(a, _, _)| *a == device) {
+            if !table.implements(p, m.id) {
+                info.not_for_model = Some(*name);
+            }
+        }
     }
 
     /// End of stream: every request still waiting got no reply.

@@ -155,4 +155,7 @@ pub fn pair_suffix(out: &mut String, p: &crate::pair::PairInfo) {
     if p.unsolicited {
         out.push_str("  !! unsolicited reply");
     }
+    if let Some(model) = p.not_for_model {
+        let _ = write!(out, "  !! {}", crate::DiagKind::NotForModel { model });
+    }
 }

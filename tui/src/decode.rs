@@ -141,6 +141,9 @@ fn pair_diags(r: &Rec, out: &mut String) {
     if r.has(F_NO_REPLY) {
         push_sep(out, "no reply");
     }
+    if r.has(F_NOT_FOR_MODEL) {
+        push_sep(out, "not for this model");
+    }
 }
 
 fn push_sep(out: &mut String, s: &str) {
@@ -425,6 +428,9 @@ fn pair_nodes(ix: &Index, r: &Rec, t: &mut Tree) {
     }
     if r.has(F_DUPLICATE) {
         extra.push("duplicate_reply: a second reply to an answered request");
+    }
+    if r.has(F_NOT_FOR_MODEL) {
+        extra.push("not_for_model: the spec does not list this message for the device's model");
     }
     for (i, e) in extra.into_iter().enumerate() {
         t.add(
@@ -796,6 +802,10 @@ pub fn render(ix: &Index, n: u64, buf: &mut String) -> Option<Rendered> {
             unsolicited: r.has(F_UNSOLICITED),
             duplicate: r.has(F_DUPLICATE),
             expired: vec![],
+            not_for_model: r
+                .has(F_NOT_FOR_MODEL)
+                .then(|| ix.not_for_model.get(&n).copied())
+                .flatten(),
         };
         json::apt_frame_paired(buf, n, &f, &p);
         if dir.is_none() {
@@ -1063,7 +1073,9 @@ fn build(
                 None => continue,
             },
             "pair_other_address" if r.has(F_OTHER_ADDR) => J::Bool(true),
-            "diag" if !r.has(F_DIAG | F_UNSOLICITED | F_DUPLICATE | F_NO_REPLY) => {
+            "diag"
+                if !r.has(F_DIAG | F_UNSOLICITED | F_DUPLICATE | F_NO_REPLY | F_NOT_FOR_MODEL) =>
+            {
                 if lean {
                     continue;
                 }
@@ -1075,6 +1087,10 @@ fn build(
                     r.has(F_UNSOLICITED).then_some(DiagKind::Unsolicited),
                     pair.filter(|_| r.has(F_DUPLICATE))
                         .map(|request| DiagKind::DuplicateReply { request }),
+                    r.has(F_NOT_FOR_MODEL)
+                        .then(|| ix.not_for_model.get(&n))
+                        .flatten()
+                        .map(|&model| DiagKind::NotForModel { model }),
                     r.has(F_NO_REPLY).then_some(DiagKind::NoReply { cmd: n }),
                 ];
                 let extra = extra.into_iter().flatten().map(|kind| Diag {

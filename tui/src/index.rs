@@ -41,6 +41,9 @@ pub const F_ABSURD: u16 = 512;
 pub const F_TRAILING: u16 = 1024;
 /// Record flag: the frame is a reply (its `pair` is the request).
 pub const F_IS_REPLY: u16 = 2048;
+/// Record flag: the device's model does not implement the message (model in
+/// [`Index::not_for_model`]).
+pub const F_NOT_FOR_MODEL: u16 = 4096;
 
 /// One record of the capture (a frame or a garbage run), about 40 bytes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -112,6 +115,8 @@ pub struct Index {
     /// Plot series: positions and velocities from status updates, keyed by
     /// `quantity source` (e.g. `position usb ch1`, `position ell 0`).
     pub series: BTreeMap<String, Vec<Point>>,
+    /// For records flagged [`F_NOT_FOR_MODEL`]: the device's model, by record number.
+    pub not_for_model: BTreeMap<u64, [u8; 8]>,
     /// Whether the whole file has been read.
     pub done: bool,
     /// Error that stopped reading.
@@ -234,6 +239,7 @@ struct Indexer {
     /// Pair links and flags for already-published records: (record number, pair, flags to set).
     patches: Vec<(u64, u32, u16)>,
     series: BTreeMap<String, Vec<Point>>,
+    not_for_model: Vec<(u64, [u8; 8])>,
     first_ts: Option<u64>,
     streams: Vec<String>,
     file_diags: Vec<(u64, String)>,
@@ -263,6 +269,7 @@ impl Indexer {
             modules_base: 0,
             patches: vec![],
             series: BTreeMap::new(),
+            not_for_model: vec![],
             first_ts: None,
             streams: vec![],
             file_diags: vec![],
@@ -512,6 +519,10 @@ impl Indexer {
                         if p.other_address {
                             flags |= F_OTHER_ADDR;
                         }
+                        if let Some(m) = p.not_for_model {
+                            flags |= F_NOT_FOR_MODEL;
+                            self.not_for_model.push((n, m));
+                        }
                         let mut pts = vec![];
                         if let Some(name) = fr.name() {
                             if name.contains("STATUSUPDATE") || name.ends_with("GET_POSCOUNTER") {
@@ -665,6 +676,7 @@ impl Indexer {
                 r.flags |= flags;
             }
         }
+        ix.not_for_model.extend(self.not_for_model.drain(..));
         for (k, v) in std::mem::take(&mut self.series) {
             ix.series.entry(k).or_default().extend(v);
         }

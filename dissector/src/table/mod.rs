@@ -14,6 +14,15 @@ mod sources {
     include!(concat!(env!("OUT_DIR"), "/sources.rs"));
 }
 
+/// The messages one controller model implements (from the table's `devices` blocks).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DeviceProfile {
+    /// The model as the device named itself.
+    pub model: String,
+    /// Per message index: listed for this model.
+    msgs: Box<[bool]>,
+}
+
 /// The parsed table with its lookup indexes.
 #[derive(Debug)]
 pub struct Table {
@@ -37,6 +46,69 @@ impl Table {
             Ok(t) => t,
             Err(e) => panic!("the embedded message table has errors:\n{}", e.join("\n")),
         })
+    }
+
+    /// The `devices` blocks: which messages each controller model implements.
+    pub fn devices(&self) -> &[DeviceGroup] {
+        &self.data.devices
+    }
+
+    /// The models (as the spec names them) whose message lists name `m`, in table order.
+    pub fn models_of(&self, m: &MsgDef) -> Vec<&'static str> {
+        let mut out: Vec<&'static str> = vec![];
+        for g in &self.data.devices {
+            if g.msgs.contains(&m.name) {
+                for x in &g.models {
+                    if !out.contains(x) {
+                        out.push(x);
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// What a model (as an HW_GET_INFO reply names it) implements: the messages its `devices`
+    /// blocks list and their replies; `None` when no block names the model (nothing can be said
+    /// of it then).
+    pub fn device_profile(&self, model: &str) -> Option<DeviceProfile> {
+        let groups: Vec<&DeviceGroup> = self
+            .data
+            .devices
+            .iter()
+            .filter(|g| g.matches(model))
+            .collect();
+        if groups.is_empty() {
+            return None;
+        }
+        let mut msgs = vec![false; self.data.msgs.len()];
+        for g in groups {
+            for name in &g.msgs {
+                let Some(i) = self.data.msgs.iter().position(|m| m.name == *name) else {
+                    continue;
+                };
+                msgs[i] = true;
+                // The lists often name a request without its reply (TTC001: REQ_STATUSUPDATE
+                // but not GET_STATUSUPDATE): a device that takes a request sends its reply.
+                for r in self.reply_ids(&self.data.msgs[i]) {
+                    if let Some(&j) = self.by_id.get(*r as usize).filter(|&&j| j != u16::MAX) {
+                        msgs[j as usize] = true;
+                    }
+                }
+            }
+        }
+        Some(DeviceProfile {
+            model: model.trim().to_string(),
+            msgs: msgs.into_boxed_slice(),
+        })
+    }
+
+    /// Whether `profile`'s model implements message `id` (unknown ids: `true`, nothing to say).
+    pub fn implements(&self, profile: &DeviceProfile, id: u16) -> bool {
+        match self.by_id.get(id as usize) {
+            Some(&i) if i != u16::MAX => profile.msgs.get(i as usize).copied().unwrap_or(true),
+            _ => true,
+        }
     }
 
     /// The embedded table files: `(file name, text)`.

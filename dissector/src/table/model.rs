@@ -358,6 +358,38 @@ impl FlagsDef {
     }
 }
 
+/// A `devices` block: controller models and the messages they implement (one of the spec's
+/// "Messages Applicable to …" lists).
+#[derive(Debug, Clone)]
+pub struct DeviceGroup {
+    /// Model names as the spec writes them; a lower-case `x` stands for any character
+    /// (`BSC20x`, `KLSxxx`).
+    pub models: Vec<&'static str>,
+    /// Message names.
+    pub msgs: Vec<&'static str>,
+    /// Table file.
+    pub file: &'static str,
+    /// Line.
+    pub line: usize,
+}
+
+impl DeviceGroup {
+    /// Whether a model string (as HW_GET_INFO reports it) is one of this group's models.
+    pub fn matches(&self, model: &str) -> bool {
+        self.models.iter().any(|m| model_matches(m, model))
+    }
+}
+
+/// Whether `model` (from a device) fits the spec's model `pattern` (`x` = any character).
+pub fn model_matches(pattern: &str, model: &str) -> bool {
+    let model = model.trim();
+    pattern.len() == model.len()
+        && pattern
+            .bytes()
+            .zip(model.bytes())
+            .all(|(p, m)| p == b'x' || p.eq_ignore_ascii_case(&m))
+}
+
 /// Everything the table files define.
 #[derive(Debug, Clone, Default)]
 pub struct TableData {
@@ -369,4 +401,6 @@ pub struct TableData {
     pub enums: Vec<EnumDef>,
     /// Flag sets.
     pub flags: Vec<FlagsDef>,
+    /// Which messages each controller model implements.
+    pub devices: Vec<DeviceGroup>,
 }

@@ -48,6 +48,8 @@ enum Cur {
     Sub(usize),
     /// Inside an `enum` (true) or `flags` (false) definition, for `+` continuation lines.
     Def(bool, usize),
+    /// Inside a `devices` block.
+    Devices(usize),
 }
 
 fn strip_comment(line: &str) -> &str {
@@ -155,6 +157,23 @@ impl Parser {
                     ),
                 },
                 "msg" => self.msg(file, ln, rest),
+                "devices" => {
+                    let models: Vec<&'static str> = tokens(rest);
+                    if models.is_empty() || !models.iter().all(|m| is_ident(m)) {
+                        self.err(file, ln, "devices needs: MODEL [MODEL ...]");
+                    }
+                    self.data.devices.push(DeviceGroup {
+                        models,
+                        msgs: vec![],
+                        file,
+                        line: ln,
+                    });
+                    self.cur = Cur::Devices(self.data.devices.len() - 1);
+                }
+                "msgs" => match self.cur {
+                    Cur::Devices(d) => self.data.devices[d].msgs.extend(tokens(rest)),
+                    _ => self.err(file, ln, "`msgs` outside a devices block"),
+                },
                 "sub" => self.sub(file, ln, rest),
                 "doc" => match self.cur {
                     Cur::Msg(m) => self.data.msgs[m].doc = rest,
@@ -638,6 +657,16 @@ impl Parser {
             if let Some(g) = m.subs {
                 if !self.data.subs.iter().any(|s| s.group == g) {
                     errs.push(format!("{at}: no `sub {g} …` definitions"));
+                }
+            }
+        }
+        for d in &self.data.devices {
+            for m in &d.msgs {
+                if !names.contains(m) {
+                    errs.push(format!(
+                        "{}:{}: devices: `{m}` is not a message",
+                        d.file, d.line
+                    ));
                 }
             }
         }

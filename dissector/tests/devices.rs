@@ -1,0 +1,136 @@
+//! Which messages each controller implements (the spec's device lists), and the diagnostic for a
+//! message the device's model does not implement.
+
+use aptscope_dissector::apt::{encode_named, Named};
+use aptscope_dissector::pipeline::{Format, Pipeline};
+use aptscope_dissector::table::model_matches;
+use aptscope_dissector::Table;
+
+fn frame(name: &str, values: &[(&str, &str)], dst: u8, src: u8) -> Vec<u8> {
+    encode_named(
+        Table::global(),
+        &Named {
+            name,
+            sub: None,
+            values,
+            form: None,
+            dst,
+            src,
+        },
+    )
+    .unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+fn decode_json(bytes: &[u8]) -> Vec<serde_json::Value> {
+    let mut p = Pipeline::new(None, Format::Json);
+    let mut out: Vec<serde_json::Value> = vec![];
+    let mut emit = |l: &str| -> Result<(), ()> {
+        out.push(serde_json::from_str(l).expect("json"));
+        Ok(())
+    };
+    p.push(bytes, None, &mut emit).unwrap();
+    p.finish(&mut emit).unwrap();
+    out.into_iter().filter(|v| v["type"] == "frame").collect()
+}
+
+fn diag_kinds(v: &serde_json::Value) -> Vec<String> {
+    v["diag"]
+        .as_array()
+        .map(|a| {
+            a.iter()
+                .map(|d| d["kind"].as_str().unwrap_or("").to_string())
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+#[test]
+fn model_patterns_follow_the_spec_spelling() {
+    assert!(model_matches("BSC20x", "BSC203"));
+    assert!(model_matches("KLSxxx", "kls635"));
+    assert!(model_matches("KDC101", "KDC101 "));
+    assert!(!model_matches("BSC20x", "BSC2030"));
+    assert!(!model_matches("KDC101", "TDC001"));
+}
+
+#[test]
+fn every_device_list_is_in_the_table() {
+    let t = Table::global();
+    assert!(
+        t.devices().len() >= 35,
+        "{} device lists",
+        t.devices().len()
+    );
+    let home = t.msg_by_name("MOT_MOVE_HOME").expect("MOT_MOVE_HOME");
+    let models = t.models_of(home);
+    for m in ["TDC001", "KDC101", "BSC20x", "KBD101", "K10CR1"] {
+        assert!(models.contains(&m), "{m} homes: {models:?}");
+    }
+    let kdc = t.device_profile("KDC101").expect("KDC101 is listed");
+    let volts = t.msg_by_name("PZ_SET_OUTPUTVOLTS").expect("msg");
+    assert!(!t.implements(&kdc, volts.id));
+    assert!(t.implements(&kdc, home.id));
+    assert!(t.device_profile("XYZ999").is_none());
+}
+
+#[test]
+fn a_message_the_named_model_does_not_implement_is_flagged() {
+    let mut s = frame("HW_REQ_INFO", &[], 0x50, 0x01);
+    s.extend(frame(
+        "HW_GET_INFO",
+        &[("serial_number", "27000123"), ("model_number", "KDC101")],
+        0x01,
+        0x50,
+    ));
+    s.extend(frame("MOT_MOVE_HOME", &[("chan_ident", "1")], 0x50, 0x01));
+    s.extend(frame(
+        "PZ_SET_OUTPUTVOLTS",
+        &[("chan_ident", "1"), ("voltage", "100")],
+        0x50,
+        0x01,
+    ));
+    let recs = decode_json(&s);
+    let names: Vec<_> = recs
+        .iter()
+        .map(|r| r["name"].as_str().unwrap_or(""))
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "HW_REQ_INFO",
+            "HW_GET_INFO",
+            "MOT_MOVE_HOME",
+            "PZ_SET_OUTPUTVOLTS"
+        ]
+    );
+    assert!(!diag_kinds(&recs[2]).contains(&"not_for_model".to_string()));
+    assert!(
+        diag_kinds(&recs[3]).contains(&"not_for_model".to_string()),
+        "{}",
+        recs[3]
+    );
+    let msg = recs[3]["diag"].to_string();
+    assert!(msg.contains("KDC101"), "{msg}");
+}
+
+#[test]
+fn an_unknown_model_flags_nothing() {
+    let mut s = frame(
+        "HW_GET_INFO",
+        &[("serial_number", "-1"), ("model_number", "MFF002")],
+        0x01,
+        0x50,
+    );
+    s.extend(frame(
+        "PZ_SET_OUTPUTVOLTS",
+        &[("chan_ident", "1"), ("voltage", "100")],
+        0x50,
+        0x01,
+    ));
+    let recs = decode_json(&s);
+    assert!(
+        !recs[1]["diag"].to_string().contains("not_for_model"),
+        "{}",
+        recs[1]
+    );
+}
