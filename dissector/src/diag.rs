@@ -106,6 +106,14 @@ pub enum DiagKind {
         /// Record number of the request.
         request: u64,
     },
+    /// A data packet sent without the 0x80 flag in the destination byte (recognised by the
+    /// length its param bytes give).
+    MissingDataFlag {
+        /// The data length.
+        len: u32,
+    },
+    /// Destination and source both 0x00 (some controllers reply so).
+    ZeroAddresses,
     /// The device's model (from its HW_GET_INFO) does not list this message in the spec.
     NotForModel {
         /// The model, zero-padded ASCII.
@@ -138,6 +146,8 @@ impl DiagKind {
             DiagKind::Unsolicited => "unsolicited",
             DiagKind::DuplicateReply { .. } => "duplicate_reply",
             DiagKind::NotForModel { .. } => "not_for_model",
+            DiagKind::MissingDataFlag { .. } => "missing_data_flag",
+            DiagKind::ZeroAddresses => "zero_addresses",
         }
     }
 }
@@ -202,6 +212,16 @@ impl fmt::Display for DiagKind {
             DiagKind::NoReply { cmd } => write!(f, "no reply to record {cmd}"),
             DiagKind::Unsolicited => write!(f, "reply without a pending command"),
             DiagKind::DuplicateReply { request } => write!(f, "second reply to record {request}"),
+            DiagKind::MissingDataFlag { len } => write!(
+                f,
+                "{len}-byte data packet sent without the 0x80 flag in the destination byte \
+                 (as some example programs do); decoded by the length in its param bytes"
+            ),
+            DiagKind::ZeroAddresses => write!(
+                f,
+                "destination and source 0x00: some controllers reply so (TDC001) or send so on \
+                 connect (BSC201 MOVE_COMPLETED)"
+            ),
             DiagKind::NotForModel { model } => {
                 let end = model.iter().position(|&c| c == 0).unwrap_or(model.len());
                 let m = String::from_utf8_lossy(&model[..end]);

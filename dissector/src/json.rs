@@ -221,7 +221,7 @@ pub fn apt_frame_paired(out: &mut String, n: u64, f: &AptFrame<'_, '_>, p: &crat
     } else {
         ",\"data_flag\":false,\"data_len\":"
     });
-    uint(out, h.data_len() as u64);
+    uint(out, f.data_len() as u64);
     if let Some(form) = f.form {
         if !form.note.is_empty() {
             out.push_str(",\"form_note\":");

@@ -475,6 +475,17 @@ fn apt_tree(r: &Rec, bytes: &[u8], t: &mut Tree) {
             Some((2, 2)),
             NodeKind::Item,
         );
+    } else if f.data_len() > 0 {
+        t.add(
+            1,
+            "hdr.len",
+            format!(
+                "data length: {} (0x80 flag missing: the param bytes give the length)",
+                f.data_len()
+            ),
+            Some((2, 2)),
+            NodeKind::Item,
+        );
     } else {
         t.add(
             1,
@@ -1045,7 +1056,7 @@ fn build(
             "src" => addr_json(h.src(), lean),
             "dst" => addr_json(h.dst(), lean),
             "data_flag" => J::from(h.has_data()),
-            "data_len" => J::from(h.data_len() as u64),
+            "data_len" => J::from(f.data_len() as u64),
             "channel" => match f.channel() {
                 Some(c) => J::from(c),
                 None => continue,

@@ -4,14 +4,16 @@ use super::header::{Addr, Header, HEADER_LEN};
 use crate::diag::{Diag, DiagKind, Which};
 use crate::table::{Field, Form, FormKind, MsgDef, Prim, SubDef, Table, Ty};
 
-const D_TRUNCATED: u8 = 1;
-const D_DST: u8 = 2;
-const D_SRC: u8 = 4;
-const D_UNKNOWN_ID: u8 = 8;
-const D_SUB_HDR: u8 = 16;
-const D_SUB_DATA: u8 = 32;
-const D_LENGTH: u8 = 64;
-const D_HDR_WITH_DATA: u8 = 128;
+const D_TRUNCATED: u16 = 1;
+const D_DST: u16 = 2;
+const D_SRC: u16 = 4;
+const D_UNKNOWN_ID: u16 = 8;
+const D_SUB_HDR: u16 = 16;
+const D_SUB_DATA: u16 = 32;
+const D_LENGTH: u16 = 64;
+const D_HDR_WITH_DATA: u16 = 128;
+const D_NO_DATA_FLAG: u16 = 256;
+const D_ZERO_ADDRS: u16 = 512;
 
 /// A frame decoded against the table. Borrows the frame bytes and the table; no allocation.
 #[derive(Debug, Clone, Copy)]
@@ -29,7 +31,7 @@ pub struct AptFrame<'a, 't> {
     /// The form whose fields apply (the sub's form for sub-message data packets).
     pub form: Option<&'t Form>,
     /// Problems found, as `D_*` bits (see [`diags`](Self::diags)).
-    diag_bits: u8,
+    diag_bits: u16,
     table: &'t Table,
 }
 
@@ -115,18 +117,27 @@ impl<'a, 't> AptFrame<'a, 't> {
         if truncated {
             f.diag_bits |= D_TRUNCATED;
         }
-        if !h.dst().is_known() {
-            f.diag_bits |= D_DST;
-        }
-        if !h.src().is_known() {
-            f.diag_bits |= D_SRC;
+        if h.dst_byte() == 0 && h.src_byte() == 0 {
+            f.diag_bits |= D_ZERO_ADDRS;
+        } else {
+            if !h.dst().is_known() {
+                f.diag_bits |= D_DST;
+            }
+            if !h.src().is_known() {
+                f.diag_bits |= D_SRC;
+            }
         }
         let Some(m) = f.msg else {
             f.diag_bits |= D_UNKNOWN_ID;
             return Some(f);
         };
-        let has_data = h.has_data();
-        let len = h.data_len();
+        // A data packet after a header without the 0x80 flag (the framer took it by length).
+        let no_flag = !h.has_data() && bytes.len() > HEADER_LEN;
+        if no_flag {
+            f.diag_bits |= D_NO_DATA_FLAG;
+        }
+        let has_data = h.has_data() || no_flag;
+        let len = f.data_len();
         for form in &m.forms {
             match form.kind {
                 FormKind::Header if !has_data => {
@@ -192,7 +203,8 @@ impl<'a, 't> AptFrame<'a, 't> {
     /// clean frame costs nothing.
     pub fn diags(&self) -> impl Iterator<Item = Diag> + '_ {
         let h = self.header();
-        let (has_data, len) = (h.has_data(), h.data_len() as u32);
+        let no_flag = self.diag_bits & D_NO_DATA_FLAG != 0;
+        let (has_data, len) = (h.has_data() || no_flag, self.data_len() as u32);
         [
             D_TRUNCATED,
             D_DST,
@@ -202,6 +214,8 @@ impl<'a, 't> AptFrame<'a, 't> {
             D_SUB_DATA,
             D_LENGTH,
             D_HDR_WITH_DATA,
+            D_NO_DATA_FLAG,
+            D_ZERO_ADDRS,
         ]
         .into_iter()
         .filter(move |bit| self.diag_bits & bit != 0)
@@ -242,6 +256,8 @@ impl<'a, 't> AptFrame<'a, 't> {
                     },
                 ),
                 D_LENGTH => (2, DiagKind::LengthMismatch { len, has_data }),
+                D_NO_DATA_FLAG => (4, DiagKind::MissingDataFlag { len }),
+                D_ZERO_ADDRS => (4, DiagKind::ZeroAddresses),
                 _ => (4, DiagKind::HeaderOnlyWithData { len }),
             };
             Diag {
@@ -249,6 +265,19 @@ impl<'a, 't> AptFrame<'a, 't> {
                 kind,
             }
         })
+    }
+
+    /// Length of the data packet: the header's length field, or for a packet sent without the
+    /// 0x80 flag the bytes after the header (its param bytes hold the length).
+    pub fn data_len(&self) -> usize {
+        let h = self.header();
+        if h.has_data() {
+            h.data_len()
+        } else if self.bytes.len() > HEADER_LEN {
+            u16::from_le_bytes([self.bytes[2], self.bytes[3]]) as usize
+        } else {
+            0
+        }
     }
 
     /// The header view.

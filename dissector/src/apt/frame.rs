@@ -8,7 +8,7 @@
 //! output.
 
 use super::header::{Header, HEADER_LEN, KNOWN_ADDR, MAX_DATA_LEN};
-use crate::table::Table;
+use crate::table::{Dir, Table};
 
 /// Garbage runs are cut into records of at most this many bytes, so memory stays bounded.
 pub const MAX_GARBAGE_RUN: usize = 4096;
@@ -81,15 +81,18 @@ enum Step {
     NeedMore,
 }
 
-/// Decide what starts at `b[0]`. Pure: depends on the bytes only (and whether they are all).
+/// Decide what starts at `b[0]` by its header alone. Pure: depends on the bytes only.
 #[inline]
-fn step(table: &Table, b: &[u8]) -> Step {
+fn step_header(table: &Table, b: &[u8]) -> Step {
     let Some(h) = Header::new(b) else {
         return Step::NeedMore;
     };
     let dst_ok = KNOWN_ADDR[h.dst_byte() as usize];
     let src_ok = KNOWN_ADDR[h.src_byte() as usize];
-    if !dst_ok && !src_ok {
+    // Some controllers answer from and to 0x00 (TDC001; a BSC201's MOVE_COMPLETED on connect):
+    // judged on the message and its length.
+    let zeros = h.dst_byte() == 0 && h.src_byte() == 0;
+    if !dst_ok && !src_ok && !zeros {
         return Step::Skip;
     }
     let msg = table.msg(h.msg_id());
@@ -107,6 +110,11 @@ fn step(table: &Table, b: &[u8]) -> Step {
     }
     let plausible = if dst_ok && src_ok {
         true
+    } else if zeros {
+        // Only devices send so: a known device → host message whose length fits the table.
+        msg.is_some_and(|m| {
+            m.dir == Dir::DeviceToHost && table.accepts_len(m, has_data, raw_len as usize)
+        })
     } else {
         // One address off: only trust a known message whose length fits the table.
         msg.is_some_and(|m| table.accepts_len(m, has_data, raw_len as usize))
@@ -115,6 +123,52 @@ fn step(table: &Table, b: &[u8]) -> Step {
         return Step::Skip;
     }
     Step::Frame(HEADER_LEN + raw_len as usize)
+}
+
+/// Decide what starts at `b[0]`. Pure: depends on the bytes only and whether they are all
+/// (`eof`).
+///
+/// Besides the header rules of [`step_header`], a data packet sent without the 0x80 flag
+/// (example programs do it) is recognised: a known message whose param bytes, read as a length,
+/// give one of its data forms, when the bytes after the header do not start a frame and the
+/// bytes after the data packet do (or the stream ends there). A message that has no header-only
+/// form needs no such evidence.
+#[inline]
+fn step(table: &Table, b: &[u8], eof: bool) -> Step {
+    let s = step_header(table, b);
+    let Step::Frame(HEADER_LEN) = s else {
+        return s;
+    };
+    let Some(m) = Header::new(b).and_then(|h| table.msg(h.msg_id())) else {
+        return s;
+    };
+    let len = u16::from_le_bytes([b[2], b[3]]) as usize;
+    if len == 0 || len > MAX_DATA_LEN || !table.accepts_len(m, true, len) {
+        return s;
+    }
+    let whole = HEADER_LEN + len;
+    if !table.accepts_len(m, false, 0) {
+        return Step::Frame(whole);
+    }
+    let starts_frame = |at: usize| match b.get(at..) {
+        Some(rest) => matches!(step_header(table, rest), Step::Frame(_)),
+        None => false,
+    };
+    if b.len() < whole + HEADER_LEN {
+        if !eof {
+            return Step::NeedMore;
+        }
+        return if b.len() == whole && !starts_frame(HEADER_LEN) {
+            Step::Frame(whole)
+        } else {
+            s
+        };
+    }
+    if starts_frame(whole) && !starts_frame(HEADER_LEN) {
+        Step::Frame(whole)
+    } else {
+        s
+    }
 }
 
 /// Streaming, sans-io APT framer.
@@ -198,7 +252,7 @@ impl<'t> AptFramer<'t> {
                 }
             }
             let rest = &self.buf[self.pos..];
-            let s = step(self.table, rest);
+            let s = step(self.table, rest, self.eof);
             match s {
                 Step::Skip => {
                     if self.garbage.is_none() {
