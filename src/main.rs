@@ -334,8 +334,11 @@ enum Cmd {
         #[arg(long)]
         usb_device: Option<String>,
     },
-    /// List the message table.
+    /// List the message table, or show one message (`messages MOT_MOVE_HOME`, `messages 0x0443`).
     Messages {
+        /// A message name or id, or a sub-message name (`SETPOINT`, `la:SETPOINT`): show its
+        /// fields, forms, revisions, devices, replies and the spec's examples.
+        query: Option<String>,
         /// NDJSON, one object per message and sub-message, with every field.
         #[arg(long)]
         json: bool,
@@ -535,7 +538,14 @@ fn main() -> ExitCode {
             usb_device,
         } => open_opts(format.as_deref(), false, usb_device.as_deref())
             .and_then(|o| convert(&input, &output, o, to.as_deref(), force)),
-        Cmd::Messages { json, verbose } => messages(json, verbose),
+        Cmd::Messages {
+            query,
+            json,
+            verbose,
+        } => match query {
+            Some(q) => message_page(&q, json),
+            None => messages(json, verbose),
+        },
         Cmd::Encode {
             name,
             values,
@@ -783,6 +793,24 @@ fn convert(
         eprintln!("  the input has chunks without direction");
     }
     Ok(())
+}
+
+fn message_page(query: &str, as_json: bool) -> io::Result<()> {
+    use aptscope_dissector::listing::{lookup, man_page, Entry};
+    let table = Table::global();
+    let entries = lookup(table, query).map_err(bad)?;
+    let mut out = BufWriter::new(io::stdout().lock());
+    let mut s = String::new();
+    for e in entries {
+        s.clear();
+        match (as_json, e) {
+            (true, Entry::Msg(m)) => json::msg_def(&mut s, table, m),
+            (true, Entry::Sub(x)) => json::sub_def(&mut s, table, x),
+            (false, e) => man_page(table, e, &mut s),
+        }
+        writeln!(out, "{}", s.trim_end())?;
+    }
+    out.flush()
 }
 
 fn messages(as_json: bool, verbose: bool) -> io::Result<()> {

@@ -344,3 +344,23 @@ fn a_mixed_stream_is_reported_not_guessed_silently() {
         "{first}"
     );
 }
+
+#[test]
+fn messages_looks_one_message_up() {
+    let (out, err, ok) = aptscope(&["messages", "mgmsg_mot_move_home"], None);
+    assert!(ok, "{err}");
+    assert!(out.starts_with("MOT_MOVE_HOME  0x0443"), "{out}");
+    assert!(out.contains("answered by: MOT_MOVE_HOMED"), "{out}");
+    assert!(out.contains("KDC101"), "{out}");
+    let (out, _, ok) = aptscope(&["messages", "0x0444", "--json"], None);
+    assert!(ok);
+    let v: Value = serde_json::from_str(out.trim()).expect("json");
+    assert_eq!(v["name"], "MOT_MOVE_HOMED");
+    assert_eq!(v["revisions"], serde_json::json!(["23", "2025"]));
+    assert!(v["devices"]
+        .as_array()
+        .is_some_and(|d| d.iter().any(|x| x == "KDC101")));
+    let (_, err, ok) = aptscope(&["messages", "MOT_MOVE_HOMD"], None);
+    assert!(!ok);
+    assert!(err.contains("did you mean") && err.contains("MOT_MOVE_HOMED"), "{err}");
+}

@@ -416,6 +416,21 @@ pub fn msg_def(out: &mut String, table: &Table, m: &crate::table::MsgDef) {
         out.push_str(",\"sub_group\":");
         string(out, g);
     }
+    out.push_str(",\"revisions\":[");
+    for (i, r) in m.revs.names().iter().enumerate() {
+        if i > 0 {
+            out.push(',');
+        }
+        string(out, r);
+    }
+    out.push_str("],\"devices\":[");
+    for (i, d) in table.models_of(m).iter().enumerate() {
+        if i > 0 {
+            out.push(',');
+        }
+        string(out, d);
+    }
+    out.push(']');
     forms_json(out, table, &m.forms);
     let _ = write!(out, ",\"examples\":{}}}", m.examples.len());
 }

@@ -53,11 +53,19 @@ impl Table {
         &self.data.devices
     }
 
-    /// The models (as the spec names them) whose message lists name `m`, in table order.
+    /// The models (as the spec names them) that implement `m`: their lists name it or a message
+    /// it answers, in table order.
     pub fn models_of(&self, m: &MsgDef) -> Vec<&'static str> {
         let mut out: Vec<&'static str> = vec![];
         for g in &self.data.devices {
-            if g.msgs.contains(&m.name) {
+            // Listed, or the reply of a listed message (as in `device_profile`).
+            let listed = g.msgs.iter().any(|n| {
+                *n == m.name
+                    || self
+                        .msg_by_name(n)
+                        .is_some_and(|q| self.reply_ids(q).contains(&m.id))
+            });
+            if listed {
                 for x in &g.models {
                     if !out.contains(x) {
                         out.push(x);
