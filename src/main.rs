@@ -6,7 +6,7 @@ use aptscope_capture::live::sim::{sim_apt_main, sim_elliptec_main, SimLine};
 use aptscope_capture::live::tap::{sniff_main, tap_main, Flow, SniffOptions, TapOptions, TapStats};
 use aptscope_capture::open::{create, open, open_with_progress, Format, OpenOptions, Progress};
 use aptscope_capture::{Direction, Event};
-use aptscope_dissector::apt::{encode_named, Addr, Named};
+use aptscope_dissector::apt::{encode_named_report, Addr, Named};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::filter::Filter;
 use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
@@ -984,9 +984,9 @@ fn encode_cmd(
     sub: Option<&str>,
 ) -> io::Result<()> {
     let table = Table::global();
-    let m = table
-        .msg_by_name(name)
-        .ok_or_else(|| bad(format!("no message named {name}")))?;
+    let m = table.msg_by_name(name).ok_or_else(|| {
+        bad(aptscope_dissector::apt::EncodeError::unknown_message(table, name).to_string())
+    })?;
     let pairs: Vec<(&str, &str)> = values
         .iter()
         .map(|v| {
@@ -1008,7 +1008,7 @@ fn encode_cmd(
     } else {
         (Addr::Usb, Addr::Host)
     };
-    let bytes = encode_named(
+    let (bytes, zero) = encode_named_report(
         table,
         &Named {
             name,
@@ -1020,6 +1020,9 @@ fn encode_cmd(
         },
     )
     .map_err(|e| bad(e.to_string()))?;
+    if !zero.is_empty() {
+        eprintln!("fields not given, set to 0: {}", zero.join(", "));
+    }
     let hex: Vec<String> = bytes.iter().map(|b| format!("{b:02X}")).collect();
     println!("{}", hex.join(" "));
     Ok(())

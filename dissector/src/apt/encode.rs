@@ -24,6 +24,29 @@ pub enum FieldValue {
 pub enum EncodeError {
     /// No field of this name in the form.
     UnknownField(String),
+    /// No form of the message has a field of this name.
+    NoSuchField {
+        /// The message (or sub-message).
+        msg: String,
+        /// The field asked for.
+        field: String,
+        /// The fields the message has, nearest to the one asked for first.
+        fields: Vec<String>,
+    },
+    /// A field that must be given (the channel) was not.
+    MissingField {
+        /// The message.
+        msg: String,
+        /// The field.
+        field: String,
+    },
+    /// The message's data is a sub-message and none was named.
+    NeedsSub {
+        /// The message.
+        msg: String,
+        /// Its group's sub-messages.
+        subs: Vec<String>,
+    },
     /// The value does not fit the field's type.
     OutOfRange {
         /// Field name.
@@ -43,13 +66,20 @@ pub enum EncodeError {
     /// Encoding needs a header-only or data form; `form sub` is only a placeholder.
     SubFormNeedsSub,
     /// No message of this name in the table.
-    UnknownMessage(String),
+    UnknownMessage {
+        /// What was asked for.
+        name: String,
+        /// The nearest known names.
+        near: Vec<String>,
+    },
     /// No sub-message of this name in the message's group.
     UnknownSub {
         /// The group (`la`, `tec`, …).
         group: String,
         /// What was asked for.
         name: String,
+        /// The group's sub-messages.
+        subs: Vec<String>,
     },
     /// A sub-message was named for a message without sub-messages.
     NoSubs(String),
@@ -68,6 +98,19 @@ impl fmt::Display for EncodeError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             EncodeError::UnknownField(n) => write!(f, "no field `{n}` in this form"),
+            EncodeError::NoSuchField { msg, field, fields } => write!(
+                f,
+                "{msg} has no field `{field}`; its fields are: {}",
+                fields.join(", ")
+            ),
+            EncodeError::MissingField { msg, field } => {
+                write!(f, "{msg} needs `{field}` (e.g. {field}=CH1)")
+            }
+            EncodeError::NeedsSub { msg, subs } => write!(
+                f,
+                "{msg} carries a sub-message: name one with --sub ({})",
+                subs.join(", ")
+            ),
             EncodeError::OutOfRange { field, value } => {
                 write!(f, "{field}: {value} does not fit the field")
             }
@@ -82,9 +125,19 @@ impl fmt::Display for EncodeError {
                 f,
                 "this message's data is a sub-message: name the sub-message"
             ),
-            EncodeError::UnknownMessage(m) => write!(f, "no message named {m}"),
-            EncodeError::UnknownSub { group, name } => {
-                write!(f, "no sub-message {name} in group {group}")
+            EncodeError::UnknownMessage { name, near } => {
+                write!(f, "no message named {name}")?;
+                if !near.is_empty() {
+                    write!(f, "; did you mean {}?", near.join(", "))?;
+                }
+                Ok(())
+            }
+            EncodeError::UnknownSub { group, name, subs } => {
+                write!(
+                    f,
+                    "no sub-message {name} in group {group}; it has: {}",
+                    subs.join(", ")
+                )
             }
             EncodeError::NoSubs(m) => write!(f, "{m} has no sub-messages"),
             EncodeError::BadForm(x) => write!(f, "a form is hdr or a length, not {x}"),
@@ -97,6 +150,17 @@ impl fmt::Display for EncodeError {
 }
 
 impl std::error::Error for EncodeError {}
+
+impl EncodeError {
+    /// The error for a message name the table does not have, with the nearest names.
+    pub fn unknown_message(table: &Table, name: &str) -> EncodeError {
+        let near = crate::suggest::nearest(name, table.msgs().iter().map(|m| m.name), 4);
+        EncodeError::UnknownMessage {
+            name: name.to_string(),
+            near: near.into_iter().map(str::to_string).collect(),
+        }
+    }
+}
 
 impl FieldValue {
     /// Read a value for `field` from text: a number (decimal, `0x` hex, negative, float), an enum
@@ -331,9 +395,25 @@ pub struct Named<'a> {
 /// Build the frame described by `n` from the table: the message, its sub-message, the form,
 /// and each value read as its field's type.
 pub fn encode_named(table: &Table, n: &Named<'_>) -> Result<Vec<u8>, EncodeError> {
+    encode_named_report(table, n).map(|(b, _)| b)
+}
+
+/// As [`encode_named`], also naming the fields that were not given and so are 0.
+pub fn encode_named_report(
+    table: &Table,
+    n: &Named<'_>,
+) -> Result<(Vec<u8>, Vec<&'static str>), EncodeError> {
     let m = table
         .msg_by_name(n.name)
-        .ok_or_else(|| EncodeError::UnknownMessage(n.name.to_string()))?;
+        .ok_or_else(|| EncodeError::unknown_message(table, n.name))?;
+    let group_subs = |g: &str| -> Vec<String> {
+        table
+            .subs()
+            .iter()
+            .filter(|s| s.group == g)
+            .map(|s| s.name.to_string())
+            .collect()
+    };
     let sub = match (n.sub, m.subs) {
         (Some(s), Some(g)) => {
             Some(
@@ -342,6 +422,7 @@ pub fn encode_named(table: &Table, n: &Named<'_>) -> Result<Vec<u8>, EncodeError
                     .ok_or_else(|| EncodeError::UnknownSub {
                         group: g.to_string(),
                         name: s.to_string(),
+                        subs: group_subs(g),
                     })?,
             )
         }
@@ -350,9 +431,45 @@ pub fn encode_named(table: &Table, n: &Named<'_>) -> Result<Vec<u8>, EncodeError
     };
     // Candidate forms: the sub-message's for a message whose data is a sub-message.
     let mut cands: Vec<&Form> = m.forms.iter().filter(|f| f.kind != FormKind::Sub).collect();
+    let has_sub_form = m.forms.iter().any(|f| f.kind == FormKind::Sub);
     if let Some(s) = sub {
-        if m.forms.iter().any(|f| f.kind == FormKind::Sub) {
+        if has_sub_form {
             cands = s.forms.iter().collect();
+        }
+    }
+    let what = match sub {
+        Some(s) => format!("{}:{}", m.name, s.name),
+        None => m.name.to_string(),
+    };
+    // A field no candidate form has: say which fields there are.
+    for (k, _) in n.values {
+        if !cands.iter().any(|f| f.fields.iter().any(|x| x.name == *k)) {
+            if sub.is_none() && has_sub_form {
+                return Err(EncodeError::NeedsSub {
+                    msg: m.name.to_string(),
+                    subs: m.subs.map(group_subs).unwrap_or_default(),
+                });
+            }
+            let mut all: Vec<&str> = vec![];
+            for f in &cands {
+                for x in &f.fields {
+                    if !matches!(x.ty, Ty::Pad(_)) && !all.contains(&x.name) {
+                        all.push(x.name);
+                    }
+                }
+            }
+            let near = crate::suggest::nearest(k, all.iter().copied(), all.len());
+            let mut fields: Vec<String> = near.iter().map(|s| s.to_string()).collect();
+            fields.extend(
+                all.iter()
+                    .filter(|a| !near.contains(a))
+                    .map(|s| s.to_string()),
+            );
+            return Err(EncodeError::NoSuchField {
+                msg: what,
+                field: k.to_string(),
+                fields,
+            });
         }
     }
     let has_all = |f: &&&Form| {
@@ -371,14 +488,31 @@ pub fn encode_named(table: &Table, n: &Named<'_>) -> Result<Vec<u8>, EncodeError
             .find(|f| has_all(f) && (!n.values.is_empty() || f.kind == FormKind::Header))
             .or_else(|| cands.iter().find(has_all)),
     }
-    .ok_or_else(|| EncodeError::NoForm {
-        msg: m.name.to_string(),
-        forms: cands
-            .iter()
-            .map(|f| f.label())
-            .collect::<Vec<_>>()
-            .join(", "),
+    .ok_or_else(|| {
+        if cands.is_empty() && has_sub_form {
+            return EncodeError::NeedsSub {
+                msg: m.name.to_string(),
+                subs: m.subs.map(group_subs).unwrap_or_default(),
+            };
+        }
+        EncodeError::NoForm {
+            msg: what.clone(),
+            forms: cands
+                .iter()
+                .map(|f| f.label())
+                .collect::<Vec<_>>()
+                .join(", "),
+        }
     })?;
+    // The channel has no sensible default (0 addresses no channel).
+    if chosen.fields.iter().any(|f| f.name == "chan_ident")
+        && !n.values.iter().any(|(k, _)| *k == "chan_ident")
+    {
+        return Err(EncodeError::MissingField {
+            msg: what,
+            field: "chan_ident".into(),
+        });
+    }
     let mut vals: Vec<(&str, FieldValue)> = vec![];
     if let Some(s) = sub {
         if chosen.fields.iter().any(|f| f.name == "sub_id")
@@ -395,7 +529,14 @@ pub fn encode_named(table: &Table, n: &Named<'_>) -> Result<Vec<u8>, EncodeError
             .ok_or_else(|| EncodeError::UnknownField(k.to_string()))?;
         vals.push((k, FieldValue::from_text(table, f, v)?));
     }
-    encode(chosen, &vals, m.id, n.dst, n.src)
+    let defaulted: Vec<&'static str> = chosen
+        .fields
+        .iter()
+        .filter(|f| !matches!(f.ty, Ty::Pad(_)))
+        .filter(|f| !vals.iter().any(|(k, _)| *k == f.name))
+        .map(|f| f.name)
+        .collect();
+    encode(chosen, &vals, m.id, n.dst, n.src).map(|b| (b, defaulted))
 }
 
 #[cfg(test)]
@@ -437,7 +578,45 @@ mod tests {
         let e = |n: &Named<'_>| encode_named(t, n).expect_err("refused").to_string();
         assert!(e(&named("NO_SUCH", None, &[])).contains("no message named NO_SUCH"));
         assert!(e(&named("HW_REQ_INFO", Some("X"), &[])).contains("has no sub-messages"));
-        assert!(e(&named("MOT_MOVE_STOP", None, &[("speed", "1")])).contains("no form of"));
+        assert!(e(&named("NO_SUCH", None, &[])).contains("no message named NO_SUCH"));
+        let typo = e(&named("MOT_MOVE_STPO", None, &[]));
+        assert!(typo.contains("did you mean MOT_MOVE_STOP"), "{typo}");
+        let field = e(&named(
+            "MOT_MOVE_ABSOLUTE",
+            None,
+            &[("chan_ident", "CH1"), ("position", "5")],
+        ));
+        assert!(
+            field
+                .contains("has no field `position`; its fields are: absolute_position, chan_ident"),
+            "{field}"
+        );
+        let needs = e(&named("LA_SET_PARAMS", None, &[("setpoint", "1638")]));
+        assert!(
+            needs.contains("name one with --sub (") && needs.contains("SETPOINT"),
+            "{needs}"
+        );
+        let bad_sub = e(&named("LA_SET_PARAMS", Some("FOO"), &[]));
+        assert!(
+            bad_sub.contains("it has: ") && bad_sub.contains("SETPOINT"),
+            "{bad_sub}"
+        );
+        let chan = e(&named(
+            "MOT_MOVE_ABSOLUTE",
+            None,
+            &[("absolute_position", "5")],
+        ));
+        assert!(chan.contains("needs `chan_ident`"), "{chan}");
+        let (_, zero) = encode_named_report(
+            t,
+            &named(
+                "MOT_SET_VELPARAMS",
+                None,
+                &[("chan_ident", "1"), ("max_vel", "9")],
+            ),
+        )
+        .expect("encodes");
+        assert_eq!(zero, ["min_vel", "acceleration"]);
         let hdr = Named {
             form: Some("12x"),
             ..stop
