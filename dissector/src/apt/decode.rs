@@ -385,10 +385,11 @@ pub fn fmt_value(table: &Table, f: &Field, v: &Value<'_>, out: &mut String) {
         _ => {
             let raw = v.as_i64();
             if let (Some(e), Some(r)) = (f.enumeration, raw) {
-                match table.enum_def(e).label(r) {
+                let def = table.enum_def(e);
+                match def.label(r) {
                     Some(l) => out.push_str(l),
                     None => {
-                        let _ = write!(out, "{r}(?)");
+                        let _ = write!(out, "{r}(not in enum {})", def.name);
                     }
                 }
                 return;
