@@ -7,7 +7,7 @@
 
 use crate::apt::AptFrame;
 use crate::apt::Value;
-use crate::table::{DeviceProfile, Dir, MsgDef, Table};
+use crate::table::{Class, DeviceProfile, Dir, MsgDef, Table, DEFAULT_TIMEOUT_MS};
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 
 /// A request still waiting.
@@ -69,27 +69,17 @@ pub struct PairInfo {
 const MAX_PENDING: usize = 4096;
 const RECENT: usize = 64;
 
-/// Default timeouts: the spec gives none for replies; requests are answered within milliseconds,
-/// motion completes when the move ends.
+/// How long a request waits for its reply: the table's `timeout=` (motion waits for the end of
+/// the move), else [`DEFAULT_TIMEOUT_MS`] (the spec gives none; requests are answered within
+/// milliseconds).
 pub fn default_timeout_ns(m: &MsgDef) -> u64 {
-    const S: u64 = 1_000_000_000;
-    if m.name.contains("_MOVE_") || m.name.ends_with("_HOME") || m.name.contains("LUTOUTPUT") {
-        120 * S
-    } else {
-        2 * S
-    }
+    u64::from(m.timeout_ms.unwrap_or(DEFAULT_TIMEOUT_MS)) * 1_000_000
 }
 
-fn is_status_stream(m: &MsgDef) -> bool {
-    m.name.contains("STATUSUPDATE")
-        || m.name.contains("_GET_STATUSBITS")
-        || m.name.ends_with("_READING")
-}
-
-fn is_spontaneous(m: &MsgDef) -> bool {
-    matches!(m.name, "HW_RESPONSE" | "HW_RICHRESPONSE" | "HW_DISCONNECT")
-        || m.name.contains("BUTTON")
-        || m.name == "LD_POTROTATING"
+/// Messages that come by design, not as a reply: status streams (after HW_START_UPDATEMSGS)
+/// and what a device sends on its own (the table's `class=status` / `class=spontaneous`).
+fn comes_unasked(m: &MsgDef) -> bool {
+    m.class.has(Class::STATUS) || m.class.has(Class::SPONTANEOUS)
 }
 
 /// A waiting request as a reply sees it.
@@ -298,7 +288,7 @@ impl AptPairer {
                 });
             }
             None => {
-                if is_status_stream(m) || is_spontaneous(m) {
+                if comes_unasked(m) {
                     return info;
                 }
                 match self

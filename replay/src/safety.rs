@@ -3,28 +3,26 @@
 
 use crate::script::Msg;
 use aptscope_dissector::apt::{encode_named, Named};
+use aptscope_dissector::table::Class;
 use aptscope_dissector::Table;
 use serde_json::Value;
 use std::path::Path;
-
-/// Replies that end a move: a message answered by one of these starts a move.
-const END_OF_MOVE: &[&str] = &["MOT_MOVE_COMPLETED", "MOT_MOVE_HOMED", "MOT_MOVE_STOPPED"];
 
 /// Whether the APT message `name` starts a move (from the table: it is completed by an
 /// end-of-move message, and is not a stop).
 pub fn apt_starts_move(name: &str) -> bool {
     let t = Table::global();
     t.msg_by_name(name).is_some_and(|m| {
-        !m.name.ends_with("_STOP")
+        !m.class.has(Class::STOP)
             && t.replies_of(m)
                 .iter()
-                .any(|r| END_OF_MOVE.contains(&r.name))
+                .any(|r| r.class.has(Class::END_OF_MOVE))
     })
 }
 
 /// Whether a host message makes hardware move or changes an output (asked for confirmation
-/// before a real port): APT moves, jogs, homing and piezo/laser/TEC outputs; Elliptec moves,
-/// homing, jogs and optimisation.
+/// before a real port): APT messages of `class=motion` in the table and those that start a
+/// move; Elliptec moves, homing, jogs and optimisation.
 pub fn is_motion(m: &Msg) -> bool {
     let n = m.name.as_str();
     if m.rec.get("proto").and_then(Value::as_str) == Some("ell") {
@@ -36,11 +34,9 @@ pub fn is_motion(m: &Msg) -> bool {
             || n.contains("CLEAN");
     }
     apt_starts_move(n)
-        || n.contains("_MOVE_")
-        || n.contains("OUTPUTVOLTS")
-        || n.contains("OUTPUTPOS")
-        || n.contains("_JOG")
-        || (n.contains("_SET_") && (n.contains("ENABLE") || n.contains("OUTPUT")))
+        || Table::global()
+            .msg_by_name(n)
+            .is_some_and(|d| d.class.has(Class::MOTION) || d.class.has(Class::STOP))
 }
 
 /// Whether `path` is a pseudo-terminal (a simulator or a tap), where no confirmation is needed.

@@ -243,6 +243,10 @@ pub struct MsgDef {
     pub subs: Option<&'static str>,
     /// Which revisions of the spec define it ([`Revs`]).
     pub revs: Revs,
+    /// Behaviour classes (`class=` in the table).
+    pub class: Class,
+    /// How long its reply may take (`timeout=`); `None`: [`DEFAULT_TIMEOUT_MS`].
+    pub timeout_ms: Option<u32>,
     /// One-line description.
     pub doc: &'static str,
     /// Every length the message exists in.
@@ -253,6 +257,55 @@ pub struct MsgDef {
     pub file: &'static str,
     /// Line in that file.
     pub line: usize,
+}
+
+/// The reply timeout of a message without `timeout=`: the spec gives none; requests are answered
+/// within milliseconds.
+pub const DEFAULT_TIMEOUT_MS: u32 = 2000;
+
+/// What a message does, as pairing, replay safety and the simulators need to know it (`class=`
+/// in the table, a comma-separated set).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Class(pub u8);
+
+impl Class {
+    /// Sent periodically or on request as a status stream: never "unsolicited".
+    pub const STATUS: Class = Class(1);
+    /// Sent by the device on its own (errors, button presses, disconnect): never "unsolicited".
+    pub const SPONTANEOUS: Class = Class(2);
+    /// Makes hardware move or changes an output (replay asks before sending it to a real port).
+    pub const MOTION: Class = Class(4);
+    /// Reports the end of a move (a message it answers started one).
+    pub const END_OF_MOVE: Class = Class(8);
+    /// Stops a move.
+    pub const STOP: Class = Class(16);
+    const NAMES: [(Class, &'static str); 5] = [
+        (Class::STATUS, "status"),
+        (Class::SPONTANEOUS, "spontaneous"),
+        (Class::MOTION, "motion"),
+        (Class::END_OF_MOVE, "end_of_move"),
+        (Class::STOP, "stop"),
+    ];
+    /// Parse a `class=` value (`motion`, `status,spontaneous`).
+    pub fn parse(s: &str) -> Option<Class> {
+        let mut c = 0;
+        for p in s.split(',') {
+            c |= Class::NAMES.iter().find(|(_, n)| *n == p)?.0 .0;
+        }
+        Some(Class(c))
+    }
+    /// Whether every class of `other` is in this set.
+    pub fn has(self, other: Class) -> bool {
+        self.0 & other.0 == other.0 && other.0 != 0
+    }
+    /// The names of the classes in the set.
+    pub fn names(self) -> Vec<&'static str> {
+        Class::NAMES
+            .iter()
+            .filter(|(c, _)| self.has(*c))
+            .map(|(_, n)| *n)
+            .collect()
+    }
 }
 
 /// A set of revisions of the APT spec (`rev=` in the table; both when absent).

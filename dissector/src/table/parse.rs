@@ -106,6 +106,14 @@ pub fn parse_int(s: &str) -> Option<i64> {
     Some(if neg { -v } else { v })
 }
 
+/// A duration written `500ms`, `2s` or `120s`, in milliseconds.
+fn parse_ms(s: &str) -> Option<u32> {
+    if let Some(ms) = s.strip_suffix("ms") {
+        return ms.parse().ok();
+    }
+    s.strip_suffix('s')?.parse::<u32>().ok()?.checked_mul(1000)
+}
+
 fn is_ident(s: &str) -> bool {
     !s.is_empty() && s.bytes().all(|c| c.is_ascii_alphanumeric() || c == b'_')
 }
@@ -304,6 +312,8 @@ impl Parser {
             reply: vec![],
             subs: None,
             revs: Revs::BOTH,
+            class: Class::default(),
+            timeout_ms: None,
             doc: "",
             forms: vec![],
             examples: vec![],
@@ -314,6 +324,18 @@ impl Parser {
             match a.split_once('=') {
                 Some(("reply", v)) => m.reply = v.split(',').filter(|s| !s.is_empty()).collect(),
                 Some(("subs", v)) if is_ident(v) => m.subs = Some(v),
+                Some(("class", v)) => match Class::parse(v) {
+                    Some(c) => m.class = c,
+                    None => self.err(
+                        file,
+                        ln,
+                        format!("bad class `{v}` (status, spontaneous, motion, end_of_move, stop)"),
+                    ),
+                },
+                Some(("timeout", v)) => match parse_ms(v) {
+                    Some(t) => m.timeout_ms = Some(t),
+                    None => self.err(file, ln, format!("bad timeout `{v}` (e.g. 500ms, 120s)")),
+                },
                 Some(("rev", v)) => match Revs::parse(v) {
                     Some(r) => m.revs = r,
                     None => self.err(file, ln, format!("bad rev `{v}` (23, 2025 or 23,2025)")),
