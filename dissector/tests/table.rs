@@ -7,15 +7,12 @@ use aptscope_dissector::synth::{all_forms, random_frame, Rng};
 use aptscope_dissector::table::FormKind;
 use aptscope_dissector::Table;
 
-#[test]
-fn every_id_in_the_spec_indexes_is_in_the_table() {
+/// The ids of a fixture of spec index lines that the table lacks, and how many lines it has.
+fn missing_ids(fixture: &str) -> (Vec<String>, usize) {
     let t = Table::global();
     let mut missing = vec![];
     let mut n = 0;
-    for line in include_str!("spec_ids.txt")
-        .lines()
-        .filter(|l| !l.starts_with('#'))
-    {
+    for line in fixture.lines().filter(|l| !l.starts_with('#')) {
         let (id, name) = line.split_once(' ').expect("id name");
         let id = u16::from_str_radix(id.trim_start_matches("0x"), 16).expect("hex id");
         n += 1;
@@ -23,12 +20,61 @@ fn every_id_in_the_spec_indexes_is_in_the_table() {
             missing.push(format!("0x{id:04X} {name}"));
         }
     }
+    (missing, n)
+}
+
+#[test]
+fn every_id_in_the_spec_indexes_is_in_the_table() {
+    let t = Table::global();
+    let (missing, n) = missing_ids(include_str!("spec_ids.txt"));
     assert!(n > 400, "the fixture lists the spec's index lines");
     assert!(
         missing.is_empty(),
         "ids in the spec's indexes but not in the table: {missing:#?}"
     );
     assert!(t.msgs().len() >= 320, "{} messages", t.msgs().len());
+}
+
+#[test]
+fn every_id_of_the_2025_revision_is_in_the_table_and_marked() {
+    let t = Table::global();
+    let (missing, n) = missing_ids(include_str!("spec_ids_2025.txt"));
+    assert!(n > 390, "the fixture lists the 2025 spec's index lines");
+    assert!(
+        missing.is_empty(),
+        "ids in the 2025 spec's indexes but not in the table: {missing:#?}"
+    );
+    // Ids the 2025 revision lists and Issue 23 does not are marked as 2025 only.
+    let old: std::collections::HashSet<&str> = include_str!("spec_ids.txt")
+        .lines()
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    let mut unmarked = vec![];
+    for line in include_str!("spec_ids_2025.txt")
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+    {
+        let Some(id) = line.split_whitespace().next() else {
+            continue;
+        };
+        let Ok(v) = u16::from_str_radix(id.trim_start_matches("0x"), 16) else {
+            continue;
+        };
+        // In Issue 23's body though not in its indexes (lines 6550 and 13295).
+        if old.contains(id) || ["0x07D4", "0x08E2"].contains(&id) {
+            continue;
+        }
+        if let Some(m) = t.msg(v) {
+            if m.revs != aptscope_dissector::table::Revs::REV_2025 {
+                unmarked.push(m.name);
+            }
+        }
+    }
+    unmarked.dedup();
+    assert!(
+        unmarked.is_empty(),
+        "new in 2025 but not rev=2025: {unmarked:?}"
+    );
 }
 
 #[test]
