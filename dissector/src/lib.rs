@@ -21,6 +21,7 @@ pub mod stats;
 pub mod synth;
 pub mod table;
 pub mod text;
+pub mod units;
 
 pub use diag::{Diag, DiagKind};
 pub use table::Table;

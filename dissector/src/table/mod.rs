@@ -227,7 +227,8 @@ mod tests {
                 "i32 position unit=counts q=pos scale=2",
                 "converts per stage",
             ),
-            ("bytes[4] position unit=counts q=pos", "not a number"),
+            ("bytes[4] position unit=counts q=pos", "not one number"),
+            ("i32[2] position unit=counts q=pos", "not one number"),
         ] {
             let e = one_field(field).expect_err(field).join("\n");
             assert!(e.contains(says), "{field}: {e}");

@@ -710,8 +710,8 @@ fn quantity_error(f: &Field) -> Option<String> {
                 q.as_str()
             ))
         }
-        (Some(q), _) if !matches!(f.ty, Ty::Prim(_) | Ty::Array(..)) => Some(format!(
-            "`q={}` on a field that is not a number",
+        (Some(q), _) if !matches!(f.ty, Ty::Prim(_)) => Some(format!(
+            "`q={}` on a field that is not one number",
             q.as_str()
         )),
         (None, Some("counts/s2")) => Some(
