@@ -12,6 +12,7 @@ use aptscope_dissector::filter::Filter;
 use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
 use aptscope_dissector::stats::Stats;
 use aptscope_dissector::table::{Form, MsgDef};
+use aptscope_dissector::units::UnitsOpts;
 use aptscope_dissector::{json, Table};
 use aptscope_replay::{replay_main, ReplayOptions, Role};
 use clap::{Parser, Subcommand};
@@ -66,6 +67,34 @@ enum SimCmd {
     },
 }
 
+/// Physical units of APT motion values (spec section 8), for the commands that decode.
+#[derive(clap::Args)]
+struct UnitsArgs {
+    /// The stage the APT controller drives (`MTS25-Z8`, `Z825`, `DDS220`, `LTS150`…): positions,
+    /// velocities and accelerations are also shown in mm (or deg) and mm/s, mm/s2.
+    #[arg(long, value_name = "NAME")]
+    stage: Option<String>,
+    /// Counts (or microsteps) per unit for a stage section 8 does not list: `34554.96/mm`,
+    /// `1919.64/deg` (unit mm when left out).
+    #[arg(long, value_name = "X[/UNIT]", conflicts_with = "stage")]
+    scale: Option<String>,
+    /// The controller (a model, `KDC101`, or a family, `dc_servo`, `brushless`, `stepper`,
+    /// `stepper_trinamic`), when the capture has no HW_GET_INFO to tell it.
+    #[arg(long, value_name = "MODEL")]
+    controller: Option<String>,
+}
+
+impl UnitsArgs {
+    fn opts(&self) -> io::Result<UnitsOpts> {
+        UnitsOpts::from_args(
+            self.stage.as_deref(),
+            self.scale.as_deref(),
+            self.controller.as_deref(),
+        )
+        .map_err(bad)
+    }
+}
+
 /// Options shared by `tap` and `sniff`.
 #[derive(clap::Args)]
 struct LiveArgs {
@@ -93,6 +122,8 @@ struct LiveArgs {
     /// Stop after this long (`30s`).
     #[arg(long, value_parser = parse_duration)]
     duration: Option<u64>,
+    #[command(flatten)]
+    units: UnitsArgs,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -138,6 +169,8 @@ enum Cmd {
         /// Reply timeout for every request (`500ms`, `2s`) instead of the per-message defaults.
         #[arg(long, value_parser = parse_duration)]
         timeout: Option<u64>,
+        #[command(flatten)]
+        units: UnitsArgs,
     },
     /// Statistics of a capture: counts and bytes per message, address and direction, request
     /// latency (min/median/p99/max), diagnostics by kind, rate over time.
@@ -165,6 +198,8 @@ enum Cmd {
         /// USB captures: only the device at BUS:ADDR.
         #[arg(long)]
         usb_device: Option<String>,
+        #[command(flatten)]
+        units: UnitsArgs,
     },
     /// Browse a capture in the terminal UI: timeline, detail tree, hex, filters, statistics, plots.
     View {
@@ -179,6 +214,8 @@ enum Cmd {
         /// USB captures: only the device at BUS:ADDR.
         #[arg(long)]
         usb_device: Option<String>,
+        #[command(flatten)]
+        units: UnitsArgs,
     },
     /// Simulate a controller on a pseudo-terminal (or a serial port, --port):
     /// `sim apt --model kdc101` or `sim elliptec --modules 0:ELL14,1:ELL9`.
@@ -380,6 +417,7 @@ macro_rules! live_fields {
         $o.quiet = $live.quiet;
         $o.duration = $live.duration.map(std::time::Duration::from_nanos);
         $o.signals = true;
+        $o.units = $live.units.opts()?;
     };
 }
 
@@ -395,18 +433,21 @@ fn main() -> ExitCode {
             usb_device,
             filter,
             timeout,
+            units,
         } => open_opts(format.as_deref(), hex, usb_device.as_deref()).and_then(|o| {
+            let u = units.opts()?;
             files
                 .iter()
-                .try_for_each(|f| decode(f, o, json, proto, filter.as_deref(), timeout))
+                .try_for_each(|f| decode(f, o, json, proto, filter.as_deref(), timeout, u.clone()))
         }),
         Cmd::View {
             file,
             format,
             proto,
             usb_device,
+            units,
         } => open_opts(format.as_deref(), false, usb_device.as_deref())
-            .and_then(|o| aptscope_tui::run_as(&file, o, proto_of(proto))),
+            .and_then(|o| aptscope_tui::run_with(&file, o, proto_of(proto), units.opts()?)),
         Cmd::Sim { what } => match what {
             SimCmd::Apt {
                 model,
@@ -519,8 +560,11 @@ fn main() -> ExitCode {
             timeout,
             bin,
             usb_device,
-        } => open_opts(format.as_deref(), false, usb_device.as_deref())
-            .and_then(|o| stats(&file, o, json, proto, filter.as_deref(), bin, timeout)),
+            units,
+        } => open_opts(format.as_deref(), false, usb_device.as_deref()).and_then(|o| {
+            let u = units.opts()?;
+            stats(&file, o, json, proto, filter.as_deref(), bin, timeout, u)
+        }),
         Cmd::Info {
             file,
             format,
@@ -657,6 +701,7 @@ fn run_pipeline(
     p.finish(emit)
 }
 
+#[allow(clippy::too_many_arguments)]
 fn stats(
     file: &str,
     opts: OpenOptions,
@@ -665,12 +710,14 @@ fn stats(
     filter: Option<&str>,
     bin: f64,
     timeout: Option<u64>,
+    units: UnitsOpts,
 ) -> io::Result<()> {
     let mut f = filter.map(compile_filter).transpose()?;
     let (mut reader, _, progress) = open_with_progress(file, opts)?;
     let mut ticker = Ticker::new(progress);
     let st = Rc::new(RefCell::new(Stats::new((bin.max(1e-6) * 1e9) as u64)));
     let mut p = Pipeline::new(proto_of(proto), PFormat::Json);
+    p.set_units(units);
     if let Some(t) = timeout {
         p.set_reply_timeout(t);
     }
@@ -702,6 +749,7 @@ fn decode(
     proto: ProtoArg,
     filter: Option<&str>,
     timeout: Option<u64>,
+    units: UnitsOpts,
 ) -> io::Result<()> {
     let filter = filter.map(compile_filter).transpose()?;
     let (mut reader, _) = open(file, opts)?;
@@ -718,6 +766,7 @@ fn decode(
         out.write_all(line.as_bytes())?;
         out.write_all(b"\n")
     };
+    p.set_units(units);
     if let Some(t) = timeout {
         p.set_reply_timeout(t);
     }

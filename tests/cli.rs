@@ -367,3 +367,150 @@ fn messages_looks_one_message_up() {
         "{err}"
     );
 }
+
+/// `--stage` shows motion values in mm beside the raw ones: the kdc101 session sets 2.5 mm/s
+/// and 4 mm/s² on a Z8 stage and moves to 2 mm. Without it the raw values are labelled as
+/// what they are (velocity units, not counts/s).
+#[test]
+fn a_stage_shows_positions_and_velocities_in_mm() {
+    let cap = "samples/sessions/kdc101.pcapng";
+    let (out, err, ok) = aptscope(&["decode", "--stage", "MTS25-Z8", cap], None);
+    assert!(ok, "{err}");
+    let line = |name: &str| {
+        out.lines()
+            .find(|l| l.contains(name))
+            .unwrap_or_else(|| panic!("no {name} in\n{out}"))
+            .to_string()
+    };
+    assert!(
+        out.contains(
+            "# units: stream 0 usb (KDC101): MTS25-Z8: 34554.96 counts/mm, brushed DC servo rules"
+        ),
+        "{out}"
+    );
+    let vel = line("MOT_SET_VELPARAMS");
+    assert!(
+        vel.contains("acceleration=1055 (3.99857 mm/s2) max_vel=1932478 (2.50003 mm/s)"),
+        "{vel}"
+    );
+    assert!(line("MOT_MOVE_ABSOLUTE").contains("absolute_position=69110 (2 mm)"));
+    assert!(line("MOT_MOVE_RELATIVE").contains("relative_distance=-34555 (-1 mm)"));
+    assert!(line("MOT_GET_POSCOUNTER").contains("position=34555 (1 mm)"));
+
+    let (out, _, ok) = aptscope(&["decode", "--json", "--stage", "MTS25-Z8", cap], None);
+    assert!(ok);
+    let recs = ndjson(&out);
+    let units: Vec<&Value> = recs.iter().filter(|r| r["type"] == "units").collect();
+    assert_eq!(units.len(), 1, "{units:?}");
+    assert_eq!(units[0]["family"], "dc_servo");
+    assert_eq!(units[0]["counts_per_unit"], 34554.96);
+    let vel = recs
+        .iter()
+        .find(|r| r["name"] == "MOT_SET_VELPARAMS")
+        .expect("velparams");
+    assert_eq!(vel["fields"]["max_vel"], 1932478, "the raw value stays");
+    assert_eq!(vel["phys"]["max_vel"]["unit"], "mm/s");
+    assert_eq!(vel["phys"]["max_vel"]["value"], 2.50003);
+    assert_eq!(vel["phys"]["acceleration"]["unit"], "mm/s2");
+
+    // The same through a custom scale: the family comes from HW_GET_INFO (KDC101).
+    let (out, _, ok) = aptscope(&["decode", "--scale", "34554.96/mm", cap], None);
+    assert!(ok);
+    assert!(out.contains("max_vel=1932478 (2.50003 mm/s)"), "{out}");
+
+    let (out, _, ok) = aptscope(&["decode", cap], None);
+    assert!(ok);
+    assert!(out.contains("max_vel=1932478 vel_units"), "{out}");
+    assert!(out.contains("acceleration=1055 acc_units"), "{out}");
+    assert!(
+        !out.contains("counts/s") && !out.contains("# units"),
+        "{out}"
+    );
+    assert!(out.contains("absolute_position=69110 counts"), "{out}");
+}
+
+/// A K10CR1 has its stage built in: once its HW_GET_INFO is seen, positions are in degrees
+/// with no option (409600 / 3 microsteps per degree, spec section 8).
+#[test]
+fn a_fixed_stage_model_is_recognised_from_hw_get_info() {
+    let enc = |args: &[&str]| {
+        let (out, err, ok) = aptscope(args, None);
+        assert!(ok, "{err}");
+        out
+    };
+    let mut hex = enc(&[
+        "encode",
+        "HW_GET_INFO",
+        "model_number=K10CR1",
+        "--source",
+        "usb",
+        "--dest",
+        "host",
+    ]);
+    hex += &enc(&[
+        "encode",
+        "MOT_MOVE_ABSOLUTE",
+        "chan_ident=CH1",
+        "absolute_position=4096000",
+        "--dest",
+        "usb",
+    ]);
+    let (out, err, ok) = aptscope(&["decode", "--hex", "-"], Some(hex.as_bytes()));
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("# units: stream 0 usb (K10CR1): K10CR1: "),
+        "{out}"
+    );
+    assert!(out.contains("absolute_position=4096000 (30 deg)"), "{out}");
+}
+
+#[test]
+fn an_unknown_stage_is_an_error_listing_the_known_ones() {
+    let (out, err, ok) = aptscope(
+        &[
+            "decode",
+            "--stage",
+            "MTS52-Z8",
+            "samples/sessions/kdc101.pcapng",
+        ],
+        None,
+    );
+    assert!(!ok && out.is_empty(), "{out}");
+    assert!(err.contains("unknown stage `MTS52-Z8`"), "{err}");
+    let list = err.split("nearest first: ").nth(1).unwrap_or("");
+    assert!(list.starts_with("MTS50-Z8, MTS25-Z8"), "{err}");
+    assert!(list.contains("DDS220") && list.contains("K10CR1"), "{err}");
+    let (_, err, ok) = aptscope(
+        &["stats", "--scale", "x/mm", "samples/sessions/kdc101.pcapng"],
+        None,
+    );
+    assert!(!ok && err.contains("bad --scale"), "{err}");
+}
+
+/// The message listing says what each motion field is.
+#[test]
+fn messages_json_marks_motion_quantities() {
+    let (out, _, ok) = aptscope(&["messages", "--json"], None);
+    assert!(ok);
+    let recs = ndjson(&out);
+    let vel = recs
+        .iter()
+        .find(|r| r["name"] == "MOT_SET_VELPARAMS")
+        .expect("listed");
+    let fields = &vel["forms"][0]["fields"];
+    assert_eq!(fields[1]["name"], "min_vel");
+    assert_eq!(
+        (&fields[1]["unit"], &fields[1]["q"]),
+        (&Value::from("vel_units"), &Value::from("vel"))
+    );
+    assert_eq!(
+        (&fields[2]["unit"], &fields[2]["q"]),
+        (&Value::from("acc_units"), &Value::from("acc"))
+    );
+    let (out, _, ok) = aptscope(&["messages", "-v"], None);
+    assert!(ok && out.contains("MOT_SET_VELPARAMS"));
+    assert!(
+        !out.contains("counts/s2"),
+        "no acceleration claims counts/s²"
+    );
+}

@@ -188,6 +188,18 @@ pub fn apt_frame(out: &mut String, n: u64, f: &AptFrame<'_, '_>) {
 /// [`apt_frame`] with what pairing found: `pair`, `latency_ms`, `pair_other_address`, and the
 /// `unsolicited`/`duplicate_reply` diagnostics.
 pub fn apt_frame_paired(out: &mut String, n: u64, f: &AptFrame<'_, '_>, p: &crate::pair::PairInfo) {
+    apt_frame_in(out, n, f, p, None)
+}
+
+/// [`apt_frame_paired`] with the stage's conversion: motion fields (`q=` in the table) get a
+/// `phys` entry (`{"value": 2.5, "unit": "mm/s"}`) beside their raw value in `fields`.
+pub fn apt_frame_in(
+    out: &mut String,
+    n: u64,
+    f: &AptFrame<'_, '_>,
+    p: &crate::pair::PairInfo,
+    scale: Option<&crate::units::Scale>,
+) {
     let h = f.header();
     out.push_str("{\"n\":");
     uint(out, n);
@@ -248,15 +260,19 @@ pub fn apt_frame_paired(out: &mut String, n: u64, f: &AptFrame<'_, '_>, p: &crat
         string(out, fd.name);
         out.push(':');
         value(out, f.table(), fd, &v);
-        if let (Some(s), Some(x)) = (fd.scale, v.as_f64()) {
+        let conv = match (fd.scale, v.as_f64()) {
+            (Some(s), Some(x)) => Some((x * s, fd.unit.unwrap_or(""))),
+            _ => crate::apt::phys(fd, &v, scale),
+        };
+        if let Some((x, unit)) = conv {
             if !phys.is_empty() {
                 phys.push(',');
             }
             string(&mut phys, fd.name);
             phys.push_str(":{\"value\":");
-            float(&mut phys, crate::apt::round_sig(x * s));
+            float(&mut phys, crate::apt::round_sig(x));
             phys.push_str(",\"unit\":");
-            string(&mut phys, fd.unit.unwrap_or(""));
+            string(&mut phys, unit);
             phys.push('}');
         }
     }
@@ -290,6 +306,41 @@ pub fn apt_frame_paired(out: &mut String, n: u64, f: &AptFrame<'_, '_>, p: &crat
     });
     out.push_str(",\"diag\":");
     diags(out, f.diags().chain(extra));
+    out.push('}');
+}
+
+/// Append the JSON object of a units notice: what converts a device's motion values from now
+/// on (`{"type":"units","stream":0,"addr":{…},"model":"KDC101","stage":"MTS25-Z8",
+/// "family":"dc_servo","counts_per_unit":34554.96,"unit":"mm"}`), or why they stay raw
+/// (`"raw":"…"`).
+pub fn units_notice(out: &mut String, n: &crate::units::Notice) {
+    use crate::units::Resolution;
+    out.push_str("{\"type\":\"units\",\"stream\":");
+    uint(out, n.stream as u64);
+    addr(out, "addr", crate::apt::Addr::from_byte(n.addr));
+    if let Some(m) = &n.model {
+        out.push_str(",\"model\":");
+        string(out, m);
+    }
+    match &n.resolution {
+        Resolution::Scale(s) => {
+            out.push_str(",\"stage\":");
+            string(out, s.stage);
+            if let Some(f) = s.family {
+                out.push_str(",\"family\":");
+                string(out, f.name());
+            }
+            out.push_str(",\"counts_per_unit\":");
+            float(out, s.counts_per_unit);
+            out.push_str(",\"unit\":");
+            string(out, &s.unit);
+        }
+        Resolution::Raw(why) => {
+            out.push_str(",\"raw\":");
+            string(out, why);
+        }
+        Resolution::None => out.push_str(",\"raw\":\"no stage\""),
+    }
     out.push('}');
 }
 
@@ -360,6 +411,10 @@ fn form_json(out: &mut String, table: &Table, form: &crate::table::Form) {
         if let Some(s) = f.scale {
             out.push_str(",\"scale\":");
             float(out, s);
+        }
+        if let Some(q) = f.q {
+            out.push_str(",\"q\":");
+            string(out, q.as_str());
         }
         if let Some(e) = f.enumeration {
             let d = table.enum_def(e);

@@ -23,6 +23,7 @@ pub mod suggest;
 pub mod synth;
 pub mod table;
 pub mod text;
+pub mod units;
 
 pub use diag::{Diag, DiagKind};
 pub use table::Table;

@@ -11,6 +11,7 @@ use crate::diag::{Diag, DiagKind};
 use crate::ell::{Bus, EllFrame, EllFramer, Expired, Item as EllItem};
 use crate::pair::AptPairer;
 use crate::table::Dir;
+use crate::units::{Tracker, UnitsOpts};
 use crate::{json, text, Table};
 use std::fmt::Write;
 
@@ -62,6 +63,8 @@ pub struct Pipeline {
     jline: String,
     filter: Option<RecordFilter>,
     reply_timeout: Option<u64>,
+    /// Models seen per device and the stage conversion of motion values.
+    units: Tracker,
 }
 
 /// Decides, from its NDJSON object, whether a record is emitted.
@@ -85,7 +88,15 @@ impl Pipeline {
             jline: String::with_capacity(512),
             filter: None,
             reply_timeout: None,
+            units: Tracker::new(UnitsOpts::default()),
         }
+    }
+
+    /// Convert APT motion values (positions, velocities, accelerations) to physical units
+    /// with this stage or scale, beside their raw values. Without it only devices with a
+    /// built-in stage (HW_GET_INFO model K10CR1, LTS150 …) convert.
+    pub fn set_units(&mut self, opts: UnitsOpts) {
+        self.units = Tracker::new(opts);
     }
 
     /// Use one reply timeout for every request instead of the per-message defaults.
@@ -472,11 +483,21 @@ impl Pipeline {
                                     code: u.name,
                                 })
                                 .collect();
+                            let (scale, notice) = self.units.observe(stream, &f);
+                            if let Some(nt) = notice {
+                                // Before the frame: what its values are converted with.
+                                let mut l = String::new();
+                                match self.fmt {
+                                    Format::Json => json::units_notice(&mut l, &nt),
+                                    Format::Text => text::units_notice_line(&mut l, &nt),
+                                }
+                                emit(&l)?;
+                            }
                             if want_json {
-                                json::apt_frame_paired(&mut self.jline, self.n, &f, &pinfo);
+                                json::apt_frame_in(&mut self.jline, self.n, &f, &pinfo, scale);
                             }
                             if want_text {
-                                text::apt_line(&mut self.line, self.n, &f, time);
+                                text::apt_line_in(&mut self.line, self.n, &f, time, scale);
                                 text::pair_suffix(&mut self.line, &pinfo);
                             }
                         }
@@ -615,5 +636,127 @@ mod tests {
             })
             .collect();
         assert_eq!(kinds, ["other", "frame", "diag", "frame"], "{out:?}");
+    }
+
+    fn frame(name: &str, values: &[(&str, &str)], dst: u8, src: u8) -> Vec<u8> {
+        let n = crate::apt::Named {
+            name,
+            sub: None,
+            values,
+            form: None,
+            dst,
+            src,
+        };
+        crate::apt::encode_named(Table::global(), &n).expect("valid frame")
+    }
+
+    /// Decode `chunks` (host/device direction each) with `opts`, as NDJSON objects.
+    fn decode_json(opts: UnitsOpts, chunks: &[(Dir, Vec<u8>)]) -> Vec<serde_json::Value> {
+        let mut p = Pipeline::new(Some(Proto::Apt), Format::Json);
+        p.set_units(opts);
+        let mut out: Vec<String> = vec![];
+        let mut emit = |l: &str| -> Result<(), ()> {
+            out.push(l.to_string());
+            Ok(())
+        };
+        for (dir, b) in chunks {
+            let ctx = Ctx {
+                stream: 0,
+                dir: Some(*dir),
+                ts_ns: None,
+            };
+            p.push_chunk(ctx, b, &mut emit).unwrap();
+        }
+        p.finish(&mut emit).unwrap();
+        out.iter()
+            .map(|l| serde_json::from_str(l).expect("JSON"))
+            .collect()
+    }
+
+    const VEL: &[(&str, &str)] = &[
+        ("chan_ident", "CH1"),
+        ("min_vel", "0"),
+        ("acceleration", "1502"),
+        ("max_vel", "73291093"),
+    ];
+
+    /// A K10CR1 names itself in HW_GET_INFO and its stage is built in: its motion values come
+    /// out in degrees with no option (Trinamic rules: 136533.33 µsteps/deg, × 53.68, ÷ 90.9).
+    #[test]
+    fn a_fixed_stage_model_converts_once_hw_get_info_names_it() {
+        let info = frame(
+            "HW_GET_INFO",
+            &[("serial_number", "55000123"), ("model_number", "K10CR1")],
+            0x01,
+            0x50,
+        );
+        let vel = frame("MOT_GET_VELPARAMS", VEL, 0x01, 0x50);
+        let recs = decode_json(
+            UnitsOpts::default(),
+            &[
+                (Dir::DeviceToHost, vel.clone()),
+                (Dir::DeviceToHost, info),
+                (Dir::DeviceToHost, vel),
+            ],
+        );
+        let kinds: Vec<&str> = recs.iter().filter_map(|r| r["type"].as_str()).collect();
+        assert_eq!(kinds, ["frame", "units", "frame", "frame"], "{recs:?}");
+        // Before the model is known: raw only.
+        assert!(recs[0].get("phys").is_none(), "{}", recs[0]);
+        assert_eq!(recs[0]["fields"]["max_vel"], 73291093);
+        let u = &recs[1];
+        assert_eq!(
+            (&u["model"], &u["stage"], &u["family"], &u["unit"]),
+            (
+                &serde_json::json!("K10CR1"),
+                &serde_json::json!("K10CR1"),
+                &serde_json::json!("stepper_trinamic"),
+                &serde_json::json!("deg")
+            )
+        );
+        let v = &recs[3];
+        assert_eq!(v["fields"]["max_vel"], 73291093, "raw stays where it was");
+        assert_eq!(v["phys"]["max_vel"]["unit"], "deg/s");
+        let max_vel = v["phys"]["max_vel"]["value"].as_f64().unwrap_or(0.0);
+        assert!((max_vel - 10.0).abs() < 1e-4, "{max_vel}");
+        let acc = v["phys"]["acceleration"]["value"].as_f64().unwrap_or(0.0);
+        assert!((acc - 1.0).abs() < 1e-3, "{acc}");
+        assert_eq!(v["phys"]["acceleration"]["unit"], "deg/s2");
+    }
+
+    /// A stage named on the command line: converted from the first motion value on, and a
+    /// stage the controller cannot drive leaves the values raw, saying why.
+    #[test]
+    fn a_named_stage_converts_and_a_mismatch_says_why() {
+        let vel = frame("MOT_SET_VELPARAMS", VEL, 0x50, 0x01);
+        let named = |n| UnitsOpts {
+            stage: Some(crate::units::StageChoice::Named(n)),
+            controller: None,
+        };
+        let recs = decode_json(named("LTS150"), &[(Dir::HostToDevice, vel.clone())]);
+        // LTS150 is in both stepper tables: nothing says which controller.
+        assert_eq!(recs[0]["type"], "units");
+        assert!(recs[0]["raw"]
+            .as_str()
+            .unwrap_or("")
+            .contains("HW_GET_INFO"));
+        assert!(recs[1].get("phys").is_none());
+        let info = frame("HW_GET_INFO", &[("model_number", "BSC203")], 0x01, 0x21);
+        let to_bay = frame("MOT_SET_VELPARAMS", VEL, 0x21, 0x01);
+        let recs = decode_json(
+            named("LTS150"),
+            &[(Dir::DeviceToHost, info), (Dir::HostToDevice, to_bay)],
+        );
+        assert_eq!(recs[0]["stage"], "LTS150");
+        assert_eq!(recs[0]["counts_per_unit"], 409600.0);
+        let v = recs[2]["phys"]["max_vel"]["value"].as_f64().unwrap_or(0.0);
+        assert!((v - 73291093.0 / 409600.0 / 53.68).abs() < 1e-3, "{v}");
+        let info = frame("HW_GET_INFO", &[("model_number", "BSC203")], 0x01, 0x50);
+        let recs = decode_json(
+            named("MTS25-Z8"),
+            &[(Dir::DeviceToHost, info), (Dir::HostToDevice, vel)],
+        );
+        assert!(recs[0]["raw"].as_str().unwrap_or("").contains("not listed"));
+        assert!(recs[2].get("phys").is_none(), "{}", recs[2]);
     }
 }

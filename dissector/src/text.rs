@@ -1,6 +1,6 @@
 //! One-line text rendering of records, like tshark's default output.
 
-use crate::apt::{summary, AptFrame, GarbageKind};
+use crate::apt::{summary_in, AptFrame, GarbageKind};
 use crate::diag::Diag;
 use std::fmt::Write;
 
@@ -17,6 +17,17 @@ fn prefix(out: &mut String, n: u64, time: Option<f64>, offset: u64) {
 /// Append the timeline line of a decoded APT frame (no newline):
 /// `N  offset  src → dst  NAME  chN  key fields  [diagnostics]`.
 pub fn apt_line(out: &mut String, n: u64, f: &AptFrame<'_, '_>, time: Option<f64>) {
+    apt_line_in(out, n, f, time, None)
+}
+
+/// [`apt_line`] with motion values also in physical units (`max_vel=1932478 (2.5 mm/s)`).
+pub fn apt_line_in(
+    out: &mut String,
+    n: u64,
+    f: &AptFrame<'_, '_>,
+    time: Option<f64>,
+    scale: Option<&crate::units::Scale>,
+) {
     let h = f.header();
     prefix(out, n, time, f.offset);
     let _ = write!(out, "{:>5} → {:<5} ", h.src().name(), h.dst().name());
@@ -39,7 +50,7 @@ pub fn apt_line(out: &mut String, n: u64, f: &AptFrame<'_, '_>, time: Option<f64
     }
     out.push(' ');
     let before = out.len();
-    summary(f, 6, out);
+    summary_in(f, 6, scale, out);
     if out.len() == before && f.form.is_none() && f.bytes.len() > 6 {
         out.push_str("data=");
         for b in &f.bytes[6..f.bytes.len().min(6 + 32)] {
@@ -158,4 +169,11 @@ pub fn pair_suffix(out: &mut String, p: &crate::pair::PairInfo) {
     if let Some(model) = p.not_for_model {
         let _ = write!(out, "  !! {}", crate::DiagKind::NotForModel { model });
     }
+}
+
+/// Append the line of a units notice: `# units: stream 0 usb (KDC101): MTS25-Z8: 34554.96
+/// counts/mm, brushed DC servo rules`.
+pub fn units_notice_line(out: &mut String, n: &crate::units::Notice) {
+    out.push_str("# ");
+    out.push_str(&n.text());
 }

@@ -3,7 +3,7 @@
 //! directly or picked from the rendered text). Only what is on screen is decoded.
 
 use crate::index::*;
-use aptscope_dissector::apt::{fmt_value, summary, AptFrame, Value};
+use aptscope_dissector::apt::{fmt_value_in, summary_in, AptFrame, Value};
 use aptscope_dissector::diag::{Diag, DiagKind};
 use aptscope_dissector::ell::{self, head, EllFrame, Observation};
 use aptscope_dissector::json;
@@ -153,6 +153,16 @@ fn push_sep(out: &mut String, s: &str) {
     out.push_str(s);
 }
 
+/// The stage conversion of an APT record's motion values, when one applies.
+pub fn scale_of<'a>(ix: &'a Index, r: &Rec) -> Option<&'a aptscope_dissector::units::Scale> {
+    if r.has(F_ELL) {
+        return None;
+    }
+    (r.module as usize)
+        .checked_sub(1)
+        .and_then(|i| ix.scales.get(i))
+}
+
 fn module_of(ix: &Index, r: &Rec) -> Option<ell::Module> {
     (r.module as usize)
         .checked_sub(1)
@@ -247,7 +257,7 @@ pub fn row(ix: &Index, n: u64) -> Option<Row> {
         let _ = write!(row.fields, "[{}] ", s.name);
     }
     let before = row.fields.len();
-    summary(&f, 8, &mut row.fields);
+    summary_in(&f, 8, scale_of(ix, r), &mut row.fields);
     if row.fields.len() == before && f.form.is_none() && bytes.len() > 6 {
         row.fields.push_str("data=");
         for b in &bytes[6..bytes.len().min(6 + 24)] {
@@ -379,7 +389,7 @@ pub fn tree(ix: &Index, n: u64) -> Vec<Node> {
     if r.has(F_ELL) {
         ell_tree(ix, r, n, bytes, &mut t);
     } else {
-        apt_tree(r, bytes, &mut t);
+        apt_tree(r, bytes, scale_of(ix, r), &mut t);
     }
     pair_nodes(ix, r, &mut t);
     let mut v = t.0;
@@ -443,7 +453,7 @@ fn pair_nodes(ix: &Index, r: &Rec, t: &mut Tree) {
     }
 }
 
-fn apt_tree(r: &Rec, bytes: &[u8], t: &mut Tree) {
+fn apt_tree(r: &Rec, bytes: &[u8], scale: Option<&aptscope_dissector::units::Scale>, t: &mut Tree) {
     let table = Table::global();
     let Some(f) = AptFrame::decode(table, r.offset, bytes, r.has(F_TRUNCATED)) else {
         return;
@@ -551,13 +561,24 @@ fn apt_tree(r: &Rec, bytes: &[u8], t: &mut Tree) {
         }
         head.push(')');
         t.add(0, "fields", head, None, NodeKind::Section);
+        let motion = form.fields.iter().any(|x| x.q.is_some());
+        if let Some(sc) = scale.filter(|_| motion) {
+            t.add(
+                1,
+                "units",
+                format!("units: {} (spec section 8)", sc.describe()),
+                None,
+                NodeKind::Item,
+            );
+        }
         for (fd, v) in f.fields() {
             let at = fd.loc.frame_offset();
             let w = fd.ty.width();
             let mut s = format!("{} = ", fd.name);
-            fmt_value(table, fd, &v, &mut s);
+            fmt_value_in(table, fd, &v, scale, &mut s);
             let raw = raw_text(&v);
-            if !raw.is_empty() && !s.ends_with(&raw) {
+            let shown = aptscope_dissector::apt::phys(fd, &v, scale).is_some();
+            if !raw.is_empty() && !s.ends_with(&raw) && !shown {
                 let _ = write!(s, "   (raw {raw})");
             }
             let _ = write!(s, "  [{} @{at}]", fd.ty.name());
@@ -818,7 +839,7 @@ pub fn render(ix: &Index, n: u64, buf: &mut String) -> Option<Rendered> {
                 .then(|| ix.not_for_model.get(&n).copied())
                 .flatten(),
         };
-        json::apt_frame_paired(buf, n, &f, &p);
+        json::apt_frame_in(buf, n, &f, &p, scale_of(ix, r));
         if dir.is_none() {
             dir = Some("unknown");
         }

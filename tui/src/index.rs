@@ -11,6 +11,7 @@ use aptscope_dissector::detect::{detect, Proto, SAMPLE};
 use aptscope_dissector::ell::{Bus, EllFrame, EllFramer, Item as EllItem, Module};
 use aptscope_dissector::pair::AptPairer;
 use aptscope_dissector::table::Dir;
+use aptscope_dissector::units::{Scale, Tracker, UnitsOpts};
 use aptscope_dissector::Table;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -59,7 +60,8 @@ pub struct Rec {
     pub pair: u32,
     /// Length in bytes.
     pub len: u32,
-    /// Elliptec: index + 1 of the module (in [`Index::modules`]) the frame concerns; 0 if none.
+    /// Elliptec: index + 1 of the module (in [`Index::modules`]) the frame concerns. APT:
+    /// index + 1 of the conversion of its motion values (in [`Index::scales`]). 0 if none.
     pub module: u32,
     /// Stream (port/device) index.
     pub stream: u16,
@@ -100,6 +102,10 @@ pub struct Index {
     pub arena: Vec<u8>,
     /// Elliptec modules as the bus knew them (indexed by `Rec::module - 1`).
     pub modules: Vec<Module>,
+    /// APT: the stage conversions records use (indexed by `Rec::module - 1`).
+    pub scales: Vec<Scale>,
+    /// APT: what converts each device's motion values, as it changed (`units: …` lines).
+    pub units_notes: Vec<String>,
     /// Protocol (once detected).
     pub proto: Option<Proto>,
     /// Whether detection was certain.
@@ -170,6 +176,16 @@ pub fn spawn_as(
     opts: OpenOptions,
     proto: Option<Proto>,
 ) -> std::io::Result<Arc<Shared>> {
+    spawn_with(path, opts, proto, UnitsOpts::default())
+}
+
+/// [`spawn_as`], converting APT motion values with the stage or scale of `units`.
+pub fn spawn_with(
+    path: &str,
+    opts: OpenOptions,
+    proto: Option<Proto>,
+    units: UnitsOpts,
+) -> std::io::Result<Arc<Shared>> {
     // Readers are not `Send`: open in the indexing thread, hand back the shared index.
     let (tx, rx) = std::sync::mpsc::channel();
     let path = path.to_string();
@@ -178,7 +194,7 @@ pub fn spawn_as(
         .spawn(move || match opened(&path, opts) {
             Ok((shared, reader)) => {
                 let _ = tx.send(Ok(shared.clone()));
-                Indexer::new(shared, proto).run(reader);
+                Indexer::new(shared, proto, units).run(reader);
             }
             Err(e) => {
                 let _ = tx.send(Err(e));
@@ -206,7 +222,14 @@ fn opened(path: &str, opts: OpenOptions) -> std::io::Result<Opened> {
 /// Open and index a capture completely, in the calling thread (tests, small files).
 pub fn load(path: &str, opts: OpenOptions) -> std::io::Result<Arc<Shared>> {
     let (shared, reader) = opened(path, opts)?;
-    Indexer::new(shared.clone(), None).run(reader);
+    Indexer::new(shared.clone(), None, UnitsOpts::default()).run(reader);
+    Ok(shared)
+}
+
+/// [`load`] with a stage or scale for APT motion values.
+pub fn load_with(path: &str, opts: OpenOptions, units: UnitsOpts) -> std::io::Result<Arc<Shared>> {
+    let (shared, reader) = opened(path, opts)?;
+    Indexer::new(shared.clone(), None, units).run(reader);
     Ok(shared)
 }
 
@@ -236,6 +259,13 @@ struct Indexer {
     base: u64,
     modules: Vec<Module>,
     modules_base: usize,
+    /// Models per device and the conversion of their motion values.
+    units: Tracker,
+    /// Every conversion given out so far (`Rec::module - 1` indexes them), and how many of
+    /// them are published.
+    scales: Vec<Scale>,
+    scales_published: usize,
+    units_notes: Vec<String>,
     /// Pair links and flags for already-published records: (record number, pair, flags to set).
     patches: Vec<(u64, u32, u16)>,
     series: BTreeMap<String, Vec<Point>>,
@@ -248,7 +278,7 @@ struct Indexer {
 
 impl Indexer {
     /// An indexer; `proto` given: no detection.
-    fn new(shared: Arc<Shared>, proto: Option<Proto>) -> Self {
+    fn new(shared: Arc<Shared>, proto: Option<Proto>, units: UnitsOpts) -> Self {
         if let (Some(p), Ok(mut ix)) = (proto, shared.index.write()) {
             ix.proto = Some(p);
             ix.proto_certain = true;
@@ -267,6 +297,10 @@ impl Indexer {
             base: 0,
             modules: vec![],
             modules_base: 0,
+            units: Tracker::new(units),
+            scales: vec![],
+            scales_published: 0,
+            units_notes: vec![],
             patches: vec![],
             series: BTreeMap::new(),
             not_for_model: vec![],
@@ -523,6 +557,10 @@ impl Indexer {
                             flags |= F_NOT_FOR_MODEL;
                             self.not_for_model.push((n, m));
                         }
+                        let (scale, notice) = self.units.observe(stream, &fr);
+                        if let Some(nt) = notice {
+                            self.units_notes.push(nt.text());
+                        }
                         let mut pts = vec![];
                         if let Some(name) = fr.name() {
                             if name.contains("STATUSUPDATE") || name.ends_with("GET_POSCOUNTER") {
@@ -530,12 +568,33 @@ impl Indexer {
                                 let ch =
                                     fr.channel().map(|c| format!(" ch{c}")).unwrap_or_default();
                                 for q in ["position", "velocity"] {
-                                    if let Some(v) = fr.field(q).and_then(|(_, v)| v.as_f64()) {
-                                        pts.push((format!("{q} {src}{ch}"), v));
+                                    let Some((fd, v)) = fr.field(q) else {
+                                        continue;
+                                    };
+                                    // In mm (deg) once the stage is known: its own series.
+                                    match aptscope_dissector::apt::phys(fd, &v, scale) {
+                                        Some((x, unit)) => {
+                                            pts.push((format!("{q} {src}{ch} ({unit})"), x))
+                                        }
+                                        None => {
+                                            if let Some(x) = v.as_f64() {
+                                                pts.push((format!("{q} {src}{ch}"), x));
+                                            }
+                                        }
                                     }
                                 }
                             }
                         }
+                        let scale_id = match scale {
+                            Some(sc) => match self.scales.iter().position(|x| x == sc) {
+                                Some(i) => i as u32 + 1,
+                                None => {
+                                    self.scales.push(sc.clone());
+                                    self.scales.len() as u32
+                                }
+                            },
+                            None => 0,
+                        };
                         let x = self.x_of(ts, n);
                         for (k, v) in pts {
                             self.series.entry(k).or_default().push((x, v));
@@ -548,10 +607,11 @@ impl Indexer {
                             self.set(req, n as u32, 0);
                         }
                         let me = self.add(i, offset, &bytes, flags);
-                        if let Some(req) = p.pair {
-                            if let Some(r) = self.batch.last_mut() {
+                        if let Some(r) = self.batch.last_mut() {
+                            if let Some(req) = p.pair {
                                 r.pair = req as u32;
                             }
+                            r.module = scale_id;
                         }
                         let _ = me;
                     }
@@ -668,6 +728,10 @@ impl Indexer {
         ix.arena.append(&mut self.arena);
         self.modules_base += self.modules.len();
         ix.modules.append(&mut self.modules);
+        ix.scales
+            .extend(self.scales[self.scales_published..].iter().cloned());
+        self.scales_published = self.scales.len();
+        ix.units_notes.append(&mut self.units_notes);
         for (n, pair, flags) in self.patches.drain(..) {
             if let Some(r) = (n as usize).checked_sub(1).and_then(|i| ix.recs.get_mut(i)) {
                 if r.pair == 0 {

@@ -52,7 +52,18 @@ pub fn run_as(
     opts: OpenOptions,
     proto: Option<aptscope_dissector::detect::Proto>,
 ) -> io::Result<()> {
-    let shared = index::spawn_as(path, opts, proto)?;
+    run_with(path, opts, proto, Default::default())
+}
+
+/// [`run_as`], showing APT motion values also in physical units with the stage or scale of
+/// `units` (devices with a built-in stage convert without it).
+pub fn run_with(
+    path: &str,
+    opts: OpenOptions,
+    proto: Option<aptscope_dissector::detect::Proto>,
+    units: aptscope_dissector::units::UnitsOpts,
+) -> io::Result<()> {
+    let shared = index::spawn_with(path, opts, proto, units)?;
     let title = std::path::Path::new(path)
         .file_name()
         .map_or_else(|| path.to_string(), |n| n.to_string_lossy().into_owned());

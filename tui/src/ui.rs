@@ -425,6 +425,9 @@ fn draw_stats(f: &mut Frame<'_>, app: &mut App, area: Rect) {
         for (o, d) in &ix.file_diags {
             head.push_str(&format!("File problem @{o}: {d}\n"));
         }
+        for u in &ix.units_notes {
+            head.push_str(&format!("Physical {u}\n"));
+        }
         if let Some(e) = &ix.error {
             head.push_str(&format!("Error: {e}\n"));
         }

@@ -294,3 +294,96 @@ fn a_forced_protocol_is_used_without_detection() {
     assert_eq!(ix.proto, Some(Proto::Elliptec));
     assert!(ix.proto_certain);
 }
+
+/// With a stage, the viewer shows what `decode --stage` shows: rows and the detail tree give
+/// motion values raw and in mm, the NDJSON records (for filters) carry the same `phys`, and
+/// the position plot is in mm.
+#[test]
+fn a_stage_shows_motion_values_in_mm_everywhere() {
+    use aptscope_capture::model::Event;
+    use aptscope_dissector::pipeline::{Format, Pipeline};
+    use aptscope_dissector::units::UnitsOpts;
+    let path = sample("sessions/kdc101.pcapng");
+    let units = UnitsOpts::from_args(Some("MTS25-Z8"), None, None).expect("stage");
+    let shared = aptscope_tui::index::load_with(&path, OpenOptions::default(), units.clone())
+        .expect("opens");
+    let ix = shared.index.read().expect("lock");
+    // Record 6 is MOT_SET_VELPARAMS: 2.5 mm/s and 4 mm/s² on a Z8 stage.
+    let row = aptscope_tui::decode::row(&ix, 6).expect("row");
+    assert!(
+        row.fields.contains("max_vel=1932478 (2.50003 mm/s)"),
+        "{}",
+        row.fields
+    );
+    assert!(
+        row.fields.contains("acceleration=1055 (3.99857 mm/s2)"),
+        "{}",
+        row.fields
+    );
+    let tree = aptscope_tui::decode::tree(&ix, 6);
+    let texts: Vec<&str> = tree.iter().map(|n| n.text.as_str()).collect();
+    assert!(
+        texts
+            .iter()
+            .any(|t| t.starts_with("units: MTS25-Z8: 34554.96 counts/mm")),
+        "{texts:?}"
+    );
+    assert!(
+        texts.contains(&"max_vel = 1932478 (2.50003 mm/s)  [i32 @16]"),
+        "{texts:?}"
+    );
+    assert!(
+        ix.units_notes
+            .iter()
+            .any(|n| n.contains("(KDC101): MTS25-Z8")),
+        "{:?}",
+        ix.units_notes
+    );
+    assert!(
+        ix.series.contains_key("position usb ch1 (mm)"),
+        "{:?}",
+        ix.series.keys()
+    );
+    // The last position of the session: 1 mm (34555 counts).
+    let last = ix.series["position usb ch1 (mm)"]
+        .last()
+        .map_or(0.0, |p| p.1);
+    assert!((last - 1.0).abs() < 1e-4, "{last}");
+    // Without the stage: raw, honestly labelled.
+    let plain = load(&path, OpenOptions::default()).expect("opens");
+    let plain = plain.index.read().expect("lock");
+    let row = aptscope_tui::decode::row(&plain, 6).expect("row");
+    assert!(
+        row.fields.contains("max_vel=1932478 vel_units"),
+        "{}",
+        row.fields
+    );
+    assert!(plain.series.contains_key("position usb ch1"));
+    // The records equal the pipeline's with the same stage.
+    let (mut r, _) = aptscope_capture::open::open(&path, OpenOptions::default()).expect("opens");
+    let mut p = Pipeline::new(None, Format::Json);
+    p.set_units(units);
+    let mut out: Vec<serde_json::Value> = vec![];
+    let mut emit = |l: &str| -> Result<(), ()> {
+        out.push(serde_json::from_str(l).expect("json"));
+        Ok(())
+    };
+    while let Some(ev) = r.next_event() {
+        if let Event::Chunk(c) = ev {
+            p.push_chunk(c.ctx(), c.bytes, &mut emit).expect("push");
+        }
+    }
+    p.finish(&mut emit).expect("finish");
+    let mut buf = String::new();
+    let mut with_phys = 0;
+    for want in out.iter().filter(|v| v.get("n").is_some()) {
+        let n = want["n"].as_u64().expect("n");
+        let mut got = aptscope_tui::decode::json_of(&ix, n, &mut buf).expect("record");
+        if let Some(d) = got["diag"].as_array_mut() {
+            d.retain(|x| x["kind"] != "no_reply");
+        }
+        assert_eq!(&got, want, "#{n}");
+        with_phys += usize::from(got.get("phys").is_some());
+    }
+    assert!(with_phys > 30, "{with_phys}");
+}

@@ -42,6 +42,7 @@ use crate::pcap::{PcapNgOut, PcapOut};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::pipeline::{Ctx, Format as OutFormat, Pipeline};
 use aptscope_dissector::table::Dir;
+use aptscope_dissector::units::UnitsOpts;
 use nix::errno::Errno;
 use nix::fcntl::{fcntl, FcntlArg, OFlag};
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
@@ -218,6 +219,8 @@ pub struct TapOptions {
     pub signals: bool,
     /// Stops the tap from another thread.
     pub stop: StopHandle,
+    /// Stage or scale for the live timeline's APT motion values (physical units beside raw).
+    pub units: UnitsOpts,
 }
 
 impl TapOptions {
@@ -236,6 +239,7 @@ impl TapOptions {
             duration: None,
             signals: true,
             stop: StopHandle::new(),
+            units: UnitsOpts::default(),
         }
     }
 }
@@ -267,6 +271,8 @@ pub struct SniffOptions {
     pub signals: bool,
     /// Stops the sniff from another thread.
     pub stop: StopHandle,
+    /// Stage or scale for the live timeline's APT motion values (physical units beside raw).
+    pub units: UnitsOpts,
 }
 
 impl SniffOptions {
@@ -285,6 +291,7 @@ impl SniffOptions {
             duration: None,
             signals: true,
             stop: StopHandle::new(),
+            units: UnitsOpts::default(),
         }
     }
 }
@@ -1061,8 +1068,14 @@ impl Shared {
 }
 
 /// The live timeline: decodes what the display channel brings, writes lines to `out`.
-fn display_loop(rx: Receiver<Arc<Rec>>, proto: Proto, out: &mut dyn Write, sh: &Shared) {
+fn display_loop(
+    rx: Receiver<Arc<Rec>>,
+    (proto, units): (Proto, UnitsOpts),
+    out: &mut dyn Write,
+    sh: &Shared,
+) {
     let mut p = Pipeline::new(Some(proto), OutFormat::Text);
+    p.set_units(units);
     let mut broken = false;
     let mut reported = 0u64;
     let mut emit = |line: &str| -> io::Result<()> { writeln!(out, "{line}") };
@@ -1240,7 +1253,7 @@ fn run_recorded<'s, 'e: 's>(
     sh: &'e Shared,
     sink: Option<FileSink>,
     display: Option<DisplayTo>,
-    proto: Proto,
+    decode: (Proto, UnitsOpts),
     body: impl FnOnce() -> io::Result<()>,
 ) -> io::Result<TapStats> {
     let clock = sh.clock;
@@ -1249,7 +1262,7 @@ fn run_recorded<'s, 'e: 's>(
         _ => None,
     };
     let disp =
-        display.map(|(rx, mut out)| scope.spawn(move || display_loop(rx, proto, &mut *out, sh)));
+        display.map(|(rx, mut out)| scope.spawn(move || display_loop(rx, decode, &mut *out, sh)));
     let r = body();
     if let Some(q) = &sh.file {
         q.close();
@@ -1386,63 +1399,75 @@ impl Tap {
         let mut host_r = host.master.try_clone()?;
         let mut host_w = host.master.try_clone()?;
         let stats = thread::scope(|scope| {
-            run_recorded(scope, sh, sink, disp, opts.proto, || loop {
-                let (mut dev_r, mut dev_w) = match device.take() {
-                    Some(d) => d,
-                    None => match wait_for_device(
-                        &opts.device,
-                        &settings,
-                        &mut host_r,
-                        sh,
-                        signals.as_ref(),
-                        deadline,
-                    ) {
+            run_recorded(
+                scope,
+                sh,
+                sink,
+                disp,
+                (opts.proto, opts.units.clone()),
+                || loop {
+                    let (mut dev_r, mut dev_w) = match device.take() {
                         Some(d) => d,
-                        None => return Ok(()),
-                    },
-                };
-                let end = AtomicBool::new(false);
-                let (h2d, d2h) = thread::scope(|s| {
-                    let (sh, end) = (&sh, &end);
-                    let finish = move |r: FwdEnd| {
-                        end.store(true, Ordering::SeqCst);
-                        sh.stop.wake();
-                        r
+                        None => match wait_for_device(
+                            &opts.device,
+                            &settings,
+                            &mut host_r,
+                            sh,
+                            signals.as_ref(),
+                            deadline,
+                        ) {
+                            Some(d) => d,
+                            None => return Ok(()),
+                        },
                     };
-                    let (host_r, host_w) = (&mut host_r, &mut host_w);
-                    let (dev_r, dev_w): (&mut dyn Port, &mut dyn Port) = (&mut *dev_r, &mut *dev_w);
-                    let h = s.spawn(move || {
-                        let to = Some(dev_w);
-                        finish(forward(host_r, to, Direction::HostToDevice, sh, end))
+                    let end = AtomicBool::new(false);
+                    let (h2d, d2h) = thread::scope(|s| {
+                        let (sh, end) = (&sh, &end);
+                        let finish = move |r: FwdEnd| {
+                            end.store(true, Ordering::SeqCst);
+                            sh.stop.wake();
+                            r
+                        };
+                        let (host_r, host_w) = (&mut host_r, &mut host_w);
+                        let (dev_r, dev_w): (&mut dyn Port, &mut dyn Port) =
+                            (&mut *dev_r, &mut *dev_w);
+                        let h = s.spawn(move || {
+                            let to = Some(dev_w);
+                            finish(forward(host_r, to, Direction::HostToDevice, sh, end))
+                        });
+                        let d = s.spawn(move || {
+                            let to: Option<&mut dyn Port> = Some(host_w);
+                            finish(forward(dev_r, to, Direction::DeviceToHost, sh, end))
+                        });
+                        supervise(sh, signals.as_ref(), deadline, end);
+                        end.store(true, Ordering::SeqCst);
+                        (
+                            h.join().unwrap_or(FwdEnd::Stopped),
+                            d.join().unwrap_or(FwdEnd::Stopped),
+                        )
                     });
-                    let d = s.spawn(move || {
-                        let to: Option<&mut dyn Port> = Some(host_w);
-                        finish(forward(dev_r, to, Direction::DeviceToHost, sh, end))
-                    });
-                    supervise(sh, signals.as_ref(), deadline, end);
-                    end.store(true, Ordering::SeqCst);
-                    (
-                        h.join().unwrap_or(FwdEnd::Stopped),
-                        d.join().unwrap_or(FwdEnd::Stopped),
-                    )
-                });
-                let (dev_gone, host_gone) = match (h2d, d2h) {
-                    (FwdEnd::SrcGone(t, e), _) | (_, FwdEnd::DstGone(t, e)) => (None, Some((t, e))),
-                    (FwdEnd::DstGone(t, e), _) | (_, FwdEnd::SrcGone(t, e)) => (Some((t, e)), None),
-                    (FwdEnd::Stopped, FwdEnd::Stopped) => (None, None),
-                };
-                if let Some((_, e)) = host_gone {
-                    return Err(io::Error::new(e.kind(), format!("host side: {e}")));
-                }
-                if let Some((t, e)) = dev_gone {
-                    sh.disconnect(t, &opts.device, &e);
-                    if opts.reconnect && !sh.stop.is_stopped() {
-                        eprintln!("aptscope tap: waiting for {} to come back", opts.device);
-                        continue;
+                    let (dev_gone, host_gone) = match (h2d, d2h) {
+                        (FwdEnd::SrcGone(t, e), _) | (_, FwdEnd::DstGone(t, e)) => {
+                            (None, Some((t, e)))
+                        }
+                        (FwdEnd::DstGone(t, e), _) | (_, FwdEnd::SrcGone(t, e)) => {
+                            (Some((t, e)), None)
+                        }
+                        (FwdEnd::Stopped, FwdEnd::Stopped) => (None, None),
+                    };
+                    if let Some((_, e)) = host_gone {
+                        return Err(io::Error::new(e.kind(), format!("host side: {e}")));
                     }
-                }
-                return Ok(());
-            })
+                    if let Some((t, e)) = dev_gone {
+                        sh.disconnect(t, &opts.device, &e);
+                        if opts.reconnect && !sh.stop.is_stopped() {
+                            eprintln!("aptscope tap: waiting for {} to come back", opts.device);
+                            continue;
+                        }
+                    }
+                    return Ok(());
+                },
+            )
         })?;
         drop(signals);
         drop(host);
@@ -1577,21 +1602,30 @@ impl Sniff {
         let deadline = opts.duration.map(|d| Instant::now() + d);
         let never = AtomicBool::new(false);
         let stats = thread::scope(|scope| {
-            run_recorded(scope, sh, sink, disp, opts.proto, || {
-                thread::scope(|s| {
-                    let dirs = [Direction::HostToDevice, Direction::DeviceToHost];
-                    let paths = [&opts.host_tx, &opts.device_tx];
-                    for ((port, dir), path) in ports.into_iter().zip(dirs).zip(paths) {
-                        let (sh, never, settings) = (&sh, &never, &settings);
-                        let reconnect = opts.reconnect;
-                        s.spawn(move || receive(path, port, dir, settings, reconnect, sh, never));
-                    }
-                    supervise(sh, signals.as_ref(), deadline, &never);
-                    // The receivers see the stop within a tick.
-                    sh.stop.stop();
-                });
-                Ok(())
-            })
+            run_recorded(
+                scope,
+                sh,
+                sink,
+                disp,
+                (opts.proto, opts.units.clone()),
+                || {
+                    thread::scope(|s| {
+                        let dirs = [Direction::HostToDevice, Direction::DeviceToHost];
+                        let paths = [&opts.host_tx, &opts.device_tx];
+                        for ((port, dir), path) in ports.into_iter().zip(dirs).zip(paths) {
+                            let (sh, never, settings) = (&sh, &never, &settings);
+                            let reconnect = opts.reconnect;
+                            s.spawn(move || {
+                                receive(path, port, dir, settings, reconnect, sh, never)
+                            });
+                        }
+                        supervise(sh, signals.as_ref(), deadline, &never);
+                        // The receivers see the stop within a tick.
+                        sh.stop.stop();
+                    });
+                    Ok(())
+                },
+            )
         })?;
         drop(signals);
         eprintln!("{}", stats.summary("aptscope sniff"));

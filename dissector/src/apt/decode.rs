@@ -361,7 +361,25 @@ impl<'a, 't> AptFrame<'a, 't> {
 
 /// How a field's value reads for people: enum label, flag names, scaled value with unit.
 pub fn fmt_value(table: &Table, f: &Field, v: &Value<'_>, out: &mut String) {
+    fmt_value_in(table, f, v, None, out)
+}
+
+/// [`fmt_value`] with the stage's conversion: a motion value (`q=`) reads raw then physical,
+/// `1932478 (2.5 mm/s)`; without a conversion it reads raw with its raw unit
+/// (`1932478 vel_units`).
+pub fn fmt_value_in(
+    table: &Table,
+    f: &Field,
+    v: &Value<'_>,
+    scale: Option<&crate::units::Scale>,
+    out: &mut String,
+) {
     use std::fmt::Write;
+    if let Some(p) = phys(f, v, scale) {
+        fmt_scalar(v, out);
+        let _ = write!(out, " ({} {})", round_sig(p.0), p.1);
+        return;
+    }
     match v {
         Value::Str(b) => {
             let _ = write!(out, "{:?}", text_of(b));
@@ -452,8 +470,27 @@ pub fn round_sig(x: f64) -> f64 {
     (x * p).round() / p
 }
 
+/// A motion field's value in physical units, with the unit, when `scale` converts it.
+pub fn phys<'s>(
+    f: &Field,
+    v: &Value<'_>,
+    scale: Option<&'s crate::units::Scale>,
+) -> Option<(f64, &'s str)> {
+    scale?.convert(f.q?, v.as_f64()?)
+}
+
 /// A one-line summary of the key fields (`name=value unit`, comma separated), for timelines.
 pub fn summary(frame: &AptFrame<'_, '_>, max_fields: usize, out: &mut String) {
+    summary_in(frame, max_fields, None, out)
+}
+
+/// [`summary`] with motion values also in physical units (see [`fmt_value_in`]).
+pub fn summary_in(
+    frame: &AptFrame<'_, '_>,
+    max_fields: usize,
+    scale: Option<&crate::units::Scale>,
+    out: &mut String,
+) {
     let mut n = 0;
     for (f, v) in frame.fields() {
         if AptFrame::is_key_field(f) {
@@ -468,7 +505,7 @@ pub fn summary(frame: &AptFrame<'_, '_>, max_fields: usize, out: &mut String) {
         }
         out.push_str(f.name);
         out.push('=');
-        fmt_value(frame.table(), f, &v, out);
+        fmt_value_in(frame.table(), f, &v, scale, out);
         n += 1;
     }
 }

@@ -5,7 +5,10 @@ mod encode;
 mod frame;
 mod header;
 
-pub use decode::{fmt_value, read_prim, round_sig, summary, text_of, AptFrame, Value};
+pub use decode::{
+    fmt_value, fmt_value_in, phys, read_prim, round_sig, summary, summary_in, text_of, AptFrame,
+    Value,
+};
 pub use encode::{encode, encode_named, encode_named_report, EncodeError, FieldValue, Named};
 pub use frame::{AptFramer, GarbageKind, Item, MAX_GARBAGE_RUN};
 pub use header::{emit_header, Addr, AddrName, Header, DATA_FLAG, HEADER_LEN, MAX_DATA_LEN};

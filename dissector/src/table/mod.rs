@@ -273,3 +273,47 @@ impl Table {
         out
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn one_field(field: &'static str) -> Result<Table, Vec<String>> {
+        let text: &'static str = Box::leak(
+            format!("msg 0x0413 MOT_SET_VELPARAMS h2d\n  form 4\n    {field}\n").into_boxed_str(),
+        );
+        Table::from_sources(&[("t.apt", text)])
+    }
+
+    /// `q=` marks a motion value and must come with the raw unit that names it honestly.
+    #[test]
+    fn motion_quantities_need_their_honest_raw_unit() {
+        let t = one_field("i32 max_vel unit=vel_units q=vel").expect("valid");
+        let f = &t.msgs()[0].forms[0].fields[0];
+        assert_eq!((f.q, f.unit), (Some(Quantity::Vel), Some("vel_units")));
+        let t = one_field("i32 vel1 unit=counts/s q=pos/s").expect("valid");
+        assert_eq!(t.msgs()[0].forms[0].fields[0].q, Some(Quantity::PosPerSec));
+        for (field, says) in [
+            ("i32 acceleration unit=counts/s2", "acc_units q=acc"),
+            ("i32 max_vel unit=counts/s", "needs its `q=`"),
+            ("i32 max_vel unit=vel_units", "needs its `q=`"),
+            (
+                "i32 max_vel unit=counts/s q=vel",
+                "`q=vel` needs `unit=vel_units`",
+            ),
+            ("i32 max_vel q=vel", "`q=vel` needs `unit=vel_units`"),
+            ("i32 max_vel unit=vel_units q=speed", "bad `q=speed`"),
+            (
+                "i32 position unit=counts q=pos scale=2",
+                "converts per stage",
+            ),
+            ("bytes[4] position unit=counts q=pos", "not one number"),
+            ("i32[2] position unit=counts q=pos", "not one number"),
+        ] {
+            let e = one_field(field).expect_err(field).join("\n");
+            assert!(e.contains(says), "{field}: {e}");
+        }
+        // Positions without `q=` (encoder readbacks) stay plain counts.
+        assert!(one_field("i32 encoder_count unit=counts").is_ok());
+    }
+}

@@ -178,6 +178,64 @@ pub struct Field {
     pub enumeration: Option<usize>,
     /// Index into [`TableData::flags`].
     pub flags: Option<usize>,
+    /// The motion quantity the raw value is (`q=`): converted to mm or degrees once the stage
+    /// is known (spec section 8).
+    pub q: Option<Quantity>,
+}
+
+/// What a motion field's raw value is, in the controller's own units (`q=` in the table).
+///
+/// How raw values relate to physical ones depends on the controller family and the stage
+/// (spec section 8, "Conversion between position, velocity and acceleration values"): see
+/// `crate::units`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Quantity {
+    /// A position or distance: encoder counts (servo) or microsteps (stepper).
+    Pos,
+    /// A speed stated in position units per second (the spec's worked example for the pot
+    /// parameters gives 3430 counts/s = 0.1 mm/s).
+    PosPerSec,
+    /// A velocity parameter in the controller's velocity units (section 8: VELAPT).
+    Vel,
+    /// An acceleration parameter in the controller's acceleration units (section 8: ACCAPT).
+    Acc,
+    /// A jerk parameter in the controller's jerk units (MOT_SET_PMDPROFILEMODEPARAMS).
+    Jerk,
+}
+
+impl Quantity {
+    /// Every quantity.
+    pub const ALL: [Quantity; 5] = [
+        Quantity::Pos,
+        Quantity::PosPerSec,
+        Quantity::Vel,
+        Quantity::Acc,
+        Quantity::Jerk,
+    ];
+    /// The name used by `q=` in the table (`pos`, `pos/s`, `vel`, `acc`, `jerk`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Quantity::Pos => "pos",
+            Quantity::PosPerSec => "pos/s",
+            Quantity::Vel => "vel",
+            Quantity::Acc => "acc",
+            Quantity::Jerk => "jerk",
+        }
+    }
+    /// The `unit=` a field with this quantity carries: what the raw value honestly is.
+    pub fn raw_unit(self) -> &'static str {
+        match self {
+            Quantity::Pos => "counts",
+            Quantity::PosPerSec => "counts/s",
+            Quantity::Vel => "vel_units",
+            Quantity::Acc => "acc_units",
+            Quantity::Jerk => "jerk_units",
+        }
+    }
+    /// Parse a `q=` value.
+    pub fn parse(s: &str) -> Option<Quantity> {
+        Quantity::ALL.into_iter().find(|q| q.as_str() == s)
+    }
 }
 
 /// Which bytes a form covers.

@@ -472,6 +472,7 @@ impl Parser {
             scale: None,
             enumeration: None,
             flags: None,
+            q: None,
         };
         let mut pending = vec![];
         for a in attrs {
@@ -483,8 +484,19 @@ impl Parser {
                 },
                 Some(("enum", e)) => pending.push((true, e)),
                 Some(("flags", e)) => pending.push((false, e)),
+                Some(("q", q)) => match Quantity::parse(q) {
+                    Some(q) => f.q = Some(q),
+                    None => self.err(
+                        file,
+                        ln,
+                        format!("bad `q={q}` (pos, pos/s, vel, acc or jerk)"),
+                    ),
+                },
                 _ => self.err(file, ln, format!("unknown field attribute `{a}`")),
             }
+        }
+        if let Some(e) = quantity_error(&f) {
+            self.err(file, ln, e);
         }
         if matches!(ty, Ty::Str(_) | Ty::Bytes(_) | Ty::Pad(_))
             && (!pending.is_empty() || f.scale.is_some())
@@ -729,5 +741,38 @@ fn check_forms(at: &str, forms: &[Form], errs: &mut Vec<String>) {
                 ));
             }
         }
+    }
+}
+
+/// Why a field's `unit=`/`q=` pair is wrong, if it is. APT velocities and accelerations are
+/// not counts/s or counts/s² (spec section 8): they carry `q=` and an honest raw unit, and a
+/// motion quantity is never a fixed `scale=` (the scaling depends on the controller and stage).
+fn quantity_error(f: &Field) -> Option<String> {
+    let raw_units = Quantity::ALL.map(|q| q.raw_unit());
+    match (f.q, f.unit) {
+        (Some(q), u) if u != Some(q.raw_unit()) => Some(format!(
+            "`q={}` needs `unit={}` (the raw value's unit)",
+            q.as_str(),
+            q.raw_unit()
+        )),
+        (Some(q), _) if f.scale.is_some() || f.enumeration.is_some() || f.flags.is_some() => {
+            Some(format!(
+                "`q={}` and scale/enum/flags: a motion value converts per stage (section 8)",
+                q.as_str()
+            ))
+        }
+        (Some(q), _) if !matches!(f.ty, Ty::Prim(_)) => Some(format!(
+            "`q={}` on a field that is not one number",
+            q.as_str()
+        )),
+        (None, Some("counts/s2")) => Some(
+            "`unit=counts/s2`: APT accelerations are not counts/s\u{b2} (spec section 8); \
+             write `unit=acc_units q=acc`"
+                .into(),
+        ),
+        (None, Some(u)) if u != "counts" && raw_units.contains(&u) => Some(format!(
+            "`unit={u}` needs its `q=` (velocities are `unit=vel_units q=vel`, spec section 8)"
+        )),
+        _ => None,
     }
 }
