@@ -376,6 +376,9 @@ enum Cmd {
         /// A message name or id, or a sub-message name (`SETPOINT`, `la:SETPOINT`): show its
         /// fields, forms, revisions, devices, replies and the spec's examples.
         query: Option<String>,
+        /// Protocol: apt (default) or elliptec.
+        #[arg(long, value_enum, default_value_t = ProtoArg::Apt)]
+        proto: ProtoArg,
         /// NDJSON, one object per message and sub-message, with every field.
         #[arg(long)]
         json: bool,
@@ -383,11 +386,15 @@ enum Cmd {
         #[arg(short, long)]
         verbose: bool,
     },
-    /// Build a frame from field values and print it as hex.
+    /// Build a frame from field values and print it as hex (Elliptec: as text).
     Encode {
-        /// Message name (`MOT_MOVE_ABSOLUTE`, `MGMSG_` prefix optional).
+        /// Protocol: apt (default) or elliptec (`encode --proto elliptec ADDR CMD field=value…`).
+        #[arg(long, value_enum, default_value_t = ProtoArg::Apt)]
+        proto: ProtoArg,
+        /// Message name (`MOT_MOVE_ABSOLUTE`, `MGMSG_` prefix optional); Elliptec: the address.
         name: String,
-        /// Field values: `name=value` (numbers, `0x` hex, enum labels, flags `A|B`).
+        /// Field values: `name=value` (numbers, `0x` hex, enum labels, flags `A|B`); Elliptec:
+        /// the command (`ma`) first.
         values: Vec<String>,
         /// Destination: host, rack, usb, bay0…bay9 or a byte value.
         #[arg(long)]
@@ -583,12 +590,40 @@ fn main() -> ExitCode {
         } => open_opts(format.as_deref(), false, usb_device.as_deref())
             .and_then(|o| convert(&input, &output, o, to.as_deref(), force)),
         Cmd::Messages {
+            proto: ProtoArg::Elliptec,
+            json,
+            verbose,
+            query,
+        } => match query {
+            None => ell_messages(json, verbose),
+            Some(_) => Err(bad(
+                "messages NAME looks up APT messages; `messages --proto elliptec -v` lists every \
+                 Elliptec command with its fields"
+                    .into(),
+            )),
+        },
+        Cmd::Messages {
             query,
             json,
             verbose,
+            ..
         } => match query {
             Some(q) => message_page(&q, json),
             None => messages(json, verbose),
+        },
+        Cmd::Encode {
+            proto: ProtoArg::Elliptec,
+            name,
+            values,
+            dest,
+            source,
+            form,
+            sub,
+        } => match (dest, source, form, sub) {
+            (None, None, None, None) => ell_encode(&name, &values),
+            _ => Err(bad(
+                "--dest, --source, --form and --sub are APT options".into()
+            )),
         },
         Cmd::Encode {
             name,
@@ -597,6 +632,7 @@ fn main() -> ExitCode {
             source,
             form,
             sub,
+            ..
         } => encode_cmd(
             &name,
             &values,
@@ -923,6 +959,33 @@ fn messages(as_json: bool, verbose: bool) -> io::Result<()> {
         )?;
     }
     out.flush()
+}
+
+/// `messages --proto elliptec`: the listing lives in the dissector.
+fn ell_messages(as_json: bool, verbose: bool) -> io::Result<()> {
+    let mut out = BufWriter::new(io::stdout().lock());
+    if as_json {
+        for l in aptscope_dissector::ell::listing::json_lines() {
+            writeln!(out, "{l}")?;
+        }
+    } else {
+        out.write_all(aptscope_dissector::ell::listing::text(verbose).as_bytes())?;
+    }
+    out.flush()
+}
+
+/// `encode --proto elliptec ADDR CMD field=value…`: the frame as text (escaped CR LF for
+/// replies), or as hex when it holds binary data (`C1`/`C2`).
+fn ell_encode(addr: &str, args: &[String]) -> io::Result<()> {
+    use aptscope_dissector::ell::encode;
+    let (cmd, values) = args
+        .split_first()
+        .ok_or_else(|| bad("usage: encode --proto elliptec ADDR CMD [field=value …]".into()))?;
+    let bytes = encode::assignments(values)
+        .and_then(|v| encode::encode(addr, cmd, &v))
+        .map_err(|e| bad(e.to_string()))?;
+    println!("{}", encode::display(&bytes));
+    Ok(())
 }
 
 /// A progress line on stderr for long jobs, only when stderr is a terminal.

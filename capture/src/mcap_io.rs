@@ -1441,7 +1441,7 @@ pub fn ell_schema(cmd: Option<&Cmd>) -> String {
     .prop("cmd", "string", Some("the two-letter mnemonic"))
     .prop("name", "string", Some("the command's name"));
     let mut fo = SchemaObj::new(None, Some("typed field values"));
-    let mut po = SchemaObj::new(None, Some("positions in mm or deg"));
+    let mut po = SchemaObj::new(None, Some("positions in mm, deg or slots"));
     let mut any_phys = false;
     for f in cmd.map_or(&[][..], |c| c.fields) {
         fo.raw(f.name, &ell_field_schema(f.kind));
@@ -1452,10 +1452,21 @@ pub fn ell_schema(cmd: Option<&Cmd>) -> String {
             );
             fo.prop("hw_release", "integer", Some("hardware release"));
         }
+        if f.kind == Kind::Raw {
+            let mut p = SchemaObj::new(None, None);
+            p.prop("period", "integer", Some("drive period"))
+                .prop("current", "integer", Some("1866 per ampere"))
+                .prop("hz", "number", Some("14740000 / period"))
+                .prop("amps", "number", None);
+            fo.raw(
+                "curve_points",
+                &array_of(&p.build(), Some("the current curve, point by point")),
+            );
+        }
         if f.kind == Kind::Position {
             let mut v = SchemaObj::new(None, None);
             v.prop("value", "number", None)
-                .prop("unit", "string", Some("mm or deg"));
+                .prop("unit", "string", Some("mm, deg or slot"));
             po.raw(f.name, &v.build());
             any_phys = true;
         }

@@ -88,6 +88,12 @@ pub enum DiagKind {
         /// Characters present.
         got: u32,
     },
+    /// Elliptec: a command sent without its data (`0ma` then CR LF, `0ho` without the
+    /// direction digit); the offset is where the data belongs.
+    MissingData {
+        /// Characters the command has.
+        expected: u32,
+    },
     /// Elliptec: a module reply without its CR LF terminator.
     MissingTerminator,
     /// Elliptec: spaces or commas between address, command and data.
@@ -139,6 +145,7 @@ impl DiagKind {
             DiagKind::UnknownCommand => "unknown_command",
             DiagKind::BadDataChar { .. } => "bad_data_char",
             DiagKind::DataLength { .. } => "data_length",
+            DiagKind::MissingData { .. } => "missing_data",
             DiagKind::MissingTerminator => "missing_terminator",
             DiagKind::Separators => "separators",
             DiagKind::LetterO => "letter_o",
@@ -205,6 +212,12 @@ impl fmt::Display for DiagKind {
             DiagKind::BadDataChar { ch } => write!(f, "{ch:?} is not a valid data character"),
             DiagKind::DataLength { expected, got } => {
                 write!(f, "{got} data characters, the command has {expected}")
+            }
+            DiagKind::MissingData { expected } => {
+                write!(
+                    f,
+                    "data missing: the command takes {expected} data character(s)"
+                )
             }
             DiagKind::MissingTerminator => write!(f, "reply not terminated by CR LF"),
             DiagKind::Separators => write!(f, "spaces or commas inside the frame (ignored)"),

@@ -551,6 +551,25 @@ pub fn ell_frame(
             (_, EllValue::Digits(d)) => string(out, d),
             (_, EllValue::Raw(b)) => hex(out, b),
         }
+        // The binary current curve, point by point.
+        if let (Kind::Raw, EllValue::Raw(b)) = (fd.kind, v) {
+            out.push_str(",\"curve_points\":[");
+            for (i, p) in crate::ell::curve_points(b).enumerate() {
+                if i > 0 {
+                    out.push(',');
+                }
+                let _ = write!(
+                    out,
+                    "{{\"period\":{},\"current\":{},\"hz\":",
+                    p.period, p.current
+                );
+                float(out, p.hz().round());
+                out.push_str(",\"amps\":");
+                float(out, crate::apt::round_sig(p.amps()));
+                out.push('}');
+            }
+            out.push(']');
+        }
         // The manual packs two facts into this byte: give each its own key too.
         if let (Kind::ThreadHw, EllValue::U(x)) = (fd.kind, v) {
             let thread = if x & 0x80 != 0 { "imperial" } else { "metric" };

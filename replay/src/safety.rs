@@ -21,11 +21,16 @@ pub fn apt_starts_move(name: &str) -> bool {
 }
 
 /// Whether a host message makes hardware move or changes an output (asked for confirmation
-/// before a real port): APT messages of `class=motion` in the table and those that start a
-/// move; Elliptec moves, homing, jogs and optimisation.
+/// before a real port): APT messages of `class=motion` (or `stop`) in the table and those that
+/// start a move; Elliptec commands whose class in the command table may move the stage
+/// (motions, frequency searches and current-curve scans, energising a motor).
 pub fn is_motion(m: &Msg) -> bool {
     let n = m.name.as_str();
     if m.rec.get("proto").and_then(Value::as_str) == Some("ell") {
+        if let Some(c) = aptscope_dissector::ell::table::by_name(n) {
+            return c.class.moves();
+        }
+        // Not in the manual: judge by the name.
         return n.contains("MOVE")
             || n.contains("HOME")
             || n.contains("FORWARD")

@@ -2,7 +2,7 @@
 //! `IN` replies) across address changes (`ca`, `ga`), and pairs each host command with its reply.
 
 use super::decode::{EllFrame, EllValue};
-use super::table::{model, Cmd};
+use super::table::{model, Answer, Class, Cmd};
 use crate::table::Dir;
 use std::collections::VecDeque;
 
@@ -23,15 +23,35 @@ pub struct Module {
 
 impl Module {
     /// Pulses per physical unit and the unit, when known: pulses per mm for linear stages, per
-    /// degree for rotary ones (their `IN` gives pulses per revolution: the manual's ELL4/ELL8 row).
+    /// degree for rotary ones (their `IN` gives pulses per revolution: the manual's ELL4/ELL8
+    /// row), per slot for indexed sliders and wheels (ELL6, ELL9, ELL12: position = slot ×
+    /// pulses per position, slot 0 first).
+    ///
+    /// The manual's ELL6 example (p.9) gives 1 "pulse per position" with a travel of 0x1F,
+    /// while its `ga` example (p.43) shows a slider's forward position as 0x1F: when `IN` says
+    /// 0 or 1 pulses, the travel is the spacing.
     pub fn scale(&self) -> Option<(f64, &'static str)> {
         let m = model(self.model?)?;
         let p = self.pulses? as f64;
         match m.unit {
             "deg" => Some((p / 360.0, "deg")),
             "mm" => Some((p, "mm")),
+            "slot" if p > 1.0 => Some((p, "slot")),
+            "slot" => Some((self.travel? as f64, "slot")).filter(|(t, _)| *t > 0.0),
             _ => None,
         }
+    }
+
+    /// The slot of an indexed slider at `position` pulses, when it sits on one (within a tenth
+    /// of the spacing) and the slider has it.
+    pub fn slot(&self, position: i64) -> Option<u8> {
+        let slots = model(self.model?)?.slots;
+        let (ppp, "slot") = self.scale()? else {
+            return None;
+        };
+        let x = position as f64 / ppp;
+        let r = x.round();
+        ((x - r).abs() <= 0.1 && r >= 0.0 && r < slots as f64).then_some(r as u8)
     }
 }
 
@@ -40,7 +60,16 @@ impl Module {
 struct Pending {
     n: u64,
     offset: u64,
+    /// Address the (first) reply comes from.
     reply_addr: u8,
+    /// Addresses replies may come from: the reply address, and a group's members' own.
+    from: u16,
+    /// Final replies expected (one per module of a group).
+    expect: u8,
+    /// Final replies seen.
+    got: u8,
+    /// The module the command addressed (its address once the command took effect).
+    target: u8,
     cmd: &'static Cmd,
     ts: Option<u64>,
 }
@@ -83,23 +112,18 @@ impl From<&Pending> for Expired {
     }
 }
 
-/// Default reply timeout: the manual gives modules a 2 s timeout; motion and scans reply when
-/// done (the current-curve scan takes about 12 s).
+/// Default reply timeout of a command: its row of the table (the manual's 2 s; motions 10 s;
+/// the frequency search and current-curve scans 30 s).
 pub fn timeout_ns(cmd: &Cmd) -> u64 {
-    const S: u64 = 1_000_000_000;
-    match cmd.code {
-        "c1" | "c2" | "s1" | "s2" => 30 * S,
-        _ if cmd.is_move() => 10 * S,
-        _ => 2 * S,
-    }
+    cmd.timeout_ns()
 }
 
 /// Bus state and pairing.
 #[derive(Debug, Default)]
 pub struct Bus {
     modules: [Option<Module>; 16],
-    /// `ga`: address Y temporarily answered by the module at X.
-    alias: [Option<u8>; 16],
+    /// `ga`: bit X of `groups[Y]` is set while the module at X also answers at Y.
+    groups: [u16; 16],
     pending: VecDeque<Pending>,
     /// Overrides the per-command default reply timeout.
     pub timeout_ns: Option<u64>,
@@ -107,6 +131,10 @@ pub struct Bus {
 
 /// Bound on commands waiting for replies (a host that never gets answers must not grow memory).
 const MAX_PENDING: usize = 256;
+
+fn bit(addr: u8) -> u16 {
+    1 << (addr & 15)
+}
 
 impl Bus {
     /// An empty bus.
@@ -127,12 +155,24 @@ impl Bus {
         })
     }
 
+    /// A module of the group at `addr` (the lowest address), when the address has one.
+    fn member(&self, addr: u8) -> Option<&Module> {
+        let g = self.groups[addr as usize & 15];
+        (0..16u8)
+            .filter(|a| g & bit(*a) != 0)
+            .find_map(|a| self.module(a))
+    }
+
+    /// Drop commands whose timeout passed; those that got no reply at all are reported (a group
+    /// command already answered by one module is not).
     fn expire(&mut self, now: Option<u64>, out: &mut Vec<Expired>) {
         let Some(now) = now else { return };
         let fixed = self.timeout_ns;
         self.pending.retain(|p| match p.ts {
-            Some(t) if now > t.saturating_add(fixed.unwrap_or_else(|| timeout_ns(p.cmd))) => {
-                out.push(p.into());
+            Some(t) if now > t.saturating_add(fixed.unwrap_or_else(|| p.cmd.timeout_ns())) => {
+                if p.got == 0 {
+                    out.push(p.into());
+                }
                 false
             }
             _ => true,
@@ -143,42 +183,12 @@ impl Bus {
     pub fn observe(&mut self, n: u64, f: &EllFrame<'_>, ts: Option<u64>) -> Observation {
         let mut o = Observation::default();
         self.expire(ts, &mut o.expired);
-        let addr = f.addr;
+        let addr = f.addr & 15;
         let Some(cmd) = f.cmd else {
             return o;
         };
         if f.dir() == Dir::HostToDevice {
-            let mut reply_addr = addr;
-            if let Some(EllValue::Char(c)) = f.field("new_address") {
-                let new = c.to_digit(16).unwrap_or(0) as u8;
-                reply_addr = new;
-                match cmd.code {
-                    "ca" => {
-                        let m = self.modules[addr as usize & 15].take();
-                        self.modules[new as usize & 15] = m;
-                    }
-                    _ => self.alias[new as usize & 15] = Some(addr),
-                }
-            }
-            // The addressed module; after `ca` it already sits at its new address.
-            o.module = self
-                .module(addr)
-                .or_else(|| self.module(reply_addr))
-                .cloned();
-            if !cmd.replies.is_empty() {
-                if self.pending.len() == MAX_PENDING {
-                    if let Some(p) = self.pending.pop_front() {
-                        o.expired.push((&p).into());
-                    }
-                }
-                self.pending.push_back(Pending {
-                    n,
-                    offset: f.offset,
-                    reply_addr,
-                    cmd,
-                    ts,
-                });
-            }
+            self.command(n, f, cmd, ts, &mut o);
             return o;
         }
         // A module reply.
@@ -194,38 +204,129 @@ impl Bus {
                 }
             }
         }
-        let owner = self.alias[addr as usize & 15].unwrap_or(addr);
-        o.module = self.module(owner).or_else(|| self.module(addr)).cloned();
         let code = f.code_str();
-        let found = self
-            .pending
-            .iter()
-            .position(|p| p.reply_addr == addr && p.cmd.replies.contains(&code));
-        match found {
-            Some(i) => {
-                let p = &self.pending[i];
-                o.pair = Some(p.n);
-                o.latency_ns = match (p.ts, ts) {
-                    (Some(a), Some(b)) => Some(b.saturating_sub(a)),
-                    _ => None,
-                };
-                let busy = code == "GS" && matches!(f.field("status"), Some(EllValue::U(9)));
-                o.interim = p.cmd.is_move() && busy;
-                if !o.interim {
-                    // A group (`ga`) lasts for one operation: until a motion completes.
-                    if p.cmd.is_move() {
-                        self.alias[addr as usize & 15] = None;
-                    }
-                    self.pending.remove(i);
-                }
-            }
-            None => o.unsolicited = !matches!(code, "BS" | "BO"),
+        let status = f.field("status").and_then(|v| v.as_i64()).map(|s| s as u64);
+        // The oldest command still waiting for its first reply; else a group command that has
+        // more modules to hear from.
+        let pick = |first: bool| {
+            self.pending.iter().position(|p| {
+                (p.got == 0) == first
+                    && p.from & bit(addr) != 0
+                    && p.cmd.answer(code, status) != Answer::No
+            })
+        };
+        let found = pick(true).or_else(|| pick(false));
+        let owner = match found.map(|i| &self.pending[i]) {
+            // The `ca`/`ga` reply comes from the new address, for the module addressed.
+            Some(p) if matches!(p.cmd.class, Class::Address | Class::Group) => p.target,
+            _ => addr,
+        };
+        o.module = self.module(owner).or_else(|| self.member(addr)).cloned();
+        let Some(i) = found else {
+            o.unsolicited = cmd.class != Class::Spontaneous;
+            return o;
+        };
+        let p = &mut self.pending[i];
+        o.pair = Some(p.n);
+        o.latency_ns = match (p.ts, ts) {
+            (Some(a), Some(b)) => Some(b.saturating_sub(a)),
+            _ => None,
+        };
+        if p.cmd.answer(code, status) == Answer::Interim {
+            o.interim = true;
+            return o;
+        }
+        p.got = p.got.saturating_add(1);
+        let (done, ends_group, group_addr) = (
+            p.got >= p.expect,
+            p.cmd.class == Class::Motion,
+            p.reply_addr,
+        );
+        // A group (`ga`) lasts for one operation: until a motion completes.
+        if ends_group {
+            self.groups[group_addr as usize] = 0;
+        }
+        if done {
+            self.pending.remove(i);
         }
         o
     }
 
-    /// End of stream: every command still waiting got no reply.
+    /// A host command: address changes, then what replies to wait for.
+    fn command(
+        &mut self,
+        n: u64,
+        f: &EllFrame<'_>,
+        cmd: &'static Cmd,
+        ts: Option<u64>,
+        o: &mut Observation,
+    ) {
+        let addr = f.addr & 15;
+        let mut reply_addr = addr;
+        let mut target = addr;
+        if let Some(EllValue::Char(c)) = f.field("new_address") {
+            let new = c.to_digit(16).unwrap_or(0) as u8 & 15;
+            match cmd.class {
+                Class::Address => {
+                    let m = self.modules[addr as usize].take();
+                    self.modules[new as usize] = m;
+                    for g in &mut self.groups {
+                        *g &= !bit(addr);
+                    }
+                    reply_addr = new;
+                    target = new;
+                }
+                Class::Group => {
+                    // A module listens to one group address at a time.
+                    for g in &mut self.groups {
+                        *g &= !bit(addr);
+                    }
+                    if new != addr {
+                        self.groups[new as usize] |= bit(addr);
+                    }
+                    reply_addr = new;
+                }
+                _ => {}
+            }
+        }
+        // The addressed module; after `ca` it already sits at its new address.
+        o.module = self.module(target).or_else(|| self.module(addr)).cloned();
+        if cmd.replies.is_empty() {
+            return;
+        }
+        // A command sent to a group address is answered by every module of the group: from
+        // the group address or from their own (the manual's example, p.43, has both sliders
+        // answer `0fw`, from 0 and from 2).
+        let members = match cmd.class {
+            Class::Address | Class::Group => 0,
+            _ => self.groups[addr as usize] & !bit(addr),
+        };
+        if self.pending.len() == MAX_PENDING {
+            if let Some(p) = self.pending.pop_front() {
+                if p.got == 0 {
+                    o.expired.push((&p).into());
+                }
+            }
+        }
+        self.pending.push_back(Pending {
+            n,
+            offset: f.offset,
+            reply_addr,
+            from: bit(reply_addr) | members,
+            expect: 1 + members.count_ones() as u8,
+            got: 0,
+            target,
+            cmd,
+            ts,
+        });
+    }
+
+    /// End of stream: every command still waiting for its first reply got none.
     pub fn finish(&mut self) -> Vec<Expired> {
-        self.pending.drain(..).map(|p| (&p).into()).collect()
+        self.pending
+            .drain(..)
+            .filter(|p| p.got == 0)
+            .map(|p| (&p).into())
+            .collect()
     }
 }

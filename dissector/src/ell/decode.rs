@@ -1,7 +1,7 @@
 //! Decoding an Elliptec frame: address, command, typed fields, and what is off about it.
 
-use super::frame::head;
-use super::table::{status_name, Cmd, Field, Kind};
+use super::frame::head_of_frame;
+use super::table::{status_name, Cmd, Field, Kind, CURVE_POINT_BYTES};
 use crate::diag::{Diag, DiagKind};
 use crate::table::Dir;
 
@@ -70,7 +70,7 @@ fn hex_val(s: &[u8]) -> Option<u64> {
 impl<'a> EllFrame<'a> {
     /// Decode a frame from the framer. `None` only when the bytes are not a frame at all.
     pub fn decode(offset: u64, bytes: &'a [u8], truncated: bool) -> Option<Self> {
-        let h = head(bytes)?.ok()?;
+        let h = head_of_frame(bytes)?;
         let code = [bytes[h.cmd_at], bytes[h.cmd_at + 1]];
         let mut end = bytes.len();
         while end > h.data_at && matches!(bytes[end - 1], b'\r' | b'\n') {
@@ -93,9 +93,7 @@ impl<'a> EllFrame<'a> {
         if h.letter_o {
             f.diag(0, DiagKind::LetterO);
         }
-        let raw = h
-            .cmd
-            .is_some_and(|c| c.fields.iter().any(|x| x.kind == Kind::Raw));
+        let raw = h.cmd.is_some_and(|c| c.is_binary());
         let mut separators = h.spaced;
         if !raw {
             for (i, &c) in body.iter().enumerate() {
@@ -137,7 +135,14 @@ impl<'a> EllFrame<'a> {
         match h.cmd {
             None => f.diag(h.cmd_at, DiagKind::UnknownCommand),
             Some(c) => {
-                if !truncated && f.data_len != c.data_len() {
+                if !truncated && f.data_len == 0 && c.data_len() > 0 {
+                    f.diag(
+                        h.data_at,
+                        DiagKind::MissingData {
+                            expected: c.data_len() as u32,
+                        },
+                    );
+                } else if !truncated && f.data_len != c.data_len() {
                     f.diag(
                         h.data_at,
                         DiagKind::DataLength {
@@ -225,7 +230,7 @@ impl<'a> EllFrame<'a> {
         let mut at = 0usize;
         fields.iter().filter_map(move |f| {
             let w = f.width as usize;
-            if f.kind == Kind::Raw {
+            if f.kind.is_binary() {
                 return Some((f, EllValue::Raw(self.data_raw)));
             }
             let s = self.data().get(at..at + w)?;
@@ -253,6 +258,66 @@ impl<'a> EllFrame<'a> {
     pub fn field(&self, name: &str) -> Option<EllValue<'_>> {
         self.fields().find(|(f, _)| f.name == name).map(|(_, v)| v)
     }
+
+    /// The points of a `C1`/`C2` current curve (empty for other frames).
+    pub fn curve(&self) -> impl Iterator<Item = CurvePoint> + '_ {
+        let data: &[u8] = if self.cmd.is_some_and(|c| c.is_binary()) {
+            self.data_raw
+        } else {
+            &[]
+        };
+        curve_points(data)
+    }
+}
+
+/// One point of a `C1`/`C2` current curve.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CurvePoint {
+    /// Drive period (frequency = 14 740 000 / period Hz).
+    pub period: u16,
+    /// Current in points (1866 per ampere).
+    pub current: u32,
+}
+
+impl CurvePoint {
+    /// Drive frequency in Hz (0 for a zero period).
+    pub fn hz(&self) -> f64 {
+        if self.period == 0 {
+            0.0
+        } else {
+            PERIOD_CLOCK_HZ / self.period as f64
+        }
+    }
+
+    /// Current in amperes.
+    pub fn amps(&self) -> f64 {
+        self.current as f64 / CURRENT_PER_AMP
+    }
+}
+
+/// The clock of drive periods: frequency = this / period (p.13).
+pub const PERIOD_CLOCK_HZ: f64 = 14_740_000.0;
+/// Current points per ampere (p.13).
+pub const CURRENT_PER_AMP: f64 = 1866.0;
+
+/// The whole points of current-curve bytes: period u16 then current u32, little endian (the
+/// layout chosen in [`CURVE_POINTS`](super::table::CURVE_POINTS)); trailing bytes of a partial
+/// point are left out.
+pub fn curve_points(data: &[u8]) -> impl Iterator<Item = CurvePoint> + '_ {
+    data.chunks_exact(CURVE_POINT_BYTES).map(|p| CurvePoint {
+        period: u16::from_le_bytes([p[0], p[1]]),
+        current: u32::from_le_bytes([p[2], p[3], p[4], p[5]]),
+    })
+}
+
+/// The current-curve bytes of these points (the inverse of [`curve_points`]).
+pub fn curve_bytes(points: &[CurvePoint]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(points.len() * CURVE_POINT_BYTES);
+    for p in points {
+        out.extend_from_slice(&p.period.to_le_bytes());
+        out.extend_from_slice(&p.current.to_le_bytes());
+    }
+    out
 }
 
 fn addr_char(c: u8) -> Option<char> {
@@ -263,8 +328,11 @@ fn addr_char(c: u8) -> Option<char> {
     }
 }
 
-/// How a field reads for people. `pulses_per_unit` and `unit` come from the bus state when the
-/// module's `IN` reply has been seen.
+/// How a field reads for people. `scale` comes from the bus state ([`Module::scale`]) when the
+/// module's `IN` reply has been seen: pulses per unit and the unit (`mm`, `deg`, or `slot` for
+/// an indexed slider, whose positions show as slot numbers).
+///
+/// [`Module::scale`]: super::Module::scale
 pub fn fmt_value(f: &Field, v: &EllValue<'_>, scale: Option<(f64, &str)>, out: &mut String) {
     use std::fmt::Write;
     let _ = match (f.kind, v) {
@@ -278,14 +346,21 @@ pub fn fmt_value(f: &Field, v: &EllValue<'_>, scale: Option<(f64, &str)>, out: &
             x & 0x7F
         ),
         (Kind::Period, EllValue::U(p)) if *p > 0 => {
-            write!(out, "{p} ({:.1} kHz)", 14_740_000.0 / *p as f64 / 1000.0)
+            write!(out, "{p} ({:.1} kHz)", PERIOD_CLOCK_HZ / *p as f64 / 1000.0)
         }
-        (Kind::Current, EllValue::U(c)) => write!(out, "{c} ({:.3} A)", *c as f64 / 1866.0),
+        (Kind::Current, EllValue::U(c)) => {
+            write!(out, "{c} ({:.3} A)", *c as f64 / CURRENT_PER_AMP)
+        }
         (Kind::Percent, EllValue::U(p)) => write!(out, "{p}%"),
         (Kind::Minutes, EllValue::U(m)) => write!(out, "{m} min"),
         (Kind::HomeDir, EllValue::U(d)) => write!(out, "{}", if *d == 0 { "CW" } else { "CCW" }),
         (Kind::Bool, EllValue::U(b)) => write!(out, "{}", if *b != 0 { "ON" } else { "OFF" }),
         (Kind::Position, EllValue::I(p)) => match scale {
+            Some((ppp, "slot")) if ppp > 0.0 => {
+                let _ = write!(out, "{p} (");
+                fmt_slot(*p as f64 / ppp, out);
+                write!(out, ")")
+            }
             Some((ppu, unit)) if ppu > 0.0 => write!(
                 out,
                 "{p} ({} {unit})",
@@ -293,10 +368,52 @@ pub fn fmt_value(f: &Field, v: &EllValue<'_>, scale: Option<(f64, &str)>, out: &
             ),
             _ => write!(out, "{p} pulses"),
         },
+        (Kind::Raw, EllValue::Raw(b)) => {
+            fmt_curve(b, out);
+            Ok(())
+        }
         (_, EllValue::U(x)) => write!(out, "{x}"),
         (_, EllValue::I(x)) => write!(out, "{x}"),
         (_, EllValue::Char(c)) => write!(out, "{c}"),
         (_, EllValue::Digits(d)) => write!(out, "{d}"),
         (_, EllValue::Raw(b)) => write!(out, "<{} bytes>", b.len()),
     };
+}
+
+/// `slot 2`, or `≈slot 3` within a tenth of the spacing, or `2.5 slots` in between.
+fn fmt_slot(x: f64, out: &mut String) {
+    use std::fmt::Write;
+    let r = x.round();
+    let _ = if x == r {
+        write!(out, "slot {r}")
+    } else if (x - r).abs() <= 0.1 {
+        write!(out, "≈slot {r}")
+    } else {
+        write!(out, "{} slots", crate::apt::round_sig(x))
+    };
+}
+
+/// A current curve in one line: points, frequency range, peak current.
+fn fmt_curve(b: &[u8], out: &mut String) {
+    use std::fmt::Write;
+    let pts: Vec<CurvePoint> = curve_points(b).collect();
+    let _ = write!(out, "{} points", pts.len());
+    let freqs = pts.iter().map(CurvePoint::hz).filter(|f| *f > 0.0);
+    let lo = freqs.clone().fold(f64::INFINITY, f64::min);
+    let hi = freqs.fold(0.0, f64::max);
+    if hi > 0.0 {
+        let _ = write!(out, " {:.1}-{:.1} kHz", lo / 1000.0, hi / 1000.0);
+    }
+    if let Some(peak) = pts.iter().max_by_key(|p| p.current) {
+        let _ = write!(
+            out,
+            ", peak {:.3} A at {:.1} kHz",
+            peak.amps(),
+            peak.hz() / 1000.0
+        );
+    }
+    let rest = b.len() % CURVE_POINT_BYTES;
+    if rest > 0 {
+        let _ = write!(out, " (+{rest} bytes)");
+    }
 }

@@ -7,7 +7,8 @@
 //! commas between fields, the letter O for the digit 0 as address, one or two extra data
 //! characters before the terminator. Every byte ends up in one frame or garbage record.
 
-use super::table::{lookup, Cmd, Kind};
+use super::table::{lookup, Cmd, CURVE_SHORT_BYTES};
+use crate::table::Dir;
 
 /// Longest line accepted for a reply of an unknown command, or slack for extra characters.
 const SLACK: usize = 24;
@@ -84,6 +85,16 @@ fn is_data_char(c: u8) -> bool {
 /// Parse address and command at the start of `b`. `None` if no frame can start here, `Some(Err)`
 /// if more bytes are needed to tell.
 pub fn head(b: &[u8]) -> Option<Result<Head, ()>> {
+    parse_head(b, false)
+}
+
+/// [`head`] of a whole frame: nothing follows `b`, so a command that ends right after its
+/// letters has no data (rather than needing more bytes).
+pub(crate) fn head_of_frame(b: &[u8]) -> Option<Head> {
+    parse_head(b, true)?.ok()
+}
+
+fn parse_head(b: &[u8], whole: bool) -> Option<Result<Head, ()>> {
     let (addr, letter_o) = addr_of(*b.first()?)?;
     let mut at = 1;
     let mut spaced = false;
@@ -92,7 +103,7 @@ pub fn head(b: &[u8]) -> Option<Result<Head, ()>> {
         spaced = true;
     }
     let Some(code) = b.get(at..at + 2) else {
-        return Some(Err(()));
+        return if whole { None } else { Some(Err(())) };
     };
     if !code[0].is_ascii_alphabetic() || !code[1].is_ascii_alphanumeric() {
         return None;
@@ -108,7 +119,7 @@ pub fn head(b: &[u8]) -> Option<Result<Head, ()>> {
     if cmd.is_some_and(|c| c.data_len() > 0) && matches!(b.get(at), Some(b' ' | b',')) {
         data_at += 1;
         spaced = true;
-    } else if b.len() <= at && cmd.is_some_and(|c| c.data_len() > 0) {
+    } else if b.len() <= at && !whole && cmd.is_some_and(|c| c.data_len() > 0) {
         return Some(Err(()));
     }
     Some(Ok(Head {
@@ -146,7 +157,13 @@ fn term_len(b: &[u8], eof: bool) -> Option<usize> {
 fn step(b: &[u8], eof: bool, cut: bool) -> Step {
     let h = match head(b) {
         None => return Step::Skip,
-        Some(Err(())) => return if eof { Step::Skip } else { Step::NeedMore },
+        // The bytes end after a command's letters: when nothing more will come (the stream
+        // ended, or the module answered), it is a command without its data.
+        Some(Err(())) => match head_of_frame(b) {
+            Some(h) if eof || cut => h,
+            _ if eof => return Step::Skip,
+            _ => return Step::NeedMore,
+        },
         Some(Ok(h)) => h,
     };
     let Some(cmd) = h.cmd else {
@@ -169,36 +186,11 @@ fn step(b: &[u8], eof: bool, cut: bool) -> Step {
     };
     let n = cmd.data_len();
     let data = &b[h.data_at..];
-    let raw = cmd.fields.iter().any(|f| f.kind == Kind::Raw);
-    if raw {
-        // Binary data: fixed length, then an optional terminator.
-        if data.len() < n {
-            return if eof {
-                Step::Frame(b.len(), true)
-            } else {
-                Step::NeedMore
-            };
-        }
-        // Binary data can hold anything, so only a terminator right after it makes it a frame.
-        return match term_len(&data[n..], eof) {
-            Some(0) => Step::Skip,
-            Some(t) => Step::Frame(h.data_at + n + t, false),
-            None => Step::NeedMore,
-        };
+    if cmd.is_binary() {
+        return binary(data, n, eof, h.data_at);
     }
-    let host = cmd.dir == crate::table::Dir::HostToDevice;
-    if host {
-        if data.len() < n {
-            return if eof {
-                Step::Frame(b.len(), true)
-            } else {
-                Step::NeedMore
-            };
-        }
-        return match term_len(&data[n..], eof || cut) {
-            Some(t) => Step::Frame(h.data_at + n + t, false),
-            None => Step::NeedMore,
-        };
+    if cmd.dir == Dir::HostToDevice {
+        return host_command(b, &h, n, eof, cut);
     }
     // A module reply: up to its terminator, allowing separators and a few extra characters.
     let limit = n + SLACK;
@@ -218,6 +210,81 @@ fn step(b: &[u8], eof: bool, cut: bool) -> Step {
         Some(_) => Step::Skip,
         None if data.len() > limit => Step::Frame(h.data_at + n, false),
         None if eof => Step::Frame(b.len(), data.len() < n),
+        None => Step::NeedMore,
+    }
+}
+
+/// Binary data (the `C1`/`C2` current curve): a fixed length, then a terminator. Binary data
+/// can hold anything, so only a terminator right after it makes it a frame; the length the
+/// manual's byte table gives ([`CURVE_SHORT_BYTES`]) is accepted too when CR LF follows it.
+fn binary(data: &[u8], n: usize, eof: bool, data_at: usize) -> Step {
+    if data.len() >= n {
+        match term_len(&data[n..], eof) {
+            Some(0) => {}
+            Some(t) => return Step::Frame(data_at + n + t, false),
+            None => return Step::NeedMore,
+        }
+    } else if !eof {
+        return Step::NeedMore;
+    }
+    let short = CURVE_SHORT_BYTES;
+    if short < n && data.get(short..short + 2) == Some(b"\r\n".as_slice()) {
+        return Step::Frame(data_at + short + 2, false);
+    }
+    if data.len() < n {
+        Step::Frame(data_at + data.len(), true)
+    } else {
+        Step::Skip
+    }
+}
+
+/// A host command: its data's length, then an optional terminator. A command sent short (or
+/// without its data) ends early: at a terminator inside the data, where the next command
+/// visibly starts inside it (`0ma1gp`), or where the bytes end once the module has answered
+/// (`cut`).
+fn host_command(b: &[u8], h: &Head, n: usize, eof: bool, cut: bool) -> Step {
+    let data = &b[h.data_at..];
+    let window = &data[..data.len().min(n)];
+    // The first character that cannot be data decides, whatever the chunking: a terminator
+    // ends the command there; if a known host command starts right before it (its address,
+    // then the command letters), the data was left out. Any other character is bad data.
+    if let Some(q) = window.iter().position(|&c| !is_data_char(c)) {
+        if is_term(window[q]) {
+            return term_at(data, q, eof, h.data_at);
+        }
+        for p in q.saturating_sub(2)..q {
+            match head(&data[p..]) {
+                Some(Ok(next)) if next.cmd.is_some_and(|c| c.dir == Dir::HostToDevice) => {
+                    return Step::Frame(h.data_at + p, false);
+                }
+                Some(Err(())) if !eof => return Step::NeedMore,
+                _ => {}
+            }
+        }
+        // Bad data: a terminator further on still ends the command early.
+        if let Some(t) = window[q..].iter().position(|&c| is_term(c)) {
+            return term_at(data, q + t, eof, h.data_at);
+        }
+    }
+    if data.len() < n {
+        return if cut {
+            Step::Frame(b.len(), false)
+        } else if eof {
+            Step::Frame(b.len(), true)
+        } else {
+            Step::NeedMore
+        };
+    }
+    match term_len(&data[n..], eof || cut) {
+        Some(t) => Step::Frame(h.data_at + n + t, false),
+        None => Step::NeedMore,
+    }
+}
+
+/// A frame ending with the terminator at `data[p..]`.
+fn term_at(data: &[u8], p: usize, eof: bool, data_at: usize) -> Step {
+    match term_len(&data[p..], eof) {
+        Some(t) => Step::Frame(data_at + p + t, false),
         None => Step::NeedMore,
     }
 }

@@ -1,7 +1,14 @@
 //! The Elliptec ELLx command table: every command and reply of the manual, described once.
 //!
-//! Host commands are lower case (`ma`), module replies upper case (`PO`). Data is hex ASCII,
-//! big-endian; widths below are in characters.
+//! [`COMMANDS`] has one row per command: its mnemonic, name, class (what it does, which decides
+//! how its replies pair), reply timeout, the replies that answer it, its data fields and a line
+//! of documentation. Decoding, encoding, pairing, `aptscope messages --proto elliptec`, the
+//! JSON field names and the docs all read these rows; no code matches on mnemonics to guess
+//! behaviour.
+//!
+//! Host commands are lower case (`ma`), module replies upper case (`PO`): the direction follows
+//! from the case (manual p.4, "Description of the message header"). Data is hex ASCII,
+//! big-endian; widths are in characters.
 
 use crate::table::Dir;
 
@@ -24,8 +31,8 @@ pub enum Kind {
     Firmware,
     /// Thread (bit 7: 1 imperial, 0 metric) and hardware release (bits 0–6).
     ThreadHw,
-    /// A position in encoder pulses (32-bit two's complement); in mm/deg when the module's
-    /// pulses per unit are known from an `IN` reply.
+    /// A position in encoder pulses (32-bit two's complement); in mm/deg (or a slider's slot)
+    /// when the module's pulses per unit are known from an `IN` reply.
     Position,
     /// Motor drive period: frequency = 14 740 000 / period Hz.
     Period,
@@ -39,8 +46,182 @@ pub enum Kind {
     Minutes,
     /// Home direction: 0 clockwise, 1 counter-clockwise (rotary stages only).
     HomeDir,
-    /// Raw bytes (the binary current curve of `C1`/`C2`).
+    /// Binary bytes, not hex text: the current curve of `C1`/`C2`, [`CURVE_POINTS`] points of
+    /// [`CURVE_POINT_BYTES`] bytes (see [`CURVE_POINTS`] for the layout).
     Raw,
+}
+
+impl Kind {
+    /// Every kind, for listings and tests.
+    pub const ALL: [Kind; 16] = [
+        Kind::Hex,
+        Kind::Signed,
+        Kind::Dec,
+        Kind::Addr,
+        Kind::Status,
+        Kind::Model,
+        Kind::Firmware,
+        Kind::ThreadHw,
+        Kind::Position,
+        Kind::Period,
+        Kind::Current,
+        Kind::Bool,
+        Kind::Percent,
+        Kind::Minutes,
+        Kind::HomeDir,
+        Kind::Raw,
+    ];
+
+    /// snake_case name (listings, JSON).
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::Hex => "hex",
+            Kind::Signed => "signed",
+            Kind::Dec => "dec",
+            Kind::Addr => "addr",
+            Kind::Status => "status",
+            Kind::Model => "model",
+            Kind::Firmware => "firmware",
+            Kind::ThreadHw => "thread_hw",
+            Kind::Position => "position",
+            Kind::Period => "period",
+            Kind::Current => "current",
+            Kind::Bool => "bool",
+            Kind::Percent => "percent",
+            Kind::Minutes => "minutes",
+            Kind::HomeDir => "home_dir",
+            Kind::Raw => "raw",
+        }
+    }
+
+    /// Unit of the raw value (`""` when it has none).
+    pub fn unit(self) -> &'static str {
+        match self {
+            Kind::Position | Kind::Signed => "pulses",
+            Kind::Period => "1/14.74MHz",
+            Kind::Current => "1/1866 A",
+            Kind::Percent => "%",
+            Kind::Minutes => "min",
+            _ => "",
+        }
+    }
+
+    /// What the value means, in one line.
+    pub fn doc(self) -> &'static str {
+        match self {
+            Kind::Hex => "unsigned hex number",
+            Kind::Signed => "32-bit two's complement hex number",
+            Kind::Dec => "decimal digits",
+            Kind::Addr => "bus address character 0-F",
+            Kind::Status => "status/error code (0 OK, 9 BUSY, …)",
+            Kind::Model => "module type: the ELL number in hex",
+            Kind::Firmware => "firmware release: high nibble major, low nibble minor",
+            Kind::ThreadHw => "bit 7 thread (1 imperial, 0 metric), bits 0-6 hardware release",
+            Kind::Position => "encoder pulses, 32-bit two's complement (mm, deg or slot once the module is known)",
+            Kind::Period => "drive period: frequency = 14740000 / period Hz",
+            Kind::Current => "motor current: 1866 points per ampere",
+            Kind::Bool => "0 off, 1 on",
+            Kind::Percent => "percent of the maximum, 0-100 (0x64)",
+            Kind::Minutes => "minutes",
+            Kind::HomeDir => "home direction: 0 clockwise, 1 counter-clockwise (rotary stages)",
+            Kind::Raw => "binary current curve: 87 points of period (u16 LE) and current (u32 LE, 1866 per A)",
+        }
+    }
+
+    /// Whether the field is binary bytes rather than ASCII characters.
+    pub fn is_binary(self) -> bool {
+        self == Kind::Raw
+    }
+}
+
+/// Points of a `C1`/`C2` current curve.
+///
+/// The manual (p.21 and p.31) is inconsistent: its byte table gives the reply 522 bytes with
+/// data at bytes 3–521 (519 bytes), but also says the data is "87 points" of "Period (2
+/// bytes) - Current (4 bytes)", which is 87 × 6 = 522 bytes. 519 bytes is not a whole number
+/// of 6-byte points (86.5), so the table's "522 bytes" is taken to count the data alone (its
+/// byte indices forgot the 3 header bytes): 87 points, 522 data bytes, then CR LF. 87 is also
+/// the number of whole periods from 70 kHz (period 210) to 120 kHz (period 123), the range the
+/// manual gives. A reply cut after 519 data bytes (the index table's reading) is still framed,
+/// with a `data_length` diagnostic, and decodes as 86 points.
+pub const CURVE_POINTS: usize = 87;
+/// Bytes per current-curve point: period (u16) then current (u32), both little endian (the
+/// manual states little endian for the current; the period is taken to be the same machine's
+/// byte order).
+pub const CURVE_POINT_BYTES: usize = 6;
+/// Data bytes of a `C1`/`C2` reply as the manual's byte table numbers them (3–521): accepted too.
+pub const CURVE_SHORT_BYTES: usize = 519;
+
+/// What a command does; decides how its replies pair.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Class {
+    /// Asks for data; the reply carries it (`in`, `gp`).
+    Query,
+    /// Changes a parameter; `GS` acknowledges (`sv`, `sj`, `us`).
+    Setting,
+    /// Moves the stage (`ma`, `ho`, `fw`): `GS` BUSY replies while it runs are interim, the
+    /// final `PO` (or an error `GS`) completes it, and it ends a `ga` group (p.32–38, p.43).
+    Motion,
+    /// A motor scan that may move the stage and runs for seconds (`s1`, `c1`): busy replies
+    /// are interim, as for a motion (p.19–21).
+    Scan,
+    /// Drives a motor directly: energise (`e1`, which may move the stage) or halt (`h1`).
+    Drive,
+    /// Moves the module to another address (`ca`): the reply comes from the new address.
+    Address,
+    /// Makes the module also answer at another address until its next motion ends (`ga`):
+    /// the reply comes from that address, and a command sent there is answered by every module
+    /// of the group (p.43).
+    Group,
+    /// Module housekeeping: reboot (`re`), isolate (`is`).
+    System,
+    /// A module's reply to a host command.
+    Reply,
+    /// Sent by a module on its own, when its hardware buttons move it (`BS`, `BO`, p.41).
+    Spontaneous,
+}
+
+impl Class {
+    /// Every class.
+    pub const ALL: [Class; 10] = [
+        Class::Query,
+        Class::Setting,
+        Class::Motion,
+        Class::Scan,
+        Class::Drive,
+        Class::Address,
+        Class::Group,
+        Class::System,
+        Class::Reply,
+        Class::Spontaneous,
+    ];
+
+    /// snake_case name (listings, JSON).
+    pub fn name(self) -> &'static str {
+        match self {
+            Class::Query => "query",
+            Class::Setting => "setting",
+            Class::Motion => "motion",
+            Class::Scan => "scan",
+            Class::Drive => "drive",
+            Class::Address => "address",
+            Class::Group => "group",
+            Class::System => "system",
+            Class::Reply => "reply",
+            Class::Spontaneous => "spontaneous",
+        }
+    }
+
+    /// Whether a `GS` BUSY reply is interim (the final reply is still to come).
+    pub fn busy_is_interim(self) -> bool {
+        matches!(self, Class::Motion | Class::Scan)
+    }
+
+    /// Whether the command may make the hardware move (asked for confirmation before a real
+    /// port).
+    pub fn moves(self) -> bool {
+        matches!(self, Class::Motion | Class::Scan | Class::Drive)
+    }
 }
 
 /// One field of a command's data.
@@ -48,7 +229,7 @@ pub enum Kind {
 pub struct Field {
     /// snake_case name (JSON key, filter name).
     pub name: &'static str,
-    /// Width in characters.
+    /// Width in characters (bytes for binary data).
     pub width: u16,
     /// How to read it.
     pub kind: Kind,
@@ -63,12 +244,27 @@ pub struct Cmd {
     pub name: &'static str,
     /// Host → module (lower case) or module → host (upper case).
     pub dir: Dir,
+    /// What it does.
+    pub class: Class,
+    /// How long the host waits for the final reply, in ms (0: no reply expected).
+    pub timeout_ms: u32,
     /// Data fields in order.
     pub fields: &'static [Field],
     /// Replies the module answers with (host commands only), first the final ones.
     pub replies: &'static [&'static str],
-    /// Manual section (page) for reference.
+    /// What it does, with the manual page.
     pub doc: &'static str,
+}
+
+/// How a reply relates to a pending command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Answer {
+    /// Not a reply to this command.
+    No,
+    /// A reply, but the final one is still to come (`GS` BUSY during a motion).
+    Interim,
+    /// The reply that completes the command.
+    Final,
 }
 
 impl Cmd {
@@ -76,422 +272,191 @@ impl Cmd {
     pub fn data_len(&self) -> usize {
         self.fields.iter().map(|f| f.width as usize).sum()
     }
-    /// Whether the command starts a motion (its `GS` replies while busy are interim).
+
+    /// Whether the command starts a motion or scan (its `GS` BUSY replies are interim).
     pub fn is_move(&self) -> bool {
-        matches!(
-            self.code,
-            "ho" | "ma" | "mr" | "fw" | "bw" | "s1" | "s2" | "c1" | "c2"
-        )
+        self.class.busy_is_interim()
+    }
+
+    /// The reply timeout in ns (0: none expected).
+    pub fn timeout_ns(&self) -> u64 {
+        self.timeout_ms as u64 * 1_000_000
+    }
+
+    /// Whether the data is binary (framed by length, not read as hex text).
+    pub fn is_binary(&self) -> bool {
+        self.fields.iter().any(|f| f.kind.is_binary())
+    }
+
+    /// How the reply `code` (with its status, for `GS`) answers this command.
+    pub fn answer(&self, code: &str, status: Option<u64>) -> Answer {
+        if !self.replies.contains(&code) {
+            return Answer::No;
+        }
+        if code == "GS" && status == Some(STATUS_BUSY as u64) && self.class.busy_is_interim() {
+            return Answer::Interim;
+        }
+        Answer::Final
+    }
+
+    /// The host commands this reply answers (replies only).
+    pub fn answers(&self) -> impl Iterator<Item = &'static Cmd> + '_ {
+        COMMANDS
+            .iter()
+            .filter(move |c| c.replies.contains(&self.code))
+    }
+
+    /// A field by name.
+    pub fn field(&self, name: &str) -> Option<&'static Field> {
+        self.fields.iter().find(|f| f.name == name)
     }
 }
 
-const fn f(name: &'static str, width: u16, kind: Kind) -> Field {
-    Field { name, width, kind }
+/// The direction a mnemonic's case gives.
+const fn dir_of(code: &str) -> Dir {
+    if code.as_bytes()[0].is_ascii_lowercase() {
+        Dir::HostToDevice
+    } else {
+        Dir::DeviceToHost
+    }
 }
 
-const NONE: &[Field] = &[];
-const STATUS_F: &[Field] = &[f("status", 2, Kind::Status)];
-const POS_F: &[Field] = &[f("position", 8, Kind::Position)];
-const PERIOD_F: &[Field] = &[f("period", 4, Kind::Period)];
-const ADDR_F: &[Field] = &[f("new_address", 1, Kind::Addr)];
-const MOTOR_INFO: &[Field] = &[
-    f("loop", 1, Kind::Bool),
-    f("motor", 1, Kind::Bool),
-    f("current", 4, Kind::Current),
-    f("ramp_up", 4, Kind::Hex),
-    f("ramp_down", 4, Kind::Hex),
-    f("forward_period", 4, Kind::Period),
-    f("backward_period", 4, Kind::Period),
-];
-/// `C1`/`C2`: 519 data bytes (binary: period u16 + current u32 little endian, per point).
-const CURVE: &[Field] = &[f("curve", 519, Kind::Raw)];
-const MOVE_REPLIES: &[&str] = &["PO", "GS"];
-const GS: &[&str] = &["GS"];
-
-macro_rules! cmd {
-    ($code:literal, $name:literal, $dir:ident, $fields:expr, $replies:expr, $doc:literal) => {
-        Cmd {
-            code: $code,
-            name: $name,
-            dir: Dir::$dir,
-            fields: $fields,
-            replies: $replies,
-            doc: $doc,
-        }
+/// `-`: no reply expected; `N`: N seconds.
+macro_rules! timeout_ms {
+    (-) => {
+        0
+    };
+    ($s:literal) => {
+        $s * 1000
     };
 }
 
-/// Every command and reply of the ELLx manual.
-pub static COMMANDS: &[Cmd] = &[
-    cmd!(
-        "in",
-        "REQ_INFORMATION",
-        HostToDevice,
-        NONE,
-        &["IN"],
-        "Identify: model, serial, year, firmware, travel, pulses (p.9)"
-    ),
-    cmd!(
-        "IN",
-        "GET_INFORMATION",
-        DeviceToHost,
-        &[
-            f("model", 2, Kind::Model),
-            f("serial", 8, Kind::Dec),
-            f("year", 4, Kind::Dec),
-            f("firmware", 2, Kind::Firmware),
-            f("thread_hw", 2, Kind::ThreadHw),
-            f("travel", 4, Kind::Hex),
-            f("pulses_per_unit", 8, Kind::Hex),
-        ],
-        &[],
-        "Module information (p.9)"
-    ),
-    cmd!(
-        "gs",
-        "REQ_STATUS",
-        HostToDevice,
-        NONE,
-        GS,
-        "Get status or error; reading clears the error (p.10)"
-    ),
-    cmd!(
-        "GS",
-        "GET_STATUS",
-        DeviceToHost,
-        STATUS_F,
-        &[],
-        "Status or error code (p.10)"
-    ),
-    cmd!(
-        "us",
-        "SAVE_USER_DATA",
-        HostToDevice,
-        NONE,
-        GS,
-        "Save motor and user parameters (p.11)"
-    ),
-    cmd!(
-        "re",
-        "REBOOT",
-        HostToDevice,
-        NONE,
-        &[],
-        "Reboot the module (p.12)"
-    ),
-    cmd!(
-        "ca",
-        "CHANGE_ADDRESS",
-        HostToDevice,
-        ADDR_F,
-        GS,
-        "Change the bus address; the reply comes from the new address (p.12)"
-    ),
-    cmd!(
-        "i1",
-        "REQ_MOTOR1_INFO",
-        HostToDevice,
-        NONE,
-        &["I1"],
-        "Motor 1 parameters (p.13)"
-    ),
-    cmd!(
-        "I1",
-        "GET_MOTOR1_INFO",
-        DeviceToHost,
-        MOTOR_INFO,
-        &[],
-        "Motor 1 parameters (p.13)"
-    ),
-    cmd!(
-        "f1",
-        "SET_FWP_MOTOR1",
-        HostToDevice,
-        PERIOD_F,
-        GS,
-        "Motor 1 forward period (p.15)"
-    ),
-    cmd!(
-        "b1",
-        "SET_BWP_MOTOR1",
-        HostToDevice,
-        PERIOD_F,
-        GS,
-        "Motor 1 backward period (p.16)"
-    ),
-    cmd!(
-        "e1",
-        "ENERGIZE_MOTOR1",
-        HostToDevice,
-        PERIOD_F,
-        GS,
-        "Energize motor 1 at a period (p.17)"
-    ),
-    cmd!(
-        "h1",
-        "HALT_MOTOR1",
-        HostToDevice,
-        NONE,
-        GS,
-        "Stop motor 1 (p.18)"
-    ),
-    cmd!(
-        "s1",
-        "SEARCH_FREQ_MOTOR1",
-        HostToDevice,
-        NONE,
-        GS,
-        "Search the best frequencies of motor 1 (p.19)"
-    ),
-    cmd!(
-        "c1",
-        "SCAN_CURRENT_CURVE_MOTOR1",
-        HostToDevice,
-        NONE,
-        &["C1", "GS"],
-        "Scan the current curve of motor 1 (p.20)"
-    ),
-    cmd!(
-        "C1",
-        "GET_CURRENT_CURVE_MOTOR1",
-        DeviceToHost,
-        CURVE,
-        &[],
-        "Current curve of motor 1, binary (p.21)"
-    ),
-    cmd!(
-        "is",
-        "ISOLATE_MINUTES",
-        HostToDevice,
-        &[f("minutes", 2, Kind::Minutes)],
-        &[],
-        "Do not reply for N minutes (p.22)"
-    ),
-    cmd!(
-        "i2",
-        "REQ_MOTOR2_INFO",
-        HostToDevice,
-        NONE,
-        &["I2"],
-        "Motor 2 parameters (p.23)"
-    ),
-    cmd!(
-        "I2",
-        "GET_MOTOR2_INFO",
-        DeviceToHost,
-        MOTOR_INFO,
-        &[],
-        "Motor 2 parameters (p.23)"
-    ),
-    cmd!(
-        "f2",
-        "SET_FWP_MOTOR2",
-        HostToDevice,
-        PERIOD_F,
-        GS,
-        "Motor 2 forward period (p.25)"
-    ),
-    cmd!(
-        "b2",
-        "SET_BWP_MOTOR2",
-        HostToDevice,
-        PERIOD_F,
-        GS,
-        "Motor 2 backward period (p.26)"
-    ),
-    cmd!(
-        "e2",
-        "ENERGIZE_MOTOR2",
-        HostToDevice,
-        PERIOD_F,
-        GS,
-        "Energize motor 2 at a period (p.27)"
-    ),
-    cmd!(
-        "h2",
-        "HALT_MOTOR2",
-        HostToDevice,
-        NONE,
-        GS,
-        "Stop motor 2 (p.28)"
-    ),
-    cmd!(
-        "s2",
-        "SEARCH_FREQ_MOTOR2",
-        HostToDevice,
-        NONE,
-        GS,
-        "Search the best frequencies of motor 2 (p.29)"
-    ),
-    cmd!(
-        "c2",
-        "SCAN_CURRENT_CURVE_MOTOR2",
-        HostToDevice,
-        NONE,
-        &["C2", "GS"],
-        "Scan the current curve of motor 2 (p.30)"
-    ),
-    cmd!(
-        "C2",
-        "GET_CURRENT_CURVE_MOTOR2",
-        DeviceToHost,
-        CURVE,
-        &[],
-        "Current curve of motor 2, binary (p.31)"
-    ),
-    cmd!(
-        "ho",
-        "HOME",
-        HostToDevice,
-        &[f("direction", 1, Kind::HomeDir)],
-        MOVE_REPLIES,
-        "Move home; rotary stages: 0 CW, 1 CCW (p.32)"
-    ),
-    cmd!(
-        "ma",
-        "MOVE_ABSOLUTE",
-        HostToDevice,
-        POS_F,
-        MOVE_REPLIES,
-        "Move to an absolute position in pulses (p.33)"
-    ),
-    cmd!(
-        "mr",
-        "MOVE_RELATIVE",
-        HostToDevice,
-        POS_F,
-        MOVE_REPLIES,
-        "Move by a distance in pulses (p.34)"
-    ),
-    cmd!(
-        "go",
-        "REQ_HOME_OFFSET",
-        HostToDevice,
-        NONE,
-        &["HO"],
-        "Get the home offset (p.35)"
-    ),
-    cmd!(
-        "HO",
-        "GET_HOME_OFFSET",
-        DeviceToHost,
-        &[f("offset", 8, Kind::Position)],
-        &[],
-        "Home offset in pulses (p.35)"
-    ),
-    cmd!(
-        "so",
-        "SET_HOME_OFFSET",
-        HostToDevice,
-        &[f("offset", 8, Kind::Position)],
-        GS,
-        "Set the home offset in pulses (p.35)"
-    ),
-    cmd!(
-        "gj",
-        "REQ_JOG_STEP_SIZE",
-        HostToDevice,
-        NONE,
-        &["GJ"],
-        "Get the jog step size (p.37)"
-    ),
-    cmd!(
-        "GJ",
-        "GET_JOG_STEP_SIZE",
-        DeviceToHost,
-        &[f("step", 8, Kind::Position)],
-        &[],
-        "Jog step size in pulses (p.37)"
-    ),
-    cmd!(
-        "sj",
-        "SET_JOG_STEP_SIZE",
-        HostToDevice,
-        &[f("step", 8, Kind::Position)],
-        GS,
-        "Set the jog step size in pulses (p.37)"
-    ),
-    cmd!(
-        "fw",
-        "FORWARD",
-        HostToDevice,
-        NONE,
-        MOVE_REPLIES,
-        "Move forward by the jog step (p.38)"
-    ),
-    cmd!(
-        "bw",
-        "BACKWARD",
-        HostToDevice,
-        NONE,
-        MOVE_REPLIES,
-        "Move backward by the jog step (p.38)"
-    ),
-    cmd!(
-        "gp",
-        "GET_POSITION",
-        HostToDevice,
-        NONE,
-        &["PO"],
-        "Get the position (p.39)"
-    ),
-    cmd!(
-        "PO",
-        "POSITION",
-        DeviceToHost,
-        POS_F,
-        &[],
-        "Position in pulses (p.39)"
-    ),
-    cmd!(
-        "gv",
-        "REQ_VELOCITY",
-        HostToDevice,
-        NONE,
-        &["GV"],
-        "Get the velocity compensation (p.40)"
-    ),
-    cmd!(
-        "GV",
-        "GET_VELOCITY",
-        DeviceToHost,
-        &[f("velocity", 2, Kind::Percent)],
-        &[],
-        "Velocity compensation, % of maximum (p.40)"
-    ),
-    cmd!(
-        "sv",
-        "SET_VELOCITY",
-        HostToDevice,
-        &[f("velocity", 2, Kind::Percent)],
-        GS,
-        "Set the velocity compensation (p.40)"
-    ),
-    cmd!(
-        "BS",
-        "BUTTON_STATUS",
-        DeviceToHost,
-        STATUS_F,
-        &[],
-        "Unsolicited status while a button move runs (p.41)"
-    ),
-    cmd!(
-        "BO",
-        "BUTTON_POSITION",
-        DeviceToHost,
-        POS_F,
-        &[],
-        "Unsolicited position after a button move (p.41)"
-    ),
-    cmd!(
-        "ga",
-        "GROUP_ADDRESS",
-        HostToDevice,
-        ADDR_F,
-        GS,
-        "Listen to another address for one operation (p.43)"
-    ),
-];
+/// Builds [`COMMANDS`] from rows of
+/// `code NAME Class timeout_s [REPLIES] [field: Kind(width), …]` then `"doc";`.
+macro_rules! commands {
+    ($(
+        $code:ident $name:ident $class:ident $timeout:tt [$($reply:ident),*]
+            [$($fname:ident : $kind:ident($width:literal)),*]
+            $doc:literal;
+    )*) => {
+        /// Every command and reply of the ELLx manual, one row each.
+        pub static COMMANDS: &[Cmd] = &[$(Cmd {
+            code: stringify!($code),
+            name: stringify!($name),
+            dir: dir_of(stringify!($code)),
+            class: Class::$class,
+            timeout_ms: timeout_ms!($timeout),
+            replies: &[$(stringify!($reply)),*],
+            fields: &[$(Field { name: stringify!($fname), width: $width, kind: Kind::$kind }),*],
+            doc: $doc,
+        }),*];
+    };
+}
+
+// One row per command (manual pages in the doc line). Columns: mnemonic, name, class, reply
+// timeout in seconds (`-`: no reply), replies (first the final ones), data fields as
+// `name: Kind(width in characters)`, then the doc line. Timeouts: the manual's 2 s; motions
+// reply when done (10 s); the frequency search and current-curve scan take about 12 s (30 s).
+#[rustfmt::skip]
+commands! {
+//  code name                      class        s   replies    data
+    in   REQ_INFORMATION           Query        2   [IN]       []
+        "Identify: model, serial, year, firmware, travel, pulses (p.9)";
+    IN   GET_INFORMATION           Reply        -   []         [model: Model(2), serial: Dec(8), year: Dec(4), firmware: Firmware(2),
+                                                                thread_hw: ThreadHw(2), travel: Hex(4), pulses_per_unit: Hex(8)]
+        "Module information: travel in mm or deg, pulses per mm, per revolution or per slider position (p.9)";
+    gs   REQ_STATUS                Query        2   [GS]       []
+        "Get status or error; reading clears the error (p.10)";
+    GS   GET_STATUS                Reply        -   []         [status: Status(2)]
+        "Status or error code (p.10)";
+    us   SAVE_USER_DATA            Setting      2   [GS]       []
+        "Save motor and user parameters (p.11)";
+    re   REBOOT                    System       2   [GS]       []
+        "Reboot into the bootloader; GS OK says it is there (p.12)";
+    ca   CHANGE_ADDRESS            Address      2   [GS]       [new_address: Addr(1)]
+        "Change the bus address; the reply comes from the new address (p.12)";
+    i1   REQ_MOTOR1_INFO           Query        2   [I1]       []
+        "Motor 1 parameters (p.13)";
+    I1   GET_MOTOR1_INFO           Reply        -   []         [loop: Bool(1), motor: Bool(1), current: Current(4), ramp_up: Hex(4),
+                                                                ramp_down: Hex(4), forward_period: Period(4), backward_period: Period(4)]
+        "Motor 1 parameters (p.13)";
+    f1   SET_FWP_MOTOR1            Setting      2   [GS]       [period: Period(4)]
+        "Motor 1 forward period (p.15)";
+    b1   SET_BWP_MOTOR1            Setting      2   [GS]       [period: Period(4)]
+        "Motor 1 backward period (p.16)";
+    e1   ENERGIZE_MOTOR1           Drive        2   [GS]       [period: Period(4)]
+        "Energize motor 1 at a period; the part may move until h1 (p.17)";
+    h1   HALT_MOTOR1               Drive        2   [GS]       []
+        "Stop motor 1 (p.18)";
+    s1   SEARCH_FREQ_MOTOR1        Scan         30  [GS]       []
+        "Search the best frequencies of motor 1; the part may move (p.19)";
+    c1   SCAN_CURRENT_CURVE_MOTOR1 Scan         30  [C1, GS]   []
+        "Scan the current curve of motor 1, about 12 s; the part may move (p.20)";
+    C1   GET_CURRENT_CURVE_MOTOR1  Reply        -   []         [curve: Raw(522)]
+        "Current curve of motor 1: 87 binary points from 70 kHz up (p.21)";
+    is   ISOLATE_MINUTES           System       -   []         [minutes: Minutes(2)]
+        "Do not reply for N minutes (p.22)";
+    i2   REQ_MOTOR2_INFO           Query        2   [I2]       []
+        "Motor 2 parameters (p.23)";
+    I2   GET_MOTOR2_INFO           Reply        -   []         [loop: Bool(1), motor: Bool(1), current: Current(4), ramp_up: Hex(4),
+                                                                ramp_down: Hex(4), forward_period: Period(4), backward_period: Period(4)]
+        "Motor 2 parameters (p.23)";
+    f2   SET_FWP_MOTOR2            Setting      2   [GS]       [period: Period(4)]
+        "Motor 2 forward period (p.25)";
+    b2   SET_BWP_MOTOR2            Setting      2   [GS]       [period: Period(4)]
+        "Motor 2 backward period (p.26)";
+    e2   ENERGIZE_MOTOR2           Drive        2   [GS]       [period: Period(4)]
+        "Energize motor 2 at a period; the part may move until h2 (p.27)";
+    h2   HALT_MOTOR2               Drive        2   [GS]       []
+        "Stop motor 2 (p.28)";
+    s2   SEARCH_FREQ_MOTOR2        Scan         30  [GS]       []
+        "Search the best frequencies of motor 2; the part may move (p.29)";
+    c2   SCAN_CURRENT_CURVE_MOTOR2 Scan         30  [C2, GS]   []
+        "Scan the current curve of motor 2, about 12 s; the part may move (p.30)";
+    C2   GET_CURRENT_CURVE_MOTOR2  Reply        -   []         [curve: Raw(522)]
+        "Current curve of motor 2: 87 binary points from 70 kHz up (p.31)";
+    ho   HOME                      Motion       10  [PO, GS]   [direction: HomeDir(1)]
+        "Move home; rotary stages: 0 CW, 1 CCW, linear stages ignore it (p.32)";
+    ma   MOVE_ABSOLUTE             Motion       10  [PO, GS]   [position: Position(8)]
+        "Move to an absolute position in pulses (p.33)";
+    mr   MOVE_RELATIVE             Motion       10  [PO, GS]   [position: Position(8)]
+        "Move by a distance in pulses (p.34)";
+    go   REQ_HOME_OFFSET           Query        2   [HO]       []
+        "Get the home offset (p.35)";
+    HO   GET_HOME_OFFSET           Reply        -   []         [offset: Position(8)]
+        "Home offset in pulses (p.35)";
+    so   SET_HOME_OFFSET           Setting      2   [GS]       [offset: Position(8)]
+        "Set the home offset in pulses (p.35)";
+    gj   REQ_JOG_STEP_SIZE         Query        2   [GJ]       []
+        "Get the jog step size (p.37)";
+    GJ   GET_JOG_STEP_SIZE         Reply        -   []         [step: Position(8)]
+        "Jog step size in pulses (p.37)";
+    sj   SET_JOG_STEP_SIZE         Setting      2   [GS]       [step: Position(8)]
+        "Set the jog step size in pulses (p.37)";
+    fw   FORWARD                   Motion       10  [PO, GS]   []
+        "Move forward by the jog step (a slider: to the next position) (p.38)";
+    bw   BACKWARD                  Motion       10  [PO, GS]   []
+        "Move backward by the jog step (a slider: to the previous position) (p.38)";
+    gp   GET_POSITION              Query        2   [PO]       []
+        "Get the position (p.39)";
+    PO   POSITION                  Reply        -   []         [position: Position(8)]
+        "Position in pulses (p.39)";
+    gv   REQ_VELOCITY              Query        2   [GV]       []
+        "Get the velocity compensation (p.40)";
+    GV   GET_VELOCITY              Reply        -   []         [velocity: Percent(2)]
+        "Velocity compensation, % of maximum (p.40)";
+    sv   SET_VELOCITY              Setting      2   [GS]       [velocity: Percent(2)]
+        "Set the velocity compensation (p.40)";
+    BS   BUTTON_STATUS             Spontaneous  -   []         [status: Status(2)]
+        "Status while a move started by a hardware button runs (p.41)";
+    BO   BUTTON_POSITION           Spontaneous  -   []         [position: Position(8)]
+        "Position after a move started by a hardware button (p.41)";
+    ga   GROUP_ADDRESS             Group        2   [GS]       [new_address: Addr(1)]
+        "Also answer at another address until the next motion ends, to move a group together (p.43)";
+}
+
+/// Status code of `GS`/`BS` that means the module is busy (a motion is running).
+pub const STATUS_BUSY: u32 = 9;
 
 /// Status/error codes of `GS` and `BS` (p.10, p.44).
 pub static STATUS: &[(u32, &str)] = &[
@@ -525,6 +490,11 @@ pub fn lookup(code: &[u8]) -> Option<&'static Cmd> {
     COMMANDS.iter().find(|c| c.code.as_bytes() == code)
 }
 
+/// The command with this name (`MOVE_ABSOLUTE`, any case).
+pub fn by_name(name: &str) -> Option<&'static Cmd> {
+    COMMANDS.iter().find(|c| c.name.eq_ignore_ascii_case(name))
+}
+
 /// What the manual and real modules say about an ELL model number (the `IN` reply's type).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Model {
@@ -532,82 +502,30 @@ pub struct Model {
     pub number: u8,
     /// Short description.
     pub what: &'static str,
-    /// Unit of positions once converted: `mm`, `deg` or `pos` (indexed positions).
+    /// Unit of positions once converted: `mm`, `deg`, `slot` (indexed sliders and wheels) or
+    /// `pulses` (no conversion).
     pub unit: &'static str,
+    /// Number of positions of an indexed slider or wheel (0 for the others).
+    pub slots: u8,
 }
 
 /// Known ELL models.
+#[rustfmt::skip]
 pub static MODELS: &[Model] = &[
-    Model {
-        number: 4,
-        what: "rotator",
-        unit: "deg",
-    },
-    Model {
-        number: 5,
-        what: "actuator",
-        unit: "pulses",
-    },
-    Model {
-        number: 6,
-        what: "bi-positional slider",
-        unit: "pos",
-    },
-    Model {
-        number: 7,
-        what: "linear stage",
-        unit: "mm",
-    },
-    Model {
-        number: 8,
-        what: "rotary stage",
-        unit: "deg",
-    },
-    Model {
-        number: 9,
-        what: "four-position slider",
-        unit: "pos",
-    },
-    Model {
-        number: 10,
-        what: "linear stage",
-        unit: "mm",
-    },
-    Model {
-        number: 12,
-        what: "six-position slider",
-        unit: "pos",
-    },
-    Model {
-        number: 14,
-        what: "rotation mount",
-        unit: "deg",
-    },
-    Model {
-        number: 15,
-        what: "motorized iris",
-        unit: "pulses",
-    },
-    Model {
-        number: 16,
-        what: "rotation stage",
-        unit: "deg",
-    },
-    Model {
-        number: 17,
-        what: "linear stage",
-        unit: "mm",
-    },
-    Model {
-        number: 18,
-        what: "rotation stage",
-        unit: "deg",
-    },
-    Model {
-        number: 20,
-        what: "linear stage",
-        unit: "mm",
-    },
+    Model { number: 4, what: "rotator", unit: "deg", slots: 0 },
+    Model { number: 5, what: "actuator", unit: "pulses", slots: 0 },
+    Model { number: 6, what: "bi-positional slider", unit: "slot", slots: 2 },
+    Model { number: 7, what: "linear stage", unit: "mm", slots: 0 },
+    Model { number: 8, what: "rotary stage", unit: "deg", slots: 0 },
+    Model { number: 9, what: "four-position slider", unit: "slot", slots: 4 },
+    Model { number: 10, what: "linear stage", unit: "mm", slots: 0 },
+    Model { number: 12, what: "six-position slider", unit: "slot", slots: 6 },
+    Model { number: 14, what: "rotation mount", unit: "deg", slots: 0 },
+    Model { number: 15, what: "motorized iris", unit: "pulses", slots: 0 },
+    Model { number: 16, what: "rotation stage", unit: "deg", slots: 0 },
+    Model { number: 17, what: "linear stage", unit: "mm", slots: 0 },
+    Model { number: 18, what: "rotation stage", unit: "deg", slots: 0 },
+    Model { number: 20, what: "linear stage", unit: "mm", slots: 0 },
 ];
 
 /// The model with this ELL number.

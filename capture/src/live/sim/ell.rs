@@ -393,7 +393,8 @@ impl EllSim {
                 let mins = num("minutes").unwrap_or(0).max(0) as u64;
                 self.modules[i].isolated_until = now.saturating_add(mins * 60 * SEC);
             }
-            "re" => {}
+            // The reply says the module is in its bootloader (p.12).
+            "re" => self.status(now, addr, OK),
             "ho" | "ma" | "mr" | "fw" | "bw" => {
                 if busy {
                     self.status(now, addr, BUSY);
