@@ -1,6 +1,7 @@
 //! Application state and event handling (no terminal needed): keys and mouse events change
 //! the state; [`crate::ui::draw`] renders it.
 
+use crate::as_filter;
 use crate::decode::{json_of, tree, Node};
 use crate::index::Shared;
 use crate::scan::Scan;
@@ -58,6 +59,17 @@ pub enum Input {
     Search(String),
 }
 
+/// What to do with the filter built from the selected line ([`App::selected_as_filter`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AsFilter {
+    /// Apply it (Wireshark's "Apply as Filter → Selected").
+    Apply,
+    /// Put it in the filter bar to edit ("Prepare as Filter → Selected").
+    Prepare,
+    /// Apply the current filter narrowed by it ("Apply as Filter → … and Selected").
+    And,
+}
+
 /// Screen areas of the last draw, for mouse events.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Areas {
@@ -105,8 +117,14 @@ pub struct App {
     pub collapsed: HashSet<String>,
     /// First shown hex row.
     pub hex_top: usize,
+    /// Columns the detail tree is scrolled to the right (`<` `>`).
+    pub detail_left: usize,
     /// Help overlay shown.
     pub help: bool,
+    /// First shown line of the help overlay (it scrolls when the window is too small).
+    pub help_scroll: usize,
+    /// Lines of the help overlay at the last draw.
+    pub help_rows: usize,
     /// Quit requested.
     pub quit: bool,
     /// A one-line message for the status bar.
@@ -147,7 +165,10 @@ impl App {
             detail_top: 0,
             collapsed: HashSet::new(),
             hex_top: 0,
+            detail_left: 0,
             help: false,
+            help_scroll: 0,
+            help_rows: 10,
             quit: false,
             message: None,
             list_rows: 10,
@@ -213,6 +234,7 @@ impl App {
             self.detail_sel = 0;
             self.detail_top = 0;
             self.hex_top = 0;
+            self.detail_left = 0;
         }
         self.sel = new;
         self.scroll_into_view();
@@ -383,6 +405,64 @@ impl App {
         }
     }
 
+    /// The display filter for the selected detail line (in the timeline: for the selected
+    /// record's message), applied, prepared in the filter bar, or and-ed with the current one.
+    pub fn selected_as_filter(&mut self, what: AsFilter) {
+        let Some(n) = self.selected() else { return };
+        let index = &self.shared.index;
+        let expr = if self.focus == Pane::List {
+            index
+                .read()
+                .ok()
+                .and_then(|ix| as_filter::for_record(&ix, n))
+        } else {
+            let line = self.detail_lines().into_iter().nth(self.detail_sel);
+            line.and_then(|node| {
+                let ix = index.read().ok()?;
+                as_filter::for_node(&ix, n, &node)
+            })
+        };
+        let Some(expr) = expr else {
+            self.message =
+                Some("no filter for this line (pick a field, header or diagnostic)".into());
+            return;
+        };
+        match what {
+            AsFilter::Prepare => {
+                self.filter_error = Filter::parse(&expr).err();
+                self.input = Input::Filter(expr);
+            }
+            AsFilter::Apply | AsFilter::And => {
+                let text = if what == AsFilter::And {
+                    as_filter::and(&self.filter_text, &expr)
+                } else {
+                    expr
+                };
+                self.apply_filter(&text);
+                self.message = Some(format!("filter: {text}"));
+            }
+        }
+    }
+
+    fn on_help_key(&mut self, k: KeyEvent) {
+        let page = self.help_rows.max(1);
+        match k.code {
+            KeyCode::Char('q') | KeyCode::Char('?') | KeyCode::Esc | KeyCode::Enter => {
+                self.help = false
+            }
+            KeyCode::Char('j') | KeyCode::Down => self.help_scroll += 1,
+            KeyCode::Char('k') | KeyCode::Up => {
+                self.help_scroll = self.help_scroll.saturating_sub(1)
+            }
+            KeyCode::PageDown | KeyCode::Char(' ') => self.help_scroll += page,
+            KeyCode::PageUp => self.help_scroll = self.help_scroll.saturating_sub(page),
+            KeyCode::Char('g') | KeyCode::Home => self.help_scroll = 0,
+            // The view clamps it to the last page.
+            KeyCode::Char('G') | KeyCode::End => self.help_scroll = usize::MAX / 2,
+            _ => {}
+        }
+    }
+
     /// Handle a key.
     pub fn on_key(&mut self, k: KeyEvent) {
         if k.kind == ratatui::crossterm::event::KeyEventKind::Release {
@@ -398,12 +478,7 @@ impl App {
             return;
         }
         if self.help {
-            if matches!(
-                k.code,
-                KeyCode::Char('q') | KeyCode::Char('?') | KeyCode::Esc | KeyCode::Enter
-            ) {
-                self.help = false;
-            }
+            self.on_help_key(k);
             return;
         }
         self.message = None;
@@ -416,7 +491,10 @@ impl App {
                 }
             }
             KeyCode::Esc => self.view = View::Timeline,
-            KeyCode::Char('?') => self.help = true,
+            KeyCode::Char('?') => {
+                self.help = true;
+                self.help_scroll = 0;
+            }
             KeyCode::Char('/') => self.input = Input::Filter(self.filter_text.clone()),
             KeyCode::Char(':') => self.input = Input::Goto(String::new()),
             KeyCode::Char('s') => {
@@ -430,6 +508,11 @@ impl App {
             KeyCode::Char('n') => self.search_step(true),
             KeyCode::Char('N') => self.search_step(false),
             KeyCode::Char('p') => self.jump_pair(),
+            KeyCode::Char('a') => self.selected_as_filter(AsFilter::Apply),
+            KeyCode::Char('A') => self.selected_as_filter(AsFilter::Prepare),
+            KeyCode::Char('&') => self.selected_as_filter(AsFilter::And),
+            KeyCode::Char('>') => self.detail_left += 8,
+            KeyCode::Char('<') => self.detail_left = self.detail_left.saturating_sub(8),
             KeyCode::Char('t') => {
                 self.time_mode = match self.time_mode {
                     TimeMode::Relative => TimeMode::Delta,
@@ -647,6 +730,14 @@ impl App {
             None
         };
         let key = |c| KeyEvent::new(c, KeyModifiers::NONE);
+        if self.help {
+            match m.kind {
+                MouseEventKind::ScrollDown => self.help_scroll += 3,
+                MouseEventKind::ScrollUp => self.help_scroll = self.help_scroll.saturating_sub(3),
+                _ => {}
+            }
+            return;
+        }
         match m.kind {
             MouseEventKind::ScrollDown | MouseEventKind::ScrollUp => {
                 if self.view != View::Timeline {
@@ -670,6 +761,10 @@ impl App {
                     self.focus = old;
                 }
             }
+            MouseEventKind::ScrollLeft if pane == Some(Pane::Detail) => {
+                self.detail_left = self.detail_left.saturating_sub(8)
+            }
+            MouseEventKind::ScrollRight if pane == Some(Pane::Detail) => self.detail_left += 8,
             MouseEventKind::Down(MouseButton::Left) => match pane {
                 Some(Pane::List) => {
                     self.focus = Pane::List;

@@ -626,16 +626,21 @@ fn apt_tree(r: &Rec, bytes: &[u8], scale: Option<&aptscope_dissector::units::Sca
             t.add(
                 1,
                 &format!("diag.{i}"),
-                format!(
-                    "!! {}: {} (offset {:#x}, +{rel})",
-                    d.kind.name(),
-                    d.kind,
-                    d.offset
-                ),
+                format!("!! {} (offset {:#x}, +{rel})", diag_text(d), d.offset),
                 range,
                 NodeKind::Diag,
             );
         }
+    }
+}
+
+/// A diagnostic as `kind: message`, the kind once (some messages start with it:
+/// `truncated: header announces …`).
+fn diag_text(d: &Diag) -> String {
+    let (name, msg) = (d.kind.name(), d.kind.to_string());
+    match msg.strip_prefix(name).and_then(|m| m.strip_prefix(':')) {
+        Some(_) => msg,
+        None => format!("{name}: {msg}"),
     }
 }
 
@@ -745,12 +750,7 @@ fn ell_tree(ix: &Index, r: &Rec, _n: u64, bytes: &[u8], t: &mut Tree) {
             t.add(
                 1,
                 &format!("diag.{i}"),
-                format!(
-                    "!! {}: {} (offset {:#x}, +{rel})",
-                    d.kind.name(),
-                    d.kind,
-                    d.offset
-                ),
+                format!("!! {} (offset {:#x}, +{rel})", diag_text(d), d.offset),
                 range,
                 NodeKind::Diag,
             );

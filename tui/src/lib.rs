@@ -3,11 +3,13 @@
 //! Architecture (state → events → view): [`index`] builds a compact index of the capture in a
 //! background thread; [`scan`] runs the display filter and statistics over it in another;
 //! [`app::App`] holds the UI state and handles keys and mouse events without a terminal;
-//! [`ui::draw`] renders the state, decoding only the visible rows ([`decode`]).
+//! [`ui::draw`] renders the state, decoding only the visible rows ([`decode`]);
+//! [`as_filter`] turns a detail line into a display filter.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod app;
+pub mod as_filter;
 pub mod decode;
 pub mod index;
 pub mod scan;

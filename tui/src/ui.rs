@@ -3,6 +3,10 @@
 
 use crate::app::{App, Areas, Input, Pane, TimeMode, View};
 use crate::decode::{row, Node, NodeKind, Row, Way};
+use crate::index::{
+    Index, Rec, F_DIAG, F_DUPLICATE, F_GARBAGE, F_IS_REPLY, F_NOT_FOR_MODEL, F_NO_REPLY,
+    F_TRUNCATED, F_UNSOLICITED,
+};
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::symbols::Marker;
@@ -10,7 +14,7 @@ use ratatui::text::{Line, Span};
 use ratatui::widgets::{Axis, Block, Borders, Chart, Clear, Dataset, GraphType, Paragraph, Wrap};
 use ratatui::Frame;
 
-/// The help text (also the `?` overlay).
+/// The keys (the `?` overlay lists them).
 pub const HELP: &[(&str, &str)] = &[
     ("j k ↑ ↓", "move (in the focused pane)"),
     ("g G Home End", "first / last"),
@@ -19,6 +23,19 @@ pub const HELP: &[(&str, &str)] = &[
     (
         "Enter space h l",
         "detail: collapse / expand; pair line: jump",
+    ),
+    ("< >", "detail: scroll long lines left / right"),
+    (
+        "a",
+        "apply the selected detail line as a display filter (in the timeline: its message)",
+    ),
+    (
+        "A",
+        "prepare it as a filter: edit it in the filter bar, Enter applies",
+    ),
+    (
+        "&",
+        "apply the current filter narrowed by the selected line",
     ),
     ("/", "display filter (Enter apply, Esc cancel)"),
     ("s", "search expression (filter language)"),
@@ -32,23 +49,102 @@ pub const HELP: &[(&str, &str)] = &[
     ("? q ^C", "help / quit (q: back from a view)"),
 ];
 
-fn dir_color(w: Way) -> Color {
-    match w {
-        Way::Out => Color::Cyan,
-        Way::In => Color::Green,
-        Way::Unknown => Color::Gray,
-    }
+/// Examples of the display-filter language, for the help overlay.
+pub const FILTER_EXAMPLES: &[(&str, &str)] = &[
+    ("apt.name ~ MOVE", "APT messages whose name matches a regex"),
+    (
+        "apt.position > 1000",
+        "a field of the message (apt.fields.position)",
+    ),
+    (
+        "apt.src == bay1 && apt.chan == 1",
+        "addresses by name, channel",
+    ),
+    (
+        "ell.cmd == PO",
+        "Elliptec command (case: gs request, GS reply)",
+    ),
+    (
+        "diag",
+        "records with a diagnostic; unpaired: no reply or unsolicited",
+    ),
+    ("latency > 50ms", "replies slower than 50 ms"),
+];
+
+/// A colouring rule of the timeline: rows take the style of the first rule that matches, as
+/// Wireshark's default colouring rules do (errors first, then warnings, then kinds of traffic).
+#[derive(Debug, Clone, Copy)]
+pub struct ColourRule {
+    /// Short name.
+    pub name: &'static str,
+    /// Which records it matches.
+    pub what: &'static str,
+    /// The row style.
+    pub style: Style,
 }
 
-fn family_color(f: &str) -> Color {
-    match f {
-        "MOT" | "motion" => Color::Yellow,
-        "HW" | "query" => Color::Magenta,
-        "PZ" | "PZMOT" | "KPZ" => Color::LightBlue,
-        "LA" | "LD" | "TEC" => Color::LightRed,
-        "QUAD" | "NT" | "KNA" | "KSG" => Color::LightCyan,
-        "RACK" | "MOD" => Color::LightMagenta,
-        _ => Color::White,
+/// The colouring rules, in order (a row matching none keeps the terminal's colours).
+pub const COLOURS: &[ColourRule] = &[
+    ColourRule {
+        name: "Errors",
+        what: "garbage, truncated or malformed frames, unknown messages",
+        style: Style::new()
+            .fg(Color::LightRed)
+            .bg(Color::Rgb(70, 0, 0))
+            .add_modifier(Modifier::BOLD),
+    },
+    ColourRule {
+        name: "Unsolicited",
+        what: "replies no request asked for, second replies to one request",
+        style: Style::new().fg(Color::Yellow).bg(Color::Rgb(70, 50, 0)),
+    },
+    ColourRule {
+        name: "No reply",
+        what: "requests that got no reply",
+        style: Style::new()
+            .fg(Color::LightMagenta)
+            .bg(Color::Rgb(50, 0, 50)),
+    },
+    ColourRule {
+        name: "Not for model",
+        what: "messages the spec does not list for the device's model",
+        style: Style::new().fg(Color::LightBlue).bg(Color::Rgb(0, 30, 70)),
+    },
+    ColourRule {
+        name: "Replies",
+        what: "answers to a request (↩#n: the request)",
+        style: Style::new().fg(Color::Green),
+    },
+    ColourRule {
+        name: "Requests",
+        what: "host → device (→#n: the reply)",
+        style: Style::new().fg(Color::Cyan),
+    },
+    ColourRule {
+        name: "Device",
+        what: "device → host without a request (status updates …)",
+        style: Style::new().fg(Color::LightBlue),
+    },
+];
+
+/// The colouring rule (index in [`COLOURS`]) of a record going `way`.
+pub fn colour_rule(r: &Rec, way: Way) -> Option<usize> {
+    if r.has(F_GARBAGE | F_TRUNCATED | F_DIAG) {
+        Some(0)
+    } else if r.has(F_UNSOLICITED | F_DUPLICATE) {
+        Some(1)
+    } else if r.has(F_NO_REPLY) {
+        Some(2)
+    } else if r.has(F_NOT_FOR_MODEL) {
+        Some(3)
+    } else if r.has(F_IS_REPLY) {
+        Some(4)
+    } else {
+        match way {
+            Way::Out => Some(5),
+            Way::In => Some(6),
+            Way::Unknown => None,
+        }
     }
 }
 
@@ -93,7 +189,7 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App) {
     }
     draw_status(f, app, status);
     if app.help {
-        draw_help(f, area);
+        draw_help(f, app, area);
     }
 }
 
@@ -159,7 +255,8 @@ fn draw_timeline_view(f: &mut Frame<'_>, app: &mut App, area: Rect) {
             Layout::horizontal([Constraint::Min(40), Constraint::Length(78)]).areas(bottom);
         (list, detail, hex)
     } else {
-        let hex_h = 3.min(area.height / 4).max(2);
+        // The hex pane grows with the window (a sixth of it), so long frames show whole.
+        let hex_h = (area.height / 6).max(3.min(area.height / 4).max(2));
         let rest = area.height.saturating_sub(hex_h);
         let list_h = (rest * 11 / 20).max(3);
         let [list, detail, hex] = Layout::vertical([
@@ -170,23 +267,76 @@ fn draw_timeline_view(f: &mut Frame<'_>, app: &mut App, area: Rect) {
         .areas(area);
         (list, detail, hex)
     };
-    let inner = |r: Rect| Rect {
-        y: r.y + 1,
-        height: r.height.saturating_sub(1),
+    // Below the border line (and, for the timeline, the column headers).
+    let below = |r: Rect, n: u16| Rect {
+        y: r.y + n.min(r.height),
+        height: r.height.saturating_sub(n),
         ..r
     };
     app.areas = Areas {
-        list: inner(list),
-        detail: inner(detail),
-        hex: inner(hex),
+        list: below(list, 2),
+        detail: below(detail, 1),
+        hex: below(hex, 1),
     };
-    app.list_rows = inner(list).height as usize;
-    app.detail_rows = inner(detail).height as usize;
+    app.list_rows = app.areas.list.height as usize;
+    app.detail_rows = app.areas.detail.height as usize;
     app.tick();
     draw_list(f, app, list);
     let lines = app.detail_lines();
     draw_detail(f, app, detail, &lines);
     draw_hex(f, app, hex, &lines);
+}
+
+/// Widths of the timeline columns: sized for the whole capture (its record count and time
+/// span), so rows do not shift as the view scrolls.
+struct Columns {
+    /// Record number.
+    n: usize,
+    /// Time.
+    time: usize,
+    /// Whether the protocol column is shown.
+    proto: bool,
+    /// Message name.
+    name: usize,
+}
+
+impl Columns {
+    fn of(ix: &Index, mode: TimeMode, width: u16) -> Self {
+        let n = ix.recs.len().max(1).to_string().len().max(3);
+        let span = match (ix.first_ts, ix.recs.last().and_then(Rec::ts)) {
+            (Some(a), Some(b)) => Some(b.saturating_sub(a)),
+            _ => None,
+        };
+        let rel = span.map_or(0, |s| format!("{:.6}", s as f64 / 1e9).len().max(8));
+        let time = match (span, mode) {
+            (None, _) => 4,
+            (_, TimeMode::Absolute) => 15,
+            (_, TimeMode::Relative) => rel,
+            // "Δ" and a sign.
+            (_, TimeMode::Delta) => rel + 2,
+        };
+        let proto = width >= 110;
+        Columns {
+            n,
+            time,
+            proto,
+            name: if proto { 30 } else { 23 },
+        }
+    }
+
+    /// The header row.
+    fn header(&self) -> String {
+        let (nw, tw, name_w) = (self.n, self.time, self.name);
+        let mut s = format!("{:>nw$} {:>tw$} ", "No.", "Time");
+        if self.proto {
+            s.push_str("Proto ");
+        }
+        s.push_str(&format!(
+            "  {:>5} → {:<5} {:<name_w$} Info",
+            "Src", "Dst", "Message"
+        ));
+        s
+    }
 }
 
 fn draw_list(f: &mut Frame<'_>, app: &App, area: Rect) {
@@ -203,7 +353,11 @@ fn draw_list(f: &mut Frame<'_>, app: &App, area: Rect) {
     let block = pane_block(title, app.focus == Pane::List);
     let inner = block.inner(area);
     f.render_widget(block, area);
-    let h = inner.height as usize;
+    if inner.height == 0 {
+        return;
+    }
+    let [head, body] = Layout::vertical([Constraint::Length(1), Constraint::Min(0)]).areas(inner);
+    let h = body.height as usize;
     // One row more above the first, for the Δ time of the first shown row.
     let from = app.top.saturating_sub(1);
     let ns = app.rows(from, h + (app.top - from));
@@ -211,55 +365,69 @@ fn draw_list(f: &mut Frame<'_>, app: &App, area: Rect) {
         return;
     };
     let first = ix.first_ts;
-    let rows: Vec<Option<Row>> = ns.iter().map(|n| row(&ix, *n)).collect();
+    let cols = Columns::of(&ix, app.time_mode, inner.width);
+    let rows: Vec<Option<(Row, Option<usize>)>> = ns
+        .iter()
+        .map(|n| {
+            let r = row(&ix, *n)?;
+            let rule = ix.rec(*n).and_then(|rec| colour_rule(rec, r.way));
+            Some((r, rule))
+        })
+        .collect();
     drop(ix);
-    let nw = ns.last().map_or(6, |n| n.to_string().len().max(6));
-    let wide = inner.width >= 110;
-    let name_w = if wide { 30 } else { 23 };
+    f.render_widget(
+        Paragraph::new(cols.header()).style(
+            Style::new()
+                .fg(Color::White)
+                .bg(Color::DarkGray)
+                .add_modifier(Modifier::BOLD),
+        ),
+        head,
+    );
+    let (nw, tw, name_w) = (cols.n, cols.time, cols.name);
     let mut lines = vec![];
     for (i, r) in rows.iter().enumerate() {
         let pos = from + i;
         if pos < app.top {
             continue;
         }
-        let Some(r) = r else {
+        let Some((r, rule)) = r else {
             lines.push(Line::from("?"));
             continue;
         };
         let prev = if i > 0 {
-            rows[i - 1].as_ref().and_then(|p| p.ts)
+            rows[i - 1].as_ref().and_then(|p| p.0.ts)
         } else {
             None
         };
-        let dc = dir_color(r.way);
-        let mut spans = vec![
-            Span::raw(format!("{:>nw$} ", r.n)),
-            Span::styled(
-                format!("{:>10} ", time_text(app.time_mode, r.ts, prev, first)),
-                Style::new().fg(Color::DarkGray),
-            ),
-        ];
-        if wide {
-            spans.push(Span::raw(format!("{:<4}", r.proto)));
+        let mut spans = vec![Span::raw(format!(
+            "{:>nw$} {:>tw$} ",
+            r.n,
+            time_text(app.time_mode, r.ts, prev, first)
+        ))];
+        if cols.proto {
+            spans.push(Span::raw(format!("{:<6}", r.proto)));
         }
-        if r.garbage {
-            spans.push(Span::styled(
-                format!("!! {} ", r.diag),
-                Style::new().fg(Color::Red).add_modifier(Modifier::BOLD),
-            ));
-            spans.push(Span::styled(
-                r.fields.clone(),
-                Style::new().fg(Color::DarkGray),
-            ));
+        // Garbage has no addresses, but the side it came from is known when captured.
+        let (src, dst) = if r.garbage {
+            match r.way {
+                Way::Out => ("host", "?"),
+                Way::In => ("?", "host"),
+                Way::Unknown => ("?", "?"),
+            }
         } else {
-            spans.push(Span::styled(
-                format!("{} {:>5} → {:<5} ", r.way.arrow(), r.src, r.dst),
-                Style::new().fg(dc),
-            ));
-            spans.push(Span::styled(
-                format!("{:<name_w$} ", r.name),
-                Style::new().fg(family_color(r.family)),
-            ));
+            (r.src.as_str(), r.dst.as_str())
+        };
+        spans.push(Span::raw(format!(
+            "{} {src:>5} → {dst:<5} {:<name_w$} ",
+            r.way.arrow(),
+            r.name
+        )));
+        let bold = Style::new().add_modifier(Modifier::BOLD);
+        if r.garbage {
+            spans.push(Span::styled(format!("!! {}  ", r.diag), bold));
+            spans.push(Span::raw(r.fields.clone()));
+        } else {
             if let Some(p) = r.pair {
                 let t = if r.is_reply {
                     match r.latency_ns {
@@ -269,21 +437,21 @@ fn draw_list(f: &mut Frame<'_>, app: &App, area: Rect) {
                 } else {
                     format!("→#{p} ")
                 };
-                spans.push(Span::styled(t, Style::new().fg(Color::Blue)));
+                spans.push(Span::raw(t));
             }
             spans.push(Span::raw(r.fields.clone()));
             if !r.diag.is_empty() {
-                spans.push(Span::styled(
-                    format!("  !! {}", r.diag),
-                    Style::new().fg(Color::Red).add_modifier(Modifier::BOLD),
-                ));
+                let gap = if r.fields.is_empty() && r.pair.is_none() {
+                    ""
+                } else {
+                    "  "
+                };
+                spans.push(Span::styled(format!("{gap}!! {}", r.diag), bold));
             }
         }
-        let mut line = Line::from(spans);
+        let mut line = Line::from(spans).style(rule.map_or(Style::new(), |i| COLOURS[i].style));
         if pos == app.sel {
-            line = line.style(Style::new().add_modifier(Modifier::REVERSED));
-        } else if !r.diag.is_empty() {
-            line = line.style(Style::new().bg(Color::Rgb(60, 0, 0)));
+            line = line.patch_style(Style::new().add_modifier(Modifier::REVERSED));
         }
         lines.push(line);
     }
@@ -299,20 +467,11 @@ fn draw_list(f: &mut Frame<'_>, app: &App, area: Rect) {
         };
         lines.push(Line::styled(msg, Style::new().fg(Color::DarkGray)));
     }
-    f.render_widget(Paragraph::new(lines), inner);
+    f.render_widget(Paragraph::new(lines), body);
 }
 
-fn draw_detail(f: &mut Frame<'_>, app: &App, area: Rect, lines: &[Node]) {
-    let block = pane_block(" Detail ".into(), app.focus == Pane::Detail);
-    let inner = block.inner(area);
-    f.render_widget(block, area);
-    let mut out = vec![];
-    for (i, n) in lines
-        .iter()
-        .enumerate()
-        .skip(app.detail_top)
-        .take(inner.height as usize)
-    {
+fn draw_detail(f: &mut Frame<'_>, app: &mut App, area: Rect, lines: &[Node]) {
+    let text_of = |n: &Node| {
         let marker = if n.children {
             if app.collapsed.contains(&n.id) {
                 "▸ "
@@ -322,6 +481,31 @@ fn draw_detail(f: &mut Frame<'_>, app: &App, area: Rect, lines: &[Node]) {
         } else {
             "  "
         };
+        format!("{}{marker}{}", "  ".repeat(n.depth as usize), n.text)
+    };
+    // Long lines scroll sideways (`<` `>`); the view keeps the scroll within the longest.
+    let w = area.width as usize;
+    let widest = lines
+        .iter()
+        .map(|n| text_of(n).chars().count())
+        .max()
+        .unwrap_or(0);
+    let left = app.detail_left.min(widest.saturating_sub(w));
+    let title = if left > 0 {
+        format!(" Detail ◂{left} ")
+    } else {
+        " Detail ".to_string()
+    };
+    let block = pane_block(title, app.focus == Pane::Detail);
+    let inner = block.inner(area);
+    f.render_widget(block, area);
+    let mut out = vec![];
+    for (i, n) in lines
+        .iter()
+        .enumerate()
+        .skip(app.detail_top)
+        .take(inner.height as usize)
+    {
         let style = match n.kind {
             NodeKind::Section => Style::new().add_modifier(Modifier::BOLD),
             NodeKind::Item => Style::new(),
@@ -332,13 +516,20 @@ fn draw_detail(f: &mut Frame<'_>, app: &App, area: Rect, lines: &[Node]) {
                 .add_modifier(Modifier::UNDERLINED),
             NodeKind::Diag => Style::new().fg(Color::Red).add_modifier(Modifier::BOLD),
         };
-        let text = format!("{}{marker}{}", "  ".repeat(n.depth as usize), n.text);
+        let full = text_of(n);
+        let mut text: String = full.chars().skip(left).take(w).collect();
+        // A line that goes on past the right edge ends in "…".
+        if full.chars().count() > left + w {
+            text.pop();
+            text.push('…');
+        }
         let mut line = Line::styled(text, style);
         if i == app.detail_sel && app.focus != Pane::List {
             line = line.patch_style(Style::new().add_modifier(Modifier::REVERSED));
         }
         out.push(line);
     }
+    app.detail_left = left;
     f.render_widget(Paragraph::new(out), inner);
 }
 
@@ -550,8 +741,31 @@ fn draw_status(f: &mut Frame<'_>, app: &App, area: Rect) {
     }
     let s = match &app.message {
         Some(m) => m.clone(),
-        None => " ?:help /:filter s,n,N:search p:pair ::goto t:time Tab:pane 2:stats 3:plot q:quit"
-            .to_string(),
+        None => {
+            // As many hints as fit, the most useful first.
+            const HINTS: &[&str] = &[
+                "?:help",
+                "/:filter",
+                "a,A:as filter",
+                "s,n,N:search",
+                "p:pair",
+                "Tab:pane",
+                "q:quit",
+                "::goto",
+                "t:time",
+                "2:stats",
+                "3:plot",
+            ];
+            let mut s = String::new();
+            for h in HINTS {
+                if s.chars().count() + 1 + h.chars().count() > area.width as usize {
+                    break;
+                }
+                s.push(' ');
+                s.push_str(h);
+            }
+            s
+        }
     };
     f.render_widget(
         Paragraph::new(s).style(Style::new().fg(Color::Black).bg(Color::Gray)),
@@ -559,27 +773,123 @@ fn draw_status(f: &mut Frame<'_>, app: &App, area: Rect) {
     );
 }
 
-fn draw_help(f: &mut Frame<'_>, area: Rect) {
-    let w = 64.min(area.width);
-    let h = (HELP.len() as u16 + 2).min(area.height);
+/// Width of the key column of the help overlay.
+const KEY_W: usize = 18;
+
+/// One help entry: the key (or a sample in its style) in a column `key_w` wide and its text,
+/// wrapped to `width` columns under itself.
+fn help_entry(
+    out: &mut Vec<Line<'static>>,
+    (width, key_w): (usize, usize),
+    k: &str,
+    ks: Style,
+    d: &str,
+) {
+    let room = width.saturating_sub(key_w + 1).max(10);
+    let mut rows: Vec<String> = vec![String::new()];
+    for word in d.split(' ') {
+        let used = rows.last().map_or(0, |r| r.chars().count());
+        if used > 0 && used + 1 + word.chars().count() > room {
+            rows.push(String::new());
+        }
+        if let Some(r) = rows.last_mut() {
+            if !r.is_empty() {
+                r.push(' ');
+            }
+            r.push_str(word);
+        }
+    }
+    let k = format!(" {k}");
+    let k_w = k.chars().count();
+    // A key longer than its column gets a line of its own.
+    let own_line = k_w > key_w;
+    if own_line {
+        out.push(Line::from(Span::styled(k.clone(), ks)));
+    }
+    for (i, r) in rows.into_iter().enumerate() {
+        let mut spans = vec![];
+        if i == 0 && !own_line {
+            spans.push(Span::styled(k.clone(), ks));
+            spans.push(Span::raw(" ".repeat(key_w + 1 - k_w)));
+        } else {
+            spans.push(Span::raw(" ".repeat(key_w + 1)));
+        }
+        spans.push(Span::raw(r));
+        out.push(Line::from(spans));
+    }
+}
+
+/// The help overlay's lines, wrapped to `width` columns: the keys, the colouring rules and
+/// examples of the filter language.
+pub fn help_lines(width: usize) -> Vec<Line<'static>> {
+    let heading = Style::new().add_modifier(Modifier::BOLD | Modifier::UNDERLINED);
+    let key = Style::new().fg(Color::Yellow);
+    let cols = (width, KEY_W);
+    let mut out = vec![Line::styled(" Keys", heading)];
+    for (k, d) in HELP {
+        help_entry(&mut out, cols, k, key, d);
+    }
+    out.push(Line::default());
+    out.push(Line::styled(
+        " Colours (a row takes the first rule that matches, as in Wireshark)",
+        heading,
+    ));
+    for c in COLOURS {
+        help_entry(&mut out, cols, c.name, c.style, c.what);
+    }
+    out.push(Line::default());
+    out.push(Line::styled(
+        " Display filters (/ and s; the language of aptscope decode -Y)",
+        heading,
+    ));
+    // Examples are longer than keys: a wider column when the window has the room.
+    let ex_w = FILTER_EXAMPLES
+        .iter()
+        .map(|(k, _)| k.chars().count() + 1)
+        .max()
+        .unwrap_or(KEY_W);
+    let ex_cols = (width, if width >= ex_w + 30 { ex_w } else { KEY_W });
+    for (k, d) in FILTER_EXAMPLES {
+        help_entry(&mut out, ex_cols, k, key, d);
+    }
+    out
+}
+
+fn draw_help(f: &mut Frame<'_>, app: &mut App, area: Rect) {
+    // As wide as the longest entry needs, within the screen; as tall as the text, else it
+    // scrolls.
+    let natural = HELP
+        .iter()
+        .chain(FILTER_EXAMPLES)
+        .map(|(k, d)| (k.chars().count() + 1).max(KEY_W) + 1 + d.chars().count())
+        .chain(COLOURS.iter().map(|c| KEY_W + 1 + c.what.chars().count()))
+        .max()
+        .unwrap_or(60)
+        + 3;
+    let w = (natural as u16).min(area.width.saturating_sub(2).max(area.width.min(20)));
+    let lines = help_lines(w.saturating_sub(2) as usize);
+    let h = (lines.len() as u16 + 2).min(area.height.saturating_sub(2).max(area.height.min(5)));
     let r = Rect {
         x: area.x + (area.width - w) / 2,
         y: area.y + (area.height - h) / 2,
         width: w,
         height: h,
     };
-    let lines: Vec<Line> = HELP
-        .iter()
-        .map(|(k, d)| {
-            Line::from(vec![
-                Span::styled(format!(" {k:<16}"), Style::new().fg(Color::Yellow)),
-                Span::raw(*d),
-            ])
-        })
-        .collect();
+    let rows = h.saturating_sub(2) as usize;
+    app.help_rows = rows;
+    app.help_scroll = app.help_scroll.min(lines.len().saturating_sub(rows));
+    let top = app.help_scroll;
+    let mut block = Block::bordered().title(" Help (? or Esc to close) ");
+    if lines.len() > rows {
+        let end = (top + rows).min(lines.len());
+        let more = if end < lines.len() { "↓ " } else { "" };
+        block = block.title_bottom(format!(
+            " {more}lines {}–{end} of {} (j/k PgUp/PgDn) ",
+            top + 1,
+            lines.len()
+        ));
+    }
+    let shown: Vec<Line> = lines.into_iter().skip(top).take(rows).collect();
     f.render_widget(Clear, r);
-    f.render_widget(
-        Paragraph::new(lines).block(Block::bordered().title(" Keys (? or Esc to close) ")),
-        r,
-    );
+    f.render_widget(Paragraph::new(shown).block(block), r);
 }

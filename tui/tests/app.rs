@@ -387,3 +387,95 @@ fn a_stage_shows_motion_values_in_mm_everywhere() {
     }
     assert!(with_phys > 30, "{with_phys}");
 }
+
+/// Select detail line `id` of the selected record (focus on the detail pane).
+fn select_line(a: &mut App, id: &str) {
+    a.focus = Pane::Detail;
+    a.detail_sel = a
+        .detail_lines()
+        .iter()
+        .position(|l| l.id == id)
+        .expect("line shown");
+}
+
+#[test]
+fn apply_prepare_and_narrow_as_filter() {
+    let mut a = app("kdc101-session.pcapng");
+    key(&mut a, KeyCode::Char(':'));
+    typed(&mut a, "8");
+    key(&mut a, KeyCode::Enter);
+    // Apply: the filter runs, the record stays selected.
+    select_line(&mut a, "f.status_bits.HOMING");
+    key(&mut a, KeyCode::Char('a'));
+    assert_eq!(a.filter_text, "apt.status_bits contains HOMING");
+    assert_eq!(a.rows(0, 100), [8, 9, 10, 11]);
+    assert_eq!(a.selected(), Some(8));
+    assert_eq!(a.input, Input::None);
+    // … and Selected: narrowed by another line of the record.
+    select_line(&mut a, "f.position");
+    key(&mut a, KeyCode::Char('&'));
+    assert_eq!(
+        a.filter_text,
+        "(apt.status_bits contains HOMING) && (apt.position == 0)"
+    );
+    assert_eq!(a.rows(0, 100), [8]);
+    // Prepare: into the filter bar to edit, not applied yet.
+    select_line(&mut a, "hdr.src");
+    key(&mut a, KeyCode::Char('A'));
+    assert_eq!(a.input, Input::Filter("apt.src == usb".into()));
+    assert_eq!(a.rows(0, 100), [8], "not applied before Enter");
+    typed(&mut a, " && apt.position < 0");
+    key(&mut a, KeyCode::Enter);
+    assert_eq!(a.filter_text, "apt.src == usb && apt.position < 0");
+    assert_eq!(a.rows(0, 100), [9, 10, 11]);
+    // A heading has no value: nothing changes, the status line says why.
+    let before = a.filter_text.clone();
+    select_line(&mut a, "fields");
+    key(&mut a, KeyCode::Char('a'));
+    assert_eq!(a.filter_text, before);
+    assert!(a
+        .message
+        .as_deref()
+        .is_some_and(|m| m.starts_with("no filter")));
+    // In the timeline the action takes the row's message.
+    a.focus = Pane::List;
+    key(&mut a, KeyCode::Char('a'));
+    assert_eq!(a.filter_text, "apt.name == MOT_GET_DCSTATUSUPDATE");
+    assert_eq!(a.len(), 9);
+}
+
+#[test]
+fn detail_scrolls_sideways_and_resets_on_another_record() {
+    let mut a = app("kdc101-session.pcapng");
+    key(&mut a, KeyCode::Char(':'));
+    typed(&mut a, "2");
+    key(&mut a, KeyCode::Enter);
+    key(&mut a, KeyCode::Tab);
+    key(&mut a, KeyCode::Char('>'));
+    key(&mut a, KeyCode::Char('>'));
+    assert_eq!(a.detail_left, 16);
+    key(&mut a, KeyCode::Char('<'));
+    assert_eq!(a.detail_left, 8);
+    a.focus = Pane::List;
+    key(&mut a, KeyCode::Char('j'));
+    assert_eq!(a.detail_left, 0, "a new record starts at the left");
+}
+
+#[test]
+fn help_scrolls_and_closes() {
+    let mut a = app("kdc101-session.pcapng");
+    key(&mut a, KeyCode::Char('?'));
+    assert!(a.help);
+    key(&mut a, KeyCode::Char('j'));
+    key(&mut a, KeyCode::Down);
+    assert_eq!(a.help_scroll, 2);
+    key(&mut a, KeyCode::Char('k'));
+    assert_eq!(a.help_scroll, 1);
+    // Keys do not reach the panes while the help is open.
+    assert_eq!(a.selected(), Some(1));
+    key(&mut a, KeyCode::Char('g'));
+    assert_eq!(a.help_scroll, 0);
+    key(&mut a, KeyCode::Char('q'));
+    assert!(!a.help);
+    assert!(!a.quit, "q closes the help only");
+}

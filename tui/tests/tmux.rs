@@ -23,15 +23,19 @@ fn viewer() -> Option<Vec<String>> {
         .then(|| vec![bin.to_string_lossy().into_owned(), "view".into()])
 }
 
-/// The screen once it shows every one of `what` (a capture can catch a redraw half done, so
-/// wait for all the parts of the expected state), or after 10 s.
+/// The screen once it shows every one of `what` and has stopped changing (a capture can catch
+/// a redraw half done: the parts of the expected state can be there while other cells still
+/// show the previous one), or after 10 s.
 fn wait_for(session: &str, what: &[&str]) -> String {
     let start = Instant::now();
+    let mut last = String::new();
     loop {
         let screen = tmux(&["capture-pane", "-p", "-t", session]).unwrap_or_default();
-        if what.iter().all(|w| screen.contains(w)) || start.elapsed() > Duration::from_secs(10) {
+        let shown = what.iter().all(|w| screen.contains(w));
+        if (shown && screen == last) || start.elapsed() > Duration::from_secs(10) {
             return screen;
         }
+        last = screen;
         sleep(Duration::from_millis(100));
     }
 }
@@ -70,6 +74,23 @@ fn real_binary_under_tmux() {
     );
     assert!(screen.contains("Timeline 1/20"), "{screen}");
     assert!(screen.contains("MOD_SET_CHANENABLESTATE"), "{screen}");
+    // Column headers over the timeline.
+    assert!(
+        screen.contains("No.") && screen.contains("Message") && screen.contains("Info"),
+        "{screen}"
+    );
+    // The help fits the width and scrolls to its end (colours and filter examples).
+    tmux(&["send-keys", "-t", &session, "?"]);
+    let screen = wait_for(&session, &["Help", "lines 1–"]);
+    assert!(
+        screen.contains("apply the selected detail line"),
+        "{screen}"
+    );
+    tmux(&["send-keys", "-t", &session, "G"]);
+    let screen = wait_for(&session, &["latency > 50ms", "Colours"]);
+    assert!(screen.contains("latency > 50ms"), "{screen}");
+    tmux(&["send-keys", "-t", &session, "Escape"]);
+    wait_for(&session, &["Timeline 1/20"]);
     // Go to record 19, jump to its request, filter, then quit.
     tmux(&["send-keys", "-t", &session, ":19", "Enter"]);
     let screen = wait_for(&session, &["Timeline 19/20", "Record 19"]);
@@ -81,6 +102,28 @@ fn real_binary_under_tmux() {
     let screen = wait_for(&session, &["2 shown", "MOT_MOVE_HOMED"]);
     assert!(screen.contains("MOT_MOVE_HOMED"), "{screen}");
     assert!(!screen.contains("MOT_MOVE_ABSOLUTE"), "{screen}");
+    // Apply as filter: the selected row's message (MOT_MOVE_HOME, the first shown).
+    tmux(&["send-keys", "-t", &session, "a"]);
+    let screen = wait_for(&session, &["filter: apt.name == MOT_MOVE_HOME", "1 shown"]);
+    assert!(screen.contains("1 shown"), "{screen}");
+    // Prepare as filter from a detail line: the source address, in the filter bar.
+    tmux(&[
+        "send-keys",
+        "-t",
+        &session,
+        "Tab",
+        "j",
+        "j",
+        "j",
+        "j",
+        "j",
+        "A",
+    ]);
+    let screen = wait_for(&session, &["/apt.src == host"]);
+    assert!(screen.contains("/apt.src == host"), "{screen}");
+    tmux(&["send-keys", "-t", &session, "Enter"]);
+    let screen = wait_for(&session, &["filter: apt.src == host", "7 shown"]);
+    assert!(screen.contains("7 shown"), "{screen}");
     tmux(&["send-keys", "-t", &session, "q"]);
     let alive = || {
         Command::new("tmux")
