@@ -1452,6 +1452,20 @@ pub fn ell_schema(cmd: Option<&Cmd>) -> String {
             );
             fo.prop("hw_release", "integer", Some("hardware release"));
         }
+        if f.kind == Kind::Model {
+            fo.prop(
+                &format!("{}_name", f.name),
+                "string",
+                Some("the model as named: ELL14"),
+            );
+        }
+        if f.kind == Kind::Firmware {
+            fo.prop(
+                &format!("{}_version", f.name),
+                "string",
+                Some("the release as major.minor: 1.5"),
+            );
+        }
         if f.kind == Kind::Raw {
             let mut p = SchemaObj::new(None, None);
             p.prop("period", "integer", Some("drive period"))

@@ -570,6 +570,13 @@ pub fn ell_frame(
             }
             out.push(']');
         }
+        // Coded numbers also as the text shows them (the number stays for scripts).
+        if let (Kind::Model, EllValue::U(x)) = (fd.kind, v) {
+            let _ = write!(out, ",\"{}_name\":\"ELL{x}\"", fd.name);
+        }
+        if let (Kind::Firmware, EllValue::U(x)) = (fd.kind, v) {
+            let _ = write!(out, ",\"{}_version\":\"{}.{}\"", fd.name, x >> 4, x & 15);
+        }
         // The manual packs two facts into this byte: give each its own key too.
         if let (Kind::ThreadHw, EllValue::U(x)) = (fd.kind, v) {
             let thread = if x & 0x80 != 0 { "imperial" } else { "metric" };

@@ -86,3 +86,24 @@ fn rack_bays_are_numbered_as_their_addresses() {
     assert!(out.iter().any(|l| l.contains("bay_ident=BAY0")), "{out:#?}");
     assert!(out.iter().any(|l| l.contains("→ bay0")), "{out:#?}");
 }
+
+#[test]
+fn elliptec_model_and_firmware_also_as_the_text_shows_them() {
+    let out = decode(b"1in1IN0911300123202315010013000000020\r\n", Format::Json);
+    let v: serde_json::Value = out
+        .iter()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .find(|v| v["cmd"] == "IN")
+        .expect("IN record");
+    let f = &v["fields"];
+    assert_eq!(
+        (f["model"].as_u64(), f["model_name"].as_str()),
+        (Some(9), Some("ELL9")),
+        "{v}"
+    );
+    assert_eq!(
+        (f["firmware"].as_u64(), f["firmware_version"].as_str()),
+        (Some(0x15), Some("1.5")),
+        "{v}"
+    );
+}
