@@ -157,3 +157,51 @@ fn a_shorter_reply_timeout_flags_slow_replies() {
     let (_, err, ok) = run(&["decode", "--timeout", "1x", KDC]);
     assert!(!ok && err.contains("unknown unit"), "{err}");
 }
+
+/// Every name a record can hold is a name filters accept: each key of every record `decode
+/// --json` writes for the samples (with and without a stage), under its protocol prefix, and
+/// each field under `fields.` and `phys.`. (Filters reject names no record has.)
+#[test]
+fn every_key_decode_writes_is_a_filter_name() {
+    use aptscope_dissector::filter::Filter;
+    let mut names = std::collections::BTreeSet::new();
+    for f in [
+        "samples/kdc101-session.pcapng",
+        "samples/damaged.bin",
+        "samples/elliptec-bus.txt",
+        "samples/sessions/bsc203.pcapng",
+        "samples/sessions/kpz101.pcapng",
+        "samples/sessions/laser-tec-quad.pcapng",
+        "samples/sessions/elliptec.pcapng",
+        "samples/sessions/damaged.pcapng",
+    ] {
+        for extra in [&[][..], &["--stage", "MTS25-Z8"][..]] {
+            let mut args = vec!["decode", "--json"];
+            args.extend_from_slice(extra);
+            args.push(f);
+            for r in records(&args) {
+                let Some(p) = r["proto"].as_str().filter(|p| *p == "apt" || *p == "ell") else {
+                    continue;
+                };
+                let Some(obj) = r.as_object() else { continue };
+                for (k, v) in obj {
+                    names.insert(format!("{p}.{k}"));
+                    if k == "fields" || k == "phys" {
+                        for f in v.as_object().into_iter().flat_map(|o| o.keys()) {
+                            names.insert(format!("{p}.{k}.{f}"));
+                            if k == "fields" {
+                                names.insert(format!("{p}.{f}"));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(names.len() > 100, "{names:?}");
+    let rejected: Vec<String> = names
+        .iter()
+        .filter_map(|n| Filter::parse(n).err().map(|e| format!("{n}: {e}")))
+        .collect();
+    assert!(rejected.is_empty(), "{rejected:#?}");
+}

@@ -622,6 +622,152 @@ const TOP_LEVEL: &[&str] = &[
     "paired",
 ];
 
+/// Record keys of APT records (frames, garbage, late diagnostics), with the filter's aliases.
+const APT_KEYS: &[&str] = &[
+    "n",
+    "proto",
+    "type",
+    "offset",
+    "len",
+    "raw",
+    "msgid",
+    "msgid_hex",
+    "name",
+    "msg_dir",
+    "src",
+    "dst",
+    "data_flag",
+    "data_len",
+    "form_note",
+    "channel",
+    "chan",
+    "sub",
+    "fields",
+    "phys",
+    "pair",
+    "latency",
+    "latency_ms",
+    "pair_other_address",
+    "diag",
+    "dir",
+    "ts",
+    "ts_ns",
+    "stream",
+    "ref",
+    "unpaired",
+    "paired",
+];
+
+/// Record keys of Elliptec records, with the filter's aliases.
+const ELL_KEYS: &[&str] = &[
+    "n",
+    "proto",
+    "type",
+    "offset",
+    "len",
+    "raw",
+    "text",
+    "addr",
+    "dir",
+    "cmd",
+    "name",
+    "fields",
+    "phys",
+    "module",
+    "pair",
+    "latency",
+    "latency_ms",
+    "interim",
+    "diag",
+    "ts",
+    "ts_ns",
+    "stream",
+    "ref",
+    "unpaired",
+    "paired",
+];
+
+/// The field names a protocol's records can hold in `fields` (from the message tables, plus
+/// the keys the NDJSON derives beside a field).
+fn field_names(proto: &str) -> &'static [&'static str] {
+    use std::sync::OnceLock;
+    static APT: OnceLock<Vec<&'static str>> = OnceLock::new();
+    static ELL: OnceLock<Vec<&'static str>> = OnceLock::new();
+    let build = |v: Vec<&'static str>| {
+        let mut v = v;
+        v.sort_unstable();
+        v.dedup();
+        v
+    };
+    if proto == "ell" {
+        ELL.get_or_init(|| {
+            let mut v: Vec<&'static str> = vec![];
+            for c in crate::ell::table::COMMANDS {
+                for f in c.fields {
+                    v.push(f.name);
+                    match f.kind {
+                        crate::ell::table::Kind::Model => {
+                            v.push(Box::leak(format!("{}_name", f.name).into_boxed_str()))
+                        }
+                        crate::ell::table::Kind::Firmware => {
+                            v.push(Box::leak(format!("{}_version", f.name).into_boxed_str()))
+                        }
+                        crate::ell::table::Kind::ThreadHw => v.extend(["thread", "hw_release"]),
+                        crate::ell::table::Kind::Raw => v.push("curve_points"),
+                        _ => {}
+                    }
+                }
+            }
+            build(v)
+        })
+    } else {
+        APT.get_or_init(|| {
+            let t = crate::Table::global();
+            let forms = t
+                .msgs()
+                .iter()
+                .flat_map(|m| m.forms.iter())
+                .chain(t.subs().iter().flat_map(|s| s.forms.iter()));
+            build(
+                forms
+                    .flat_map(|f| f.fields.iter().map(|x| x.name))
+                    .collect(),
+            )
+        })
+    }
+}
+
+/// Check that `rest` (the name after `apt.`/`ell.`) names something records of `proto` hold;
+/// if not, say so with the nearest names.
+fn check_name(proto: &str, rest: &[&str]) -> Result<(), String> {
+    let keys = if proto == "ell" { ELL_KEYS } else { APT_KEYS };
+    let fields = field_names(proto);
+    let first = rest.first().copied().unwrap_or("");
+    let (ok, bad, cands): (bool, &str, Vec<&str>) = match (first, rest.get(1)) {
+        ("fields" | "phys", Some(f)) => (fields.contains(f), f, fields.to_vec()),
+        _ => (
+            keys.contains(&first) || fields.contains(&first),
+            first,
+            keys.iter().chain(fields.iter()).copied().collect(),
+        ),
+    };
+    if ok {
+        return Ok(());
+    }
+    let near = crate::suggest::nearest(bad, cands, 4);
+    let name = format!("{proto}.{}", rest.join("."));
+    Err(if near.is_empty() {
+        format!("unknown field `{name}`: no {proto} record has `{bad}`")
+    } else {
+        let prefix = match (first, rest.get(1)) {
+            ("fields" | "phys", Some(_)) => format!("{proto}.{first}."),
+            _ => format!("{proto}."),
+        };
+        let list: Vec<String> = near.iter().map(|n| format!("`{prefix}{n}`")).collect();
+        format!("unknown field `{name}`; did you mean {}?", list.join(", "))
+    })
+}
+
 /// What a dotted name refers to.
 enum Ref {
     Proto(&'static str),
@@ -639,9 +785,28 @@ fn resolve(segs: &[&str]) -> Result<Ref, String> {
     };
     if proto.is_none() && !TOP_LEVEL.contains(first) {
         let name = segs.join(".");
-        return Err(format!(
-            "unknown field `{name}`: protocol fields need a prefix, e.g. `apt.{name}` or `ell.{name}`"
-        ));
+        // Suggest only names that exist: a protocol field of that name, or a record key.
+        let mut near: Vec<String> = vec![];
+        for p in ["apt", "ell"] {
+            if check_name(p, rest).is_ok() {
+                near.push(format!("`{p}.{name}`"));
+            }
+        }
+        let last = rest.last().copied().unwrap_or(first);
+        for t in crate::suggest::nearest(last, TOP_LEVEL.iter().copied(), 3) {
+            near.push(format!("`{t}`"));
+        }
+        return Err(if near.is_empty() {
+            format!("unknown field `{name}`: protocol fields need a prefix (`apt.` or `ell.`)")
+        } else {
+            format!(
+                "unknown field `{name}`: protocol fields need a prefix; did you mean {}?",
+                near.join(", ")
+            )
+        });
+    }
+    if let Some(p) = proto {
+        check_name(p, rest)?;
     }
     let mut path: Vec<String> = rest.iter().map(|s| s.to_string()).collect();
     let mut ts_seconds = false;
@@ -1522,9 +1687,9 @@ mod tests {
             ("apt.data_flag == \"TRUE\"", true),
             ("apt.data_flag == 1", false),
             // Missing fields: every comparison is false.
-            ("apt.fields.nothing == 1", false),
-            ("apt.fields.nothing != 1", false),
-            ("!(apt.fields.nothing == 1)", true),
+            ("apt.fields.max_vel == 1", false),
+            ("apt.fields.max_vel != 1", false),
+            ("!(apt.fields.max_vel == 1)", true),
         ] {
             assert_eq!(yes(&r, src), want, "{src}");
         }
@@ -1700,19 +1865,19 @@ mod tests {
         assert!(!yes(&status_rec(), "apt.sub == SETPOINT"));
         assert!(!yes(&status_rec(), "apt.sub != SETPOINT"));
 
-        let r = json!({"proto":"apt","n":1,"diag":[],"fields":{"a":0,"b":false,"c":"",
-            "d":[],"e":"x","f":[1],"g":null,"h":{}}});
-        assert!(yes(&r, "apt.fields.a"), "0 exists and is not false");
-        assert!(!yes(&r, "apt.fields.b"));
-        assert!(!yes(&r, "apt.fields.c"));
-        assert!(!yes(&r, "apt.fields.d"));
-        assert!(yes(&r, "apt.fields.e"));
-        assert!(yes(&r, "apt.fields.f"));
-        assert!(!yes(&r, "apt.fields.g"));
-        assert!(!yes(&r, "apt.fields.h"));
-        assert!(!yes(&r, "apt.fields.zz"));
+        let r = json!({"proto":"apt","n":1,"diag":[],"fields":{"position":0,"velocity":false,"model_number":"",
+            "status_bits":[],"notes":"x","chan_ident":[1],"serial_number":null,"internal":{}}});
+        assert!(yes(&r, "apt.fields.position"), "0 exists and is not false");
+        assert!(!yes(&r, "apt.fields.velocity"));
+        assert!(!yes(&r, "apt.fields.model_number"));
+        assert!(!yes(&r, "apt.fields.status_bits"));
+        assert!(yes(&r, "apt.fields.notes"));
+        assert!(yes(&r, "apt.fields.chan_ident"));
+        assert!(!yes(&r, "apt.fields.serial_number"));
+        assert!(!yes(&r, "apt.fields.internal"));
+        assert!(!yes(&r, "apt.fields.max_vel"));
         assert!(!yes(&r, "diag"));
-        assert!(!yes(&r, "apt.fields.g == null"));
+        assert!(!yes(&r, "apt.fields.serial_number == null"));
 
         let input = json!({"type":"input","diag":[]});
         assert!(yes(&input, "diag"));
@@ -1739,23 +1904,26 @@ mod tests {
 
     #[test]
     fn values() {
-        let r = json!({"proto":"apt","n":-3,"fields":{"s":"a \"quoted\" \\ word",
-            "big":18446744073709551615_u64,"neg":-2147483648,"f":0.25,"t":"x\ty"}});
+        let r = json!({"proto":"apt","n":-3,"fields":{"model_number":"a \"quoted\" \\ word",
+            "serial_number":18446744073709551615_u64,"position":-2147483648,"velocity":0.25,"notes":"x\ty"}});
         for (src, want) in [
             ("n == -3", true),
             ("n < -2", true),
             ("n == -0x3", true),
-            ("apt.fields.s == \"a \\\"quoted\\\" \\\\ word\"", true),
-            ("apt.fields.s contains \"\\\"quoted\\\"\"", true),
-            ("apt.fields.t == \"x\\ty\"", true),
-            ("apt.fields.big == 0xFFFFFFFFFFFFFFFF", true),
-            ("apt.fields.big == 18446744073709551615", true),
-            ("apt.fields.big > 18446744073709551614", true),
-            ("apt.fields.neg == -2147483648", true),
-            ("apt.fields.f == 0.25", true),
-            ("apt.fields.f < 1", true),
-            ("apt.fields.f > 0", true),
-            ("apt.fields.s ~ \"\\\"q\"", true),
+            (
+                "apt.fields.model_number == \"a \\\"quoted\\\" \\\\ word\"",
+                true,
+            ),
+            ("apt.fields.model_number contains \"\\\"quoted\\\"\"", true),
+            ("apt.fields.notes == \"x\\ty\"", true),
+            ("apt.fields.serial_number == 0xFFFFFFFFFFFFFFFF", true),
+            ("apt.fields.serial_number == 18446744073709551615", true),
+            ("apt.fields.serial_number > 18446744073709551614", true),
+            ("apt.fields.position == -2147483648", true),
+            ("apt.fields.velocity == 0.25", true),
+            ("apt.fields.velocity < 1", true),
+            ("apt.fields.velocity > 0", true),
+            ("apt.fields.model_number ~ \"\\\"q\"", true),
         ] {
             assert_eq!(yes(&r, src), want, "{src}");
         }
@@ -1806,12 +1974,23 @@ mod tests {
             (
                 "name == MOT_MOVE_HOME",
                 1,
-                "unknown field `name`: protocol fields need a prefix, e.g. `apt.name` or `ell.name`",
+                "unknown field `name`: protocol fields need a prefix; did you mean `apt.name`, `ell.name`?",
             ),
             (
                 "dir == h2d && fields.position > 3",
                 15,
-                "unknown field `fields.position`: protocol fields need a prefix, e.g. `apt.fields.position` or `ell.fields.position`",
+                "unknown field `fields.position`: protocol fields need a prefix; did you mean `apt.fields.position`, `ell.fields.position`?",
+            ),
+            ("apt.nmae == X", 1, "unknown field `apt.nmae`; did you mean `apt.name`?"),
+            (
+                "frame.len > 3",
+                1,
+                "unknown field `frame.len`: protocol fields need a prefix; did you mean `len`?",
+            ),
+            (
+                "ell.fields.postion > 3",
+                1,
+                "unknown field `ell.fields.postion`; did you mean `ell.fields.position`?",
             ),
             ("apt == 5", 1, "`apt` is a protocol; compare one of its fields, e.g. `apt.name`"),
             ("apt.fields.", 12, "expected a field name after `.`"),

@@ -39,12 +39,16 @@ pub fn nearest<'a>(
         .filter_map(|c| {
             let d = distance(word, c);
             let lc = c.to_ascii_lowercase();
-            let contains = lw.len() >= 3 && (lc.contains(&lw) || lw.contains(&lc));
+            let contains = lw.len() >= 3 && lc.len() >= 3 && (lc.contains(&lw) || lw.contains(&lc));
             (d <= limit || contains).then_some((if contains { d.min(limit) } else { d }, c))
         })
         .collect();
     scored.sort();
     scored.dedup_by(|a, b| a.1 == b.1);
+    // A name that matches but for case is the answer.
+    if scored.iter().any(|(_, c)| c.eq_ignore_ascii_case(word)) {
+        scored.retain(|(_, c)| c.eq_ignore_ascii_case(word));
+    }
     scored.into_iter().take(n).map(|(_, c)| c).collect()
 }
 
