@@ -132,7 +132,7 @@ enum RoleArg {
     Device,
 }
 
-#[derive(Clone, Copy, clap::ValueEnum)]
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum ProtoArg {
     Auto,
     Apt,
@@ -376,8 +376,8 @@ enum Cmd {
         /// A message name or id, or a sub-message name (`SETPOINT`, `la:SETPOINT`): show its
         /// fields, forms, revisions, devices, replies and the spec's examples.
         query: Option<String>,
-        /// Protocol: apt (default) or elliptec.
-        #[arg(long, value_enum, default_value_t = ProtoArg::Apt)]
+        /// Protocol: apt, elliptec, or auto (default: both, APT first).
+        #[arg(long, value_enum, default_value_t = ProtoArg::Auto)]
         proto: ProtoArg,
         /// NDJSON, one object per message and sub-message, with every field.
         #[arg(long)]
@@ -606,9 +606,12 @@ fn main() -> ExitCode {
             query,
             json,
             verbose,
-            ..
+            proto,
         } => match query {
             Some(q) => message_page(&q, json),
+            None if proto == ProtoArg::Auto => {
+                messages(json, verbose).and_then(|()| ell_messages(json, verbose))
+            }
             None => messages(json, verbose),
         },
         Cmd::Encode {

@@ -210,12 +210,22 @@ fn messages_json_lists_every_id_in_the_spec() {
         .filter(|r| r["type"] == "msg")
         .filter_map(|r| r["msgid"].as_u64())
         .collect();
+    // Both revisions of the APT spec, and every Elliptec command of the table.
     for line in include_str!("../dissector/tests/spec_ids.txt")
         .lines()
+        .chain(include_str!("../dissector/tests/spec_ids_2025.txt").lines())
         .filter(|l| !l.starts_with('#'))
     {
         let id = u64::from_str_radix(line[2..6].trim(), 16).expect("hex");
         assert!(ids.contains(&id), "{line} missing from `messages --json`");
+    }
+    let codes: std::collections::HashSet<&str> = recs
+        .iter()
+        .filter(|r| r["proto"] == "ell" && r["type"] == "cmd")
+        .filter_map(|r| r["code"].as_str())
+        .collect();
+    for c in aptscope_dissector::ell::table::COMMANDS {
+        assert!(codes.contains(c.code), "{} missing", c.code);
     }
     let abs = recs
         .iter()

@@ -98,18 +98,21 @@ fn messages_json_describes_every_elliptec_command() {
 }
 
 #[test]
-fn messages_without_proto_still_lists_apt() {
+fn messages_without_proto_lists_both_apt_first() {
     let (plain, _, ok) = aptscope(&["messages"], None);
     assert!(ok);
     let (apt, _, ok2) = aptscope(&["messages", "--proto", "apt"], None);
     assert!(ok2);
-    assert_eq!(plain, apt);
+    let (ell, _, ok3) = aptscope(&["messages", "--proto", "elliptec"], None);
+    assert!(ok3);
+    assert_eq!(plain, format!("{apt}{ell}"));
     assert!(
         plain.starts_with("0x"),
         "{}",
         &plain[..plain.len().min(200)]
     );
-    assert!(plain.contains("MOT_MOVE_ABSOLUTE") && !plain.contains("GET_CURRENT_CURVE"));
+    assert!(apt.contains("MOT_MOVE_ABSOLUTE") && !apt.contains("GET_CURRENT_CURVE"));
+    assert!(plain.contains("GET_CURRENT_CURVE"));
 }
 
 #[test]

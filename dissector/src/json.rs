@@ -452,7 +452,7 @@ fn forms_json(out: &mut String, table: &Table, forms: &[crate::table::Form]) {
 pub fn msg_def(out: &mut String, table: &Table, m: &crate::table::MsgDef) {
     let _ = write!(
         out,
-        "{{\"type\":\"msg\",\"msgid\":{},\"msgid_hex\":\"0x{:04X}\",\"name\":",
+        "{{\"proto\":\"apt\",\"type\":\"msg\",\"msgid\":{},\"msgid_hex\":\"0x{:04X}\",\"name\":",
         m.id, m.id
     );
     string(out, m.name);
@@ -494,7 +494,7 @@ pub fn msg_def(out: &mut String, table: &Table, m: &crate::table::MsgDef) {
 pub fn sub_def(out: &mut String, table: &Table, s: &crate::table::SubDef) {
     let _ = write!(
         out,
-        "{{\"type\":\"sub\",\"group\":\"{}\",\"sub_id\":{},\"name\":",
+        "{{\"proto\":\"apt\",\"type\":\"sub\",\"group\":\"{}\",\"sub_id\":{},\"name\":",
         s.group, s.id
     );
     string(out, s.name);
