@@ -260,8 +260,13 @@ pub fn apt_frame_in(
         string(out, fd.name);
         out.push(':');
         value(out, f.table(), fd, &v);
-        let conv = match (fd.scale, v.as_f64()) {
-            (Some(s), Some(x)) => Some((x * s, fd.unit.unwrap_or(""))),
+        // A device-relative value (piezo % of its maximum) in V or µm once the maximum is
+        // known, else the table's fixed scale, else the stage's conversion.
+        let conv = match (fd.pct_of, fd.scale, v.as_f64()) {
+            (Some(_), Some(s), Some(x)) => {
+                crate::apt::phys(fd, &v, scale).or(Some((x * s, fd.unit.unwrap_or(""))))
+            }
+            (None, Some(s), Some(x)) => Some((x * s, fd.unit.unwrap_or(""))),
             _ => crate::apt::phys(fd, &v, scale),
         };
         if let Some((x, unit)) = conv {

@@ -22,7 +22,7 @@
 //! model a device reports in HW_GET_INFO, followed by [`Tracker`].
 
 use crate::apt::{text_of, AptFrame, Value};
-use crate::table::Quantity;
+use crate::table::{Maximum, Quantity};
 use std::fmt::Write;
 
 /// Sampling interval of brushed DC servo controllers (TDC001, KDC101, KVS30), in seconds.
@@ -491,6 +491,9 @@ pub struct Scale {
     pub unit: String,
     /// Per quantity (in [`Quantity::ALL`] order): raw units per physical unit, and the unit.
     per: [(Option<f64>, String); 5],
+    /// The device's maxima that percentages refer to (piezo: output voltage limit in V, travel
+    /// in µm), once it has reported them.
+    maxima: [Option<f64>; 2],
 }
 
 impl Scale {
@@ -521,7 +524,35 @@ impl Scale {
             counts_per_unit,
             unit: unit.to_string(),
             per,
+            maxima: [None; 2],
         }
+    }
+
+    /// The conversion of a device with no stage, for values relative to its maxima (piezo).
+    pub fn piezo() -> Scale {
+        Scale::new("piezo", None, 0.0, "")
+    }
+
+    fn max_slot(m: Maximum) -> usize {
+        match m {
+            Maximum::Volts => 0,
+            Maximum::Travel => 1,
+        }
+    }
+
+    /// The device maximum `m`, when reported.
+    pub fn maximum(&self, m: Maximum) -> Option<f64> {
+        self.maxima[Self::max_slot(m)]
+    }
+
+    /// Set the device maximum `m` (in V or µm).
+    pub fn set_maximum(&mut self, m: Maximum, v: f64) {
+        self.maxima[Self::max_slot(m)] = Some(v);
+    }
+
+    /// A percentage of maximum `m` in its physical unit, when the maximum is known.
+    pub fn of_maximum(&self, m: Maximum, pct: f64) -> Option<(f64, &'static str)> {
+        self.maximum(m).map(|max| (pct / 100.0 * max, m.unit()))
     }
 
     /// The conversion of a stage of section 8.
@@ -665,6 +696,8 @@ struct Device {
     stream: u32,
     addr: u8,
     model: Option<String>,
+    /// Piezo maxima reported by the device, for a device without a stage conversion.
+    piezo: Option<Scale>,
     resolution: Resolution,
     /// Whether `resolution` was worked out for the current model.
     resolved: bool,
@@ -705,9 +738,11 @@ impl Tracker {
     ) -> (Option<&Scale>, Option<Notice>) {
         let h = f.header();
         let info = h.msg_id() == HW_GET_INFO;
-        let has_q = f
-            .form
-            .is_some_and(|fm| fm.fields.iter().any(|x| x.q.is_some()));
+        let has_q = f.form.is_some_and(|fm| {
+            fm.fields
+                .iter()
+                .any(|x| x.q.is_some() || x.pct_of.is_some() || x.max_of.is_some())
+        });
         if !info && !has_q {
             return (None, None);
         }
@@ -743,6 +778,7 @@ impl Tracker {
                     stream,
                     addr,
                     model,
+                    piezo: None,
                     resolution: Resolution::None,
                     resolved: false,
                 });
@@ -769,9 +805,27 @@ impl Tracker {
                 d.resolution = r;
             }
         }
-        let scale = match &self.devices[i].resolution {
+        // A device reporting a maximum (piezo output voltage limit, travel): later percentages
+        // of it convert to V and µm.
+        if h.src() != crate::apt::Addr::Host {
+            for (fd, v) in f.fields() {
+                let (Some(m), Some(x)) = (fd.max_of, v.as_f64()) else {
+                    continue;
+                };
+                let x = x * fd.scale.unwrap_or(1.0);
+                if x > 0.0 {
+                    let d = &mut self.devices[i];
+                    if let Resolution::Scale(s) = &mut d.resolution {
+                        s.set_maximum(m, x);
+                    }
+                    d.piezo.get_or_insert_with(Scale::piezo).set_maximum(m, x);
+                }
+            }
+        }
+        let d = &self.devices[i];
+        let scale = match &d.resolution {
             Resolution::Scale(s) => Some(&**s),
-            _ => None,
+            _ => d.piezo.as_ref(),
         };
         (scale, notice)
     }

@@ -107,3 +107,63 @@ fn elliptec_model_and_firmware_also_as_the_text_shows_them() {
         "{v}"
     );
 }
+
+/// Piezo percentages in volts and micrometres once the device has reported its voltage limit
+/// and travel (PZ_GET_OUTPUTMAXVOLTS, PZ_GET_MAXTRAVEL); before that, in % as the spec gives.
+#[test]
+fn piezo_percentages_in_volts_and_micrometres_once_the_maxima_are_known() {
+    let volts = |v: &str| {
+        frame(
+            "PZ_GET_OUTPUTVOLTS",
+            &[("chan_ident", "1"), ("voltage", v)],
+            0x01,
+            0x50,
+        )
+    };
+    let mut b = volts("16384");
+    b.extend(frame(
+        "PZ_GET_OUTPUTMAXVOLTS",
+        &[
+            ("chan_ident", "1"),
+            ("voltage", "1500"),
+            ("flags", "LIMIT_150V"),
+        ],
+        0x01,
+        0x50,
+    ));
+    b.extend(volts("32767"));
+    b.extend(frame(
+        "PZ_GET_MAXTRAVEL",
+        &[("chan_ident", "1"), ("travel", "200")],
+        0x01,
+        0x50,
+    ));
+    b.extend(frame(
+        "PZ_GET_OUTPUTPOS",
+        &[("chan_ident", "1"), ("position_sw", "16384")],
+        0x01,
+        0x50,
+    ));
+    let recs: Vec<serde_json::Value> = decode(&b, Format::Json)
+        .iter()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .filter(|v: &serde_json::Value| v["type"] == "frame")
+        .collect();
+    let phys = |i: usize, f: &str| {
+        (
+            recs[i]["phys"][f]["value"].as_f64(),
+            recs[i]["phys"][f]["unit"].clone(),
+        )
+    };
+    let (pct, unit) = phys(0, "voltage");
+    assert_eq!(unit, "%");
+    assert!((pct.unwrap_or(0.0) - 50.0).abs() < 0.01);
+    let (v, unit) = phys(2, "voltage");
+    assert_eq!(unit, "V");
+    assert!((v.unwrap_or(0.0) - 150.0).abs() < 1e-6, "{v:?}");
+    let (um, unit) = phys(4, "position_sw");
+    assert_eq!(unit, "um");
+    assert!((um.unwrap_or(0.0) - 10.0).abs() < 0.01, "{um:?}");
+    let text = decode(&b, Format::Text).join("\n");
+    assert!(text.contains("voltage=32767 (150 V)"), "{text}");
+}

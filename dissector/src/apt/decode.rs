@@ -476,7 +476,11 @@ pub fn phys<'s>(
     v: &Value<'_>,
     scale: Option<&'s crate::units::Scale>,
 ) -> Option<(f64, &'s str)> {
-    scale?.convert(f.q?, v.as_f64()?)
+    let s = scale?;
+    if let Some(m) = f.pct_of {
+        return s.of_maximum(m, v.as_f64()? * f.scale.unwrap_or(1.0));
+    }
+    s.convert(f.q?, v.as_f64()?)
 }
 
 /// A one-line summary of the key fields (`name=value unit`, comma separated), for timelines.

@@ -181,6 +181,46 @@ pub struct Field {
     /// The motion quantity the raw value is (`q=`): converted to mm or degrees once the stage
     /// is known (spec section 8).
     pub q: Option<Quantity>,
+    /// A percentage of the device's maximum (`pct_of=`): in volts or micrometres once the device
+    /// has reported that maximum.
+    pub pct_of: Option<Maximum>,
+    /// The device's maximum itself (`max_of=`), in the field's scaled unit.
+    pub max_of: Option<Maximum>,
+}
+
+/// A device maximum that percentages refer to (piezo controllers: the output voltage limit of
+/// PZ_GET_OUTPUTMAXVOLTS, the travel of PZ_GET_MAXTRAVEL).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Maximum {
+    /// The maximum output voltage, in V.
+    Volts,
+    /// The maximum travel, in µm.
+    Travel,
+}
+
+impl Maximum {
+    /// The name used in the table (`volts`, `travel`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Maximum::Volts => "volts",
+            Maximum::Travel => "travel",
+        }
+    }
+    /// The physical unit of a value converted with this maximum.
+    pub fn unit(self) -> &'static str {
+        match self {
+            Maximum::Volts => "V",
+            Maximum::Travel => "um",
+        }
+    }
+    /// Parse a table name.
+    pub fn parse(s: &str) -> Option<Maximum> {
+        match s {
+            "volts" => Some(Maximum::Volts),
+            "travel" => Some(Maximum::Travel),
+            _ => None,
+        }
+    }
 }
 
 /// What a motion field's raw value is, in the controller's own units (`q=` in the table).

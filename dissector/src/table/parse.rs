@@ -473,6 +473,8 @@ impl Parser {
             enumeration: None,
             flags: None,
             q: None,
+            pct_of: None,
+            max_of: None,
         };
         let mut pending = vec![];
         for a in attrs {
@@ -484,6 +486,18 @@ impl Parser {
                 },
                 Some(("enum", e)) => pending.push((true, e)),
                 Some(("flags", e)) => pending.push((false, e)),
+                Some(("pct_of", m)) => match Maximum::parse(m) {
+                    Some(m) => f.pct_of = Some(m),
+                    _ => self.err(
+                        file,
+                        ln,
+                        format!("bad `pct_of={m}` (volts or travel, on a % field)"),
+                    ),
+                },
+                Some(("max_of", m)) => match Maximum::parse(m) {
+                    Some(m) => f.max_of = Some(m),
+                    None => self.err(file, ln, format!("bad `max_of={m}` (volts or travel)")),
+                },
                 Some(("q", q)) => match Quantity::parse(q) {
                     Some(q) => f.q = Some(q),
                     None => self.err(
