@@ -384,6 +384,9 @@ fn form_json(out: &mut String, table: &Table, form: &crate::table::Form) {
             let _ = write!(out, "\"data\",\"data_len\":{n}");
         }
         FormKind::Sub => out.push_str("\"sub\""),
+        FormKind::Open(n) => {
+            let _ = write!(out, "\"open\",\"data_len\":{n}");
+        }
     }
     if !form.note.is_empty() {
         out.push_str(",\"note\":");

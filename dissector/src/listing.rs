@@ -115,6 +115,10 @@ fn forms(t: &Table, forms: &[Form], out: &mut String) {
             FormKind::Header => "6 bytes, header only".to_string(),
             FormKind::Data(n) => format!("6 + {n} bytes"),
             FormKind::Sub => "6 + a sub-message's data packet".to_string(),
+            FormKind::Open(n) => format!(
+                "6 + {n} bytes, then {} bytes per element of its last field",
+                f.open_elem().unwrap_or(0)
+            ),
         };
         let _ = write!(out, "    [{}] {size}", f.label());
         if !f.note.is_empty() {

@@ -63,6 +63,10 @@ pub fn random_values(table: &Table, r: &mut Rng, form: &Form) -> Vec<(&'static s
                     FieldValue::Int(prim_value(r, p) as i64)
                 }
             }
+            // An open array: a few whole rows' worth of elements.
+            Ty::Array(p, 0) => {
+                FieldValue::List((0..r.below(13) * 3).map(|_| prim_value(r, p)).collect())
+            }
             Ty::Array(p, n) => FieldValue::List((0..n).map(|_| prim_value(r, p)).collect()),
             Ty::Str(n) => {
                 let len = r.below(n as u64 + 1) as usize;

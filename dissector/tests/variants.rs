@@ -227,3 +227,49 @@ fn genuine_header_only_frames_are_not_taken_for_unflagged_data() {
     );
     assert_eq!(recs[0]["data_len"], 0);
 }
+
+/// MOT_SET_MOVESYNCHARRAY breaks the spec's 255-byte rule (its own example is 1208 bytes): a
+/// whole 100-row array for two channels frames and decodes, row values included, and the
+/// frames around it are untouched.
+#[test]
+fn a_data_packet_over_255_bytes_frames_when_the_table_allows_it() {
+    let rows: Vec<String> = (0..300).map(|i| (i * 7).to_string()).collect();
+    let list = rows.join(",");
+    let mut s = frame("HW_REQ_INFO", &[], None, 0x50, 0x01);
+    let big = frame(
+        "MOT_SET_MOVESYNCHARRAY",
+        &[
+            ("array_id", "1"),
+            ("channels", "3"),
+            ("num_points", "100"),
+            ("start_ix", "0"),
+            ("time_pos", &list),
+        ],
+        None,
+        0xD0,
+        0x01,
+    );
+    assert_eq!(big.len(), 6 + 1208, "the spec example's length");
+    s.extend(&big);
+    s.extend(frame("HW_REQ_INFO", &[], None, 0x50, 0x01));
+    for step in [0, 7, 64] {
+        let recs: Vec<Value> = decode(&s, step)
+            .into_iter()
+            .filter(|r| r["type"] != "diag")
+            .collect();
+        assert_eq!(
+            names(&recs),
+            ["HW_REQ_INFO", "MOT_SET_MOVESYNCHARRAY", "HW_REQ_INFO"],
+            "chunks of {step}"
+        );
+        assert!(kinds(&recs[1]).is_empty(), "{}", recs[1]["diag"]);
+        assert_eq!(recs[1]["data_len"], 1208);
+        let tp = recs[1]["fields"]["time_pos"].as_array().expect("rows");
+        assert_eq!(tp.len(), 300);
+        assert_eq!(tp[299], 299 * 7);
+    }
+    // Another message claiming more than 255 bytes is still a corrupt header.
+    let absurd = [0x53, 0x04, 0x00, 0x01, 0xD0, 0x01];
+    let recs = decode(&absurd, 0);
+    assert_eq!(recs[0]["type"], "garbage");
+}

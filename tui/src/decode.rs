@@ -554,6 +554,7 @@ fn apt_tree(r: &Rec, bytes: &[u8], scale: Option<&aptscope_dissector::units::Sca
             FormKind::Header => "header-only".to_string(),
             FormKind::Data(n) => format!("{n}-byte data packet"),
             FormKind::Sub => "sub-message".to_string(),
+            FormKind::Open(_) => format!("{}-byte data packet", f.data_len()),
         };
         let mut head = format!("Fields ({kind}");
         if !form.note.is_empty() {

@@ -94,6 +94,19 @@ impl Value<'_> {
     }
 }
 
+/// The width of field `f` in a frame of `frame_len` bytes: its type's, or for the open array
+/// that ends an open form (`TYPE[*]`), the whole elements left in the frame.
+#[inline]
+fn field_width(f: &Field, frame_len: usize) -> usize {
+    match f.ty {
+        Ty::Array(p, 0) => {
+            let left = frame_len.saturating_sub(f.loc.frame_offset());
+            left - left % p.width()
+        }
+        t => t.width(),
+    }
+}
+
 /// The text of a `str[N]` field: bytes up to the first NUL, lossy UTF-8.
 pub fn text_of(b: &[u8]) -> std::borrow::Cow<'_, str> {
     let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
@@ -153,6 +166,10 @@ impl<'a, 't> AptFrame<'a, 't> {
                     }
                 }
                 FormKind::Data(n) if has_data && n as usize == len => {
+                    f.msg_form = Some(form);
+                    f.form = Some(form);
+                }
+                FormKind::Open(_) if has_data && form.open_fits(len, table.max_data_len(m)) => {
                     f.msg_form = Some(form);
                     f.form = Some(form);
                 }
@@ -309,7 +326,9 @@ impl<'a, 't> AptFrame<'a, 't> {
     /// A field's value; `None` when the frame is too short to hold it.
     pub fn value(&self, f: &Field) -> Option<Value<'a>> {
         let start = f.loc.frame_offset();
-        let b = self.bytes.get(start..start + f.ty.width())?;
+        let b = self
+            .bytes
+            .get(start..start + field_width(f, self.bytes.len()))?;
         Some(match f.ty {
             Ty::Prim(p) => read_prim(p, b),
             Ty::Array(p, _) => Value::Array(p, b),
@@ -324,7 +343,7 @@ impl<'a, 't> AptFrame<'a, 't> {
         let bytes = self.bytes;
         fields.iter().filter_map(move |f| {
             let start = f.loc.frame_offset();
-            let b = bytes.get(start..start + f.ty.width())?;
+            let b = bytes.get(start..start + field_width(f, bytes.len()))?;
             let v = match f.ty {
                 Ty::Prim(p) => read_prim(p, b),
                 Ty::Array(p, _) => Value::Array(p, b),

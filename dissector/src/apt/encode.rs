@@ -312,6 +312,17 @@ pub fn encode(
         FormKind::Header => 0,
         FormKind::Data(n) => n as usize,
         FormKind::Sub => return Err(EncodeError::SubFormNeedsSub),
+        // The fixed fields, then as many elements of the open array as given.
+        FormKind::Open(n) => {
+            let elems = values
+                .iter()
+                .find_map(|(k, v)| match (form.fields.last(), v) {
+                    (Some(f), FieldValue::List(xs)) if f.name == *k => Some(xs.len()),
+                    _ => None,
+                })
+                .unwrap_or(0);
+            n as usize + elems * form.open_elem().unwrap_or(0)
+        }
     };
     let mut out = vec![0u8; HEADER_LEN + data_len];
     for (name, v) in values {
@@ -321,7 +332,10 @@ pub fn encode(
             .find(|f| f.name == *name)
             .ok_or_else(|| EncodeError::UnknownField(name.to_string()))?;
         let at = f.loc.frame_offset();
-        let w = f.ty.width();
+        let w = match f.ty {
+            Ty::Array(_, 0) => out.len() - at,
+            t => t.width(),
+        };
         let slot = &mut out[at..at + w];
         let mismatch = || EncodeError::BadValue {
             field: f.name.to_string(),
@@ -347,7 +361,7 @@ pub fn encode(
                 slot.copy_from_slice(b);
             }
             (Ty::Array(p, n), FieldValue::List(xs)) => {
-                if xs.len() > *n as usize {
+                if *n != 0 && xs.len() > *n as usize {
                     return Err(mismatch());
                 }
                 for (i, x) in xs.iter().enumerate() {

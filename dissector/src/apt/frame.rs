@@ -102,7 +102,9 @@ fn step_header(table: &Table, b: &[u8]) -> Step {
     } else {
         0
     };
-    if raw_len as usize > MAX_DATA_LEN {
+    // Beyond the spec's 255 bytes only for a message whose table entry allows it (`maxlen=`).
+    let max = msg.map_or(MAX_DATA_LEN, |m| table.max_data_len(m));
+    if raw_len as usize > max {
         return match (msg, dst_ok && src_ok) {
             (Some(_), true) => Step::Absurd(h.msg_id(), raw_len),
             _ => Step::Skip,
@@ -143,7 +145,7 @@ fn step(table: &Table, b: &[u8], eof: bool) -> Step {
         return s;
     };
     let len = u16::from_le_bytes([b[2], b[3]]) as usize;
-    if len == 0 || len > MAX_DATA_LEN || !table.accepts_len(m, true, len) {
+    if len == 0 || len > table.max_data_len(m) || !table.accepts_len(m, true, len) {
         return s;
     }
     let whole = HEADER_LEN + len;

@@ -240,6 +240,7 @@ impl Table {
         m.forms.iter().any(|f| match f.kind {
             FormKind::Header => !has_data,
             FormKind::Data(n) => has_data && n as usize == len,
+            FormKind::Open(_) => has_data && f.open_fits(len, self.max_data_len(m)),
             FormKind::Sub => {
                 has_data
                     && self.data.subs.iter().any(|s| {
@@ -249,6 +250,14 @@ impl Table {
                                 .any(|sf| sf.kind == FormKind::Data(len as u16))
                     })
             }
+        })
+    }
+
+    /// The largest data packet the framer takes for `m`: the spec's 255 bytes, or its `maxlen=`.
+    #[inline]
+    pub fn max_data_len(&self, m: &MsgDef) -> usize {
+        m.max_len.map_or(crate::apt::MAX_DATA_LEN, |x| {
+            (x as usize).max(crate::apt::MAX_DATA_LEN)
         })
     }
 

@@ -115,6 +115,10 @@ impl Ty {
             return Some(Ty::Prim(p));
         }
         let (base, rest) = s.split_once('[')?;
+        // `TYPE[*]`: as many elements as the data packet holds (the last field of an open form).
+        if rest == "*]" {
+            return Some(Ty::Array(Prim::from_name(base)?, 0));
+        }
         let n: u16 = rest.strip_suffix(']')?.parse().ok()?;
         if n == 0 {
             return None;
@@ -130,6 +134,7 @@ impl Ty {
     pub fn name(self) -> String {
         match self {
             Ty::Prim(p) => p.as_str().to_string(),
+            Ty::Array(p, 0) => format!("{}[*]", p.as_str()),
             Ty::Array(p, n) => format!("{}[{n}]", p.as_str()),
             Ty::Str(n) => format!("str[{n}]"),
             Ty::Bytes(n) => format!("bytes[{n}]"),
@@ -287,6 +292,9 @@ pub enum FormKind {
     Data(u16),
     /// The data packet is one of the message's sub-messages.
     Sub,
+    /// A data packet of at least this many bytes: the fixed fields, then as many elements of
+    /// the last field (`TYPE[*]`) as the packet holds (`form 8+`).
+    Open(u16),
 }
 
 /// One length a message exists in, and its fields.
@@ -307,6 +315,23 @@ impl Form {
             FormKind::Header => "hdr".into(),
             FormKind::Data(n) => n.to_string(),
             FormKind::Sub => "sub".into(),
+            FormKind::Open(n) => format!("{n}+"),
+        }
+    }
+    /// Width of one element of the open array ending an open form.
+    pub fn open_elem(&self) -> Option<usize> {
+        match self.fields.last()?.ty {
+            Ty::Array(p, 0) => Some(p.width()),
+            _ => None,
+        }
+    }
+    /// Whether a data packet of `len` bytes fits this open form (`max`: the message's largest).
+    pub fn open_fits(&self, len: usize, max: usize) -> bool {
+        match (self.kind, self.open_elem()) {
+            (FormKind::Open(n), Some(w)) => {
+                len >= n as usize && len <= max && (len - n as usize).is_multiple_of(w)
+            }
+            _ => false,
         }
     }
 }
@@ -341,6 +366,8 @@ pub struct MsgDef {
     pub subs: Option<&'static str>,
     /// Which revisions of the spec define it ([`Revs`]).
     pub revs: Revs,
+    /// Largest data packet (`maxlen=`), for the messages that break the spec's 255-byte rule.
+    pub max_len: Option<u16>,
     /// Behaviour classes (`class=` in the table).
     pub class: Class,
     /// How long its reply may take (`timeout=`); `None`: [`DEFAULT_TIMEOUT_MS`].

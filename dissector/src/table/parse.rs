@@ -312,6 +312,7 @@ impl Parser {
             reply: vec![],
             subs: None,
             revs: Revs::BOTH,
+            max_len: None,
             class: Class::default(),
             timeout_ms: None,
             doc: "",
@@ -335,6 +336,10 @@ impl Parser {
                 Some(("timeout", v)) => match parse_ms(v) {
                     Some(t) => m.timeout_ms = Some(t),
                     None => self.err(file, ln, format!("bad timeout `{v}` (e.g. 500ms, 120s)")),
+                },
+                Some(("maxlen", v)) => match parse_int(v).and_then(|x| u16::try_from(x).ok()) {
+                    Some(x) if x > 255 => m.max_len = Some(x),
+                    _ => self.err(file, ln, format!("bad maxlen `{v}` (a length over 255)")),
                 },
                 Some(("rev", v)) => match Revs::parse(v) {
                     Some(r) => m.revs = r,
@@ -415,6 +420,18 @@ impl Parser {
         let kind = match k {
             "hdr" => FormKind::Header,
             "sub" => FormKind::Sub,
+            n if n.ends_with('+') => {
+                match parse_int(&n[..n.len() - 1]).and_then(|v| u16::try_from(v).ok()) {
+                    Some(l) => FormKind::Open(l),
+                    None => {
+                        return self.err(
+                            file,
+                            ln,
+                            format!("bad form `{k}` (hdr, sub, a length or LEN+)"),
+                        )
+                    }
+                }
+            }
             n => match parse_int(n).and_then(|v| u16::try_from(v).ok()) {
                 Some(0) => return self.err(file, ln, "a data form of length 0: use `form hdr`"),
                 Some(l) => FormKind::Data(l),
@@ -582,7 +599,7 @@ impl Parser {
             None => return self.err(file, ln, "a field needs a name"),
         };
         let off = match self.current_form_kind() {
-            Some((FormKind::Data(_), off)) => off,
+            Some((FormKind::Data(_) | FormKind::Open(_), off)) => off,
             Some((FormKind::Header, _)) => {
                 return self.err(
                     file,
@@ -747,7 +764,22 @@ impl Parser {
 
 fn check_forms(at: &str, forms: &[Form], errs: &mut Vec<String>) {
     for f in forms {
-        if let FormKind::Data(len) = f.kind {
+        let open = f
+            .fields
+            .iter()
+            .position(|x| matches!(x.ty, Ty::Array(_, 0)));
+        match (f.kind, open) {
+            (FormKind::Open(_), Some(i)) if i + 1 == f.fields.len() => {}
+            (FormKind::Open(n), _) => errs.push(format!(
+                "{at}: form {n}+: its last field (and only that one) is an open array `TYPE[*]`"
+            )),
+            (_, Some(_)) => errs.push(format!(
+                "{at}: form {}: an open array `TYPE[*]` needs an open form `LEN+`",
+                f.label()
+            )),
+            _ => {}
+        }
+        if let FormKind::Data(len) | FormKind::Open(len) = f.kind {
             let sum: usize = f.fields.iter().map(|x| x.ty.width()).sum();
             if sum != len as usize {
                 errs.push(format!(
