@@ -362,5 +362,8 @@ fn messages_looks_one_message_up() {
         .is_some_and(|d| d.iter().any(|x| x == "KDC101")));
     let (_, err, ok) = aptscope(&["messages", "MOT_MOVE_HOMD"], None);
     assert!(!ok);
-    assert!(err.contains("did you mean") && err.contains("MOT_MOVE_HOMED"), "{err}");
+    assert!(
+        err.contains("did you mean") && err.contains("MOT_MOVE_HOMED"),
+        "{err}"
+    );
 }
