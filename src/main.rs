@@ -787,6 +787,7 @@ fn decode(
 fn info(file: &str, opts: OpenOptions, as_json: bool, proto: ProtoArg) -> io::Result<()> {
     let (mut reader, _) = open(file, opts)?;
     let i = summarize(reader.as_mut(), proto_of(proto));
+    i.file_diags.iter().try_for_each(fatal)?;
     if as_json {
         println!("{}", i.to_json(file));
     } else {

@@ -198,6 +198,19 @@ fn a_usb_device_that_is_not_in_the_capture_is_an_error_listing_those_that_are() 
         err.contains("usb 9:9 is not in the capture; devices present: 1:7 (0403:faf0, FTDI)"),
         "{err}"
     );
+    for cmd in ["info", "stats", "convert"] {
+        let mut args = vec![
+            cmd,
+            "--usb-device",
+            "9:9",
+            "samples/kdc101-session.usbmon.pcap",
+        ];
+        if cmd == "convert" {
+            args.extend(["-", "--to", "hex"]);
+        }
+        let (_, err, ok) = run(&args);
+        assert!(!ok && err.contains("devices present: 1:7"), "{cmd}: {err}");
+    }
     // The right one decodes.
     let (out, err, ok) = run(&[
         "decode",
