@@ -5,7 +5,7 @@ use aptscope_capture::info::summarize;
 use aptscope_capture::live::sim::{sim_apt_main, sim_elliptec_main, SimLine};
 use aptscope_capture::live::tap::{sniff_main, tap_main, Flow, SniffOptions, TapOptions, TapStats};
 use aptscope_capture::open::{create, open, open_with_progress, Format, OpenOptions, Progress};
-use aptscope_capture::{Direction, Event};
+use aptscope_capture::Event;
 use aptscope_dissector::apt::{encode_named_report, Addr, Named};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::filter::Filter;
@@ -107,9 +107,13 @@ struct LiveArgs {
     /// Flow control: none, rtscts, xonxoff.
     #[arg(long)]
     flow: Option<String>,
-    /// Write the capture here: pcapng, or pcap when it ends in .pcap.
+    /// Write the capture here: pcapng, or pcap when it ends in .pcap (another extension is
+    /// refused unless --write-format says).
     #[arg(short = 'w', long)]
     write: Option<String>,
+    /// Format of the -w file whatever its name: pcapng or pcap.
+    #[arg(long, requires = "write")]
+    write_format: Option<String>,
     /// Overwrite the capture file if it exists.
     #[arg(long)]
     force: bool,
@@ -144,8 +148,7 @@ enum Cmd {
     /// Decode captures (any readable format, detected from content): one line per frame, or
     /// NDJSON with --json.
     Decode {
-        /// Capture files, or `-` for standard input.
-        #[arg(default_value = "-")]
+        /// Capture files, or `-` for standard input (the default when it is not a terminal).
         files: Vec<String>,
         /// Input format instead of detecting it (pcap, pcapng, mcap, socat, jpnevulator,
         /// interceptty, xxd, hexdump, hex, raw).
@@ -192,9 +195,9 @@ enum Cmd {
         /// Reply timeout for every request (`500ms`, `2s`) instead of the per-message defaults.
         #[arg(long, value_parser = parse_duration)]
         timeout: Option<u64>,
-        /// Width of the rate bins in seconds.
-        #[arg(long, default_value_t = 1.0)]
-        bin: f64,
+        /// Width of the rate bins (`1s`, `100ms`; plain numbers are seconds).
+        #[arg(long, value_parser = parse_bin, default_value = "1s")]
+        bin: u64,
         /// USB captures: only the device at BUS:ADDR.
         #[arg(long)]
         usb_device: Option<String>,
@@ -270,9 +273,10 @@ enum Cmd {
         /// Send each message only after the replies its captured request got (or a timeout).
         #[arg(long)]
         wait_replies: bool,
-        /// How much longer than captured a reply may take before it is missing.
-        #[arg(long, value_parser = parse_duration, default_value = "2s")]
-        reply_timeout: u64,
+        /// How much longer than captured a reply may take before it is missing (default: per
+        /// message, as pairing: 2 s, 120 s for moves and homing).
+        #[arg(long, value_parser = parse_duration)]
+        reply_timeout: Option<u64>,
         /// Replay only the messages this display filter accepts (host messages as host,
         /// device messages as device).
         #[arg(short = 'Y', long)]
@@ -356,7 +360,7 @@ enum Cmd {
     Convert {
         /// Input capture.
         input: String,
-        /// Output file.
+        /// Output file, or `-` for standard output (with --to).
         output: String,
         /// Input format instead of detecting it.
         #[arg(long, short = 'F')]
@@ -419,6 +423,7 @@ macro_rules! live_fields {
         $o.baud = $live.baud;
         $o.flow = $flow;
         $o.write = $live.write.clone();
+        $o.write_format = write_format($live.write_format.as_deref())?;
         $o.force = $live.force;
         $o.reconnect = $live.reconnect;
         $o.quiet = $live.quiet;
@@ -443,7 +448,7 @@ fn main() -> ExitCode {
             units,
         } => open_opts(format.as_deref(), hex, usb_device.as_deref()).and_then(|o| {
             let u = units.opts()?;
-            files
+            decode_inputs(files)?
                 .iter()
                 .try_for_each(|f| decode(f, o, json, proto, filter.as_deref(), timeout, u.clone()))
         }),
@@ -700,6 +705,54 @@ fn open_opts(format: Option<&str>, hex: bool, usb: Option<&str>) -> io::Result<O
     Ok(OpenOptions { format, usb_device })
 }
 
+/// A reader's diagnostic that makes the command fail: the input has nothing of what was asked
+/// for (`--usb-device` naming no device of the capture).
+fn fatal(d: &aptscope_capture::ReadDiag) -> io::Result<()> {
+    if d.kind == aptscope_capture::usb::NOT_FOUND {
+        return Err(bad(d.msg.clone()));
+    }
+    Ok(())
+}
+
+/// The inputs of `decode`: standard input when none is named, unless it is a terminal (a user
+/// who forgot the file would wait for nothing).
+fn decode_inputs(files: Vec<String>) -> io::Result<Vec<String>> {
+    use std::io::IsTerminal;
+    if !files.is_empty() {
+        return Ok(files);
+    }
+    if io::stdin().is_terminal() {
+        return Err(bad(
+            "no capture given: aptscope decode FILE… (`-` reads standard input, \
+             e.g. hex typed or pasted, ended by Ctrl-D); aptscope decode --help for more"
+                .into(),
+        ));
+    }
+    Ok(vec!["-".into()])
+}
+
+/// `--write-format` of tap and sniff: pcapng or pcap.
+fn write_format(f: Option<&str>) -> io::Result<Option<Format>> {
+    match f {
+        None => Ok(None),
+        Some("pcapng") => Ok(Some(Format::PcapNg)),
+        Some("pcap") => Ok(Some(Format::Pcap)),
+        Some(other) => Err(bad(format!(
+            "--write-format {other}: the tap writes pcapng or pcap"
+        ))),
+    }
+}
+
+/// `--bin` of stats: a duration above zero.
+fn parse_bin(s: &str) -> Result<u64, String> {
+    match parse_duration(s)? {
+        0 => Err(format!(
+            "`{s}` is no bin width: give one above zero (`1s`, `100ms`, `0.5`)"
+        )),
+        ns => Ok(ns),
+    }
+}
+
 fn compile_filter(src: &str) -> io::Result<Filter> {
     Filter::parse(src).map_err(|e| bad(format!("bad filter: {e}\n{}", e.caret(src))))
 }
@@ -714,7 +767,10 @@ fn run_pipeline(
     while let Some(ev) = reader.next_event() {
         match ev {
             Event::Chunk(c) => p.push_chunk(c.ctx(), c.bytes, emit)?,
-            Event::Diag(d) => p.file_diag(d.offset, d.kind, &d.msg, emit)?,
+            Event::Diag(d) => {
+                fatal(&d)?;
+                p.file_diag(d.offset, d.kind, &d.msg, emit)?
+            }
             Event::Stream(s) => {
                 let line = if as_json {
                     let mut l = format!("{{\"type\":\"stream\",\"stream\":{},\"name\":", s.id);
@@ -747,14 +803,14 @@ fn stats(
     as_json: bool,
     proto: ProtoArg,
     filter: Option<&str>,
-    bin: f64,
+    bin: u64,
     timeout: Option<u64>,
     units: UnitsOpts,
 ) -> io::Result<()> {
     let mut f = filter.map(compile_filter).transpose()?;
     let (mut reader, _, progress) = open_with_progress(file, opts)?;
     let mut ticker = Ticker::new(progress);
-    let st = Rc::new(RefCell::new(Stats::new((bin.max(1e-6) * 1e9) as u64)));
+    let st = Rc::new(RefCell::new(Stats::new(bin)));
     let mut p = Pipeline::new(proto_of(proto), PFormat::Json);
     p.set_units(units);
     if let Some(t) = timeout {
@@ -819,6 +875,7 @@ fn decode(
 fn info(file: &str, opts: OpenOptions, as_json: bool, proto: ProtoArg) -> io::Result<()> {
     let (mut reader, _) = open(file, opts)?;
     let i = summarize(reader.as_mut(), proto_of(proto));
+    i.file_diags.iter().try_for_each(fatal)?;
     if as_json {
         println!("{}", i.to_json(file));
     } else {
@@ -842,11 +899,20 @@ fn convert(
             ))
         })?,
     };
+    if output == "-"
+        && matches!(target, Format::PcapNg | Format::Pcap | Format::Raw)
+        && std::io::IsTerminal::is_terminal(&io::stdout())
+    {
+        return Err(bad(format!(
+            "{} is binary and standard output is a terminal: redirect it (> FILE, | …) or \
+             name a file",
+            target.name()
+        )));
+    }
     let (mut reader, from, progress) = open_with_progress(input, opts)?;
     let mut ticker = Ticker::new(progress);
     let mut w = create(output, target, force)?;
     let (mut chunks, mut bytes, mut diags) = (0u64, 0u64, 0u64);
-    let (mut no_ts, mut no_dir) = (false, false);
     while let Some(ev) = reader.next_event() {
         ticker.tick();
         match ev {
@@ -854,11 +920,10 @@ fn convert(
             Event::Chunk(c) => {
                 chunks += 1;
                 bytes += c.bytes.len() as u64;
-                no_ts |= c.ts_ns.is_none();
-                no_dir |= c.dir == Direction::Unknown;
                 w.chunk(&c)?;
             }
             Event::Diag(d) => {
+                fatal(&d)?;
                 diags += 1;
                 eprintln!("aptscope: {input}: {d}");
             }
@@ -871,14 +936,9 @@ fn convert(
         from.name(),
         target.name()
     );
-    for l in w.limits() {
+    // Only what this input had that the target dropped.
+    for l in w.lost() {
         eprintln!("  {} cannot carry: {l}", target.name());
-    }
-    if no_ts {
-        eprintln!("  the input has chunks without timestamps");
-    }
-    if no_dir {
-        eprintln!("  the input has chunks without direction");
     }
     Ok(())
 }

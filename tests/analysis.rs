@@ -120,7 +120,7 @@ fn stats_match_the_hand_count() {
         .iter()
         .map(|b| (b[0].as_f64().unwrap_or(-1.0), b[1].as_u64().unwrap_or(0)))
         .collect();
-    assert_eq!(rate, [(0.0, 11), (2.0, 9)]);
+    assert_eq!(rate, [(0.0, 11), (1.0, 0), (2.0, 9)]);
     let (out, _, _) = run(&["stats", "--json", "samples/damaged.bin"]);
     let s: Value = serde_json::from_str(out.trim()).expect("JSON");
     assert_eq!(

@@ -161,8 +161,9 @@ pub trait Writer {
     fn chunk(&mut self, c: &Chunk<'_>) -> std::io::Result<()>;
     /// Flush and close (writes summaries/footers).
     fn finish(&mut self) -> std::io::Result<()>;
-    /// What the format cannot carry (said by `convert`).
-    fn limits(&self) -> &'static [&'static str] {
-        &[]
+    /// What of the chunks and streams written so far the format could not carry, one line
+    /// each (said by `convert`): empty when the file holds all of it.
+    fn lost(&self) -> Vec<String> {
+        vec![]
     }
 }

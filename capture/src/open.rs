@@ -80,6 +80,31 @@ impl Format {
     }
 }
 
+impl Format {
+    /// The format to write `path` in: `forced` (a format flag) when given, else the one its
+    /// extension names, pcapng when it has none. An extension that names no format written
+    /// (`.txt`) is refused rather than filled with another format.
+    pub fn for_writing(path: &str, forced: Option<Format>) -> io::Result<Format> {
+        if let Some(f) = forced {
+            return Ok(f);
+        }
+        if let Some(f) = Format::from_extension(path) {
+            return Ok(f);
+        }
+        match std::path::Path::new(path).extension() {
+            None => Ok(Format::PcapNg),
+            Some(ext) => Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "{path}: .{} names no capture format written (.pcapng, .pcap, .mcap, .hex, \
+                     .bin): rename it, or give the format (--to / --write-format)",
+                    ext.to_string_lossy()
+                ),
+            )),
+        }
+    }
+}
+
 /// How much of a file [`sniff`] looks at.
 pub const SNIFF_LEN: usize = 8192;
 
@@ -250,7 +275,14 @@ pub fn open_with_progress(
         })
     } else {
         let f = File::open(path).map_err(|e| io::Error::new(e.kind(), format!("{path}: {e}")))?;
-        let total = f.metadata().ok().map(|m| m.len());
+        let meta = f.metadata().ok();
+        if meta.as_ref().is_some_and(|m| m.is_dir()) {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("{path} is a directory: give a capture file in it"),
+            ));
+        }
+        let total = meta.map(|m| m.len());
         let p = Progress {
             total,
             ..progress.clone()
@@ -318,7 +350,35 @@ fn finish_open(
 ) -> io::Result<(Box<dyn Reader>, Format, Progress)> {
     let mut head = Vec::with_capacity(SNIFF_LEN);
     (&mut input).take(SNIFF_LEN as u64).read_to_end(&mut head)?;
-    let format = opts.format.unwrap_or_else(|| sniff(&head));
+    let sniffed = sniff(&head);
+    let format = opts.format.unwrap_or(sniffed);
+    let container = |f: Format| matches!(f, Format::Pcap | Format::PcapNg | Format::Mcap);
+    if container(format) && container(sniffed) && format != sniffed {
+        // Reading one container as another cannot work: say what the file is.
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!(
+                "--format {} but the content is {}: leave --format out to detect it, or give \
+                 --format {}",
+                format.name(),
+                sniffed.name(),
+                sniffed.name()
+            ),
+        ));
+    }
+    if let (Some((bus, addr)), false) = (
+        opts.usb_device,
+        matches!(format, Format::Pcap | Format::PcapNg),
+    ) {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!(
+                "--usb-device {bus}:{addr} selects a device of a USB capture (usbmon or USBPcap \
+                 in pcap or pcapng), and this input is {}",
+                format.name()
+            ),
+        ));
+    }
     let stream: Box<dyn Read> = Box::new(Cursor::new(head).chain(input));
     let reader: Box<dyn Reader> = match format {
         Format::Pcap | Format::PcapNg => Box::new(
@@ -332,8 +392,12 @@ fn finish_open(
     Ok((reader, format, progress))
 }
 
-/// Create a capture writer for `path` in `format`, refusing to overwrite unless `force`.
+/// Create a capture writer for `path` in `format`, refusing to overwrite unless `force`; `-`
+/// is standard output (for every format but MCAP, which needs a file to seek in).
 pub fn create(path: &str, format: Format, force: bool) -> io::Result<Box<dyn Writer>> {
+    if path == "-" {
+        return create_on(io::stdout(), format);
+    }
     let file = if force {
         File::create(path)
     } else {
@@ -349,15 +413,32 @@ pub fn create(path: &str, format: Format, force: bool) -> io::Result<Box<dyn Wri
             io::Error::new(e.kind(), format!("{path}: {e}"))
         }
     })?;
-    let w = io::BufWriter::with_capacity(1 << 16, file);
+    if format == Format::Mcap {
+        let w = io::BufWriter::with_capacity(1 << 16, file);
+        return Ok(Box::new(mcap_io::McapWriter::new(w, None)?));
+    }
+    create_on(file, format)
+}
+
+/// A writer of `format` (any but MCAP) on `out`.
+fn create_on(out: impl io::Write + 'static, format: Format) -> io::Result<Box<dyn Writer>> {
+    let w = io::BufWriter::with_capacity(1 << 16, out);
     Ok(match format {
         Format::PcapNg => Box::new(pcap::PcapNgOut::new(w)?),
         Format::Pcap => Box::new(pcap::PcapOut::new(w)?),
-        Format::Mcap => Box::new(mcap_io::McapWriter::new(w, None)?),
+        Format::Mcap => {
+            return Err(io::Error::new(
+                io::ErrorKind::Unsupported,
+                "MCAP is written to a file (its index needs seeking), not to standard output",
+            ))
+        }
         Format::Hex | Format::Raw => Box::new(BytesOut {
             w,
             hex: format == Format::Hex,
             col: 0,
+            timed: 0,
+            directed: 0,
+            streams: vec![],
         }),
         Format::Text(t) => {
             return Err(io::Error::new(
@@ -373,6 +454,11 @@ struct BytesOut<W: io::Write> {
     w: W,
     hex: bool,
     col: usize,
+    /// Chunks that had a time, and a direction (both dropped).
+    timed: u64,
+    directed: u64,
+    /// Streams seen (merged into one byte stream), up to a few for the note.
+    streams: Vec<u32>,
 }
 
 impl<W: io::Write> Writer for BytesOut<W> {
@@ -380,6 +466,11 @@ impl<W: io::Write> Writer for BytesOut<W> {
         Ok(())
     }
     fn chunk(&mut self, c: &Chunk<'_>) -> io::Result<()> {
+        self.timed += u64::from(c.ts_ns.is_some());
+        self.directed += u64::from(c.dir != Direction::Unknown);
+        if !self.streams.contains(&c.stream) && self.streams.len() < 2 {
+            self.streams.push(c.stream);
+        }
         if !self.hex {
             return self.w.write_all(c.bytes);
         }
@@ -401,7 +492,20 @@ impl<W: io::Write> Writer for BytesOut<W> {
         }
         self.w.flush()
     }
-    fn limits(&self) -> &'static [&'static str] {
-        &["timestamps", "directions", "streams"]
+    fn lost(&self) -> Vec<String> {
+        let mut v = vec![];
+        if self.timed > 0 {
+            v.push(format!("times ({} chunk(s) had one)", self.timed));
+        }
+        if self.directed > 0 {
+            v.push(format!("directions ({} chunk(s) had one)", self.directed));
+        }
+        if self.streams.len() > 1 {
+            v.push(
+                "streams: the streams' bytes are written one after another, in capture order"
+                    .into(),
+            );
+        }
+        v
     }
 }

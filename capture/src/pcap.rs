@@ -667,6 +667,8 @@ impl<R: Read> Reader for PcapReader<R> {
 pub struct PcapNgOut<W: Write> {
     w: Option<PcapNgWriter<W>>,
     streams: Vec<u32>,
+    /// Chunks written without a timestamp (at time 0).
+    untimed: u64,
 }
 
 impl<W: Write> PcapNgOut<W> {
@@ -676,6 +678,7 @@ impl<W: Write> PcapNgOut<W> {
         Ok(PcapNgOut {
             w: Some(w),
             streams: vec![],
+            untimed: 0,
         })
     }
 
@@ -730,6 +733,7 @@ impl<W: Write> Writer for PcapNgOut<W> {
             .w
             .as_mut()
             .ok_or_else(|| io::Error::other("writer finished"))?;
+        self.untimed += u64::from(c.ts_ns.is_none());
         w.write_pcapng_block(EnhancedPacketBlock {
             interface_id: ifid,
             // pcap-file writes the Duration's nanoseconds as raw units: with if_tsresol 9
@@ -750,15 +754,31 @@ impl<W: Write> Writer for PcapNgOut<W> {
         Ok(())
     }
 
-    fn limits(&self) -> &'static [&'static str] {
-        &["chunks without a timestamp are written at time 0"]
+    fn lost(&self) -> Vec<String> {
+        untimed_note(self.untimed).into_iter().collect()
     }
+}
+
+/// What a pcap or pcapng file says of chunks that had no time.
+fn untimed_note(n: u64) -> Option<String> {
+    (n > 0).then(|| {
+        format!(
+            "missing times: {n} chunk(s) without a timestamp are written at time 0 (1970-01-01)"
+        )
+    })
 }
 
 /// Writer of legacy pcap serial captures (USER1 with a `[direction, stream]` pseudo-header).
 pub struct PcapOut<W: Write> {
     w: Option<PcapWriter<W>>,
     buf: Vec<u8>,
+    /// Chunks written without a timestamp (at time 0).
+    untimed: u64,
+    /// Streams declared with a name or line settings that a reader of the file cannot get
+    /// back (it names them `stream N`).
+    named: Vec<String>,
+    /// Chunks of streams above 255, written as stream 255.
+    clamped: u64,
 }
 
 impl<W: Write> PcapOut<W> {
@@ -778,12 +798,23 @@ impl<W: Write> PcapOut<W> {
         Ok(PcapOut {
             w: Some(w),
             buf: vec![],
+            untimed: 0,
+            named: vec![],
+            clamped: 0,
         })
     }
 }
 
 impl<W: Write> Writer for PcapOut<W> {
-    fn stream(&mut self, _s: &StreamInfo) -> io::Result<()> {
+    fn stream(&mut self, s: &StreamInfo) -> io::Result<()> {
+        if s.name != format!("stream {}", s.id) || s.settings.is_some() {
+            let mut d = s.name.clone();
+            if let Some(x) = &s.settings {
+                d.push_str(", ");
+                d.push_str(x);
+            }
+            self.named.push(d);
+        }
         Ok(())
     }
 
@@ -792,6 +823,8 @@ impl<W: Write> Writer for PcapOut<W> {
             .w
             .as_mut()
             .ok_or_else(|| io::Error::other("writer finished"))?;
+        self.untimed += u64::from(c.ts_ns.is_none());
+        self.clamped += u64::from(c.stream > u32::from(u8::MAX));
         // Records longer than the snap length are split: the bytes stay in order.
         for piece in c.bytes.chunks(65535 - 2) {
             self.buf.clear();
@@ -816,17 +849,77 @@ impl<W: Write> Writer for PcapOut<W> {
         Ok(())
     }
 
-    fn limits(&self) -> &'static [&'static str] {
-        &[
-            "stream names and line settings (pcap has one link type and no interface descriptions)",
-            "more than 255 streams",
-        ]
+    fn lost(&self) -> Vec<String> {
+        let mut v = vec![];
+        if !self.named.is_empty() {
+            let mut list = self.named[..self.named.len().min(4)].join("; ");
+            if self.named.len() > 4 {
+                list.push_str(&format!("; and {} more", self.named.len() - 4));
+            }
+            v.push(format!(
+                "stream names and line settings (pcap has no interface descriptions): {list}"
+            ));
+        }
+        if self.clamped > 0 {
+            v.push(format!(
+                "streams above 255: {} chunk(s) are written as stream 255",
+                self.clamped
+            ));
+        }
+        v.extend(untimed_note(self.untimed));
+        v
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A writer says what it dropped of what it was given, and nothing else.
+    #[test]
+    fn writers_say_only_what_they_lost() {
+        let timed = |stream| OwnedChunk {
+            ts_ns: Some(5),
+            dir: Direction::HostToDevice,
+            stream,
+            bytes: vec![1, 2],
+        };
+        let plain = |id: u32| StreamInfo {
+            id,
+            name: format!("stream {id}"),
+            settings: None,
+        };
+        let mut w = PcapOut::new(Vec::new()).expect("pcap");
+        w.stream(&plain(0)).expect("stream");
+        w.chunk(&timed(0).as_chunk()).expect("chunk");
+        assert_eq!(w.lost(), Vec::<String>::new());
+        w.chunk(&timed(300).as_chunk()).expect("chunk");
+        w.chunk(
+            &OwnedChunk {
+                ts_ns: None,
+                ..timed(0)
+            }
+            .as_chunk(),
+        )
+        .expect("chunk");
+        assert_eq!(
+            w.lost(),
+            [
+                "streams above 255: 1 chunk(s) are written as stream 255",
+                "missing times: 1 chunk(s) without a timestamp are written at time 0 (1970-01-01)"
+            ]
+        );
+        let mut w = PcapNgOut::new(Vec::new()).expect("pcapng");
+        w.stream(&StreamInfo {
+            id: 0,
+            name: "/dev/ttyUSB0".into(),
+            settings: Some("115200 8N1".into()),
+        })
+        .expect("stream");
+        w.chunk(&timed(0).as_chunk()).expect("chunk");
+        w.chunk(&timed(300).as_chunk()).expect("chunk");
+        assert_eq!(w.lost(), Vec::<String>::new());
+    }
 
     fn chunks() -> Vec<OwnedChunk> {
         vec![

@@ -183,6 +183,9 @@ enum Selection {
     Candidate,
 }
 
+/// Diagnostic kind: `--usb-device` named a device that sent no serial data in the capture.
+pub const NOT_FOUND: &str = "usb_device_not_found";
+
 /// Demultiplexes USB captures (usbmon, USBPcap) into the serial streams of FTDI devices.
 pub struct UsbDemux {
     filter: Option<(u16, u8)>,
@@ -275,6 +278,53 @@ impl UsbDemux {
             );
             flush_pending(dev, key, next_stream, out);
         }
+        self.report_absent_filter(out);
+    }
+
+    /// `--usb-device` named a device that sent no serial data: say which devices the capture
+    /// has, as a [`NOT_FOUND`] diagnostic (the command line makes it an error).
+    fn report_absent_filter(&self, out: &mut Vec<UsbOut>) {
+        let Some((bus, addr)) = self.filter else {
+            return;
+        };
+        let key = (bus, u16::from(addr));
+        let has_data = self
+            .devices
+            .get(&key)
+            .is_some_and(|d| d.ports.iter().any(|p| p.stream.is_some()));
+        if has_data {
+            return;
+        }
+        let mut keys: Vec<&(u16, u16)> = self.devices.keys().collect();
+        keys.sort_unstable();
+        let present: Vec<String> = keys
+            .iter()
+            .map(|k| {
+                let d = &self.devices[k];
+                let what = match d.ident {
+                    Some((FTDI_VID, pid)) => format!("{FTDI_VID:04x}:{pid:04x}, FTDI"),
+                    Some((vid, pid)) => format!("{vid:04x}:{pid:04x}"),
+                    None => "no descriptor in the capture".into(),
+                };
+                format!("{}:{} ({what})", k.0, k.1)
+            })
+            .collect();
+        let why = if self.devices.contains_key(&key) {
+            "is in the capture but sent no serial data"
+        } else {
+            "is not in the capture"
+        };
+        let list = if present.is_empty() {
+            "the capture has no USB bulk or control transfers".to_string()
+        } else {
+            format!("devices present: {}", present.join(", "))
+        };
+        diag(
+            out,
+            self.last_offset,
+            NOT_FOUND,
+            format!("--usb-device {bus}:{addr}: usb {bus}:{addr} {why}; {list}"),
+        );
     }
 
     /// usbmon header byte order: the one in which the bus number and the microseconds are
@@ -1808,6 +1858,33 @@ mod tests {
         other[1].1[64 + 8] = 0x34; // idVendor 0x0434
         let out = feed(&mut UsbDemux::new(None), LINKTYPE_USB_LINUX_MMAPPED, &other);
         assert_eq!(out, vec![]);
+        // --usb-device naming a device that is not there, or that sent no serial data: one
+        // diagnostic listing the devices present.
+        // (3:3 is enumerated, descriptors and all, and sends nothing.)
+        recs.extend(synth_usbmon(&[], 3, 3, 64));
+        for (want, why) in [
+            ((9, 9), "usb 9:9 is not in the capture"),
+            ((3, 3), "usb 3:3 is in the capture but sent no serial data"),
+        ] {
+            let out = feed(
+                &mut UsbDemux::new(Some(want)),
+                LINKTYPE_USB_LINUX_MMAPPED,
+                &recs,
+            );
+            assert_eq!(chunks_of(&out), vec![]);
+            let d = diags_of(&out);
+            assert_eq!(d.len(), 1, "{d:?}");
+            assert_eq!(d[0].kind, NOT_FOUND);
+            assert!(d[0].msg.contains(why), "{}", d[0].msg);
+            assert!(
+                d[0].msg.contains(
+                    "devices present: 1:4 (no descriptor in the capture), 1:7 (0403:faf0, FTDI), \
+                     2:9 (0403:faf0, FTDI), 3:3 (0403:faf0, FTDI)"
+                ),
+                "{}",
+                d[0].msg
+            );
+        }
     }
 
     #[test]

@@ -42,6 +42,29 @@ struct Lane {
     ell: EllFramer,
     /// Time of the latest chunk: the time a frame completing now gets.
     ts: Option<u64>,
+    /// Bytes pushed so far, and the (first offset, time) of each timed chunk not yet behind
+    /// the records emitted: garbage gets the time its first byte arrived.
+    pushed: u64,
+    times: std::collections::VecDeque<(u64, u64)>,
+}
+
+impl Lane {
+    /// Time of the byte at stream offset `at` from a lane's `times` (else `latest`). Records
+    /// come in offset order: what is before `at` is forgotten.
+    fn time_at(
+        times: &mut std::collections::VecDeque<(u64, u64)>,
+        latest: Option<u64>,
+        at: u64,
+    ) -> Option<u64> {
+        while times.get(1).is_some_and(|(o, _)| *o <= at) {
+            times.pop_front();
+        }
+        times
+            .front()
+            .filter(|(o, _)| *o <= at)
+            .map(|(_, t)| *t)
+            .or(latest)
+    }
 }
 
 /// The decoding pipeline for one capture.
@@ -358,6 +381,8 @@ impl Pipeline {
             apt: AptFramer::new(Table::global()),
             ell: EllFramer::new(),
             ts: None,
+            pushed: 0,
+            times: Default::default(),
         });
         self.lanes.len() - 1
     }
@@ -383,9 +408,11 @@ impl Pipeline {
             }
         }
         let lane = &mut self.lanes[i];
-        if ctx.ts_ns.is_some() {
-            lane.ts = ctx.ts_ns;
+        if let Some(t) = ctx.ts_ns {
+            lane.ts = Some(t);
+            lane.times.push_back((lane.pushed, t));
         }
+        lane.pushed += chunk.len() as u64;
         match self.proto {
             Some(Proto::Apt) => lane.apt.push(chunk),
             _ => lane.ell.push(chunk),
@@ -434,10 +461,11 @@ impl Pipeline {
         let t = Table::global();
         let first = self.first_ts;
         let (ts, stream, cap_dir) = (self.lanes[i].ts, self.lanes[i].stream, self.lanes[i].dir);
-        let time = match (ts, first) {
+        let rel = |ts: Option<u64>| match (ts, first) {
             (Some(a), Some(b)) => Some(a.saturating_sub(b) as f64 / 1e9),
             _ => None,
         };
+        let time = rel(ts);
         let (want_json, want_text) = (self.want_json(), self.fmt == Format::Text);
         if self.proto == Some(Proto::Apt) {
             let pi_idx = match self.pairers.iter().position(|(s, _)| *s == stream) {
@@ -454,6 +482,10 @@ impl Pipeline {
                 let Some(item) = lane.apt.next_item() else {
                     break;
                 };
+                let (AptItem::Frame { offset: at, .. } | AptItem::Garbage { offset: at, .. }) =
+                    item;
+                let first_ts = Lane::time_at(&mut lane.times, ts, at);
+                let mut rec_ts = ts;
                 self.n += 1;
                 self.line.clear();
                 self.jline.clear();
@@ -507,15 +539,22 @@ impl Pipeline {
                         bytes,
                         kind,
                     } => {
+                        rec_ts = first_ts;
                         if want_json {
                             json::apt_garbage(&mut self.jline, self.n, offset, bytes, kind);
                         }
                         if want_text {
-                            text::garbage_line(&mut self.line, self.n, offset, bytes, kind, time);
+                            let t = rel(first_ts);
+                            text::garbage_line(&mut self.line, self.n, offset, bytes, kind, t);
                         }
                     }
                 }
-                Self::close_json(&mut self.jline, ts, stream, Some(dir.unwrap_or("unknown")));
+                Self::close_json(
+                    &mut self.jline,
+                    rec_ts,
+                    stream,
+                    Some(dir.unwrap_or("unknown")),
+                );
                 self.emit_record(emit)?;
                 self.render_expired("apt", &expired, emit)?;
             }
@@ -535,6 +574,9 @@ impl Pipeline {
             let Some(item) = lane.ell.next_item() else {
                 break;
             };
+            let (EllItem::Frame { offset: at, .. } | EllItem::Garbage { offset: at, .. }) = item;
+            let first_ts = Lane::time_at(&mut lane.times, ts, at);
+            let mut rec_ts = ts;
             self.n += 1;
             self.line.clear();
             self.jline.clear();
@@ -564,15 +606,17 @@ impl Pipeline {
                     }
                 }
                 EllItem::Garbage { offset, bytes, .. } => {
+                    rec_ts = first_ts;
                     if want_json {
                         json::ell_garbage(&mut self.jline, self.n, offset, bytes);
                     }
                     if want_text {
-                        text::ell_garbage_line(&mut self.line, self.n, offset, bytes, time);
+                        let t = rel(first_ts);
+                        text::ell_garbage_line(&mut self.line, self.n, offset, bytes, t);
                     }
                 }
             }
-            Self::close_json(&mut self.jline, ts, stream, None);
+            Self::close_json(&mut self.jline, rec_ts, stream, None);
             self.emit_record(emit)?;
             self.render_expired("ell", &expired, emit)?;
         }

@@ -104,6 +104,9 @@ pub struct Stats {
     scratch: String,
 }
 
+/// At most this many rate bins are shown (text and JSON): a longer capture gets wider bins.
+pub const MAX_RATE_BINS: u64 = 200;
+
 /// Requests remembered for their replies' latency: far more than the pairer can have waiting.
 const MAX_REQUESTS: usize = 1 << 16;
 
@@ -239,6 +242,32 @@ impl Stats {
         }
     }
 
+    /// The rate histogram as shown: every bin from the first frame's to the last one's, the
+    /// empty ones included, as (bin start in ns since the first frame, frames). Bins are
+    /// widened by a round factor (2, 5, 10, 20 …) when there would be more than
+    /// [`MAX_RATE_BINS`]. Returns the width used too.
+    pub fn rate(&self) -> (u64, Vec<(u64, u64)>) {
+        let Some((&last, _)) = self.bins.last_key_value() else {
+            return (self.bin_ns, vec![]);
+        };
+        let n = last / self.bin_ns + 1;
+        // The smallest round factor (1, 2 or 5 × 10^e) that brings the bins under the cap.
+        let need = n.div_ceil(MAX_RATE_BINS);
+        let k = (0..19)
+            .flat_map(|e| [1, 2, 5].map(|m| m * 10u64.pow(e)))
+            .find(|k| *k >= need)
+            .unwrap_or(need);
+        let width = self.bin_ns.saturating_mul(k);
+        let rows = n.div_ceil(k);
+        let mut v: Vec<(u64, u64)> = (0..rows).map(|i| (i.saturating_mul(width), 0)).collect();
+        for (b, c) in &self.bins {
+            if let Some(r) = v.get_mut((b / width) as usize) {
+                r.1 += c;
+            }
+        }
+        (width, v)
+    }
+
     /// Latency summary of a message: (n, min, median, p99, max) in ms.
     pub fn latency(&self, key: &str) -> Option<(usize, f64, f64, f64, f64)> {
         let l = &self.messages.get(key)?.latencies;
@@ -291,12 +320,26 @@ impl Stats {
         for (k, n) in &self.diags {
             let _ = writeln!(s, "  {k:<48}{n:>6}");
         }
-        if !self.bins.is_empty() {
-            let _ = writeln!(s, "\nRate (frames per {} s)", self.bin_ns as f64 / 1e9);
-            let max = self.bins.values().copied().max().unwrap_or(1).max(1);
-            for (b, n) in &self.bins {
+        let (width, rate) = self.rate();
+        if !rate.is_empty() {
+            let _ = write!(s, "\nRate (frames per {} s", width as f64 / 1e9);
+            if width != self.bin_ns {
+                let _ = write!(
+                    s,
+                    "; bins of {} s widened to show at most {MAX_RATE_BINS}",
+                    self.bin_ns as f64 / 1e9
+                );
+            }
+            s.push_str(")\n");
+            let max = rate.iter().map(|r| r.1).max().unwrap_or(1).max(1);
+            // Enough decimals to tell bins apart (3 at least).
+            let dec = (3..9u32)
+                .find(|d| width.is_multiple_of(10u64.pow(9 - d)))
+                .unwrap_or(9) as usize;
+            for (b, n) in &rate {
                 let bar = "#".repeat(((*n * 40).div_ceil(max)) as usize);
-                let _ = writeln!(s, "  {:>10.3} s {n:>6} {bar}", *b as f64 / 1e9);
+                let row = format!("  {:>10.dec$} s {n:>6} {bar}", *b as f64 / 1e9);
+                let _ = writeln!(s, "{}", row.trim_end());
             }
         }
         s
@@ -346,8 +389,13 @@ impl Stats {
         for (i, (k, n)) in self.diags.iter().enumerate() {
             let _ = write!(s, "{}\"{k}\":{n}", if i > 0 { "," } else { "" });
         }
-        let _ = write!(s, "}},\"bin_s\":{},\"rate\":[", self.bin_ns as f64 / 1e9);
-        for (i, (b, n)) in self.bins.iter().enumerate() {
+        let (width, rate) = self.rate();
+        let _ = write!(s, "}},\"bin_s\":{}", width as f64 / 1e9);
+        if width != self.bin_ns {
+            let _ = write!(s, ",\"bin_s_asked\":{}", self.bin_ns as f64 / 1e9);
+        }
+        s.push_str(",\"rate\":[");
+        for (i, (b, n)) in rate.iter().enumerate() {
             let _ = write!(
                 s,
                 "{}[{},{n}]",
@@ -404,6 +452,55 @@ mod tests {
         let j: Value = serde_json::from_str(&st.to_json()).expect("valid JSON");
         assert_eq!(j["messages"]["apt HW_REQ_INFO"]["latency_ms"]["p99"], 4.0);
         assert!(st.to_text().contains("apt HW_REQ_INFO"));
+    }
+
+    fn frame_at(ts_ns: u64) -> Value {
+        json!({"n":1,"type":"frame","proto":"apt","name":"HW_REQ_INFO","len":6,"dir":"h2d","ts_ns":ts_ns,"diag":[]})
+    }
+
+    /// Empty bins are shown (a pause is visible), and a long capture gets wider bins, at most
+    /// MAX_RATE_BINS of them.
+    #[test]
+    fn rate_shows_empty_bins_and_caps_their_number() {
+        let mut st = Stats::new(1_000_000_000);
+        for t in [0, 100_000_000, 3_500_000_000] {
+            st.add(&frame_at(t));
+        }
+        assert_eq!(
+            st.rate(),
+            (
+                1_000_000_000,
+                vec![
+                    (0, 2),
+                    (1_000_000_000, 0),
+                    (2_000_000_000, 0),
+                    (3_000_000_000, 1)
+                ]
+            )
+        );
+        let text = st.to_text();
+        assert!(text.contains("Rate (frames per 1 s)\n"), "{text}");
+        assert!(text.contains("       2.000 s      0\n"), "{text}");
+        let j: Value = serde_json::from_str(&st.to_json()).expect("valid JSON");
+        assert_eq!(j["rate"], json!([[0, 2], [1, 0], [2, 0], [3, 1]]));
+        assert!(j.get("bin_s_asked").is_none());
+
+        // 1000 s in 1 ms bins: a million bins asked; 10 s wide ones, 101 of them.
+        let mut st = Stats::new(1_000_000);
+        for t in [0, 1_000_000_000_000] {
+            st.add(&frame_at(t));
+        }
+        let (width, rows) = st.rate();
+        assert_eq!((width, rows.len()), (10_000_000_000, 101));
+        assert_eq!(rows.iter().map(|r| r.1).sum::<u64>(), 2);
+        assert!(st
+            .to_text()
+            .contains("Rate (frames per 10 s; bins of 0.001 s widened to show at most 200)"));
+        let j: Value = serde_json::from_str(&st.to_json()).expect("valid JSON");
+        assert_eq!(
+            (j["bin_s"].as_f64(), j["bin_s_asked"].as_f64()),
+            (Some(10.0), Some(0.001))
+        );
     }
 }
 

@@ -128,15 +128,27 @@ pub fn ell_line(
     }
 }
 
-/// Append the line of an Elliptec garbage record.
+/// Append the line of an Elliptec garbage record: its first bytes in hex and as printable
+/// ASCII (`.` for the others), like a hex dump.
 pub fn ell_garbage_line(out: &mut String, n: u64, offset: u64, bytes: &[u8], time: Option<f64>) {
     prefix(out, n, time, offset);
-    let _ = write!(
-        out,
-        "!! {} byte(s) that start no frame: {:?}",
-        bytes.len(),
-        String::from_utf8_lossy(&bytes[..bytes.len().min(32)])
-    );
+    let _ = write!(out, "!! {} byte(s) that start no frame: ", bytes.len());
+    let head = &bytes[..bytes.len().min(24)];
+    for (i, b) in head.iter().enumerate() {
+        let _ = write!(out, "{}{b:02x}", if i > 0 { " " } else { "" });
+    }
+    if bytes.len() > head.len() {
+        out.push_str(" …");
+    }
+    out.push_str("  |");
+    out.extend(head.iter().map(|&b| {
+        if b.is_ascii_graphic() || b == b' ' {
+            b as char
+        } else {
+            '.'
+        }
+    }));
+    out.push('|');
 }
 
 /// Append a line for a diagnostic that refers to an earlier record.

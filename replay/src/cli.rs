@@ -51,8 +51,9 @@ pub struct ReplayOptions {
     pub asap: bool,
     /// Send each message after the previous one's replies.
     pub wait_replies: bool,
-    /// Extra time a reply may take before it is missing, ns.
-    pub reply_timeout_ns: u64,
+    /// Extra time a reply may take before it is missing, ns (`None`: per message, as
+    /// pairing times requests out).
+    pub reply_timeout_ns: Option<u64>,
     /// Display filter selecting the messages to send.
     pub filter: Option<String>,
     /// Range start (record or time).
@@ -324,11 +325,7 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
         (_, Some(_), Some(_)) => return Err(bad("give --port or --pty, not both".into())),
     };
     let mut writer: Option<Box<dyn Writer>> = match &o.write {
-        Some(w) => Some(create(
-            w,
-            Format::from_extension(w).unwrap_or(Format::PcapNg),
-            o.force,
-        )?),
+        Some(w) => Some(create(w, Format::for_writing(w, None)?, o.force)?),
         None => None,
     };
     let rec = writer.as_mut().map(|w| &mut **w as &mut dyn Writer);

@@ -7,8 +7,11 @@ use crate::observe::Session;
 use crate::port::Link;
 use crate::safety::Moving;
 use crate::sched::{wait_until, SendTiming, Waited};
-use crate::script::{host_schedule, Script, Selection, Side, Timing};
+use crate::script::{host_schedule, Msg, Script, Selection, Side, Timing};
 use aptscope_capture::Writer;
+use aptscope_dissector::detect::Proto;
+use aptscope_dissector::pair::default_timeout_ns;
+use aptscope_dissector::{ell, Table};
 use std::collections::BTreeSet;
 use std::io;
 
@@ -21,8 +24,9 @@ pub struct HostOptions {
     pub loops: u32,
     /// Send each message only after the replies its captured request got (or a timeout).
     pub wait_replies: bool,
-    /// How much longer than in the capture a reply may take before it counts as missing, ns.
-    pub reply_timeout_ns: u64,
+    /// How much longer than in the capture a reply may take before it counts as missing, ns;
+    /// `None`: the timeout pairing gives the request ([`reply_allowance_ns`]).
+    pub reply_timeout_ns: Option<u64>,
     /// On abort, stop the channels that replayed moves left moving (APT).
     pub stop_on_abort: bool,
     /// Fields not compared.
@@ -39,7 +43,7 @@ impl Default for HostOptions {
             timing: Timing::default(),
             loops: 1,
             wait_replies: false,
-            reply_timeout_ns: 2_000_000_000,
+            reply_timeout_ns: None,
             stop_on_abort: false,
             ignore: vec![],
             display: false,
@@ -78,13 +82,34 @@ struct Expect {
     want: Vec<(String, Option<i64>)>,
     /// Latest captured reply after the request, ns.
     captured_ns: u64,
+    /// How much later than captured the replies may come, ns.
+    allow_ns: u64,
 }
 
-fn expectation(script: &Script, idx: usize) -> Expect {
+/// How much later than in the capture the replies to `req` may come before they are missing:
+/// `fixed` (`--reply-timeout`) when given, else the reply timeout pairing uses for the request
+/// (APT: 2 s, 120 s for moves and homing; Elliptec: 2 s, longer for moves and scans), so a
+/// capture without times (nothing captured to go by) still waits for a slow move.
+pub fn reply_allowance_ns(proto: Proto, req: &Msg, fixed: Option<u64>) -> u64 {
+    const DEFAULT: u64 = 2_000_000_000;
+    fixed.unwrap_or_else(|| match proto {
+        Proto::Apt => Table::global()
+            .msg_by_name(&req.name)
+            .map_or(DEFAULT, default_timeout_ns),
+        Proto::Elliptec => req
+            .raw
+            .get(1..3)
+            .and_then(ell::table::lookup)
+            .map_or(DEFAULT, ell::timeout_ns),
+    })
+}
+
+fn expectation(script: &Script, idx: usize, fixed: Option<u64>) -> Expect {
     let req = &script.msgs[idx];
     let mut e = Expect {
         want: vec![],
         captured_ns: 0,
+        allow_ns: reply_allowance_ns(script.proto, req, fixed),
     };
     for &r in script.replies_to(idx) {
         let m = &script.msgs[r];
@@ -200,13 +225,11 @@ pub fn run_host<'a>(
             moving.insert((sess.obs.msgs()[i].n, mv));
         }
         if opts.wait_replies {
-            let e = expectation(script, s.idx);
+            let e = expectation(script, s.idx, opts.reply_timeout_ns);
             if e.want.is_empty() {
                 continue;
             }
-            let limit = t
-                .saturating_add(e.captured_ns)
-                .saturating_add(opts.reply_timeout_ns);
+            let limit = t.saturating_add(e.captured_ns).saturating_add(e.allow_ns);
             let mut got: Option<u64> = None;
             let w = wait_until(
                 &clock,
@@ -252,15 +275,18 @@ pub fn run_host<'a>(
         let expects: Vec<(Option<usize>, Expect, u64)> = exchanges
             .iter()
             .zip(&sent_at)
-            .map(|(x, &t)| (x.observed, expectation(script, x.idx), t))
+            .map(|(x, &t)| {
+                (
+                    x.observed,
+                    expectation(script, x.idx, opts.reply_timeout_ns),
+                    t,
+                )
+            })
             .filter(|(_, e, _)| !e.want.is_empty())
             .collect();
         let limit = expects
             .iter()
-            .map(|(_, e, t)| {
-                t.saturating_add(e.captured_ns)
-                    .saturating_add(opts.reply_timeout_ns)
-            })
+            .map(|(_, e, t)| t.saturating_add(e.captured_ns).saturating_add(e.allow_ns))
             .max()
             .unwrap_or(0)
             .max(tail);

@@ -428,3 +428,99 @@ fn an_impersonated_device_survives_garbage_from_the_host() {
         o.notes
     );
 }
+
+/// A capture without times (raw bytes) cannot say how long a move took: the replay waits for
+/// its completion as long as pairing would (120 s for moves), not the 2 s of other requests,
+/// so a move of about 2.8 s is not reported missing.
+#[test]
+fn a_slow_move_in_a_capture_without_times_is_not_missing() {
+    let dir = scratch("untimed");
+    let steps = vec![
+        (
+            0,
+            enc(
+                "MOD_SET_CHANENABLESTATE",
+                &[("chan_ident", 1), ("enable_state", 1)],
+            ),
+        ),
+        // 3 mm at 2 mm/s, 1.5 mm/s²: about 2.8 s.
+        (
+            20 * MS,
+            enc(
+                "MOT_MOVE_RELATIVE",
+                &[("chan_ident", 1), ("relative_distance", 103_665)],
+            ),
+        ),
+    ];
+    let timed = dir.join("timed.pcapng");
+    record_virtual(
+        &mut AptSim::new(AptModel::Kdc101),
+        &steps,
+        10_000 * MS,
+        &timed,
+    );
+    let s = load(&timed);
+    let at = |name: &str| {
+        s.msgs
+            .iter()
+            .find(|m| m.name == name)
+            .and_then(|m| m.ts_ns)
+            .unwrap_or_else(|| panic!("no {name} in {:#?}", s.msgs))
+    };
+    let took = at("MOT_MOVE_COMPLETED") - at("MOT_MOVE_RELATIVE");
+    assert!(took > 2_300 * MS, "the move takes {took} ns");
+    // The same bytes without times or directions.
+    let raw = dir.join("untimed.bin");
+    let mut w = create(raw.to_str().unwrap(), Format::Raw, true).unwrap();
+    for m in &s.msgs {
+        w.chunk(&Chunk {
+            ts_ns: None,
+            dir: Direction::Unknown,
+            stream: 0,
+            bytes: &m.raw,
+        })
+        .unwrap();
+    }
+    w.finish().unwrap();
+    let script = load(&raw);
+    assert!(!script.has_times());
+    let mv = script
+        .msgs
+        .iter()
+        .find(|m| m.name == "MOT_MOVE_RELATIVE")
+        .unwrap();
+    assert_eq!(
+        aptscope_replay::host::reply_allowance_ns(Proto::Apt, mv, None),
+        120_000 * MS
+    );
+    assert_eq!(
+        aptscope_replay::host::reply_allowance_ns(Proto::Apt, mv, Some(5 * MS)),
+        5 * MS
+    );
+    let bench = SimOnPty::start(AptSim::new(AptModel::Kdc101));
+    let mut link =
+        Link::open_port(&bench.path, LineSettings::for_proto(Proto::Apt, None, None)).unwrap();
+    // As `aptscope replay` runs a capture without times: each message after its replies.
+    let opts = HostOptions {
+        wait_replies: true,
+        ..HostOptions::default()
+    };
+    let o = run_host(
+        &script,
+        &Selection::default(),
+        &opts,
+        &mut link,
+        None,
+        &mut |_| {},
+        &mut || None,
+    )
+    .unwrap();
+    let r = &o.report;
+    assert_eq!(r.missing, 0, "{}", r.text(None));
+    assert!(
+        r.matched >= 1 && o.duration_ns > 2_300 * MS,
+        "{} after {} ns",
+        r.text(None),
+        o.duration_ns
+    );
+}

@@ -29,16 +29,56 @@ impl SerialFd {
     }
 }
 
+/// What a serial port looks like, for the messages that say a path is none.
+const PORTS: &str = "serial port (/dev/ttyUSB0, /dev/ttyACM0, /dev/serial/by-id/…)";
+
+/// A file or directory where a serial port was expected: say so, instead of the "Not a
+/// typewriter" (ENOTTY) that configuring it as a terminal gives.
+fn not_a_port(path: &str) -> io::Result<()> {
+    use std::os::unix::fs::FileTypeExt;
+    let Ok(meta) = std::fs::metadata(path) else {
+        // Missing or unreadable: opening it says why.
+        return Ok(());
+    };
+    let t = meta.file_type();
+    let what = if t.is_dir() {
+        "a directory"
+    } else if t.is_file() {
+        "a regular file"
+    } else if t.is_char_device() {
+        return Ok(());
+    } else {
+        "not a device"
+    };
+    Err(io::Error::new(
+        io::ErrorKind::InvalidInput,
+        format!("{path} is {what}, not a {PORTS}"),
+    ))
+}
+
 /// Open `path` exclusively with `settings` (8 data bits, no parity, one stop bit). What the
 /// device sent before is kept (a tap must not lose it).
 pub fn open_serial(path: &str, settings: &LineSettings) -> io::Result<SerialFd> {
+    not_a_port(path)?;
     let mut port = serialport::new(path, settings.baud)
         .data_bits(serialport::DataBits::Eight)
         .parity(serialport::Parity::None)
         .stop_bits(serialport::StopBits::One)
         .flow_control(settings.flow.to_serialport())
         .open_native()
-        .map_err(|e| io::Error::new(io::Error::from(e.clone()).kind(), format!("{path}: {e}")))?;
+        .map_err(|e| {
+            let kind = io::Error::from(e.clone()).kind();
+            // A character device that is no terminal (/dev/null) fails with ENOTTY, which
+            // strerror calls "Not a typewriter".
+            let probe = std::fs::OpenOptions::new()
+                .read(true)
+                .custom_flags((OFlag::O_NOCTTY | OFlag::O_NONBLOCK).bits())
+                .open(path);
+            if probe.is_ok_and(|f| !nix::unistd::isatty(&f).unwrap_or(true)) {
+                return io::Error::new(kind, format!("{path} is not a terminal, so not a {PORTS}"));
+            }
+            io::Error::new(kind, format!("{path}: {e}"))
+        })?;
     // The second descriptor is opened while the exclusive lock is briefly lifted.
     port.set_exclusive(false).map_err(io::Error::from)?;
     let file = std::fs::OpenOptions::new()

@@ -205,8 +205,11 @@ pub struct TapOptions {
     pub baud: Option<u32>,
     /// Flow control override.
     pub flow: Option<Flow>,
-    /// Write the capture here: pcapng, or pcap by the `.pcap` extension.
+    /// Write the capture here: pcapng, or pcap by the `.pcap` extension (a name without
+    /// extension gets pcapng; another extension is refused unless `write_format` says).
     pub write: Option<String>,
+    /// The file's format whatever its name says (pcapng or pcap).
+    pub write_format: Option<Format>,
     /// Overwrite an existing capture.
     pub force: bool,
     /// When the device disappears, wait for it to come back instead of ending.
@@ -233,6 +236,7 @@ impl TapOptions {
             baud: None,
             flow: None,
             write: None,
+            write_format: None,
             force: false,
             reconnect: false,
             quiet: false,
@@ -257,8 +261,11 @@ pub struct SniffOptions {
     pub baud: Option<u32>,
     /// Flow control override (normally none: receive-only adapters see no handshake).
     pub flow: Option<Flow>,
-    /// Write the capture here: pcapng, or pcap by the `.pcap` extension.
+    /// Write the capture here: pcapng, or pcap by the `.pcap` extension (a name without
+    /// extension gets pcapng; another extension is refused unless `write_format` says).
     pub write: Option<String>,
+    /// The file's format whatever its name says (pcapng or pcap).
+    pub write_format: Option<Format>,
     /// Overwrite an existing capture.
     pub force: bool,
     /// When an adapter disappears, wait for it to come back instead of ending.
@@ -285,6 +292,7 @@ impl SniffOptions {
             baud: None,
             flow: Some(Flow::None),
             write: None,
+            write_format: None,
             force: false,
             reconnect: false,
             quiet: false,
@@ -819,25 +827,32 @@ struct FileSink {
 }
 
 impl FileSink {
-    /// Create `path` (refusing to overwrite unless `force`, as [`crate::open::create`] does;
-    /// built here rather than with it to be able to flush periodically) and declare `stream`.
-    fn create(path: &str, force: bool, stream: &StreamInfo) -> io::Result<FileSink> {
-        // Streaming formats only: every block is whole once flushed, so a killed tap leaves a
-        // readable file. MCAP needs its footer (and text formats lose the times): convert.
-        let format = match Format::from_extension(path) {
-            None | Some(Format::PcapNg) => Format::PcapNg,
-            Some(Format::Pcap) => Format::Pcap,
-            Some(other) => {
-                return Err(io::Error::new(
-                    io::ErrorKind::InvalidInput,
-                    format!(
-                        "{path}: the tap writes pcapng or pcap (readable up to the last block if \
-                         it is killed), not {}; record a .pcapng and `aptscope convert` it",
-                        other.name()
-                    ),
-                ))
-            }
-        };
+    /// The capture's format (checked before any port is opened). Streaming formats only:
+    /// every block is whole once flushed, so a killed tap leaves a readable file. MCAP needs
+    /// its footer (and text formats lose the times): convert.
+    fn format(path: &str, forced: Option<Format>) -> io::Result<Format> {
+        match Format::for_writing(path, forced)? {
+            f @ (Format::PcapNg | Format::Pcap) => Ok(f),
+            other => Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "{path}: the tap writes pcapng or pcap (readable up to the last block if \
+                     it is killed), not {}; record a .pcapng and `aptscope convert` it",
+                    other.name()
+                ),
+            )),
+        }
+    }
+
+    /// Create `path` in `format` (refusing to overwrite unless `force`, as
+    /// [`crate::open::create`] does; built here rather than with it to be able to flush
+    /// periodically) and declare `stream`.
+    fn create(
+        path: &str,
+        format: Format,
+        force: bool,
+        stream: &StreamInfo,
+    ) -> io::Result<FileSink> {
         let f = if force {
             File::create(path)
         } else {
@@ -1334,6 +1349,11 @@ struct Tap {
 impl Tap {
     fn new(opts: TapOptions) -> io::Result<Tap> {
         let settings = LineSettings::for_proto(opts.proto, opts.baud, opts.flow);
+        let format = opts
+            .write
+            .as_deref()
+            .map(|p| FileSink::format(p, opts.write_format))
+            .transpose()?;
         let device = match open_device(&opts.device, &settings) {
             Ok(d) => Some(d),
             Err(e) if opts.reconnect => {
@@ -1346,6 +1366,7 @@ impl Tap {
         let sink = match &opts.write {
             Some(p) => Some(FileSink::create(
                 p,
+                format.unwrap_or(Format::PcapNg),
                 opts.force,
                 &StreamInfo {
                     id: 0,
@@ -1542,6 +1563,11 @@ struct Sniff {
 impl Sniff {
     fn new(opts: SniffOptions) -> io::Result<Sniff> {
         let settings = LineSettings::for_proto(opts.proto, opts.baud, opts.flow);
+        let format = opts
+            .write
+            .as_deref()
+            .map(|p| FileSink::format(p, opts.write_format))
+            .transpose()?;
         let mut ports = vec![];
         for p in [&opts.host_tx, &opts.device_tx] {
             ports.push(match open_serial(p, &settings) {
@@ -1556,6 +1582,7 @@ impl Sniff {
         let sink = match &opts.write {
             Some(p) => Some(FileSink::create(
                 p,
+                format.unwrap_or(Format::PcapNg),
                 opts.force,
                 &StreamInfo {
                     id: 0,
