@@ -2,30 +2,9 @@
 //! run through the binary.
 
 use serde_json::Value;
-use std::io::Write;
-use std::process::{Command, Stdio};
+mod common;
 
-fn aptscope(args: &[&str], stdin: Option<&[u8]>) -> (String, String, bool) {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_aptscope"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("run aptscope");
-    let mut si = c.stdin.take().expect("stdin");
-    if let Some(b) = stdin {
-        si.write_all(b).expect("write stdin");
-    }
-    drop(si);
-    let o = c.wait_with_output().expect("wait");
-    (
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-        o.status.success(),
-    )
-}
+use common::aptscope;
 
 const CODES: &[&str] = &[
     "in", "IN", "gs", "GS", "us", "re", "ca", "i1", "I1", "f1", "b1", "e1", "h1", "s1", "c1", "C1",

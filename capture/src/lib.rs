@@ -12,6 +12,7 @@ pub mod open;
 pub mod pcap;
 pub mod raw;
 pub mod textlog;
+pub mod tools;
 pub mod usb;
 
 pub use model::{Chunk, Direction, Event, OwnedChunk, ReadDiag, Reader, StreamInfo, Writer};

@@ -6,59 +6,10 @@ use aptscope_capture::pcap::{PcapNgOut, PcapOut};
 use aptscope_capture::{Direction, OwnedChunk, StreamInfo, Writer};
 use std::process::Command;
 
-/// What a test does when the tool it needs is missing.
-#[derive(Debug, PartialEq, Eq)]
-enum Missing {
-    Fail,
-    Skip,
-}
-
-/// In CI (`CI` set to anything but empty, `0` or `false`) a missing tool fails the test, so a
-/// bare machine cannot pass it; elsewhere too, unless `APTSCOPE_SKIP_MISSING_TOOLS=1` asks to
-/// skip (cargo would show a silent skip as "ok").
-fn on_missing(ci: Option<&str>, skip: Option<&str>) -> Missing {
-    let ci = ci.is_some_and(|v| !matches!(v, "" | "0" | "false"));
-    if !ci && skip == Some("1") {
-        Missing::Skip
-    } else {
-        Missing::Fail
-    }
-}
-
-/// Whether tshark runs; panics with how to install it when it does not (see [`on_missing`]).
+/// Whether tshark runs; panics with how to install it when it does not (in CI always; see
+/// [`aptscope_capture::tools::on_missing`]).
 fn tshark() -> bool {
-    let ok = Command::new("tshark")
-        .arg("--version")
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if ok {
-        return true;
-    }
-    let env = |k| std::env::var(k).ok();
-    match on_missing(
-        env("CI").as_deref(),
-        env("APTSCOPE_SKIP_MISSING_TOOLS").as_deref(),
-    ) {
-        Missing::Skip => {
-            eprintln!("tshark is not installed: skipped (APTSCOPE_SKIP_MISSING_TOOLS=1)");
-            false
-        }
-        Missing::Fail => panic!(
-            "tshark is not installed: install it (Debian/Ubuntu: `apt-get install tshark`; \
-             `.ci/run` does), or outside CI set APTSCOPE_SKIP_MISSING_TOOLS=1 to skip this test"
-        ),
-    }
-}
-
-#[test]
-fn a_missing_tool_fails_in_ci_and_skips_only_when_asked() {
-    assert_eq!(on_missing(None, None), Missing::Fail);
-    assert_eq!(on_missing(Some("true"), None), Missing::Fail);
-    assert_eq!(on_missing(Some("1"), Some("1")), Missing::Fail);
-    assert_eq!(on_missing(None, Some("0")), Missing::Fail);
-    assert_eq!(on_missing(None, Some("1")), Missing::Skip);
-    assert_eq!(on_missing(Some("false"), Some("1")), Missing::Skip);
-    assert_eq!(on_missing(Some(""), Some("1")), Missing::Skip);
+    aptscope_capture::tools::require("tshark", "--version", "tshark")
 }
 
 fn chunks() -> Vec<OwnedChunk> {

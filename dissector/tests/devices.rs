@@ -1,47 +1,21 @@
 //! Which messages each controller implements (the spec's device lists), and the diagnostic for a
 //! message the device's model does not implement.
 
-use aptscope_dissector::apt::{encode_named, Named};
-use aptscope_dissector::pipeline::{Format, Pipeline};
+mod common;
+
 use aptscope_dissector::table::model_matches;
 use aptscope_dissector::Table;
+use common::kinds;
 
 fn frame(name: &str, values: &[(&str, &str)], dst: u8, src: u8) -> Vec<u8> {
-    encode_named(
-        Table::global(),
-        &Named {
-            name,
-            sub: None,
-            values,
-            form: None,
-            dst,
-            src,
-        },
-    )
-    .unwrap_or_else(|e| panic!("{name}: {e}"))
+    common::frame(name, values, None, dst, src)
 }
 
 fn decode_json(bytes: &[u8]) -> Vec<serde_json::Value> {
-    let mut p = Pipeline::new(None, Format::Json);
-    let mut out: Vec<serde_json::Value> = vec![];
-    let mut emit = |l: &str| -> Result<(), ()> {
-        out.push(serde_json::from_str(l).expect("json"));
-        Ok(())
-    };
-    p.push(bytes, None, &mut emit).unwrap();
-    p.finish(&mut emit).unwrap();
-    out.into_iter().filter(|v| v["type"] == "frame").collect()
-}
-
-fn diag_kinds(v: &serde_json::Value) -> Vec<String> {
-    v["diag"]
-        .as_array()
-        .map(|a| {
-            a.iter()
-                .map(|d| d["kind"].as_str().unwrap_or("").to_string())
-                .collect()
-        })
-        .unwrap_or_default()
+    common::decode_json(bytes, 0)
+        .into_iter()
+        .filter(|v| v["type"] == "frame")
+        .collect()
 }
 
 #[test]
@@ -103,12 +77,8 @@ fn a_message_the_named_model_does_not_implement_is_flagged() {
             "PZ_SET_OUTPUTVOLTS"
         ]
     );
-    assert!(!diag_kinds(&recs[2]).contains(&"not_for_model".to_string()));
-    assert!(
-        diag_kinds(&recs[3]).contains(&"not_for_model".to_string()),
-        "{}",
-        recs[3]
-    );
+    assert!(!kinds(&recs[2]).contains(&"not_for_model"));
+    assert!(kinds(&recs[3]).contains(&"not_for_model"), "{}", recs[3]);
     let msg = recs[3]["diag"].to_string();
     assert!(msg.contains("KDC101"), "{msg}");
 }

@@ -1,34 +1,15 @@
 //! Decoded values a reader need not decode again (issue: "what a new user trips over").
 
-use aptscope_dissector::apt::{encode_named, Named};
-use aptscope_dissector::pipeline::{Format, Pipeline};
-use aptscope_dissector::Table;
+mod common;
+
+use aptscope_dissector::pipeline::Format;
 
 fn frame(name: &str, values: &[(&str, &str)], dst: u8, src: u8) -> Vec<u8> {
-    encode_named(
-        Table::global(),
-        &Named {
-            name,
-            sub: None,
-            values,
-            form: None,
-            dst,
-            src,
-        },
-    )
-    .unwrap_or_else(|e| panic!("{name}: {e}"))
+    common::frame(name, values, None, dst, src)
 }
 
 fn decode(bytes: &[u8], fmt: Format) -> Vec<String> {
-    let mut p = Pipeline::new(None, fmt);
-    let mut out: Vec<String> = vec![];
-    let mut emit = |l: &str| -> Result<(), ()> {
-        out.push(l.to_string());
-        Ok(())
-    };
-    p.push(bytes, None, &mut emit).unwrap();
-    p.finish(&mut emit).unwrap();
-    out
+    common::decode_lines(bytes, fmt, 0)
 }
 
 #[test]

@@ -1,50 +1,14 @@
 //! Real devices deviate from the spec: each variant described in the issue tracker, in the
 //! shape the devices send it, decodes as its message with a diagnostic that explains it.
 
-use aptscope_dissector::apt::{encode_named, Named};
-use aptscope_dissector::pipeline::{Format, Pipeline};
-use aptscope_dissector::Table;
-use serde_json::Value;
+mod common;
 
-fn frame(name: &str, values: &[(&str, &str)], form: Option<&str>, dst: u8, src: u8) -> Vec<u8> {
-    encode_named(
-        Table::global(),
-        &Named {
-            name,
-            sub: None,
-            values,
-            form,
-            dst,
-            src,
-        },
-    )
-    .unwrap_or_else(|e| panic!("{name}: {e}"))
-}
+use common::{frame, kinds};
+use serde_json::Value;
 
 /// Records of a stream fed in chunks of `step` bytes (0: all at once).
 fn decode(bytes: &[u8], step: usize) -> Vec<Value> {
-    let mut p = Pipeline::new(None, Format::Json);
-    let mut out: Vec<Value> = vec![];
-    let mut emit = |l: &str| -> Result<(), ()> {
-        out.push(serde_json::from_str(l).expect("json"));
-        Ok(())
-    };
-    if step == 0 {
-        p.push(bytes, None, &mut emit).unwrap();
-    } else {
-        for c in bytes.chunks(step) {
-            p.push(c, None, &mut emit).unwrap();
-        }
-    }
-    p.finish(&mut emit).unwrap();
-    out.into_iter().filter(|v| v["type"] != "detect").collect()
-}
-
-fn kinds(v: &Value) -> Vec<&str> {
-    v["diag"]
-        .as_array()
-        .map(|a| a.iter().filter_map(|d| d["kind"].as_str()).collect())
-        .unwrap_or_default()
+    common::decode_json(bytes, step)
 }
 
 fn names(recs: &[Value]) -> Vec<String> {

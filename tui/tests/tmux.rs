@@ -25,34 +25,6 @@ fn viewer() -> Option<Vec<String>> {
         .then(|| vec![bin.to_string_lossy().into_owned(), "view".into()])
 }
 
-/// What a test does when the tool it needs is missing.
-#[derive(Debug, PartialEq, Eq)]
-enum Missing {
-    Fail,
-    Skip,
-}
-
-/// In CI (`CI` set to anything but empty, `0` or `false`) a missing tool fails the test, so a
-/// bare machine cannot pass it; elsewhere too, unless `APTSCOPE_SKIP_MISSING_TOOLS=1` asks to
-/// skip (cargo would show a silent skip as "ok").
-fn on_missing(ci: Option<&str>, skip: Option<&str>) -> Missing {
-    let ci = ci.is_some_and(|v| !matches!(v, "" | "0" | "false"));
-    if !ci && skip == Some("1") {
-        Missing::Skip
-    } else {
-        Missing::Fail
-    }
-}
-
-#[test]
-fn a_missing_tool_fails_in_ci_and_skips_only_when_asked() {
-    assert_eq!(on_missing(None, None), Missing::Fail);
-    assert_eq!(on_missing(Some("true"), None), Missing::Fail);
-    assert_eq!(on_missing(Some("1"), Some("1")), Missing::Fail);
-    assert_eq!(on_missing(None, Some("1")), Missing::Skip);
-    assert_eq!(on_missing(Some("false"), Some("1")), Missing::Skip);
-}
-
 /// The screen once it shows every one of `what` and has stopped changing (a capture can catch
 /// a redraw half done: the parts of the expected state can be there while other cells still
 /// show the previous one), or after 10 s.
@@ -72,21 +44,8 @@ fn wait_for(session: &str, what: &[&str]) -> String {
 
 #[test]
 fn real_binary_under_tmux() {
-    if Command::new("tmux").arg("-V").output().is_err() {
-        let env = |k| std::env::var(k).ok();
-        match on_missing(
-            env("CI").as_deref(),
-            env("APTSCOPE_SKIP_MISSING_TOOLS").as_deref(),
-        ) {
-            Missing::Skip => {
-                eprintln!("tmux is not installed: skipped (APTSCOPE_SKIP_MISSING_TOOLS=1)");
-                return;
-            }
-            Missing::Fail => panic!(
-                "tmux is not installed: install it (Debian/Ubuntu: `apt-get install tmux`; \
-                 `.ci/run` does), or outside CI set APTSCOPE_SKIP_MISSING_TOOLS=1 to skip this test"
-            ),
-        }
+    if !aptscope_capture::tools::require("tmux", "-V", "tmux") {
+        return;
     }
     // `cargo test` builds the example; a run of this test alone (`--test tmux`) may not have.
     let cmd = viewer().expect(
