@@ -49,6 +49,10 @@ enum SimCmd {
         /// Baud rate on --port.
         #[arg(long, default_value_t = 115_200)]
         baud: u32,
+        /// End when the first host program closes the port (by default the simulator serves
+        /// one program after another until stopped, as a controller stays on).
+        #[arg(long, conflicts_with = "port")]
+        once: bool,
     },
     /// An Elliptec bus.
     Elliptec {
@@ -64,6 +68,9 @@ enum SimCmd {
         /// Baud rate on --port.
         #[arg(long, default_value_t = 9_600)]
         baud: u32,
+        /// End when the first host program closes the port.
+        #[arg(long, conflicts_with = "port")]
+        once: bool,
     },
 }
 
@@ -466,13 +473,21 @@ fn main() -> ExitCode {
                 pty,
                 port,
                 baud,
-            } => sim_apt_main(&model, sim_line(pty.as_deref(), port.as_deref(), baud)),
+                once,
+            } => sim_apt_main(
+                &model,
+                sim_line(pty.as_deref(), port.as_deref(), baud, once),
+            ),
             SimCmd::Elliptec {
                 modules,
                 pty,
                 port,
                 baud,
-            } => sim_elliptec_main(&modules, sim_line(pty.as_deref(), port.as_deref(), baud)),
+                once,
+            } => sim_elliptec_main(
+                &modules,
+                sim_line(pty.as_deref(), port.as_deref(), baud, once),
+            ),
         },
         Cmd::Tap { device, link, live } => live_opts(&live).and_then(|(proto, flow)| {
             let mut o = TapOptions::new(device, link);
@@ -654,7 +669,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) if e.kind() == io::ErrorKind::BrokenPipe => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("aptscope: {e}");
+            aptscope_capture::note!("aptscope: {e}");
             ExitCode::FAILURE
         }
     }
@@ -664,9 +679,11 @@ fn sim_line<'a>(
     pty: Option<&'a std::path::Path>,
     port: Option<&'a std::path::Path>,
     baud: u32,
+    once: bool,
 ) -> SimLine<'a> {
     match port {
         Some(p) => SimLine::Port(p, baud),
+        None if once => SimLine::PtyOnce(pty),
         None => SimLine::Pty(pty),
     }
 }

@@ -569,7 +569,10 @@ fn a_megabyte_burst_through_the_tap_is_recorded_exactly_and_ctrl_c_leaves_a_vali
         .collect();
     assert!(flagged.is_empty(), "{flagged:?}");
 
-    // The simulator ends by itself when the tap hangs up, and removes its link.
+    // The simulator stays up when the tap hangs up (a controller does not vanish with its
+    // host); SIGINT ends it, and it removes its link.
+    assert!(matches!(sim.child.try_wait(), Ok(None)), "{}", sim.stderr());
+    sim.signal(Signal::SIGINT);
     let st = sim.wait_exit();
     assert!(st.success(), "sim: {st}\n{}", sim.stderr());
     assert!(std::fs::symlink_metadata(dir.join("dev")).is_err());
@@ -630,7 +633,8 @@ fn kill_9_of_the_tap_leaves_a_readable_prefix() {
     );
     assert!(decode_json(&cap_path).iter().any(|r| r["type"] == "frame"));
 
-    // The simulator sees the hang-up and ends.
+    // The simulator outlives the host's session; SIGINT ends it.
+    sim.signal(Signal::SIGINT);
     let st = sim.wait_exit();
     assert!(st.success(), "sim: {st}\n{}", sim.stderr());
     let _ = std::fs::remove_dir_all(&dir);
@@ -750,6 +754,7 @@ fn with_reconnect_traffic_continues_in_the_same_file_after_the_device_comes_back
     assert!(cap.d2h == got, "d2h: {}", first_difference(&cap.d2h, &got));
     assert_eq!(count(&got, &GET_POSCOUNTER_HDR), b_replies.len());
 
+    sim2.signal(Signal::SIGINT);
     let st = sim2.wait_exit();
     assert!(st.success(), "sim: {st}\n{}", sim2.stderr());
     let _ = std::fs::remove_dir_all(&dir);
@@ -847,4 +852,128 @@ fn a_simulator_on_a_serial_port_answers_and_ends_cleanly_on_sigint() {
     let status = sim.wait_exit();
     assert!(status.success(), "{status:?}\n{}", sim.stderr());
     drop(pty.slave);
+}
+
+/// A real controller does not vanish when the host program closes the port: the simulator
+/// serves three programs in a row, each getting its own answer (none of the last one's
+/// leftovers), and `--once` keeps the old behaviour of ending with the first.
+#[test]
+fn a_simulator_serves_one_host_session_after_another() {
+    let dir = scratch("sim-sessions");
+    let link = dir.join("dev");
+    let mut sim = start_sim(&link);
+    let req_info = vec![0x05, 0x00, 0x00, 0x00, 0x50, 0x01];
+    for session in 0..3 {
+        let host = open_host(&link);
+        let rx = Receiver::start(host.try_clone().unwrap());
+        assert_eq!(send(host, req_info.clone()).join().unwrap(), 6);
+        wait_for(
+            "HW_GET_INFO",
+            || format!("session {session}: {:02x?}", rx.got()),
+            || rx.len() >= 90,
+        );
+        let got = rx.finish();
+        assert_eq!(got.len(), 90, "session {session}: exactly one reply");
+        assert_eq!(&got[..2], &[0x06, 0x00], "session {session}");
+        assert!(
+            sim.status.is_none() && matches!(sim.child.try_wait(), Ok(None)),
+            "session {session}: the simulator ended\n{}",
+            sim.stderr()
+        );
+    }
+    sim.signal(Signal::SIGINT);
+    assert!(sim.wait_exit().success(), "{}", sim.stderr());
+
+    let once = dir.join("once");
+    let mut sim = start_sim_with(&["sim", "apt", "--once"], &once);
+    let host = open_host(&once);
+    let rx = Receiver::start(host.try_clone().unwrap());
+    assert_eq!(send(host, req_info).join().unwrap(), 6);
+    wait_for(
+        "HW_GET_INFO",
+        || format!("{:02x?}", rx.got()),
+        || rx.len() >= 90,
+    );
+    drop(rx.finish());
+    assert!(
+        sim.wait_exit().success(),
+        "--once ends with the host\n{}",
+        sim.stderr()
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `aptscope tap … 2>&1 | tee tap.log`, and `tee` goes away: standard output and error are now
+/// broken pipes. SIGINT, SIGTERM and SIGHUP still stop the tap cleanly (nothing between the
+/// signal and the stop may depend on printing) and the capture holds what crossed.
+#[test]
+fn the_tap_stops_on_signals_when_its_output_pipes_are_gone() {
+    for sig in [Signal::SIGINT, Signal::SIGTERM, Signal::SIGHUP] {
+        let dir = scratch("broken-pipes");
+        let _sim = start_sim(&dir.join("dev"));
+        let (dev, host, cap) = (dir.join("dev"), dir.join("host"), dir.join("cap.pcapng"));
+        let mut child = Command::new(env!("CARGO_BIN_EXE_aptscope"))
+            .args([
+                "tap",
+                "--device",
+                dev.to_str().unwrap(),
+                "--link",
+                host.to_str().unwrap(),
+                "-w",
+                cap.to_str().unwrap(),
+            ])
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("run aptscope");
+        let mut err = child.stderr.take().expect("stderr");
+        // Up once its host side is there; then the reader of both pipes goes away.
+        let mut seen = String::new();
+        let mut buf = [0u8; 1024];
+        let t0 = Instant::now();
+        while !seen.contains("aptscope tap: host side") {
+            assert!(t0.elapsed() < DEADLINE, "{sig}: no start: {seen}");
+            match err.read(&mut buf) {
+                Ok(0) | Err(_) => panic!("{sig}: stderr closed: {seen}"),
+                Ok(n) => seen.push_str(&String::from_utf8_lossy(&buf[..n])),
+            }
+        }
+        let h = open_host(&host);
+        let rx = Receiver::start(h.try_clone().unwrap());
+        assert_eq!(
+            send(h, vec![0x05, 0x00, 0x00, 0x00, 0x50, 0x01])
+                .join()
+                .unwrap(),
+            6
+        );
+        wait_for(
+            "HW_GET_INFO",
+            || format!("{:02x?}", rx.got()),
+            || rx.len() >= 90,
+        );
+        drop(err);
+        drop(child.stdout.take());
+        kill(Pid::from_raw(child.id() as i32), sig).expect("signal");
+        let t0 = Instant::now();
+        let status = loop {
+            if let Some(s) = child.try_wait().expect("try_wait") {
+                break s;
+            }
+            if t0.elapsed() > DEADLINE {
+                let _ = child.kill();
+                panic!("{sig}: the tap did not stop with its output pipes gone");
+            }
+            thread::sleep(POLL);
+        };
+        assert!(
+            status.code().is_some(),
+            "{sig}: killed by a signal: {status}"
+        );
+        drop(rx.finish());
+        let c = read_capture(&cap);
+        assert_eq!(c.h2d, [0x05, 0x00, 0x00, 0x00, 0x50, 0x01], "{sig}");
+        assert_eq!(c.d2h.len(), 90, "{sig}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

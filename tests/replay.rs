@@ -120,23 +120,26 @@ fn dry_run_lists_the_schedule_and_sends_nothing() {
 
 #[test]
 fn motion_to_a_real_port_needs_confirmation() {
-    let o = run(&["replay", SAMPLE, "--port", "/dev/null"]);
+    // /dev/ptmx is a terminal device that is no pseudo-terminal's slave: a stand-in for a real
+    // port (opening it makes a new pair nobody answers on).
+    let o = run(&["replay", SAMPLE, "--port", "/dev/ptmx"]);
     assert!(!o.status.success());
     let err = text(&o.stderr);
     assert!(
-        err.contains("/dev/null is a real port and the replay sends motion commands: "),
+        err.contains("/dev/ptmx is a real port and the replay sends motion commands: "),
         "{err}"
     );
     assert!(
         err.contains("MOT_MOVE_HOME ×1") && err.contains("give --yes"),
         "{err}"
     );
-    // A selection without motion goes through the check (and fails only to open the port).
+    // A selection without motion goes through the check (and is sent to a line nobody
+    // answers on: the replies are missing).
     let o = run(&[
         "replay",
         SAMPLE,
         "--port",
-        "/dev/null",
+        "/dev/ptmx",
         "-Y",
         "apt.name == \"HW_REQ_INFO\"",
     ]);
@@ -300,4 +303,61 @@ fn ctrl_c_stops_sending_and_stops_the_moving_channel() {
         .collect();
     assert!(host.last().unwrap().contains("MOT_MOVE_STOP"), "{host:?}");
     assert!(!host.iter().any(|l| l.contains("MOT_MOVE_ABSOLUTE")));
+}
+
+/// What is wrong with the port, or with the options, is said before anything is asked or sent.
+#[test]
+fn port_and_option_errors_say_what_is_wrong_before_any_prompt() {
+    let dir = scratch("port-errors");
+    let file = dir.join("regular");
+    std::fs::write(&file, b"").unwrap();
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec!["--port".into(), dir.join("missing").display().to_string()],
+            "no such port",
+        ),
+        (
+            vec!["--port".into(), file.display().to_string()],
+            "is a regular file, not a serial port",
+        ),
+        (
+            vec!["--port".into(), "/dev/null".into()],
+            "is not a terminal, so not a serial port",
+        ),
+        (
+            vec!["--dry-run".into(), "--speed".into(), "0".into()],
+            "--speed 0: give a factor above 0",
+        ),
+        (
+            vec!["--dry-run".into(), "--from".into(), "1000".into()],
+            "--from record 1000 is beyond the capture (its last record is 20)",
+        ),
+        (
+            vec!["--dry-run".into(), "--from".into(), "100s".into()],
+            "is beyond the capture (it lasts",
+        ),
+        (
+            vec![
+                "--dry-run".into(),
+                "--from".into(),
+                "10".into(),
+                "--to".into(),
+                "5".into(),
+            ],
+            "--from (record 10) is after --to (record 5)",
+        ),
+    ];
+    for (extra, want) in cases {
+        let mut args = vec!["replay", SAMPLE];
+        args.extend(extra.iter().map(String::as_str));
+        let o = run(&args);
+        let err = text(&o.stderr);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(err.contains(want), "{args:?}: {err}");
+        assert!(
+            !err.contains("give --yes"),
+            "{args:?}: asked before saying what is wrong"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

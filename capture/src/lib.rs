@@ -17,3 +17,14 @@ pub mod usb;
 
 pub use model::{Chunk, Direction, Event, OwnedChunk, ReadDiag, Reader, StreamInfo, Writer};
 pub use raw::{ByteSource, InputFormat, CHUNK};
+
+/// `eprintln!` that cannot panic: a closed or failing standard error is ignored, so a live tool
+/// never dies of its log (`aptscope tap … 2>&1 | tee log` after `tee` has gone) and nothing
+/// between a signal and the stop depends on it.
+#[macro_export]
+macro_rules! note {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}

@@ -109,6 +109,13 @@ fn selection(o: &ReplayOptions, script: &Script) -> io::Result<Selection> {
         stream: o.stream,
     };
     sel.check_streams(script).map_err(bad)?;
+    sel.check_range(script).map_err(bad)?;
+    if !(o.speed.is_finite() && o.speed > 0.0) {
+        return Err(bad(format!(
+            "--speed {}: give a factor above 0 (2 = twice as fast, 0.5 = half; --asap for no waits)",
+            o.speed
+        )));
+    }
     Ok(sel)
 }
 
@@ -251,7 +258,7 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
         Side::Host => (h + 1, d),
         Side::Device => (h, d + 1),
     });
-    eprintln!(
+    aptscope_capture::note!(
         "# {} ({}, {}): {} messages, {hosts} from the host, {devs} from the device{}",
         o.file,
         script.format,
@@ -264,10 +271,10 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
         }
     );
     for n in script.notes.iter().take(10) {
-        eprintln!("# capture: {n}");
+        aptscope_capture::note!("# capture: {n}");
     }
     if script.notes.len() > 10 {
-        eprintln!(
+        aptscope_capture::note!(
             "# capture: … and {} more notes (aptscope decode shows them)",
             script.notes.len() - 10
         );
@@ -285,6 +292,8 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
             .port
             .as_deref()
             .ok_or_else(|| bad("--as host needs --port DEV".into()))?;
+        // What is wrong with the port comes before any question about sending to it.
+        aptscope_capture::live::serial::check_port(port)?;
         if !o.yes && !is_pseudo_terminal(Path::new(port)) {
             let mut motion: BTreeMap<String, usize> = BTreeMap::new();
             for s in &plan {
@@ -294,7 +303,7 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
                 }
             }
             if !motion.is_empty() && !confirm(port, &motion)? {
-                eprintln!("# nothing sent");
+                aptscope_capture::note!("# nothing sent");
                 return Ok(false);
             }
         }
@@ -316,8 +325,8 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
         (Role::Device, None, pty) => {
             let (l, path) = Link::open_pty(pty.as_deref().map(Path::new))?;
             match pty {
-                Some(p) => eprintln!("# {p} -> {}", path.display()),
-                None => eprintln!("# {}", path.display()),
+                Some(p) => aptscope_capture::note!("# {p} -> {}", path.display()),
+                None => aptscope_capture::note!("# {}", path.display()),
             }
             l
         }
@@ -336,7 +345,7 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
     match o.role {
         Role::Host => {
             let port = o.port.clone().unwrap_or_default();
-            eprintln!(
+            aptscope_capture::note!(
                 "# replaying {} messages to {port} as the host ({line}{})",
                 plan.len(),
                 if o.wait_replies {
@@ -414,7 +423,7 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
             Ok(!(o.check && fails > 0))
         }
         Role::Device => {
-            eprintln!("# answering as the captured device ({line}); Ctrl-C to stop");
+            aptscope_capture::note!("# answering as the captured device ({line}); Ctrl-C to stop");
             let opts = DeviceOptions {
                 speed: if o.speed > 0.0 { o.speed } else { 1.0 },
                 duration_ns: o.duration_ns,

@@ -382,6 +382,47 @@ impl Selection {
             && self.filter.as_ref().is_none_or(|f| f.matches(&m.rec))
     }
 
+    /// Check `from`/`to` against the capture: `from` after `to` (of the same kind) and a `from`
+    /// beyond the capture's last record or time are errors that say so.
+    pub fn check_range(&self, script: &Script) -> Result<(), String> {
+        let show = |b: &Bound| match b {
+            Bound::Record(n) => format!("record {n}"),
+            Bound::Time(t) => format!("{:.3} s", *t as f64 / 1e9),
+        };
+        if let (Some(f), Some(t)) = (&self.from, &self.to) {
+            let after = match (f, t) {
+                (Bound::Record(a), Bound::Record(b)) | (Bound::Time(a), Bound::Time(b)) => a > b,
+                _ => false,
+            };
+            if after {
+                return Err(format!(
+                    "--from ({}) is after --to ({}): nothing to replay",
+                    show(f),
+                    show(t)
+                ));
+            }
+        }
+        let last_n = script.msgs.iter().map(|m| m.n).max().unwrap_or(0);
+        let last_t = match (
+            script.msgs.iter().filter_map(|m| m.ts_ns).max(),
+            script.first_ts,
+        ) {
+            (Some(l), Some(z)) => Some(l.saturating_sub(z)),
+            _ => None,
+        };
+        match self.from {
+            Some(Bound::Record(n)) if n > last_n => Err(format!(
+                "--from record {n} is beyond the capture (its last record is {last_n})"
+            )),
+            Some(Bound::Time(t)) if last_t.is_some_and(|l| t > l) => Err(format!(
+                "--from {} is beyond the capture (it lasts {:.3} s)",
+                show(&Bound::Time(t)),
+                last_t.unwrap_or(0) as f64 / 1e9
+            )),
+            _ => Ok(()),
+        }
+    }
+
     /// Check the stream choice against the capture: several streams need `stream`.
     pub fn check_streams(&self, script: &Script) -> Result<(), String> {
         let s = script.streams();

@@ -56,6 +56,37 @@ fn not_a_port(path: &str) -> io::Result<()> {
     ))
 }
 
+/// Whether `path` can be a serial port to open now, before anything is asked or sent: it exists,
+/// is a terminal device, and no other program holds it exclusively. The error says which.
+pub fn check_port(path: &str) -> io::Result<()> {
+    if std::fs::symlink_metadata(path).is_err() && std::fs::metadata(path).is_err() {
+        return Err(io::Error::new(
+            io::ErrorKind::NotFound,
+            format!("no such port: {path} does not exist"),
+        ));
+    }
+    not_a_port(path)?;
+    let f = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .custom_flags((OFlag::O_NOCTTY | OFlag::O_NONBLOCK).bits())
+        .open(path)
+        .map_err(|e| match e.raw_os_error() {
+            Some(libc_ebusy) if libc_ebusy == nix::errno::Errno::EBUSY as i32 => io::Error::new(
+                e.kind(),
+                format!("{path} is busy: another program has it open exclusively"),
+            ),
+            _ => io::Error::new(e.kind(), format!("{path}: {e}")),
+        })?;
+    if !nix::unistd::isatty(&f).unwrap_or(false) {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!("{path} is not a terminal, so not a {PORTS}"),
+        ));
+    }
+    Ok(())
+}
+
 /// Open `path` exclusively with `settings` (8 data bits, no parity, one stop bit). What the
 /// device sent before is kept (a tap must not lose it).
 pub fn open_serial(path: &str, settings: &LineSettings) -> io::Result<SerialFd> {

@@ -1041,7 +1041,7 @@ impl Shared {
             port: port.to_string(),
             error: error.to_string(),
         };
-        eprintln!(
+        crate::note!(
             "aptscope: {} gone at {} (+{:.3} s): {}",
             d.port,
             clock_time(ts_ns),
@@ -1249,8 +1249,8 @@ fn supervise(sh: &Shared, signals: Option<&Signals>, deadline: Option<Instant>, 
         match signals {
             Some(s) => {
                 if let Some(sig) = s.wait(TICK) {
-                    eprintln!("aptscope: {sig}: stopping");
                     sh.stop.stop();
+                    crate::note!("aptscope: {sig}: stopping");
                     return;
                 }
             }
@@ -1357,7 +1357,7 @@ impl Tap {
         let device = match open_device(&opts.device, &settings) {
             Ok(d) => Some(d),
             Err(e) if opts.reconnect => {
-                eprintln!("aptscope tap: {e}; waiting for it");
+                crate::note!("aptscope tap: {e}; waiting for it");
                 None
             }
             Err(e) => return Err(e),
@@ -1376,7 +1376,7 @@ impl Tap {
             )?),
             None => None,
         };
-        eprintln!(
+        crate::note!(
             "aptscope tap: host side {}{} ⇄ device {} ({settings}){}",
             host.slave_path.display(),
             host.link
@@ -1482,7 +1482,7 @@ impl Tap {
                     if let Some((t, e)) = dev_gone {
                         sh.disconnect(t, &opts.device, &e);
                         if opts.reconnect && !sh.stop.is_stopped() {
-                            eprintln!("aptscope tap: waiting for {} to come back", opts.device);
+                            crate::note!("aptscope tap: waiting for {} to come back", opts.device);
                             continue;
                         }
                     }
@@ -1492,7 +1492,7 @@ impl Tap {
         })?;
         drop(signals);
         drop(host);
-        eprintln!("{}", stats.summary("aptscope tap"));
+        crate::note!("{}", stats.summary("aptscope tap"));
         Ok(stats)
     }
 }
@@ -1518,14 +1518,14 @@ fn wait_for_device(
             return None;
         }
         if let Some(sig) = signals.and_then(|s| s.wait(Duration::ZERO)) {
-            eprintln!("aptscope: {sig}: stopping");
             sh.stop.stop();
+            crate::note!("aptscope: {sig}: stopping");
             return None;
         }
         if last_try.is_none_or(|t| t.elapsed() >= RETRY_EVERY) {
             last_try = Some(Instant::now());
             if let Ok(d) = open_device(path, settings) {
-                eprintln!(
+                crate::note!(
                     "aptscope tap: {path} back at {}",
                     clock_time(sh.clock.now())
                 );
@@ -1537,7 +1537,7 @@ fn wait_for_device(
                 sh.discarded_h2d.fetch_add(n as u64, Ordering::Relaxed);
             }
             Err(e) => {
-                eprintln!("aptscope tap: host side: {e}");
+                crate::note!("aptscope tap: host side: {e}");
                 sh.stop.stop();
                 return None;
             }
@@ -1573,7 +1573,7 @@ impl Sniff {
             ports.push(match open_serial(p, &settings) {
                 Ok(port) => Some(port),
                 Err(e) if opts.reconnect => {
-                    eprintln!("aptscope sniff: {e}; waiting for it");
+                    crate::note!("aptscope sniff: {e}; waiting for it");
                     None
                 }
                 Err(e) => return Err(e),
@@ -1592,7 +1592,7 @@ impl Sniff {
             )?),
             None => None,
         };
-        eprintln!(
+        crate::note!(
             "aptscope sniff: host TX on {}, device TX on {} ({settings}){}",
             opts.host_tx,
             opts.device_tx,
@@ -1655,7 +1655,7 @@ impl Sniff {
             )
         })?;
         drop(signals);
-        eprintln!("{}", stats.summary("aptscope sniff"));
+        crate::note!("{}", stats.summary("aptscope sniff"));
         Ok(stats)
     }
 }
@@ -1680,7 +1680,7 @@ fn receive(
                 }
                 match open_serial(path, settings) {
                     Ok(p) => {
-                        eprintln!(
+                        crate::note!(
                             "aptscope sniff: {path} back at {}",
                             clock_time(sh.clock.now())
                         );

@@ -108,15 +108,19 @@ fn invalid(msg: String) -> io::Error {
 /// Where a simulator serves.
 #[derive(Debug, Clone, Copy)]
 pub enum SimLine<'a> {
-    /// A new pseudo-terminal, symlinked here when given.
+    /// A new pseudo-terminal, symlinked here when given, serving one host program after
+    /// another until stopped.
     Pty(Option<&'a Path>),
+    /// As [`SimLine::Pty`], but ending when the first host program hangs up.
+    PtyOnce(Option<&'a Path>),
     /// A real serial port at this baud rate.
     Port(&'a Path, u32),
 }
 
 fn serve<S: Simulator>(sim: S, line: SimLine<'_>) -> io::Result<()> {
     match line {
-        SimLine::Pty(link) => run_on_pty(sim, link),
+        SimLine::Pty(link) => run_on_pty(sim, link, false),
+        SimLine::PtyOnce(link) => run_on_pty(sim, link, true),
         SimLine::Port(dev, baud) => run_on_port(sim, dev, baud),
     }
 }

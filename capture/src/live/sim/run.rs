@@ -109,7 +109,24 @@ pub fn serve_pty<S: Simulator + ?Sized>(
 ) -> io::Result<()> {
     let mut stops: Vec<BorrowedFd<'_>> = stop.iter().map(|s| s.0.as_fd()).collect();
     stops.extend_from_slice(extra_stops);
-    serve_fd(sim, &pty.master, pty.slave, &stops, Line::Pty)
+    serve_fd(
+        sim,
+        &pty.master,
+        pty.slave,
+        &stops,
+        Line::Pty,
+        Instant::now(),
+    )
+    .map(|_| ())
+}
+
+/// Why serving ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum End {
+    /// A stop descriptor became readable (signal, stop handle).
+    Stopped,
+    /// The program on the other end closed the line.
+    HungUp,
 }
 
 /// What the simulator serves on.
@@ -130,15 +147,15 @@ fn serve_fd<S: Simulator + ?Sized>(
     mut slave: Option<OwnedFd>,
     stops: &[BorrowedFd<'_>],
     line: Line,
-) -> io::Result<()> {
+    start: Instant,
+) -> io::Result<End> {
     let gone = || match line {
-        Line::Pty => Ok(()),
+        Line::Pty => Ok(End::HungUp),
         Line::Port => Err(io::Error::new(
             io::ErrorKind::BrokenPipe,
             "the serial port went away",
         )),
     };
-    let start = Instant::now();
     let mut pending: Vec<u8> = vec![];
     let mut buf = [0u8; 4096];
     loop {
@@ -180,7 +197,7 @@ fn serve_fd<S: Simulator + ?Sized>(
             .collect();
         drop(fds);
         if revents[1..].iter().any(|r| !r.is_empty()) {
-            return Ok(());
+            return Ok(End::Stopped);
         }
         let m = revents[0];
         if m.contains(PollFlags::POLLIN) {
@@ -215,10 +232,12 @@ pub fn termination_signals() -> io::Result<SignalFd> {
 }
 
 /// Serve `sim` on a new pseudo-terminal: print its path on stdout (and make `link` a symlink to
-/// it, replacing an older symlink, removed again on exit), then run until SIGINT/SIGTERM or
-/// until the program using it hangs up. Call it from the main thread before starting others:
-/// it blocks SIGINT/SIGTERM in the calling thread to receive them through a descriptor.
-pub fn run_on_pty<S: Simulator>(mut sim: S, link: Option<&Path>) -> io::Result<()> {
+/// it, replacing an older symlink, removed again on exit), then run until SIGINT/SIGTERM. A real
+/// controller does not vanish when the host closes the port: the simulator serves one host
+/// program after another (with `once`, it ends when the first one hangs up). Call it from the
+/// main thread before starting others: it blocks SIGINT/SIGTERM in the calling thread to
+/// receive them through a descriptor.
+pub fn run_on_pty<S: Simulator>(mut sim: S, link: Option<&Path>, once: bool) -> io::Result<()> {
     let sigs = termination_signals()?;
     let pty = Pty::open()?;
     let path = pty.path().to_path_buf();
@@ -236,12 +255,46 @@ pub fn run_on_pty<S: Simulator>(mut sim: S, link: Option<&Path>) -> io::Result<(
         }
         out.flush()?;
     }
-    let r = serve_pty(&mut sim, pty, None, &[sigs.as_fd()]);
+    let start = Instant::now();
+    let (master, mut slave, _) = pty.into_parts();
+    let r = loop {
+        match serve_fd(
+            &mut sim,
+            &master,
+            slave.take(),
+            &[sigs.as_fd()],
+            Line::Pty,
+            start,
+        ) {
+            Ok(End::HungUp) if !once => {
+                // Hold the line up again for the next program, without what the last one left
+                // unread (the simulator's clock and state go on, as a controller's would).
+                match reopen_slave(&path) {
+                    Ok(fd) => slave = Some(fd),
+                    Err(e) => break Err(e),
+                }
+            }
+            r => break r.map(|_| ()),
+        }
+    };
     // Only while it is still ours: a simulator started since at the same path has replaced it.
     if let Some(l) = link.filter(|l| std::fs::read_link(l).is_ok_and(|t| t == path)) {
         let _ = std::fs::remove_file(l);
     }
     r
+}
+
+/// Open our own copy of a pseudo-terminal's slave again (so the master sees no hang-up while no
+/// program has it open), dropping what the last program left unread.
+fn reopen_slave(path: &Path) -> io::Result<OwnedFd> {
+    let fd = nix::fcntl::open(
+        path,
+        OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_NONBLOCK | OFlag::O_CLOEXEC,
+        nix::sys::stat::Mode::empty(),
+    )
+    .map_err(io_err)?;
+    let _ = nix::sys::termios::tcflush(&fd, nix::sys::termios::FlushArg::TCIOFLUSH);
+    Ok(fd)
 }
 
 /// Serve `sim` on a real serial port `dev` at `baud` (8N1, no flow control), until SIGINT or
@@ -255,7 +308,15 @@ pub fn run_on_port<S: Simulator>(mut sim: S, dev: &Path, baud: u32) -> io::Resul
     };
     let port = open_serial(&dev.to_string_lossy(), &settings)?;
     let fd = OwnedFd::from(port.file.try_clone()?);
-    serve_fd(&mut sim, &fd, None, &[sigs.as_fd()], Line::Port)
+    serve_fd(
+        &mut sim,
+        &fd,
+        None,
+        &[sigs.as_fd()],
+        Line::Port,
+        Instant::now(),
+    )
+    .map(|_| ())
 }
 
 #[cfg(test)]
