@@ -540,3 +540,58 @@ fn compare_fields_unordered_ok(lua: &Path, file: &Path) -> bool {
             .iter()
             .all(|t| t.contains_key("apt.msgid") && t.contains_key("apt.name"))
 }
+
+#[test]
+fn elliptec_fields_equal_aptscopes() {
+    let Some((_, lua)) = setup("ell") else {
+        return;
+    };
+    for f in [
+        "samples/sessions/elliptec.pcapng",
+        "samples/sessions/elliptec.pcap",
+    ] {
+        let f = Path::new(ROOT).join(f);
+        let want = frames(&f, &[]);
+        let out = tshark(&lua, &f, &["-T", "json", "--no-duplicate-keys"]);
+        let packets: Vec<Value> = serde_json::from_str(&out).expect("tshark JSON");
+        let mut got = vec![];
+        for p in &packets {
+            match &p["_source"]["layers"]["ell"] {
+                Value::Array(a) => got.extend(a.iter().cloned()),
+                Value::Null => {}
+                t => got.push(t.clone()),
+            }
+        }
+        assert_eq!(got.len(), want.len(), "{}", f.display());
+        let mut compared = 0;
+        for (w, g) in want.iter().zip(&got) {
+            assert_eq!(g["ell.cmd"], w["cmd"], "{}", f.display());
+            assert_eq!(g["ell.addr"], w["addr"]);
+            assert_eq!(g["ell.name"], w["name"]);
+            let Value::Object(g) = g else { panic!("{g}") };
+            for (k, v) in g {
+                let Some(name) = k.strip_prefix("ell.") else {
+                    continue;
+                };
+                if ["cmd", "addr", "name"].contains(&name) {
+                    continue;
+                }
+                let name = name.split('.').next().unwrap_or(name);
+                let s = v.as_str().expect("one value");
+                let wv = &w["fields"][name];
+                let ok = match wv {
+                    Value::Number(n) => n.as_f64() == as_num(s),
+                    // Status codes: aptscope names them; tshark shows the number (value string).
+                    Value::String(t) if name == "status" => aptscope_dissector::ell::table::STATUS
+                        .iter()
+                        .any(|(c, l)| l == t && Some(*c as f64) == as_num(s)),
+                    Value::String(t) => t == s,
+                    _ => false,
+                };
+                assert!(ok, "{} {}: aptscope {wv}, tshark {s}", w["cmd"], name);
+                compared += 1;
+            }
+        }
+        assert!(compared >= 30, "only {compared} values compared");
+    }
+}

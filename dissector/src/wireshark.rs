@@ -9,14 +9,17 @@
 //! Field names are aptscope's display-filter names: `apt.msgid`, `apt.name`, `apt.src`,
 //! `apt.dst`, `apt.chan`, `apt.<field>`, `ell.cmd`, `ell.addr`, `ell.<field>`. Wireshark needs
 //! one type per field name; a table field name that occurs with several types or value sets
-//! (integer signedness, float, text, bytes, enum, flag set) gets one ProtoField per variant:
+//! (integer signedness, float, text, bytes, enum, flag word) gets one ProtoField per variant:
 //! the first in table order is `apt.<field>`, each other one `apt.<field>.<suffix>` with the
-//! suffix the name of its flag set or enum, else its type (`uint`, `int`, `float`, `string`,
+//! suffix the name of its enum, else `flags` or its type (`uint`, `int`, `float`, `string`,
 //! `bytes`), numbered (`_2`) if still taken. Integers of the same signedness share one field
-//! whatever their width. Bits of a flag word are `<field abbrev>.<flag label in lower case>`.
+//! whatever their width, and flag words of one name share one field whatever their flag set.
+//! Bits of a flag word are `<field abbrev>.<flag label in lower case>`, or
+//! `<field abbrev>.<flag set>.<label>` when another set already uses that label with another
+//! mask.
 
 use crate::ell::table::{Kind, COMMANDS, STATUS};
-use crate::table::{FormKind, Loc, Prim, Table, Ty};
+use crate::table::{FlagsDef, FormKind, Loc, Prim, Table, Ty};
 use std::collections::HashMap;
 use std::fmt::Write;
 
@@ -49,8 +52,6 @@ struct Pf {
     base: &'static str,
     vs: Option<String>,
     mask: Option<u64>,
-    /// Indices of the bit fields of a flag word.
-    bits: Vec<usize>,
 }
 
 /// The ProtoFields of one protocol, deduplicated by (name, variant).
@@ -71,6 +72,66 @@ impl Fields {
             by_key: HashMap::new(),
             taken: HashMap::new(),
         }
+    }
+
+    /// The bit fields of flag set `set` in a word of `width` bits under ProtoField `parent`:
+    /// `<parent>.<label>`, or `<parent>.<set>.<label>` when another set of the same field name
+    /// already has that label with another mask or width.
+    fn bits_of(&mut self, parent: usize, set: &FlagsDef, width: usize) -> Vec<usize> {
+        let mut out = vec![];
+        for (mask, l) in &set.items {
+            let one_bit = mask.count_ones() == 1;
+            let ctor = if one_bit {
+                "bool".to_string()
+            } else {
+                format!("uint{width}")
+            };
+            let base = if one_bit {
+                // ProtoField.bool takes the word's width in bits.
+                match width {
+                    8 => "8",
+                    16 => "16",
+                    _ => "32",
+                }
+            } else {
+                "base.HEX"
+            };
+            let label = l.to_ascii_lowercase();
+            let p = self.pfs[parent].abbr.clone();
+            let mut found = None;
+            for abbr in [
+                format!("{p}.{label}"),
+                format!("{p}.{}.{label}", set.name),
+                format!("{p}.{}.{label}_{width}", set.name),
+            ] {
+                match self.taken.get(&abbr) {
+                    Some(&i) => {
+                        let b = &self.pfs[i];
+                        if b.mask == Some(*mask) && b.ctor == ctor && b.base == base {
+                            found = Some(i);
+                            break;
+                        }
+                    }
+                    None => {
+                        self.pfs.push(Pf {
+                            abbr: abbr.clone(),
+                            ctor: ctor.clone(),
+                            label: l.to_string(),
+                            base,
+                            vs: None,
+                            mask: Some(*mask),
+                        });
+                        let i = self.pfs.len() - 1;
+                        self.taken.insert(abbr, i);
+                        found = Some(i);
+                        break;
+                    }
+                }
+            }
+            // The last name is unique: set names are, labels within a set are.
+            out.extend(found);
+        }
+        out
     }
 
     /// The index of the ProtoField for `name` in variant `key`, declared on first use by `mk`.
@@ -187,6 +248,7 @@ pub fn lua_for(table: &Table) -> String {
             Ty::Pad(n) => ("pad".into(), n as usize, None),
         };
         let label = label_of(f.name, f.unit, f.scale);
+        let mut bits: Vec<usize> = vec![];
         let pf = match (f.ty, prim) {
             (Ty::Pad(_), _) => 0,
             (_, Some(p)) => {
@@ -194,23 +256,18 @@ pub fn lua_for(table: &Table) -> String {
                 let mut base = "base.DEC";
                 let mut vs = None;
                 let mut key = ctor.to_string();
-                if let Some(fl) = f.flags {
-                    // A flag word: exact width so its bits display at their positions.
-                    ctor = match p.width() {
-                        1 => "uint8",
-                        2 => "uint16",
-                        _ => "uint32",
-                    };
+                if f.flags.is_some() {
+                    // Flag words of one name share a field whatever their flag set; their bits
+                    // are fields of their own.
                     base = "base.HEX";
-                    suffix = table.flags_def(fl).name;
-                    key = format!("{ctor}/flags{fl}");
+                    suffix = "flags";
+                    key = "uint32/flags".into();
+                    ctor = "uint32";
                 } else if let Some(e) = f.enumeration {
                     vs = Some(format!("VS[{}]", e + 1));
                     suffix = table.enum_def(e).name;
                     key = format!("{ctor}/enum{e}");
                 }
-                let flags = f.flags;
-                let width_bits = p.width() * 8;
                 let i = af.get(f.name, key, suffix, |abbr| Pf {
                     abbr,
                     ctor: ctor.to_string(),
@@ -218,44 +275,9 @@ pub fn lua_for(table: &Table) -> String {
                     base,
                     vs,
                     mask: None,
-                    bits: vec![],
                 });
-                if let Some(fl) = flags {
-                    if af.pfs[i].bits.is_empty() {
-                        let parent = af.pfs[i].abbr.clone();
-                        for (mask, l) in &table.flags_def(fl).items {
-                            let one_bit = mask.count_ones() == 1;
-                            let bit = Pf {
-                                abbr: format!("{parent}.{}", l.to_ascii_lowercase()),
-                                ctor: if one_bit {
-                                    "bool".into()
-                                } else {
-                                    ctor.to_string()
-                                },
-                                label: l.to_string(),
-                                base: if one_bit { "" } else { "base.HEX" },
-                                vs: None,
-                                mask: Some(*mask),
-                                bits: vec![],
-                            };
-                            let bit = Pf {
-                                base: if one_bit {
-                                    // ProtoField.bool takes the parent's width in bits.
-                                    match width_bits {
-                                        8 => "8",
-                                        16 => "16",
-                                        _ => "32",
-                                    }
-                                } else {
-                                    bit.base
-                                },
-                                ..bit
-                            };
-                            af.pfs.push(bit);
-                            let bi = af.pfs.len() - 1;
-                            af.pfs[i].bits.push(bi);
-                        }
-                    }
+                if let Some(fl) = f.flags {
+                    bits = af.bits_of(i, table.flags_def(fl), p.width() * 8);
                 }
                 i + 1
             }
@@ -267,7 +289,6 @@ pub fn lua_for(table: &Table) -> String {
                     base: "",
                     vs: None,
                     mask: None,
-                    bits: vec![],
                 }) + 1
             }
             _ => {
@@ -278,15 +299,22 @@ pub fn lua_for(table: &Table) -> String {
                     base: "",
                     vs: None,
                     mask: None,
-                    bits: vec![],
                 }) + 1
             }
         };
         let mut e = format!("{{{off},\"{ty}\",{count},{pf}");
-        let _ = write!(e, ",{}", f.unit.map_or("nil".into(), lua_str));
+        // The unit goes into the item text when the field's label (from the first field of
+        // that name) does not already say it, or to show the scaled value.
+        let labelled = pf > 0 && af.pfs[pf - 1].label == label_of(f.name, f.unit, f.scale);
+        let unit = f.unit.filter(|_| f.scale.is_some() || !labelled);
+        let _ = write!(e, ",{}", unit.map_or("nil".into(), lua_str));
         let _ = write!(e, ",{}", f.scale.map_or("nil".into(), |s| format!("{s:e}")));
         if f.name == "chan_ident" {
-            e.push_str(",true");
+            e.push_str(",chan=true");
+        }
+        if !bits.is_empty() {
+            let b: Vec<String> = bits.iter().map(|b| (b + 1).to_string()).collect();
+            let _ = write!(e, ",bits={{{}}}", b.join(","));
         }
         e.push('}');
         e
@@ -385,7 +413,6 @@ pub fn lua_for(table: &Table) -> String {
                 base,
                 vs,
                 mask: None,
-                bits: vec![],
             });
             let _ = write!(cmds, "{{{},\"{}\",{}}},", f.width, f.kind.name(), i + 1);
         }
@@ -426,14 +453,7 @@ pub fn lua_for(table: &Table) -> String {
                 args.join(", ")
             );
         }
-        let _ = write!(out, "local {var}_BITS = {{");
-        for (i, p) in f.pfs.iter().enumerate() {
-            if !p.bits.is_empty() {
-                let b: Vec<String> = p.bits.iter().map(|b| (b + 1).to_string()).collect();
-                let _ = write!(out, "[{}]={{{}}},", i + 1, b.join(","));
-            }
-        }
-        out.push_str("}\n\n");
+        out.push('\n');
     }
     out.push_str("local HDR, SUB = -1, -2\n");
     out.push_str(&msgs);

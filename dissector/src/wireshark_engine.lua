@@ -261,7 +261,7 @@ local function num(r, ty)
 end
 
 local function add_field(tree, t, f)
-  local o, ty, cnt, pf, unit, scale, chan = f[1], f[2], f[3], f[4], f[5], f[6], f[7]
+  local o, ty, cnt, pf, unit, scale, chan = f[1], f[2], f[3], f[4], f[5], f[6], f.chan
   local n = t:len()
   local ew = ELEM_W[ty]
   local w = ew and ew * cnt or cnt
@@ -290,7 +290,7 @@ local function add_field(tree, t, f)
       elseif unit then
         item:append_text(" " .. unit)
       end
-      local bits = APF_BITS[pf]
+      local bits = f.bits
       if bits then
         for _, b in ipairs(bits) do item:add_le(APF[b], er) end
       end
@@ -378,8 +378,11 @@ local function dissect_apt(t, pinfo, root)
   if form and form.note ~= "" then tree:add(F.form, t(0, 2), form.note):set_generated() end
   if sub then tree:add(F.sub, t(0, 2), sub.name):set_generated() end
   for _, f in ipairs(fields or {}) do add_field(tree, t, f) end
-  tree:append_text(string.format(", %s -> %s", ADDR_VS[src] or string.format("0x%02x", src),
-    ADDR_VS[dst] or string.format("0x%02x", dst)))
+  local sname = ADDR_VS[src] or string.format("0x%02x", src)
+  local dname = ADDR_VS[dst] or string.format("0x%02x", dst)
+  tree:append_text(string.format(", %s -> %s", sname, dname))
+  pinfo.cols.src = sname
+  pinfo.cols.dst = dname
   return sub and (m.name .. "/" .. sub.name) or m.name
 end
 
@@ -406,6 +409,11 @@ local function dissect_ell(t, pinfo, root)
   end
   tree:add(EF.name, t(1 + a, 2), c.name):set_generated()
   tree:append_text(string.format(", %s %s %s", s:sub(1, 1), code, c.name))
+  if code:match("^%l") then
+    pinfo.cols.src, pinfo.cols.dst = "host", "module " .. s:sub(1, 1)
+  else
+    pinfo.cols.src, pinfo.cols.dst = "module " .. s:sub(1, 1), "host"
+  end
   local o = 3 + a
   if (s:sub(o + 1, o + 1) == " " or s:sub(o + 1, o + 1) == ",") and c.len > 0 then o = o + 1 end
   for _, f in ipairs(c.f) do
@@ -437,7 +445,7 @@ local function dissect_ell(t, pinfo, root)
     end
     o = o + w
   end
-  return code
+  return s:sub(1, 1) .. code .. " " .. c.name
 end
 
 -- ---- The link layer: aptscope's pcapng (USER0) and pcap (USER1 + [direction, stream]) ----
