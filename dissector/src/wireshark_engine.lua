@@ -174,9 +174,11 @@ local streams = {}   -- stream key -> bytes carried over
 local last = {}      -- stream key -> packet number that left them
 local results = {}   -- packet number -> items
 local detected = nil -- "apt" or "ell", decided by the first payload of the capture
+local usb_dev = {}   -- USB device key -> { ftdi = true/false, mps = max packet size }
 
 function link.init()
   streams, last, results, detected = {}, {}, {}, nil
+  usb_dev = {}
 end
 
 local function detect(payload)
@@ -533,6 +535,86 @@ function user1.dissector(tvb, pinfo, root)
   if dir == 1 then pinfo.p2p_dir = 0 elseif dir == 2 then pinfo.p2p_dir = 1 end
   dissect_link(tvb, pinfo, root, dir, stream, 2)
   return tvb:len()
+end
+
+-- ---- FTDI USB captures (usbmon, USBPcap): bulk transfers of the controller's FTDI chip ----
+
+
+-- The first byte of an FTDI IN packet: modem status, bit 0 set, bits 2 and 3 clear.
+local function ftdi_status_ok(b)
+  return b % 16 < 4 and b % 4 ~= 0 and math.floor(b / 4) % 4 == 0
+end
+
+local function pieces_ok(s, mps)
+  for i = 1, #s, mps do
+    if #s - i + 1 < 2 or not ftdi_status_ok(s:byte(i)) then return false end
+  end
+  return true
+end
+
+local usbp = Proto("aptscope_usb", "aptscope FTDI serial over USB")
+
+-- Dissect one bulk transfer of an FTDI device; `sure` when the device descriptor named it.
+local function dissect_usb(tvb, pinfo, root, sure)
+  -- Addresses, not field extractors: tshark -2 builds no tree in its first pass. Data of an OUT
+  -- transfer goes host -> "bus.device.endpoint", of an IN transfer the other way.
+  local src, dst = tostring(pinfo.src), tostring(pinfo.dst)
+  local is_in = dst == "host"
+  local bus, devno, ep = (is_in and src or dst):match("^(%d+)%.(%d+)%.(%d+)$")
+  if not ep or ep == "0" or tvb:len() == 0 then return 0 end
+  local key = bus .. ":" .. devno
+  local dev = usb_dev[key]
+  if not pinfo.visited then
+    if not dev then
+      dev = {}
+      usb_dev[key] = dev
+    end
+    if dev.ftdi == nil then
+      local s = tvb:raw()
+      if sure then
+        dev.ftdi = true
+      elseif is_in then
+        dev.ftdi = ftdi_status_ok(s:byte(1))
+      else
+        -- Host data before the first reply: believed when it starts a frame.
+        local r = apt_step(s, 1)
+        if not ((r > 0 and r <= #s) or detect(s) == "ell") then return 0 end
+      end
+    end
+    if dev.ftdi == false then return 0 end
+  end
+  if not dev then return 0 end
+  local t = tvb
+  if is_in then
+    local s = tvb:raw()
+    if not dev.mps then
+      dev.mps = (#s > 64 and not pieces_ok(s, 64) and pieces_ok(s, 512)) and 512 or 64
+    end
+    local parts = {}
+    for i = 1, #s, dev.mps do parts[#parts + 1] = s:sub(i + 2, i + dev.mps - 1) end
+    local data = table.concat(parts)
+    if #data == 0 then return tvb:len() end -- status bytes only
+    t = ByteArray.new(tohex(data)):tvb("FTDI data")
+  end
+  pinfo.p2p_dir = is_in and 1 or 0
+  dissect_link(t, pinfo, root, is_in and 2 or 1, key, 0)
+  return tvb:len()
+end
+
+function usbp.dissector(tvb, pinfo, root)
+  return dissect_usb(tvb, pinfo, root, true)
+end
+
+usbp:register_heuristic("usb.bulk", function(tvb, pinfo, root)
+  return dissect_usb(tvb, pinfo, root, false) > 0
+end)
+
+do
+  local products = DissectorTable.get("usb.product")
+  -- Thorlabs APT controllers (0403:faf0) and the common FTDI chips Elliptec buses use.
+  for _, pid in ipairs({ 0xfaf0, 0x6001, 0x6010, 0x6011, 0x6014, 0x6015 }) do
+    products:add(0x04030000 + pid, usbp)
+  end
 end
 
 do
