@@ -599,3 +599,97 @@ fn elliptec_fields_equal_aptscopes() {
         assert!(compared >= 30, "only {compared} values compared");
     }
 }
+
+/// A little-endian pcap of usbmon records (link type 220).
+fn write_usbmon(path: &Path, records: &[(u64, Vec<u8>)]) {
+    let mut b = vec![];
+    b.extend_from_slice(&0xa1b2_c3d4u32.to_le_bytes());
+    b.extend_from_slice(&2u16.to_le_bytes());
+    b.extend_from_slice(&4u16.to_le_bytes());
+    b.extend_from_slice(&[0; 8]);
+    b.extend_from_slice(&65535u32.to_le_bytes());
+    b.extend_from_slice(&220u32.to_le_bytes());
+    for (ts, data) in records {
+        b.extend_from_slice(&((ts / 1_000_000_000) as u32).to_le_bytes());
+        b.extend_from_slice(&((ts % 1_000_000_000 / 1000) as u32).to_le_bytes());
+        let n = data.len() as u32;
+        b.extend_from_slice(&n.to_le_bytes());
+        b.extend_from_slice(&n.to_le_bytes());
+        b.extend_from_slice(data);
+    }
+    std::fs::write(path, b).expect("write usbmon pcap");
+}
+
+#[test]
+fn usbmon_captures_with_and_without_enumeration_decode_completely() {
+    use aptscope_capture::{Direction, OwnedChunk};
+    let Some((dir, lua)) = setup("usbmon") else {
+        return;
+    };
+    // The KDC101 session in 45-byte chunks per direction: frames span USB transfers, and the
+    // device's transfers get FTDI status bytes every 64 bytes.
+    let recs = frames(&Path::new(ROOT).join("samples/sessions/kdc101.pcapng"), &[]);
+    let mut chunks = vec![];
+    let (mut h2d, mut d2h) = (vec![], vec![]);
+    for r in &recs {
+        let raw = r["raw"].as_str().expect("raw");
+        let bytes: Vec<u8> = (0..raw.len() / 2)
+            .map(|i| u8::from_str_radix(&raw[2 * i..2 * i + 2], 16).expect("hex"))
+            .collect();
+        if r["dir"] == "d2h" {
+            d2h.extend(bytes);
+        } else {
+            h2d.extend(bytes);
+        }
+    }
+    let (mut a, mut b) = (h2d.chunks(45), d2h.chunks(100));
+    let mut ts = 1_000_000_000u64;
+    loop {
+        let (x, y) = (a.next(), b.next());
+        if x.is_none() && y.is_none() {
+            break;
+        }
+        for (d, c) in [(Direction::HostToDevice, x), (Direction::DeviceToHost, y)] {
+            if let Some(c) = c {
+                ts += 1_000_000;
+                chunks.push(OwnedChunk {
+                    ts_ns: Some(ts),
+                    dir: d,
+                    stream: 0,
+                    bytes: c.to_vec(),
+                });
+            }
+        }
+    }
+    let records = aptscope_capture::usb::synth_usbmon(&chunks, 1, 7, 64);
+    let with = dir.join("enumerated.usbmon.pcap");
+    write_usbmon(&with, &records);
+    // Without enumeration: bulk transfers only (usbmon header byte 9 is the transfer type).
+    let bulk: Vec<(u64, Vec<u8>)> = records
+        .iter()
+        .filter(|(_, r)| r.get(9) == Some(&3))
+        .cloned()
+        .collect();
+    assert!(bulk.len() < records.len());
+    let without = dir.join("bulk-only.usbmon.pcap");
+    write_usbmon(&without, &bulk);
+    for f in [&with, &without] {
+        let want: Vec<String> = frames(f, &[]).iter().filter_map(name_of).collect();
+        assert_eq!(want.len(), recs.len(), "{}", f.display());
+        let mut got = tshark_values(&lua, f, &["apt.name"], None);
+        let mut w = want.clone();
+        got.sort();
+        w.sort();
+        assert_eq!(got, w, "{}", f.display());
+        assert_eq!(
+            tshark_values(&lua, f, &["apt.name"], Some("aptscope.dir == 2")),
+            frames(f, &[])
+                .iter()
+                .filter(|r| r["dir"] == "d2h")
+                .filter_map(name_of)
+                .collect::<Vec<_>>(),
+            "{}",
+            f.display()
+        );
+    }
+}

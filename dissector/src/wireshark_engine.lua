@@ -597,6 +597,9 @@ local function dissect_usb(tvb, pinfo, root, sure)
     t = ByteArray.new(tohex(data)):tvb("FTDI data")
   end
   pinfo.p2p_dir = is_in and 1 or 0
+  local lt = root:add(link, tvb(0, 0))
+  lt:add(LF.dir, tvb(0, 0), is_in and 2 or 1):set_generated()
+  lt:append_text(", USB device " .. key)
   dissect_link(t, pinfo, root, is_in and 2 or 1, key, 0)
   return tvb:len()
 end
