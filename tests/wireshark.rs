@@ -693,3 +693,75 @@ fn usbmon_captures_with_and_without_enumeration_decode_completely() {
         );
     }
 }
+
+#[test]
+fn request_reply_pairs_and_latencies_are_aptscopes() {
+    let Some((_, lua)) = setup("pairs") else {
+        return;
+    };
+    let mut pairs = 0;
+    for f in samples() {
+        let recs = frames(&f, &[]);
+        let by_n: std::collections::HashMap<u64, &Value> = recs
+            .iter()
+            .filter_map(|r| Some((r["n"].as_u64()?, r)))
+            .collect();
+        let want: Vec<(String, String, f64)> = recs
+            .iter()
+            .filter(|r| r["proto"] == "apt")
+            .filter(|r| !r["diag"].to_string().contains("duplicate"))
+            .filter_map(|r| {
+                let req = by_n.get(&r["pair"].as_u64()?)?;
+                Some((
+                    name_of(r)?,
+                    name_of(req)?,
+                    r["latency_ms"].as_f64().unwrap_or(0.0),
+                ))
+            })
+            .collect();
+        // These samples hold one frame per packet: packet numbers name frames.
+        let out = tshark(
+            &lua,
+            &f,
+            &[
+                "-T",
+                "fields",
+                "-e",
+                "frame.number",
+                "-e",
+                "apt.name",
+                "-e",
+                "apt.pair",
+                "-e",
+                "apt.latency_ms",
+            ],
+        );
+        let rows: Vec<Vec<&str>> = out.lines().map(|l| l.split('\t').collect()).collect();
+        let name: std::collections::HashMap<&str, &str> = rows
+            .iter()
+            .filter(|r| r.len() > 1)
+            .map(|r| (r[0], r[1]))
+            .collect();
+        let got: Vec<(String, String, f64)> = rows
+            .iter()
+            .filter(|r| r.len() == 4 && !r[2].is_empty())
+            .map(|r| {
+                (
+                    r[1].to_string(),
+                    name.get(r[2]).copied().unwrap_or("?").to_string(),
+                    r[3].parse().unwrap_or(f64::NAN),
+                )
+            })
+            .collect();
+        assert_eq!(got.len(), want.len(), "{}: {got:?}\n{want:?}", f.display());
+        for (g, w) in got.iter().zip(&want) {
+            assert!(
+                g.0 == w.0 && g.1 == w.1 && (g.2 - w.2).abs() < 0.01,
+                "{}: tshark {g:?}, aptscope {w:?}",
+                f.display()
+            );
+        }
+        pairs += want.len();
+    }
+    assert!(pairs > 50, "only {pairs} pairs compared");
+}

@@ -346,10 +346,17 @@ pub fn lua_for(table: &Table) -> String {
     for m in table.msgs() {
         let _ = writeln!(
             msgs,
-            "MSG[0x{:04x}] = {{name={},d2h={},subs={},forms={}}}",
+            "MSG[0x{:04x}] = {{name={},d2h={},rep={{{}}},to={},subs={},forms={}}}",
             m.id,
             lua_str(m.name),
             m.dir == crate::table::Dir::DeviceToHost,
+            table
+                .reply_ids(m)
+                .iter()
+                .map(|id| format!("[0x{id:04x}]=true"))
+                .collect::<Vec<_>>()
+                .join(","),
+            crate::pair::default_timeout_ns(m) / 1_000_000,
             m.subs.map_or("nil".into(), lua_str),
             forms_src(&mut af, &m.forms)
         );

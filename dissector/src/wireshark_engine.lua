@@ -20,6 +20,9 @@ local F = {
   form = ProtoField.string("apt.form", "Form"),
   garbage = ProtoField.bytes("apt.garbage", "Bytes outside any frame"),
   pending = ProtoField.bytes("apt.pending", "Start of a frame continued in a later packet"),
+  pair = ProtoField.framenum("apt.pair", "Request in", base.NONE, frametype.REQUEST),
+  response_in = ProtoField.framenum("apt.response_in", "Response in", base.NONE, frametype.RESPONSE),
+  latency_ms = ProtoField.double("apt.latency_ms", "Latency (ms)"),
 }
 local EF = {
   addr = ProtoField.string("ell.addr", "Address"),
@@ -175,10 +178,12 @@ local last = {}      -- stream key -> packet number that left them
 local results = {}   -- packet number -> items
 local detected = nil -- "apt" or "ell", decided by the first payload of the capture
 local usb_dev = {}   -- USB device key -> { ftdi = true/false, mps = max packet size }
+local waiting = {}   -- stream -> requests waiting for a reply, oldest first
 
 function link.init()
   streams, last, results, detected = {}, {}, {}, nil
   usb_dev = {}
+  waiting = {}
 end
 
 local function detect(payload)
@@ -304,7 +309,61 @@ local function add_field(tree, t, f)
   end
 end
 
-local function dissect_apt(t, pinfo, root)
+-- Request/reply pairing as aptscope does it (first pass, frames in order): a request waits for
+-- the ids the table says answer it; a reply takes the oldest waiting request from its address
+-- (else from any) on the same channel when both name one. `it` keeps the result.
+local function pair(it, pinfo, m, ctx, src, dst, chan)
+  local w = waiting[ctx.stream]
+  if not w then
+    w = {}
+    waiting[ctx.stream] = w
+  end
+  local now = pinfo.abs_ts
+  local keep = {}
+  for _, p in ipairs(w) do
+    if now - p.ts <= p.to / 1000 then keep[#keep + 1] = p end
+  end
+  w = keep
+  waiting[ctx.stream] = w
+  local from_host
+  if ctx.dir == 1 or ctx.dir == 2 then from_host = ctx.dir == 1 else from_host = not m.d2h and src == 0x01 end
+  if from_host then
+    if next(m.rep) then
+      w[#w + 1] = { pkt = pinfo.number, ts = now, rep = m.rep, to = m.to, device = dst, chan = chan,
+        name = m.name, item = it }
+    end
+    return
+  end
+  local function ok(p) return p.rep[it.id] and (p.chan == nil or chan == nil or p.chan == chan) end
+  local found
+  for i, p in ipairs(w) do
+    if ok(p) and p.device == src then found = i break end
+  end
+  if not found then
+    for i, p in ipairs(w) do
+      if ok(p) then found = i break end
+    end
+  end
+  if not found then return end
+  local p = table.remove(w, found)
+  it.pair = p.pkt
+  it.latency = (now - p.ts) * 1000
+  p.item.response_in = p.item.response_in or pinfo.number
+  -- The same message also completes other waiting requests to that device and channel, but a
+  -- GET answers one REQ.
+  local one_to_one = m.name:find("_GET_", 1, true) ~= nil
+  local rest = {}
+  for _, q in ipairs(w) do
+    if q.rep[it.id] and q.device == p.device and q.chan == p.chan and not (one_to_one and q.name == p.name) then
+      q.item.response_in = q.item.response_in or pinfo.number
+    else
+      rest[#rest + 1] = q
+    end
+  end
+  waiting[ctx.stream] = rest
+end
+
+local function dissect_apt(t, pinfo, root, it, ctx)
   local n = t:len()
   local id = t(0, 2):le_uint()
   local m = MSG[id]
@@ -380,6 +439,19 @@ local function dissect_apt(t, pinfo, root)
   if form and form.note ~= "" then tree:add(F.form, t(0, 2), form.note):set_generated() end
   if sub then tree:add(F.sub, t(0, 2), sub.name):set_generated() end
   for _, f in ipairs(fields or {}) do add_field(tree, t, f) end
+  if not pinfo.visited and not it.paired then
+    local chan
+    for _, f in ipairs(fields or {}) do
+      if f.chan and f[1] < n then chan = t(f[1], 1):uint() end
+    end
+    it.id, it.paired = id, true
+    pair(it, pinfo, m, ctx, src, dst, chan)
+  end
+  if it.pair then
+    tree:add(F.pair, t(0, 2), it.pair):set_generated()
+    tree:add(F.latency_ms, t(0, 2), it.latency):set_generated()
+  end
+  if it.response_in then tree:add(F.response_in, t(0, 2), it.response_in):set_generated() end
   local sname = ADDR_VS[src] or string.format("0x%02x", src)
   local dname = ADDR_VS[dst] or string.format("0x%02x", dst)
   tree:append_text(string.format(", %s -> %s", sname, dname))
@@ -464,6 +536,7 @@ local function dissect_link(tvb, pinfo, root, dir, stream, off)
   if not res then return end
   local names = {}
   local protos = {}
+  local ctx = { dir = dir, stream = stream }
   for idx, it in ipairs(res) do
     local t
     if it.bytes then
@@ -479,7 +552,7 @@ local function dissect_link(tvb, pinfo, root, dir, stream, off)
       names[#names + 1] = dissect_ell(t, pinfo, root)
       protos.ELL = true
     else
-      names[#names + 1] = dissect_apt(t, pinfo, root)
+      names[#names + 1] = dissect_apt(t, pinfo, root, it, ctx)
       protos.APT = true
     end
   end
@@ -490,7 +563,7 @@ local function dissect_link(tvb, pinfo, root, dir, stream, off)
       names[#names + 1] = dissect_ell(t, pinfo, root)
       protos.ELL = true
     elseif res.pending_total >= 6 then
-      names[#names + 1] = dissect_apt(t, pinfo, root)
+      names[#names + 1] = dissect_apt(t, pinfo, root, {}, ctx)
       protos.APT = true
     end
   elseif res.pending > 0 then
