@@ -18,7 +18,7 @@
 //! `<field abbrev>.<flag set>.<label>` when another set already uses that label with another
 //! mask.
 
-use crate::ell::table::{Kind, COMMANDS, STATUS};
+use crate::ell::table::{Class, Kind, COMMANDS, STATUS, STATUS_BUSY};
 use crate::table::{FlagsDef, FormKind, Loc, Prim, Table, Ty};
 use std::collections::HashMap;
 use std::fmt::Write;
@@ -393,11 +393,19 @@ pub fn lua_for(table: &Table) -> String {
     for c in COMMANDS {
         let _ = write!(
             cmds,
-            "CMD[{}] = {{name={},len={},bin={},f={{",
+            "CMD[{}] = {{name={},len={},bin={},rep={{{}}},interim={},newaddr={},to={},f={{",
             lua_str(c.code),
             lua_str(c.name),
             c.data_len(),
-            c.is_binary()
+            c.is_binary(),
+            c.replies
+                .iter()
+                .map(|r| format!("[{}]=true", lua_str(r)))
+                .collect::<Vec<_>>()
+                .join(","),
+            c.class.busy_is_interim(),
+            matches!(c.class, Class::Address | Class::Group),
+            c.timeout_ms
         );
         for f in c.fields {
             let (ctor, suffix, base, vs) = match f.kind {
@@ -430,7 +438,7 @@ pub fn lua_for(table: &Table) -> String {
     for (v, l) in STATUS {
         let _ = write!(status, "[{v}]={},", lua_str(l));
     }
-    status.push_str("}\n\n");
+    let _ = write!(status, "}}\nlocal ELL_BUSY = {STATUS_BUSY}\n\n");
     out.push_str(&status);
 
     for (var, f) in [("APF", &af), ("EPF", &ef)] {

@@ -30,6 +30,9 @@ local EF = {
   name = ProtoField.string("ell.name", "Command name"),
   data = ProtoField.string("ell.data", "Data"),
   garbage = ProtoField.bytes("ell.garbage", "Bytes outside any frame"),
+  pair = ProtoField.framenum("ell.pair", "Request in", base.NONE, frametype.REQUEST),
+  response_in = ProtoField.framenum("ell.response_in", "Response in", base.NONE, frametype.RESPONSE),
+  latency_ms = ProtoField.double("ell.latency_ms", "Latency (ms)"),
 }
 local LF = {
   dir = ProtoField.uint8("aptscope.dir", "Direction", base.DEC,
@@ -462,7 +465,35 @@ end
 
 -- ---- Elliptec dissection ----
 
-local function dissect_ell(t, pinfo, root)
+-- Elliptec pairing (first pass): a host command waits for its replies from the module it
+-- addressed (from the new address for `ca`/`ga`); a BUSY status during a motion is interim.
+local function ell_pair(it, pinfo, ctx, addr, code, c, status)
+  local key = "ell" .. ctx.stream
+  local now = pinfo.abs_ts
+  local w = {}
+  for _, p in ipairs(waiting[key] or {}) do
+    if now - p.ts <= p.to / 1000 then w[#w + 1] = p end
+  end
+  waiting[key] = w
+  if code:match("^%l") then
+    if next(c.rep) and c.to > 0 then
+      w[#w + 1] = { pkt = pinfo.number, ts = now, rep = c.rep, to = c.to, interim = c.interim,
+        addr = (c.newaddr and it.newaddr) or addr, item = it }
+    end
+    return
+  end
+  for i, p in ipairs(w) do
+    if p.addr == addr and p.rep[code] then
+      it.pair = p.pkt
+      it.latency = (now - p.ts) * 1000
+      p.item.response_in = p.item.response_in or pinfo.number
+      if not (code == "GS" and status == ELL_BUSY and p.interim) then table.remove(w, i) end
+      return
+    end
+  end
+end
+
+local function dissect_ell(t, pinfo, root, it, ctx)
   local n = t:len()
   local s = t():raw()
   local tree = root:add(ell, t())
@@ -506,6 +537,7 @@ local function dissect_ell(t, pinfo, root)
       tree:add(p, r)
     elseif kind == "dec" or kind == "addr" then
       tree:add(p, r, txt)
+      if kind == "addr" then it.newaddr = txt:upper() end
     else
       local v = tonumber((txt:gsub("O", "0")), 16)
       if not v then
@@ -515,10 +547,20 @@ local function dissect_ell(t, pinfo, root)
           v = v - 2 ^ (4 * w)
         end
         tree:add(p, r, v)
+        if kind == "status" then it.status = v end
       end
     end
     o = o + w
   end
+  if not pinfo.visited and not it.paired then
+    it.paired = true
+    ell_pair(it, pinfo, ctx, s:sub(1, 1):upper(), code, c, it.status)
+  end
+  if it.pair then
+    tree:add(EF.pair, t(0, 1), it.pair):set_generated()
+    tree:add(EF.latency_ms, t(0, 1), it.latency):set_generated()
+  end
+  if it.response_in then tree:add(EF.response_in, t(0, 1), it.response_in):set_generated() end
   return s:sub(1, 1) .. code .. " " .. c.name
 end
 
@@ -549,7 +591,7 @@ local function dissect_link(tvb, pinfo, root, dir, stream, off)
       local item = root:add(fld, t())
       item:add_proto_expert_info(detected == "ell" and XE.garbage or XA.garbage)
     elseif it.k == "ell" then
-      names[#names + 1] = dissect_ell(t, pinfo, root)
+      names[#names + 1] = dissect_ell(t, pinfo, root, it, ctx)
       protos.ELL = true
     else
       names[#names + 1] = dissect_apt(t, pinfo, root, it, ctx)
@@ -560,7 +602,7 @@ local function dissect_link(tvb, pinfo, root, dir, stream, off)
     -- Second pass: nothing followed on this stream, so the pending bytes are a truncated frame.
     local t = ByteArray.new(tohex(res.tail)):tvb("Truncated frame")
     if detected == "ell" then
-      names[#names + 1] = dissect_ell(t, pinfo, root)
+      names[#names + 1] = dissect_ell(t, pinfo, root, {}, ctx)
       protos.ELL = true
     elseif res.pending_total >= 6 then
       names[#names + 1] = dissect_apt(t, pinfo, root, {}, ctx)
