@@ -27,16 +27,29 @@ fn aptscope(args: &[&str]) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
-/// A scratch directory of this test.
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("aptscope-ws-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).expect("scratch dir");
-    d
+/// A scratch directory of one test, removed when the test ends.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(name: &str) -> Self {
+        let d = std::env::temp_dir().join(format!("aptscope-ws-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&d).expect("scratch dir");
+        Scratch(d)
+    }
+    fn join(&self, p: &str) -> PathBuf {
+        self.0.join(p)
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 /// The generated dissector in a scratch directory, or `None` when tshark is missing and the
 /// user allowed skipping.
-fn setup(name: &str) -> Option<(PathBuf, PathBuf)> {
+fn setup(name: &str) -> Option<(Scratch, PathBuf)> {
     let have = Command::new("tshark")
         .arg("-v")
         .output()
@@ -53,7 +66,7 @@ fn setup(name: &str) -> Option<(PathBuf, PathBuf)> {
         }
         panic!("{hint}; or set APTSCOPE_SKIP_MISSING_TOOLS=1 to skip locally");
     }
-    let dir = scratch(name);
+    let dir = Scratch::new(name);
     let lua = dir.join("aptscope.lua");
     aptscope(&[
         "export",
@@ -155,7 +168,7 @@ fn samples() -> Vec<PathBuf> {
 
 #[test]
 fn names_in_every_sample_are_aptscopes_in_the_same_order() {
-    let Some((_, lua)) = setup("names") else {
+    let Some((_dir, lua)) = setup("names") else {
         return;
     };
     for f in samples() {
@@ -176,7 +189,7 @@ fn names_in_every_sample_are_aptscopes_in_the_same_order() {
 
 #[test]
 fn a_msgid_filter_selects_the_same_frames_in_both_tools() {
-    let Some((_, lua)) = setup("filter") else {
+    let Some((_dir, lua)) = setup("filter") else {
         return;
     };
     let mut seen = 0;
@@ -555,7 +568,7 @@ fn compare_fields_unordered_ok(lua: &Path, file: &Path) -> bool {
 
 #[test]
 fn elliptec_fields_equal_aptscopes() {
-    let Some((_, lua)) = setup("ell") else {
+    let Some((_dir, lua)) = setup("ell") else {
         return;
     };
     for f in [
@@ -704,7 +717,7 @@ fn usbmon_captures_with_and_without_enumeration_decode_completely() {
 
 #[test]
 fn request_reply_pairs_and_latencies_are_aptscopes() {
-    let Some((_, lua)) = setup("pairs") else {
+    let Some((_dir, lua)) = setup("pairs") else {
         return;
     };
     let mut pairs = 0;
