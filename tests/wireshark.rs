@@ -208,6 +208,13 @@ fn a_msgid_filter_selects_the_same_frames_in_both_tools() {
 /// A legacy pcap as aptscope writes it: LINKTYPE_USER1, each record `[direction, stream]` then
 /// the bytes.
 fn write_pcap(path: &Path, records: &[(u8, Vec<u8>)]) {
+    let with_stream: Vec<(u8, u8, Vec<u8>)> =
+        records.iter().map(|(d, b)| (*d, 0, b.clone())).collect();
+    write_pcap_streams(path, &with_stream);
+}
+
+/// [`write_pcap`] with a stream byte per record: `(direction, stream, bytes)`.
+fn write_pcap_streams(path: &Path, records: &[(u8, u8, Vec<u8>)]) {
     let mut b = vec![];
     b.extend_from_slice(&0xa1b2_c3d4u32.to_le_bytes());
     b.extend_from_slice(&2u16.to_le_bytes());
@@ -215,13 +222,13 @@ fn write_pcap(path: &Path, records: &[(u8, Vec<u8>)]) {
     b.extend_from_slice(&[0; 8]);
     b.extend_from_slice(&65535u32.to_le_bytes());
     b.extend_from_slice(&148u32.to_le_bytes());
-    for (i, (dir, data)) in records.iter().enumerate() {
+    for (i, (dir, stream, data)) in records.iter().enumerate() {
         b.extend_from_slice(&(1_700_000_000u32 + i as u32).to_le_bytes());
         b.extend_from_slice(&0u32.to_le_bytes());
         let n = data.len() as u32 + 2;
         b.extend_from_slice(&n.to_le_bytes());
         b.extend_from_slice(&n.to_le_bytes());
-        b.extend_from_slice(&[*dir, 0]);
+        b.extend_from_slice(&[*dir, *stream]);
         b.extend_from_slice(data);
     }
     std::fs::write(path, b).expect("write pcap");
@@ -805,4 +812,96 @@ fn request_reply_pairs_and_latencies_are_aptscopes() {
         pairs += want.len();
     }
     assert!(pairs > 60, "only {pairs} pairs compared");
+}
+
+#[test]
+fn streams_of_a_pcapng_do_not_mix_when_their_frames_span_packets() {
+    let Some((dir, lua)) = setup("streams") else {
+        return;
+    };
+    // Two ports (the KDC101 and BSC203 sessions), each direction cut into 5-byte pieces, the
+    // pieces of both ports interleaved, converted to a pcapng with one interface per port.
+    let mut per_stream = vec![];
+    for f in [
+        "samples/sessions/kdc101.pcapng",
+        "samples/sessions/bsc203.pcapng",
+    ] {
+        let (mut h2d, mut d2h) = (vec![], vec![]);
+        for r in frames(&Path::new(ROOT).join(f), &[]) {
+            let raw = r["raw"].as_str().expect("raw").to_string();
+            let bytes: Vec<u8> = (0..raw.len() / 2)
+                .map(|i| u8::from_str_radix(&raw[2 * i..2 * i + 2], 16).expect("hex"))
+                .collect();
+            if r["dir"] == "d2h" {
+                d2h.extend(bytes);
+            } else {
+                h2d.extend(bytes);
+            }
+        }
+        let mut pieces: Vec<(u8, Vec<u8>)> = vec![];
+        let (mut a, mut b) = (h2d.chunks(5), d2h.chunks(5));
+        loop {
+            let (x, y) = (a.next(), b.next());
+            if x.is_none() && y.is_none() {
+                break;
+            }
+            pieces.extend(x.map(|x| (1, x.to_vec())));
+            pieces.extend(y.map(|y| (2, y.to_vec())));
+        }
+        per_stream.push(pieces);
+    }
+    let mut records = vec![];
+    let longest = per_stream.iter().map(Vec::len).max().unwrap_or(0);
+    for i in 0..longest {
+        for (s, pieces) in per_stream.iter().enumerate() {
+            if let Some((d, p)) = pieces.get(i) {
+                records.push((*d, s as u8, p.clone()));
+            }
+        }
+    }
+    let pcap = dir.join("streams.pcap");
+    write_pcap_streams(&pcap, &records);
+    let pcapng = dir.join("streams.pcapng");
+    aptscope(&[
+        "convert",
+        pcap.to_str().expect("utf-8"),
+        pcapng.to_str().expect("utf-8"),
+    ]);
+    for f in [&pcap, &pcapng] {
+        let recs = frames(f, &[]);
+        assert!(recs.len() > 60, "{}", f.display());
+        for (stream, d) in [(0, "d2h"), (1, "d2h"), (0, "h2d"), (1, "h2d")] {
+            let want: Vec<String> = recs
+                .iter()
+                .filter(|r| r["stream"] == stream && r["dir"] == d)
+                .filter_map(name_of)
+                .collect();
+            // No display filter: with one, tshark builds the tree in its first pass too.
+            let out = tshark(
+                &lua,
+                f,
+                &[
+                    "-T",
+                    "fields",
+                    "-E",
+                    "occurrence=a",
+                    "-e",
+                    "aptscope.stream",
+                    "-e",
+                    "aptscope.dir",
+                    "-e",
+                    "apt.name",
+                ],
+            );
+            let want_dir = if d == "h2d" { "1" } else { "2" };
+            let got: Vec<String> = out
+                .lines()
+                .map(|l| l.split('\t').collect::<Vec<_>>())
+                .filter(|c| c.len() == 3 && c[0] == stream.to_string() && c[1] == want_dir)
+                .flat_map(|c| c[2].split(',').map(str::to_string).collect::<Vec<_>>())
+                .filter(|n| !n.is_empty())
+                .collect();
+            assert_eq!(got, want, "{} stream {stream} {d}", f.display());
+        }
+    }
 }

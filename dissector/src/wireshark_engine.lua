@@ -178,15 +178,19 @@ end
 
 local streams = {}   -- stream key -> bytes carried over
 local last = {}      -- stream key -> packet number that left them
+local prev = {}      -- stream key -> its latest packet number
 local results = {}   -- packet number -> items
 local detected = nil -- "apt" or "ell", decided by the first payload of the capture
 local usb_dev = {}   -- USB device key -> { ftdi = true/false, mps = max packet size }
 local waiting = {}   -- stream -> requests waiting for a reply, oldest first
+local reframing = false -- a later pass frames again what a pass without tree framed
 
 function link.init()
   streams, last, results, detected = {}, {}, {}, nil
   usb_dev = {}
   waiting = {}
+  reframing = false
+  prev = {}
 end
 
 local function detect(payload)
@@ -202,6 +206,8 @@ local function frame_packet(key, payload, number)
   local carry = streams[key] or ""
   -- The stream goes on: what an earlier packet left pending was not the end of the capture.
   if #carry > 0 and last[key] and results[last[key]] then results[last[key]].continued = true end
+  if prev[key] and results[prev[key]] then results[prev[key]].followed = true end
+  prev[key] = number
   local buf = carry .. payload
   local step = proto == "ell" and ell_step or apt_step
   local items = {}
@@ -442,7 +448,7 @@ local function dissect_apt(t, pinfo, root, it, ctx)
   if form and form.note ~= "" then tree:add(F.form, t(0, 2), form.note):set_generated() end
   if sub then tree:add(F.sub, t(0, 2), sub.name):set_generated() end
   for _, f in ipairs(fields or {}) do add_field(tree, t, f) end
-  if not pinfo.visited and not it.paired then
+  if not it.paired then
     local chan
     for _, f in ipairs(fields or {}) do
       if f.chan and f[1] < n then chan = t(f[1], 1):uint() end
@@ -552,7 +558,7 @@ local function dissect_ell(t, pinfo, root, it, ctx)
     end
     o = o + w
   end
-  if not pinfo.visited and not it.paired then
+  if not it.paired then
     it.paired = true
     ell_pair(it, pinfo, ctx, s:sub(1, 1):upper(), code, c, it.status)
   end
@@ -572,13 +578,27 @@ local function dissect_link(tvb, pinfo, root, dir, stream, off)
   if not pinfo.visited then
     local payload = tvb(off, len):raw()
     if detected == nil then detected = detect(payload) end
-    results[pinfo.number] = frame_packet(stream .. "/" .. dir, payload, pinfo.number)
+    local r = frame_packet(tostring(stream or "?") .. "/" .. dir, payload, pinfo.number)
+    r.provisional = stream == nil
+    results[pinfo.number] = r
+  elseif stream ~= nil and results[pinfo.number] and results[pinfo.number].provisional then
+    -- Framed without the interface id (a pass without protocol tree): frame again, in order,
+    -- now that it is known, so interfaces do not mix; pairing is redone with the new frames.
+    if not reframing then
+      streams, last, prev, waiting, reframing = {}, {}, {}, {}, true
+    end
+    local old = results[pinfo.number]
+    local r = frame_packet(stream .. "/" .. dir, tvb(off, len):raw(), pinfo.number)
+    -- Whether the stream goes on is not known yet in this pass: a later packet in the same
+    -- direction (of any interface) means pending bytes are not shown as a truncated frame.
+    r.continued = old.followed
+    results[pinfo.number] = r
   end
   local res = results[pinfo.number]
   if not res then return end
   local names = {}
   local protos = {}
-  local ctx = { dir = dir, stream = stream }
+  local ctx = { dir = dir, stream = stream or "?" }
   for idx, it in ipairs(res) do
     local t
     if it.bytes then
@@ -602,10 +622,10 @@ local function dissect_link(tvb, pinfo, root, dir, stream, off)
     -- Second pass: nothing followed on this stream, so the pending bytes are a truncated frame.
     local t = ByteArray.new(tohex(res.tail)):tvb("Truncated frame")
     if detected == "ell" then
-      names[#names + 1] = dissect_ell(t, pinfo, root, {}, ctx)
+      names[#names + 1] = dissect_ell(t, pinfo, root, { paired = true }, ctx)
       protos.ELL = true
     elseif res.pending_total >= 6 then
-      names[#names + 1] = dissect_apt(t, pinfo, root, {}, ctx)
+      names[#names + 1] = dissect_apt(t, pinfo, root, { paired = true }, ctx)
       protos.APT = true
     end
   elseif res.pending > 0 then
@@ -630,11 +650,12 @@ function user0.dissector(tvb, pinfo, root)
   -- pcapng: direction in the packet flags (p2p_dir 0 sent = host -> device, 1 received).
   local dir = 0
   if pinfo.p2p_dir == 0 then dir = 1 elseif pinfo.p2p_dir == 1 then dir = 2 end
+  -- The interface id, when this pass builds a protocol tree (tshark -2's first pass does not).
   local ifid = f_ifid()
-  local stream = ifid and ifid.value or 0
+  local stream = ifid and ifid.value
   local lt = root:add(link, tvb(0, 0))
   lt:add(LF.dir, tvb(0, 0), dir):set_generated()
-  lt:add(LF.stream, tvb(0, 0), stream):set_generated()
+  if stream then lt:add(LF.stream, tvb(0, 0), stream):set_generated() end
   dissect_link(tvb, pinfo, root, dir, stream, 0)
   return tvb:len()
 end
