@@ -143,6 +143,12 @@ enum RoleArg {
     Device,
 }
 
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum ExportArg {
+    /// A Wireshark/tshark Lua dissector generated from the tables.
+    WiresharkLua,
+}
+
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum ProtoArg {
     Auto,
@@ -382,6 +388,15 @@ enum Cmd {
         #[arg(long)]
         usb_device: Option<String>,
     },
+    /// Export aptscope's message tables for other tools (`export wireshark-lua -o aptscope.lua`).
+    Export {
+        /// What to write.
+        #[arg(value_enum)]
+        what: ExportArg,
+        /// Output file (default: standard output).
+        #[arg(short, long)]
+        output: Option<String>,
+    },
     /// List the message table, or show one message (`messages MOT_MOVE_HOME`, `messages 0x0443`).
     Messages {
         /// A message name or id, or a sub-message name (`SETPOINT`, `la:SETPOINT`): show its
@@ -609,6 +624,17 @@ fn main() -> ExitCode {
             usb_device,
         } => open_opts(format.as_deref(), false, usb_device.as_deref())
             .and_then(|o| convert(&input, &output, o, to.as_deref(), force)),
+        Cmd::Export {
+            what: ExportArg::WiresharkLua,
+            output,
+        } => {
+            let lua = aptscope_dissector::wireshark::lua();
+            match output.as_deref() {
+                None | Some("-") => io::stdout().lock().write_all(lua.as_bytes()),
+                Some(path) => std::fs::write(path, lua)
+                    .map_err(|e| io::Error::new(e.kind(), format!("{path}: {e}"))),
+            }
+        }
         Cmd::Messages {
             proto: ProtoArg::Elliptec,
             json,

@@ -24,6 +24,7 @@ pub mod synth;
 pub mod table;
 pub mod text;
 pub mod units;
+pub mod wireshark;
 
 pub use diag::{Diag, DiagKind};
 pub use table::Table;
