@@ -144,14 +144,14 @@ fn name_of(r: &Value) -> Option<String> {
     v.as_str().map(str::to_string)
 }
 
-/// Every sample in the formats the dissector is registered for: aptscope's pcap and pcapng, and
-/// USBPcap. (`kdc101-session.usbmon.pcap` is a big-endian pcap holding little-endian usbmon
-/// headers, which tshark reads byte-swapped, so it cannot be compared.)
+/// Every sample in the formats the dissector is registered for: aptscope's pcap and pcapng,
+/// usbmon and USBPcap.
 fn samples() -> Vec<PathBuf> {
     let mut v = vec![
         Path::new(ROOT).join("samples/kdc101-session.pcapng"),
         Path::new(ROOT).join("samples/kdc101-session.pcap"),
-        // USBPcap of the FTDI chip, without enumeration: found by the bulk heuristic.
+        // USB captures of the FTDI chip, without enumeration: found by the bulk heuristic.
+        Path::new(ROOT).join("samples/kdc101-session.usbmon.pcap"),
         Path::new(ROOT).join("samples/kdc101-session.usbpcap.pcap"),
     ];
     let mut s: Vec<PathBuf> = std::fs::read_dir(Path::new(ROOT).join("samples/sessions"))

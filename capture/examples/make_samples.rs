@@ -97,6 +97,9 @@ fn main() {
     let header = PcapHeader {
         datalink: DataLink::from(220),
         ts_resolution: TsResolution::MicroSecond,
+        // As the capturing machine writes them (x86: little endian), like the usbmon and
+        // USBPcap headers inside: a reader takes those in the file's byte order.
+        endianness: pcap_file::Endianness::Little,
         ..PcapHeader::default()
     };
     let mut w = PcapWriter::with_header(
@@ -116,6 +119,9 @@ fn main() {
     let header = PcapHeader {
         datalink: DataLink::from(249),
         ts_resolution: TsResolution::MicroSecond,
+        // As the capturing machine writes them (x86: little endian), like the usbmon and
+        // USBPcap headers inside: a reader takes those in the file's byte order.
+        endianness: pcap_file::Endianness::Little,
         ..PcapHeader::default()
     };
     let mut w = PcapWriter::with_header(
