@@ -470,9 +470,21 @@ fn main() -> ExitCode {
             units,
         } => open_opts(format.as_deref(), hex, usb_device.as_deref()).and_then(|o| {
             let u = units.opts()?;
-            decode_inputs(files)?
-                .iter()
-                .try_for_each(|f| decode(f, o, json, proto, filter.as_deref(), timeout, u.clone()))
+            let files = decode_inputs(files)?;
+            // Several inputs: every record names its file (numbers, offsets and pairs count
+            // within a file).
+            let named = files.len() > 1;
+            files.iter().enumerate().try_for_each(|(i, f)| {
+                let d = DecodeOpts {
+                    json,
+                    proto,
+                    filter: filter.as_deref(),
+                    timeout,
+                    units: u.clone(),
+                    tag: named.then_some((i, f.as_str())),
+                };
+                decode(f, o, d)
+            })
         }),
         Cmd::View {
             file,
@@ -804,7 +816,6 @@ fn compile_filter(src: &str) -> io::Result<Filter> {
 fn run_pipeline(
     reader: &mut dyn aptscope_capture::Reader,
     p: &mut Pipeline,
-    as_json: bool,
     emit: &mut impl FnMut(&str) -> io::Result<()>,
 ) -> io::Result<()> {
     while let Some(ev) = reader.next_event() {
@@ -814,26 +825,7 @@ fn run_pipeline(
                 fatal(&d)?;
                 p.file_diag(d.offset, d.kind, &d.msg, emit)?
             }
-            Event::Stream(s) => {
-                let line = if as_json {
-                    let mut l = format!("{{\"type\":\"stream\",\"stream\":{},\"name\":", s.id);
-                    json::string(&mut l, &s.name);
-                    if let Some(x) = &s.settings {
-                        l.push_str(",\"settings\":");
-                        json::string(&mut l, x);
-                    }
-                    l.push('}');
-                    l
-                } else {
-                    format!(
-                        "# stream {}: {}{}",
-                        s.id,
-                        s.name,
-                        s.settings.map(|x| format!(" ({x})")).unwrap_or_default()
-                    )
-                };
-                emit(&line)?;
-            }
+            Event::Stream(s) => p.stream_info(s.id, &s.name, s.settings.as_deref(), emit)?,
         }
     }
     p.finish(emit)
@@ -866,7 +858,7 @@ fn stats(
         }
         false
     });
-    run_pipeline(reader.as_mut(), &mut p, true, &mut |_| {
+    run_pipeline(reader.as_mut(), &mut p, &mut |_| {
         ticker.tick();
         Ok(())
     })?;
@@ -880,18 +872,42 @@ fn stats(
     Ok(())
 }
 
-fn decode(
-    file: &str,
-    opts: OpenOptions,
-    as_json: bool,
+/// How `decode` decodes one input.
+struct DecodeOpts<'a> {
+    json: bool,
     proto: ProtoArg,
-    filter: Option<&str>,
+    filter: Option<&'a str>,
     timeout: Option<u64>,
     units: UnitsOpts,
-) -> io::Result<()> {
+    /// One of several inputs: its index and name, which every record then carries.
+    tag: Option<(usize, &'a str)>,
+}
+
+fn decode(file: &str, opts: OpenOptions, d: DecodeOpts<'_>) -> io::Result<()> {
+    let DecodeOpts {
+        json: as_json,
+        proto,
+        filter,
+        timeout,
+        units,
+        tag,
+    } = d;
     let filter = filter.map(compile_filter).transpose()?;
     let (mut reader, _) = open(file, opts)?;
     let mut out = BufWriter::with_capacity(1 << 16, io::stdout().lock());
+    // One of several inputs: a line that says which file follows, and the file in every
+    // NDJSON record.
+    let mut prefix = String::new();
+    if let Some((i, name)) = tag {
+        if as_json {
+            prefix.push_str("{\"file\":");
+            json::string(&mut prefix, name);
+            prefix.push(',');
+            writeln!(out, "{prefix}\"type\":\"file\",\"index\":{i}}}")?;
+        } else {
+            writeln!(out, "# file {}: {name}", i + 1)?;
+        }
+    }
     let mut p = Pipeline::new(
         proto_of(proto),
         if as_json {
@@ -904,6 +920,9 @@ fn decode(
         out.write_all(line.as_bytes())?;
         out.write_all(b"\n")
     };
+    if let Some((_, name)) = tag {
+        p.set_file(name);
+    }
     p.set_units(units);
     if let Some(t) = timeout {
         p.set_reply_timeout(t);
@@ -911,7 +930,7 @@ fn decode(
     if let Some(f) = filter {
         p.set_filter(move |v| f.matches(v));
     }
-    run_pipeline(reader.as_mut(), &mut p, as_json, &mut emit)?;
+    run_pipeline(reader.as_mut(), &mut p, &mut emit)?;
     out.flush()
 }
 

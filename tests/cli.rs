@@ -256,7 +256,7 @@ fn elliptec_bus_sample_is_detected_paired_and_scaled() {
         .map(|l| serde_json::from_str(l).expect("JSON"))
         .collect();
     assert_eq!(all[0]["type"], "detect");
-    assert_eq!(all[0]["proto"], "elliptec");
+    assert_eq!(all[0]["proto"], "ell");
     assert_eq!(all[0]["certain"], true);
     let recs = ndjson(&out);
     let frames: Vec<&Value> = recs.iter().filter(|r| r["type"] == "frame").collect();
@@ -501,5 +501,58 @@ fn messages_json_marks_motion_quantities() {
     assert!(
         !out.contains("counts/s2"),
         "no acceleration claims counts/s²"
+    );
+}
+
+/// Several inputs: a `file` record starts each, every record names its file (numbers, offsets
+/// and pairs count within a file, so they restart, but not silently), and filters see `file`.
+#[test]
+fn records_of_several_files_name_their_file() {
+    let (out, err, ok) = aptscope(
+        &[
+            "decode",
+            "--json",
+            "samples/kdc101-session.bin",
+            "samples/damaged.bin",
+        ],
+        None,
+    );
+    assert!(ok, "{err}");
+    let recs: Vec<Value> = out
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("JSON"))
+        .collect();
+    assert!(recs.iter().all(|r| r["file"].is_string()), "{out}");
+    let starts: Vec<&Value> = recs.iter().filter(|r| r["type"] == "file").collect();
+    assert_eq!(starts.len(), 2);
+    assert_eq!(starts[1]["file"], "samples/damaged.bin");
+    assert_eq!(starts[1]["index"], 1);
+    let firsts = recs.iter().filter(|r| r["n"] == 1).count();
+    assert_eq!(firsts, 2, "each file numbers from 1");
+    let (out, _, ok) = aptscope(
+        &[
+            "decode",
+            "--json",
+            "-Y",
+            "file contains damaged && apt.name == MOD_IDENTIFY",
+            "samples/kdc101-session.bin",
+            "samples/damaged.bin",
+        ],
+        None,
+    );
+    assert!(ok);
+    let hits: Vec<Value> = ndjson(&out)
+        .into_iter()
+        .filter(|r| r["type"] == "frame")
+        .collect();
+    assert_eq!(hits.len(), 1, "{out}");
+    // One file: no file key, as before.
+    let (out, _, _) = aptscope(&["decode", "--json", "samples/damaged.bin"], None);
+    assert!(!out.contains("\"file\""));
+    // The detection record spells the protocol as every record does.
+    let (out, _, _) = aptscope(&["decode", "--json", "samples/elliptec-bus.txt"], None);
+    assert!(
+        out.starts_with("{\"type\":\"detect\",\"proto\":\"ell\""),
+        "{out}"
     );
 }

@@ -22,6 +22,13 @@ impl Proto {
             Proto::Elliptec => "elliptec",
         }
     }
+    /// The short code every record's `proto` key uses (`apt`, `ell`), as filters spell it.
+    pub fn code(self) -> &'static str {
+        match self {
+            Proto::Apt => "apt",
+            Proto::Elliptec => "ell",
+        }
+    }
 }
 
 /// The verdict on a sample.

@@ -602,6 +602,7 @@ fn parse_num(s: &str) -> Option<N> {
 
 /// Names usable without a protocol prefix.
 const TOP_LEVEL: &[&str] = &[
+    "file",
     "dir",
     "n",
     "offset",
@@ -1365,8 +1366,8 @@ mod tests {
     use serde_json::json;
 
     /// `aptscope decode --json samples/kdc101-session.pcapng`
-    const KDC101: &str = r##"{"type":"stream","stream":0,"name":"/dev/ttyUSB0","settings":"115200 8N1 RTS/CTS"}
-{"type":"detect","proto":"apt","certain":true,"apt":1.000,"elliptec":0.000}
+    const KDC101: &str = r##"{"type":"stream","stream":0,"stream_name":"/dev/ttyUSB0","settings":"115200 8N1 RTS/CTS"}
+{"type":"detect","proto":"apt","certain":true,"apt":1.000,"ell":0.000}
 {"n":1,"proto":"apt","type":"frame","offset":0,"len":6,"raw":"050000005001","msgid":5,"msgid_hex":"0x0005","name":"HW_REQ_INFO","msg_dir":"h2d","src":{"addr":1,"name":"host"},"dst":{"addr":80,"name":"usb"},"data_flag":false,"data_len":0,"fields":{},"diag":[],"dir":"h2d","ts_ns":1764000000050000000,"stream":0}
 {"n":2,"proto":"apt","type":"frame","offset":0,"len":90,"raw":"0600540081503bfd9b014b444331303100002c000b000300000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000010000000100","msgid":6,"msgid_hex":"0x0006","name":"HW_GET_INFO","msg_dir":"d2h","src":{"addr":80,"name":"usb"},"dst":{"addr":1,"name":"host"},"data_flag":true,"data_len":84,"fields":{"serial_number":27000123,"model_number":"KDC101","hw_type":"BRUSHLESS_DC_CONTROLLER","fw_minor":11,"fw_interim":0,"fw_major":3,"internal":"000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000","hw_version":1,"mod_state":0,"nchs":1},"pair":1,"latency_ms":2,"diag":[],"dir":"d2h","ts_ns":1764000000052000000,"stream":0}
 {"n":3,"proto":"apt","type":"frame","offset":6,"len":6,"raw":"100201015001","msgid":528,"msgid_hex":"0x0210","name":"MOD_SET_CHANENABLESTATE","msg_dir":"h2d","src":{"addr":1,"name":"host"},"dst":{"addr":80,"name":"usb"},"data_flag":false,"data_len":0,"channel":1,"fields":{"chan_ident":"CH1","enable_state":"ENABLE"},"diag":[],"dir":"h2d","ts_ns":1764000000102000000,"stream":0}
@@ -1390,7 +1391,7 @@ mod tests {
 "##;
 
     /// `aptscope decode --json samples/elliptec-bus.txt`
-    const ELL_BUS: &str = r##"{"type":"detect","proto":"elliptec","certain":true,"apt":0.000,"elliptec":1.000}
+    const ELL_BUS: &str = r##"{"type":"detect","proto":"ell","certain":true,"apt":0.000,"ell":1.000}
 {"n":1,"proto":"ell","type":"frame","offset":0,"len":3,"raw":"30696e","text":"0in","addr":"0","dir":"h2d","cmd":"in","name":"REQ_INFORMATION","fields":{},"diag":[],"stream":0}
 {"n":2,"proto":"ell","type":"frame","offset":3,"len":35,"raw":"30494e3045313134303032383432303230303131373031363830303032333030300d0a","text":"0IN0E1140028420200117016800023000\r\n","addr":"0","dir":"d2h","cmd":"IN","name":"GET_INFORMATION","fields":{"model":14,"serial":"11400284","year":"2020","firmware":1,"thread_hw":23,"thread":"metric","hw_release":23,"travel":360,"pulses_per_unit":143360},"module":{"first_addr":0,"model":"ELL14","serial":"11400284"},"pair":1,"diag":[],"stream":0}
 {"n":3,"proto":"ell","type":"frame","offset":38,"len":3,"raw":"31696e","text":"1in","addr":"1","dir":"h2d","cmd":"in","name":"REQ_INFORMATION","fields":{},"diag":[],"stream":0}
@@ -1430,7 +1431,7 @@ mod tests {
 "##;
 
     /// `aptscope decode --json samples/damaged.bin`
-    const DAMAGED: &str = r##"{"type":"detect","proto":"apt","certain":false,"apt":0.369,"elliptec":0.000}
+    const DAMAGED: &str = r##"{"type":"detect","proto":"apt","certain":false,"apt":0.369,"ell":0.000}
 {"n":1,"proto":"apt","type":"garbage","offset":0,"len":4,"raw":"ff0055aa","diag":[{"kind":"garbage","offset":0,"msg":"4 byte(s) that start no frame"}],"dir":"unknown","stream":0}
 {"n":2,"proto":"apt","type":"frame","offset":4,"len":6,"raw":"050000005001","msgid":5,"msgid_hex":"0x0005","name":"HW_REQ_INFO","msg_dir":"h2d","src":{"addr":1,"name":"host"},"dst":{"addr":80,"name":"usb"},"data_flag":false,"data_len":0,"fields":{},"diag":[],"dir":"h2d","stream":0}
 {"n":3,"proto":"apt","type":"garbage","offset":10,"len":3,"raw":"133700","diag":[{"kind":"garbage","offset":10,"msg":"3 byte(s) that start no frame"}],"dir":"unknown","stream":0}
@@ -1580,7 +1581,7 @@ mod tests {
     #[test]
     fn elliptec_counts() {
         let recs = records(ELL_BUS);
-        assert_eq!(count(&recs, "ell"), 36);
+        assert_eq!(count(&recs, "ell"), 37, "the frames and the detection record");
         assert_eq!(count(&recs, "ell.addr == 0"), 17);
         assert_eq!(ns(&recs, "ell.addr == 5"), [22, 23, 24, 25, 26]);
         assert_eq!(count(&recs, "ell.module == ELL14"), 15);

@@ -86,6 +86,8 @@ pub struct Pipeline {
     jline: String,
     filter: Option<RecordFilter>,
     reply_timeout: Option<u64>,
+    /// `{"file":NAME,` when records name their input (several inputs), else empty.
+    file_prefix: String,
     /// Models seen per device and the stage conversion of motion values.
     units: Tracker,
 }
@@ -111,6 +113,7 @@ impl Pipeline {
             jline: String::with_capacity(512),
             filter: None,
             reply_timeout: None,
+            file_prefix: String::new(),
             units: Tracker::new(UnitsOpts::default()),
         }
     }
@@ -120,6 +123,15 @@ impl Pipeline {
     /// built-in stage (HW_GET_INFO model K10CR1, LTS150 …) convert.
     pub fn set_units(&mut self, opts: UnitsOpts) {
         self.units = Tracker::new(opts);
+    }
+
+    /// Name the input in every NDJSON record (`"file": name`, first key), for runs over several
+    /// files: numbers, offsets and pairs count within a file.
+    pub fn set_file(&mut self, name: &str) {
+        self.file_prefix.clear();
+        self.file_prefix.push_str("{\"file\":");
+        json::string(&mut self.file_prefix, name);
+        self.file_prefix.push(',');
     }
 
     /// Use one reply timeout for every request instead of the per-message defaults.
@@ -219,6 +231,39 @@ impl Pipeline {
         self.emit_or_hold(emit)
     }
 
+    /// Report a stream (port, device) the capture names: its index, name and line settings.
+    pub fn stream_info<E>(
+        &mut self,
+        id: u32,
+        name: &str,
+        settings: Option<&str>,
+        emit: &mut impl FnMut(&str) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.line.clear();
+        match self.fmt {
+            Format::Json => {
+                let _ = write!(
+                    self.line,
+                    "{{\"type\":\"stream\",\"stream\":{id},\"stream_name\":"
+                );
+                json::string(&mut self.line, name);
+                if let Some(x) = settings {
+                    self.line.push_str(",\"settings\":");
+                    json::string(&mut self.line, x);
+                }
+                self.line.push('}');
+            }
+            Format::Text => {
+                let _ = write!(self.line, "# stream {id}: {name}");
+                if let Some(x) = settings {
+                    let _ = write!(self.line, " ({x})");
+                }
+            }
+        }
+        self.tag_line();
+        emit(&self.line)
+    }
+
     /// Report a capture-file problem given as text (kind and message) at a file offset.
     pub fn file_diag<E>(
         &mut self,
@@ -282,11 +327,19 @@ impl Pipeline {
     /// Emit the diagnostic line in `self.line`, or hold it while the protocol is not known (its
     /// place is after the sample chunks held so far).
     fn emit_or_hold<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
+        self.tag_line();
         if self.proto.is_none() {
             self.held.push((self.sample.len(), self.line.clone()));
             return Ok(());
         }
         emit(&self.line)
+    }
+
+    /// Put the input's name into the JSON record in `self.line` (see [`Pipeline::set_file`]).
+    fn tag_line(&mut self) {
+        if self.fmt == Format::Json && !self.file_prefix.is_empty() && self.line.starts_with('{') {
+            self.line.replace_range(..1, &self.file_prefix);
+        }
     }
 
     fn replay_sample<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
@@ -346,8 +399,8 @@ impl Pipeline {
             Format::Json => {
                 let _ = write!(
                     self.line,
-                    "{{\"type\":\"detect\",\"proto\":\"{}\",\"certain\":{},\"apt\":{:.3},\"elliptec\":{:.3}}}",
-                    proto.name(),
+                    "{{\"type\":\"detect\",\"proto\":\"{}\",\"certain\":{},\"apt\":{:.3},\"ell\":{:.3}}}",
+                    proto.code(),
                     d.proto.is_some(),
                     d.apt,
                     d.elliptec
@@ -364,6 +417,7 @@ impl Pipeline {
                 );
             }
         }
+        self.tag_line();
         emit(&self.line)
     }
 
@@ -437,6 +491,9 @@ impl Pipeline {
     /// Emit the record rendered in `self.jline` (JSON, when wanted) and `self.line` (text, when
     /// wanted), if the filter lets it through.
     fn emit_record<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
+        if !self.file_prefix.is_empty() && self.jline.starts_with('{') {
+            self.jline.replace_range(..1, &self.file_prefix);
+        }
         if let Some(f) = self.filter.as_mut() {
             let keep = serde_json::from_str::<serde_json::Value>(&self.jline).is_ok_and(|v| f(&v));
             if !keep {

@@ -142,7 +142,7 @@ impl Collector {
             Some("detect") => {
                 self.proto = match rec.get("proto").and_then(Value::as_str) {
                     Some("apt") => Some(Proto::Apt),
-                    Some("elliptec") => Some(Proto::Elliptec),
+                    Some("ell" | "elliptec") => Some(Proto::Elliptec),
                     _ => self.proto,
                 }
             }
