@@ -1581,7 +1581,11 @@ mod tests {
     #[test]
     fn elliptec_counts() {
         let recs = records(ELL_BUS);
-        assert_eq!(count(&recs, "ell"), 37, "the frames and the detection record");
+        assert_eq!(
+            count(&recs, "ell"),
+            37,
+            "the frames and the detection record"
+        );
         assert_eq!(count(&recs, "ell.addr == 0"), 17);
         assert_eq!(ns(&recs, "ell.addr == 5"), [22, 23, 24, 25, 26]);
         assert_eq!(count(&recs, "ell.module == ELL14"), 15);
