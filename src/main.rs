@@ -1050,9 +1050,14 @@ fn messages(as_json: bool, verbose: bool) -> io::Result<()> {
         } else {
             format!(" → {}", replies.join(","))
         };
+        let rev = if m.revs == aptscope_dissector::table::Revs::REV_2025 {
+            "  [2025]"
+        } else {
+            ""
+        };
         writeln!(
             out,
-            "0x{:04X}  {:<40} {:<4}  {:<10}{reply}",
+            "0x{:04X}  {:<40} {:<4}  {:<10}{reply}{rev}",
             m.id,
             m.name,
             m.dir.as_str(),
@@ -1061,6 +1066,10 @@ fn messages(as_json: bool, verbose: bool) -> io::Result<()> {
         if verbose {
             if !m.doc.is_empty() {
                 writeln!(out, "        {}", m.doc)?;
+            }
+            let models = table.models_of(m);
+            if !models.is_empty() {
+                writeln!(out, "        devices: {}", models.join(" "))?;
             }
             for f in &m.forms {
                 let fields: Vec<String> = f
