@@ -317,7 +317,8 @@ impl AptPairer {
         device: u8,
         info: &mut PairInfo,
     ) {
-        if m.name == "HW_GET_INFO" {
+        // HW_GET_INFO names the device's model.
+        if m.id == 0x0006 {
             let model = f
                 .fields()
                 .find(|(fd, _)| fd.name == "model_number")
@@ -334,6 +335,9 @@ impl AptPairer {
                 self.models.retain(|(a, _, _)| *a != device);
                 self.models.push((device, name, profile));
             }
+            return;
+        }
+        if self.models.is_empty() {
             return;
         }
         if let Some((_, name, Some(p))) = self.models.iter().find(|(a, _, _)| *a == device) {
