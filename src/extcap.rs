@@ -175,10 +175,10 @@ fn interfaces(ports: &[String]) -> String {
         env!("CARGO_PKG_VERSION")
     );
     s += &format!(
-        "interface {{value={GENERIC}}}{{display=Thorlabs APT/Elliptec serial tap (port set in the options)}}\n"
+        "interface {{value={GENERIC}}}{{display=Thorlabs APT and Elliptec serial tap (port set in the options)}}\n"
     );
     for p in ports {
-        s += &format!("interface {{value={PORT_PREFIX}{p}}}{{display=Thorlabs APT/Elliptec tap on /dev/{p}}}\n");
+        s += &format!("interface {{value={PORT_PREFIX}{p}}}{{display=Thorlabs APT and Elliptec tap on /dev/{p}}}\n");
     }
     s
 }
@@ -347,7 +347,7 @@ mod tests {
             }
         }
         assert!(text.contains(
-            "interface {value=aptscope-ttyACM1}{display=Thorlabs APT/Elliptec tap on /dev/ttyACM1}"
+            "interface {value=aptscope-ttyACM1}{display=Thorlabs APT and Elliptec tap on /dev/ttyACM1}"
         ));
         assert!(config("aptscope-ttyUSB0").contains("{default=/dev/ttyUSB0}"));
     }
