@@ -887,6 +887,17 @@ impl FileSink {
     /// Open the existing pipe `path` (waiting for its reader, as opening a FIFO does) and
     /// declare `stream` in `format`.
     fn open_stream(path: &str, format: Format, stream: &StreamInfo) -> io::Result<FileSink> {
+        use std::os::unix::fs::FileTypeExt;
+        let t = std::fs::metadata(path)
+            .map_err(|e| io::Error::new(e.kind(), format!("{path}: {e}")))?
+            .file_type();
+        // Written from its start without truncating: only right for a pipe (or a terminal).
+        if !(t.is_fifo() || t.is_char_device() || t.is_socket()) {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("{path}: not a pipe (a stream goes into an existing FIFO)"),
+            ));
+        }
         let f = File::options()
             .write(true)
             .open(path)
@@ -2155,6 +2166,64 @@ mod tests {
         let mut o = tap_opts(dir.join("nope").to_str().unwrap(), &dir);
         o.force = true;
         assert!(Tap::new(o).is_err());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_stream_goes_into_an_existing_pipe_and_ends_with_its_reader() {
+        let dir = scratch("stream");
+        let (mut dev, dev_path) = fake_device();
+        let fifo = dir.join("fifo");
+        // Never created, nor written over when it is a file.
+        let mut o = tap_opts(&dev_path, &dir);
+        o.stream = true;
+        o.write = Some(fifo.to_string_lossy().into());
+        assert_eq!(
+            Tap::new(o.clone()).err().unwrap().kind(),
+            io::ErrorKind::NotFound
+        );
+        assert!(!fifo.exists());
+        std::fs::write(&fifo, b"precious").unwrap();
+        let e = Tap::new(o.clone()).err().unwrap();
+        assert!(e.to_string().contains("not a pipe"), "{e}");
+        assert_eq!(std::fs::read(&fifo).unwrap(), b"precious");
+        std::fs::remove_file(&fifo).unwrap();
+
+        nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
+        let mut r = File::options()
+            .read(true)
+            .custom_flags(OFlag::O_NONBLOCK.bits())
+            .open(&fifo)
+            .unwrap();
+        let tap = Tap::new(o).unwrap();
+        let done = within(move || tap.run(None));
+        let mut host = open_host(&dir.join("ttyAPT"));
+        let a = apt_moves(48);
+        send(&mut host, &a);
+        assert_eq!(recv(&mut dev, a.len()), a);
+        let mut got = vec![];
+        let t0 = Instant::now();
+        while !got.windows(a.len()).any(|w| w == a) {
+            assert!(t0.elapsed() < DEADLINE, "never flushed");
+            let mut buf = [0u8; 4096];
+            match r.read(&mut buf) {
+                Ok(n) => got.extend_from_slice(&buf[..n]),
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                    thread::park_timeout(Duration::from_millis(5))
+                }
+                Err(e) => panic!("{e}"),
+            }
+        }
+        // The reader goes: the tap ends by itself, saying why.
+        drop(r);
+        let stats = done().unwrap();
+        assert!(stats.reader_closed, "{}", stats.summary("test"));
+        assert!(stats.summary("test").contains("its reader closed it"));
+        let cap = dir.join("got.pcapng");
+        std::fs::write(&cap, &got).unwrap();
+        let (h2d, _, _, diags) = read_back(&cap);
+        assert!(diags.is_empty(), "{diags:?}");
+        assert_eq!(h2d, a);
         let _ = std::fs::remove_dir_all(&dir);
     }
 
