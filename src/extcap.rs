@@ -15,7 +15,8 @@ use std::path::Path;
 const GENERIC: &str = "aptscope";
 /// Per-port interfaces are `aptscope-ttyUSB0` for `/dev/ttyUSB0`.
 const PORT_PREFIX: &str = "aptscope-";
-/// The host-side link when the options give none.
+/// The host-side link when the options give none (per-port interfaces add the port's name, so
+/// that captures on two ports at once do not take each other's link).
 const DEFAULT_LINK: &str = "/tmp/ttyAPT";
 /// LINKTYPE_USER0, what the tap's pcapng uses (with direction flags).
 const DLT_USER0: u32 = 147;
@@ -97,6 +98,19 @@ pub fn extcap_main(a: ExtcapArgs) -> io::Result<()> {
         out.write_all(interfaces(&serial_ports()).as_bytes())?;
         return out.flush();
     }
+    let nothing_else = a.extcap_interface.is_none() && !a.capture && !a.extcap_config;
+    if a.extcap_version.is_some() && nothing_else && !a.extcap_dlts {
+        // Older Wireshark asks the version alone: the first line of the interfaces.
+        out.write_all(
+            interfaces(&[])
+                .lines()
+                .next()
+                .unwrap_or_default()
+                .as_bytes(),
+        )?;
+        out.write_all(b"\n")?;
+        return out.flush();
+    }
     let iface = a.extcap_interface.as_deref();
     let need_iface = || {
         iface.filter(|i| known(i)).ok_or_else(|| match iface {
@@ -168,6 +182,17 @@ fn port_of(iface: &str) -> Option<String> {
     (!p.is_empty() && !p.contains(['/', '{', '}'])).then(|| format!("/dev/{p}"))
 }
 
+/// The host-side link of an interface: `/tmp/ttyAPT`, `/tmp/ttyAPT-ttyUSB0`.
+fn default_link(iface: &str) -> String {
+    match iface
+        .strip_prefix(PORT_PREFIX)
+        .filter(|_| port_of(iface).is_some())
+    {
+        Some(p) => format!("{DEFAULT_LINK}-{p}"),
+        None => DEFAULT_LINK.into(),
+    }
+}
+
 /// `--extcap-interfaces`: the version, the generic interface and one per port.
 fn interfaces(ports: &[String]) -> String {
     let mut s = format!(
@@ -191,6 +216,7 @@ fn dlts() -> String {
 /// `--extcap-config`: the options dialog, the port defaulting to the interface's.
 fn config(iface: &str) -> String {
     let device = port_of(iface).unwrap_or_else(|| "/dev/ttyUSB0".into());
+    let link = default_link(iface);
     let mut s = String::new();
     let mut arg = |line: String| {
         s += &line;
@@ -202,7 +228,7 @@ fn config(iface: &str) -> String {
     ));
     arg(format!(
         "arg {{number=1}}{{call=--link}}{{display=Host-side link}}{{type=string}}\
-         {{default={DEFAULT_LINK}}}{{required=true}}{{tooltip=The host program opens this \
+         {{default={link}}}{{required=true}}{{tooltip=The host program opens this \
          symlink (a pseudo-terminal) instead of the real port}}"
     ));
     arg(
@@ -280,7 +306,7 @@ fn capture(iface: &str, a: &ExtcapArgs) -> io::Result<()> {
         .link
         .clone()
         .filter(|l| !l.is_empty())
-        .unwrap_or_else(|| DEFAULT_LINK.into());
+        .unwrap_or_else(|| default_link(iface));
     let mut o = TapOptions::new(device, Some(link));
     o.proto = proto;
     o.baud = baud;
@@ -350,5 +376,7 @@ mod tests {
             "interface {value=aptscope-ttyACM1}{display=Thorlabs APT and Elliptec tap on /dev/ttyACM1}"
         ));
         assert!(config("aptscope-ttyUSB0").contains("{default=/dev/ttyUSB0}"));
+        assert!(config("aptscope-ttyUSB0").contains("{default=/tmp/ttyAPT-ttyUSB0}"));
+        assert!(config("aptscope").contains("{default=/tmp/ttyAPT}"));
     }
 }

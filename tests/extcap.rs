@@ -313,6 +313,10 @@ fn the_extcap_requests_answer_in_wiresharks_grammar() {
         "{names:?}"
     );
 
+    let v = extcap_ok(&["--extcap-version"]);
+    assert_eq!(v.len(), 1);
+    assert_eq!(v[0], ifs[0]);
+
     let dlts = extcap_ok(&["--extcap-dlts", "--extcap-interface", "aptscope"]);
     assert_eq!(dlts.len(), 1);
     assert_eq!(dlts[0].0, "dlt");

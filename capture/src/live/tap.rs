@@ -1035,7 +1035,8 @@ fn writer_loop(q: &FileQueue, mut sink: FileSink, clock: Clock, stop: &StopHandl
         }
     })();
     if let Err(e) = result {
-        if sink.stream.is_some() && e.kind() == io::ErrorKind::BrokenPipe {
+        // (A pcapng writer's error may wrap the broken pipe: the pipe itself says.)
+        if sink.stream.is_some() && (e.kind() == io::ErrorKind::BrokenPipe || sink.reader_gone()) {
             out.reader_closed = true;
             stop.stop();
         }
