@@ -21,6 +21,8 @@ use std::io::{self, BufWriter, Write};
 use std::process::ExitCode;
 use std::rc::Rc;
 
+mod extcap;
+
 #[derive(Parser)]
 #[command(
     name = "aptscope",
@@ -397,6 +399,10 @@ enum Cmd {
         #[arg(short, long)]
         output: Option<String>,
     },
+    /// Wireshark capture source (extcap): Wireshark runs it, through a symlink named
+    /// `aptscope-extcap` in its personal extcap folder, to list the interfaces and options and
+    /// to capture a tap into its FIFO (see the README's Wireshark section).
+    Extcap(extcap::ExtcapArgs),
     /// List the message table, or show one message (`messages MOT_MOVE_HOME`, `messages 0x0443`).
     Messages {
         /// A message name or id, or a sub-message name (`SETPOINT`, `la:SETPOINT`): show its
@@ -456,7 +462,13 @@ macro_rules! live_fields {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let mut args: Vec<std::ffi::OsString> = std::env::args_os().collect();
+    // A symlink `aptscope-extcap` in Wireshark's extcap folder: Wireshark gives only the
+    // extcap flags.
+    if args.first().is_some_and(|a0| extcap::invoked_as_extcap(a0)) {
+        args.insert(1, "extcap".into());
+    }
+    let cli = Cli::parse_from(args);
     let r = match cli.cmd {
         Cmd::Decode {
             files,
@@ -516,6 +528,7 @@ fn main() -> ExitCode {
                 sim_line(pty.as_deref(), port.as_deref(), baud, once),
             ),
         },
+        Cmd::Extcap(a) => extcap::extcap_main(a),
         Cmd::Tap { device, link, live } => live_opts(&live).and_then(|(proto, flow)| {
             let mut o = TapOptions::new(device, link);
             live_fields!(o, live, proto, flow);

@@ -21,10 +21,26 @@ pub use raw::{ByteSource, InputFormat, CHUNK};
 /// `eprintln!` that cannot panic: a closed or failing standard error is ignored, so a live tool
 /// never dies of its log (`aptscope tap … 2>&1 | tee log` after `tee` has gone) and nothing
 /// between a signal and the stop depends on it.
+/// Silenced by [`set_notes`]`(false)`.
 #[macro_export]
 macro_rules! note {
     ($($arg:tt)*) => {{
         use std::io::Write as _;
-        let _ = writeln!(std::io::stderr(), $($arg)*);
+        if $crate::notes_on() {
+            let _ = writeln!(std::io::stderr(), $($arg)*);
+        }
     }};
+}
+
+static NOTES_OFF: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Turn [`note!`]'s progress lines on or off (an extcap: Wireshark shows anything on its
+/// standard error as an error, so only a failure may be said there).
+pub fn set_notes(on: bool) {
+    NOTES_OFF.store(!on, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Whether [`note!`] writes (see [`set_notes`]).
+pub fn notes_on() -> bool {
+    !NOTES_OFF.load(std::sync::atomic::Ordering::Relaxed)
 }

@@ -212,6 +212,11 @@ pub struct TapOptions {
     pub write_format: Option<Format>,
     /// Overwrite an existing capture.
     pub force: bool,
+    /// `write` is a pipe that already exists (the FIFO Wireshark gives an extcap): it is opened
+    /// as it is (never created or truncated), pcapng unless `write_format` says, flushed as soon
+    /// as packets are written (a live reader shows them at once), and the tap stops when the
+    /// reader closes it ([`TapStats::reader_closed`]).
+    pub stream: bool,
     /// When the device disappears, wait for it to come back instead of ending.
     pub reconnect: bool,
     /// No live timeline on standard output.
@@ -238,6 +243,7 @@ impl TapOptions {
             write: None,
             write_format: None,
             force: false,
+            stream: false,
             reconnect: false,
             quiet: false,
             duration: None,
@@ -334,6 +340,9 @@ pub struct TapStats {
     pub file: bool,
     /// The file error, when writing failed.
     pub file_error: Option<String>,
+    /// A stream's reader closed it ([`TapOptions::stream`]): the normal end of a capture
+    /// into Wireshark; `file_error` says so too.
+    pub reader_closed: bool,
     /// Bytes not written to the file because writing it had failed.
     pub file_lost: u64,
     /// Times forwarding waited because the file's backlog was full.
@@ -373,6 +382,8 @@ impl TapStats {
                 self.written,
                 if self.file_matches() {
                     "matches what was forwarded".to_string()
+                } else if self.reader_closed {
+                    "its reader closed it".to_string()
                 } else {
                     format!(
                         "MISMATCH ({} bytes lost{})",
@@ -824,6 +835,8 @@ impl Write for SharedFile {
 struct FileSink {
     out: Box<dyn Writer + Send>,
     file: SharedFile,
+    /// A stream ([`TapOptions::stream`]): the pipe, to see its reader go away.
+    stream: Option<File>,
 }
 
 impl FileSink {
@@ -868,16 +881,59 @@ impl FileSink {
                 io::Error::new(e.kind(), format!("{path}: {e}"))
             }
         })?;
+        FileSink::over(f, format, stream, false)
+    }
+
+    /// Open the existing pipe `path` (waiting for its reader, as opening a FIFO does) and
+    /// declare `stream` in `format`.
+    fn open_stream(path: &str, format: Format, stream: &StreamInfo) -> io::Result<FileSink> {
+        use std::os::unix::fs::FileTypeExt;
+        let t = std::fs::metadata(path)
+            .map_err(|e| io::Error::new(e.kind(), format!("{path}: {e}")))?
+            .file_type();
+        // Written from its start without truncating: only right for a pipe (or a terminal).
+        if !(t.is_fifo() || t.is_char_device() || t.is_socket()) {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("{path}: not a pipe (a stream goes into an existing FIFO)"),
+            ));
+        }
+        let f = File::options()
+            .write(true)
+            .open(path)
+            .map_err(|e| io::Error::new(e.kind(), format!("{path}: {e}")))?;
+        FileSink::over(f, format, stream, true)
+    }
+
+    fn over(f: File, format: Format, stream: &StreamInfo, live: bool) -> io::Result<FileSink> {
+        let pipe = if live { Some(f.try_clone()?) } else { None };
         let file = SharedFile(Arc::new(Mutex::new(BufWriter::with_capacity(1 << 16, f))));
         let mut out: Box<dyn Writer + Send> = match format {
             Format::Pcap => Box::new(PcapOut::new(file.clone())?),
             _ => Box::new(PcapNgOut::new(file.clone())?),
         };
         out.stream(stream)?;
-        let mut sink = FileSink { out, file };
+        let mut sink = FileSink {
+            out,
+            file,
+            stream: pipe,
+        };
         sink.flush()?;
         Ok(sink)
     }
+
+    /// Whether the stream's reader has closed it (a pipe's write end polls as an error then).
+    fn reader_gone(&self) -> bool {
+        let Some(p) = &self.stream else {
+            return false;
+        };
+        let mut fds = [PollFd::new(p.as_fd(), PollFlags::POLLOUT)];
+        matches!(poll(&mut fds, PollTimeout::ZERO), Ok(n) if n > 0)
+            && fds[0]
+                .revents()
+                .is_some_and(|r| r.intersects(PollFlags::POLLERR | PollFlags::POLLHUP))
+    }
+
     fn flush(&mut self) -> io::Result<()> {
         self.file.flush()
     }
@@ -913,9 +969,13 @@ struct WriterOut {
     h2d: u64,
     d2h: u64,
     error: Option<String>,
+    reader_closed: bool,
 }
 
-fn writer_loop(q: &FileQueue, mut sink: FileSink, clock: Clock) -> WriterOut {
+/// Write what the queue brings until it is closed. A stream sink is flushed whenever something
+/// was written, and its reader going away stops the whole tap through `stop` (nothing left to
+/// record into).
+fn writer_loop(q: &FileQueue, mut sink: FileSink, clock: Clock, stop: &StopHandle) -> WriterOut {
     let mut out = WriterOut::default();
     let mut merger = Merger::default();
     let mut since_flush = 0u64;
@@ -955,11 +1015,19 @@ fn writer_loop(q: &FileQueue, mut sink: FileSink, clock: Clock) -> WriterOut {
             }
             if sync
                 || since_flush >= FLUSH_CHUNKS
-                || (since_flush > 0 && last_flush.elapsed() >= FLUSH_EVERY)
+                || (since_flush > 0
+                    && (sink.stream.is_some() || last_flush.elapsed() >= FLUSH_EVERY))
             {
                 sink.flush()?;
                 since_flush = 0;
                 last_flush = Instant::now();
+            }
+            // Seen at once even when nothing is being written (a quiet line).
+            if sink.reader_gone() {
+                return Err(io::Error::new(
+                    io::ErrorKind::BrokenPipe,
+                    "the reader closed the pipe",
+                ));
             }
             if closed {
                 return sink.out.finish();
@@ -967,6 +1035,11 @@ fn writer_loop(q: &FileQueue, mut sink: FileSink, clock: Clock) -> WriterOut {
         }
     })();
     if let Err(e) = result {
+        // (A pcapng writer's error may wrap the broken pipe: the pipe itself says.)
+        if sink.stream.is_some() && (e.kind() == io::ErrorKind::BrokenPipe || sink.reader_gone()) {
+            out.reader_closed = true;
+            stop.stop();
+        }
         q.fail();
         for lane in &merger.lanes {
             for r in lane {
@@ -1066,6 +1139,7 @@ impl Shared {
             written_d2h: w.d2h,
             file,
             file_error: w.error,
+            reader_closed: w.reader_closed,
             file_lost: self
                 .file
                 .as_ref()
@@ -1273,7 +1347,7 @@ fn run_recorded<'s, 'e: 's>(
 ) -> io::Result<TapStats> {
     let clock = sh.clock;
     let writer = match (sink, &sh.file) {
-        (Some(sink), Some(q)) => Some(scope.spawn(move || writer_loop(q, sink, clock))),
+        (Some(sink), Some(q)) => Some(scope.spawn(move || writer_loop(q, sink, clock, &sh.stop))),
         _ => None,
     };
     let disp =
@@ -1349,11 +1423,14 @@ struct Tap {
 impl Tap {
     fn new(opts: TapOptions) -> io::Result<Tap> {
         let settings = LineSettings::for_proto(opts.proto, opts.baud, opts.flow);
-        let format = opts
-            .write
-            .as_deref()
-            .map(|p| FileSink::format(p, opts.write_format))
-            .transpose()?;
+        let format = match (&opts.write, opts.stream) {
+            // A pipe's name says nothing about what goes through it.
+            (Some(_), true) => Some(opts.write_format.unwrap_or(Format::PcapNg)),
+            (p, _) => p
+                .as_deref()
+                .map(|p| FileSink::format(p, opts.write_format))
+                .transpose()?,
+        };
         let device = match open_device(&opts.device, &settings) {
             Ok(d) => Some(d),
             Err(e) if opts.reconnect => {
@@ -1363,17 +1440,15 @@ impl Tap {
             Err(e) => return Err(e),
         };
         let host = HostPty::create(opts.link.as_deref())?;
+        let info = StreamInfo {
+            id: 0,
+            name: opts.device.clone(),
+            settings: Some(settings.to_string()),
+        };
+        let format = format.unwrap_or(Format::PcapNg);
         let sink = match &opts.write {
-            Some(p) => Some(FileSink::create(
-                p,
-                format.unwrap_or(Format::PcapNg),
-                opts.force,
-                &StreamInfo {
-                    id: 0,
-                    name: opts.device.clone(),
-                    settings: Some(settings.to_string()),
-                },
-            )?),
+            Some(p) if opts.stream => Some(FileSink::open_stream(p, format, &info)?),
+            Some(p) => Some(FileSink::create(p, format, opts.force, &info)?),
             None => None,
         };
         crate::note!(
@@ -2092,6 +2167,64 @@ mod tests {
         let mut o = tap_opts(dir.join("nope").to_str().unwrap(), &dir);
         o.force = true;
         assert!(Tap::new(o).is_err());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_stream_goes_into_an_existing_pipe_and_ends_with_its_reader() {
+        let dir = scratch("stream");
+        let (mut dev, dev_path) = fake_device();
+        let fifo = dir.join("fifo");
+        // Never created, nor written over when it is a file.
+        let mut o = tap_opts(&dev_path, &dir);
+        o.stream = true;
+        o.write = Some(fifo.to_string_lossy().into());
+        assert_eq!(
+            Tap::new(o.clone()).err().unwrap().kind(),
+            io::ErrorKind::NotFound
+        );
+        assert!(!fifo.exists());
+        std::fs::write(&fifo, b"precious").unwrap();
+        let e = Tap::new(o.clone()).err().unwrap();
+        assert!(e.to_string().contains("not a pipe"), "{e}");
+        assert_eq!(std::fs::read(&fifo).unwrap(), b"precious");
+        std::fs::remove_file(&fifo).unwrap();
+
+        nix::unistd::mkfifo(&fifo, nix::sys::stat::Mode::S_IRWXU).unwrap();
+        let mut r = File::options()
+            .read(true)
+            .custom_flags(OFlag::O_NONBLOCK.bits())
+            .open(&fifo)
+            .unwrap();
+        let tap = Tap::new(o).unwrap();
+        let done = within(move || tap.run(None));
+        let mut host = open_host(&dir.join("ttyAPT"));
+        let a = apt_moves(48);
+        send(&mut host, &a);
+        assert_eq!(recv(&mut dev, a.len()), a);
+        let mut got = vec![];
+        let t0 = Instant::now();
+        while !got.windows(a.len()).any(|w| w == a) {
+            assert!(t0.elapsed() < DEADLINE, "never flushed");
+            let mut buf = [0u8; 4096];
+            match r.read(&mut buf) {
+                Ok(n) => got.extend_from_slice(&buf[..n]),
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                    thread::park_timeout(Duration::from_millis(5))
+                }
+                Err(e) => panic!("{e}"),
+            }
+        }
+        // The reader goes: the tap ends by itself, saying why.
+        drop(r);
+        let stats = done().unwrap();
+        assert!(stats.reader_closed, "{}", stats.summary("test"));
+        assert!(stats.summary("test").contains("its reader closed it"));
+        let cap = dir.join("got.pcapng");
+        std::fs::write(&cap, &got).unwrap();
+        let (h2d, _, _, diags) = read_back(&cap);
+        assert!(diags.is_empty(), "{diags:?}");
+        assert_eq!(h2d, a);
         let _ = std::fs::remove_dir_all(&dir);
     }
 
