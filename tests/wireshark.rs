@@ -50,21 +50,9 @@ impl Drop for Scratch {
 /// The generated dissector in a scratch directory, or `None` when tshark is missing and the
 /// user allowed skipping.
 fn setup(name: &str) -> Option<(Scratch, PathBuf)> {
-    let have = Command::new("tshark")
-        .arg("-v")
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !have {
-        let hint = "tshark is needed for the Wireshark dissector tests: install it \
-                    (Debian/Ubuntu: `sudo apt-get install tshark`; Fedora: `sudo dnf install \
-                    wireshark-cli`; macOS: `brew install wireshark`)";
-        if std::env::var_os("CI").is_none()
-            && std::env::var("APTSCOPE_SKIP_MISSING_TOOLS").as_deref() == Ok("1")
-        {
-            eprintln!("NOT RUN (APTSCOPE_SKIP_MISSING_TOOLS=1): {hint}");
-            return None;
-        }
-        panic!("{hint}; or set APTSCOPE_SKIP_MISSING_TOOLS=1 to skip locally");
+    // The project's one rule for a missing tool: fail, in CI always (README, Set-up).
+    if !aptscope_capture::tools::require("tshark", "-v", "tshark") {
+        return None;
     }
     let dir = Scratch::new(name);
     let lua = dir.join("aptscope.lua");

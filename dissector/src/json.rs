@@ -260,15 +260,12 @@ pub fn apt_frame_in(
         string(out, fd.name);
         out.push(':');
         value(out, f.table(), fd, &v);
-        // A device-relative value (piezo % of its maximum) in V or µm once the maximum is
-        // known, else the table's fixed scale, else the stage's conversion.
-        let conv = match (fd.pct_of, fd.scale, v.as_f64()) {
-            (Some(_), Some(s), Some(x)) => {
-                crate::apt::phys(fd, &v, scale).or(Some((x * s, fd.unit.unwrap_or(""))))
-            }
-            (None, Some(s), Some(x)) => Some((x * s, fd.unit.unwrap_or(""))),
-            _ => crate::apt::phys(fd, &v, scale),
-        };
+        // The device's or stage's conversion when it applies (piezo % in V or µm, motion
+        // values in mm), else the table's fixed scale.
+        let conv = crate::apt::phys(fd, &v, scale).or_else(|| {
+            let (s, x) = fd.scale.zip(v.as_f64())?;
+            Some((x * s, fd.unit.unwrap_or("")))
+        });
         if let Some((x, unit)) = conv {
             if !phys.is_empty() {
                 phys.push(',');
