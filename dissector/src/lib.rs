@@ -17,6 +17,7 @@ pub mod json;
 pub mod listing;
 pub mod pair;
 pub mod pipeline;
+pub mod record;
 pub mod spec_examples;
 pub mod stats;
 pub mod suggest;

@@ -1,19 +1,15 @@
-//! From captured chunks to rendered records: protocol detection, one framer per (stream,
-//! direction) lane, decoding, Elliptec bus state and pairing, text or NDJSON lines. Pure: the
-//! caller feeds chunks and writes the lines out.
-//!
-//! Frames come out in the order they complete, which for a capture read in time order is time
-//! order: the lanes are merged by time.
+//! From captured chunks to rendered lines: the [`Decoder`]'s records as text or NDJSON. Pure:
+//! the caller feeds chunks and writes the lines out.
 
-use crate::apt::{AptFrame, AptFramer, Item as AptItem};
-use crate::detect::{detect, Detection, Proto, SAMPLE};
-use crate::diag::{Diag, DiagKind};
-use crate::ell::{Bus, EllFrame, EllFramer, Expired, Item as EllItem};
-use crate::pair::AptPairer;
+use crate::detect::Proto;
+use crate::diag::Diag;
+use crate::record::{Decoder, Record};
 use crate::table::Dir;
-use crate::units::{Tracker, UnitsOpts};
-use crate::{json, text, Table};
+use crate::units::UnitsOpts;
+use crate::{json, text};
 use std::fmt::Write;
+
+pub use crate::record::Ctx;
 
 /// Output format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -24,72 +20,22 @@ pub enum Format {
     Json,
 }
 
-/// A chunk's context: where and when its bytes were captured.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Ctx {
-    /// Stream (port/device) index.
-    pub stream: u32,
-    /// Direction, when the capture records it.
-    pub dir: Option<Dir>,
-    /// Capture time in ns, when recorded.
-    pub ts_ns: Option<u64>,
-}
-
-struct Lane {
-    stream: u32,
-    dir: Option<Dir>,
-    apt: AptFramer<'static>,
-    ell: EllFramer,
-    /// Time of the latest chunk: the time a frame completing now gets.
-    ts: Option<u64>,
-    /// Bytes pushed so far, and the (first offset, time) of each timed chunk not yet behind
-    /// the records emitted: garbage gets the time its first byte arrived.
-    pushed: u64,
-    times: std::collections::VecDeque<(u64, u64)>,
-}
-
-impl Lane {
-    /// Time of the byte at stream offset `at` from a lane's `times` (else `latest`). Records
-    /// come in offset order: what is before `at` is forgotten.
-    fn time_at(
-        times: &mut std::collections::VecDeque<(u64, u64)>,
-        latest: Option<u64>,
-        at: u64,
-    ) -> Option<u64> {
-        while times.get(1).is_some_and(|(o, _)| *o <= at) {
-            times.pop_front();
-        }
-        times
-            .front()
-            .filter(|(o, _)| *o <= at)
-            .map(|(_, t)| *t)
-            .or(latest)
-    }
-}
-
-/// The decoding pipeline for one capture.
+/// The decoding pipeline for one capture: a [`Decoder`] and a renderer.
 pub struct Pipeline {
     fmt: Format,
-    proto: Option<Proto>,
-    /// Chunks held back until the protocol is known.
-    sample: Vec<(Ctx, Vec<u8>)>,
-    sample_len: usize,
-    /// Input and file diagnostics met while the sample is held, with the number of sample
-    /// chunks before them: emitted in their place among the sample's records.
-    held: Vec<(usize, String)>,
-    lanes: Vec<Lane>,
-    buses: Vec<(u32, Bus)>,
-    pairers: Vec<(u32, AptPairer)>,
-    first_ts: Option<u64>,
-    n: u64,
+    dec: Decoder,
+    r: Renderer,
+}
+
+/// Renders [`Record`]s as text or NDJSON lines: the one place records become lines (the
+/// pipeline, MCAP's decoded channels and the live views all use it).
+pub struct Renderer {
+    fmt: Format,
     line: String,
     jline: String,
     filter: Option<RecordFilter>,
-    reply_timeout: Option<u64>,
     /// `{"file":NAME,` when records name their input (several inputs), else empty.
     file_prefix: String,
-    /// Models seen per device and the stage conversion of motion values.
-    units: Tracker,
 }
 
 /// Decides, from its NDJSON object, whether a record is emitted.
@@ -100,21 +46,8 @@ impl Pipeline {
     pub fn new(proto: Option<Proto>, fmt: Format) -> Self {
         Pipeline {
             fmt,
-            proto,
-            sample: vec![],
-            sample_len: 0,
-            held: vec![],
-            lanes: vec![],
-            buses: vec![],
-            pairers: vec![],
-            first_ts: None,
-            n: 0,
-            line: String::with_capacity(512),
-            jline: String::with_capacity(512),
-            filter: None,
-            reply_timeout: None,
-            file_prefix: String::new(),
-            units: Tracker::new(UnitsOpts::default()),
+            dec: Decoder::new(proto),
+            r: Renderer::new(fmt),
         }
     }
 
@@ -122,37 +55,43 @@ impl Pipeline {
     /// with this stage or scale, beside their raw values. Without it only devices with a
     /// built-in stage (HW_GET_INFO model K10CR1, LTS150 …) convert.
     pub fn set_units(&mut self, opts: UnitsOpts) {
-        self.units = Tracker::new(opts);
+        self.dec.set_units(opts);
     }
 
     /// Name the input in every NDJSON record (`"file": name`, first key), for runs over several
     /// files: numbers, offsets and pairs count within a file.
     pub fn set_file(&mut self, name: &str) {
-        self.file_prefix.clear();
-        self.file_prefix.push_str("{\"file\":");
-        json::string(&mut self.file_prefix, name);
-        self.file_prefix.push(',');
+        let p = &mut self.r.file_prefix;
+        p.clear();
+        p.push_str("{\"file\":");
+        json::string(p, name);
+        p.push(',');
     }
 
     /// Use one reply timeout for every request instead of the per-message defaults.
     pub fn set_reply_timeout(&mut self, ns: u64) {
-        self.reply_timeout = Some(ns);
+        self.dec.set_reply_timeout(ns);
     }
 
     /// Emit only the records `keep` accepts (it sees each record as its NDJSON object, whatever
     /// the output format). Records are still numbered, so a kept record keeps its number.
     pub fn set_filter(&mut self, keep: impl FnMut(&serde_json::Value) -> bool + 'static) {
-        self.filter = Some(Box::new(keep));
+        self.r.filter = Some(Box::new(keep));
     }
 
     /// The protocol in use (after detection).
     pub fn proto(&self) -> Option<Proto> {
-        self.proto
+        self.dec.proto()
     }
 
-    /// Records emitted so far.
+    /// Records numbered so far (frames and garbage runs).
     pub fn records(&self) -> u64 {
-        self.n
+        self.dec.records()
+    }
+
+    /// The output format.
+    pub fn format(&self) -> Format {
+        self.fmt
     }
 
     /// Feed bytes of a single unknown-direction stream without times.
@@ -162,14 +101,11 @@ impl Pipeline {
         ts: Option<u64>,
         emit: &mut impl FnMut(&str) -> Result<(), E>,
     ) -> Result<(), E> {
-        self.push_chunk(
-            Ctx {
-                ts_ns: ts,
-                ..Ctx::default()
-            },
-            chunk,
-            emit,
-        )
+        let ctx = Ctx {
+            ts_ns: ts,
+            ..Ctx::default()
+        };
+        self.push_chunk(ctx, chunk, emit)
     }
 
     /// Feed one captured chunk. Each rendered record is passed to `emit` (without newline).
@@ -179,37 +115,19 @@ impl Pipeline {
         chunk: &[u8],
         emit: &mut impl FnMut(&str) -> Result<(), E>,
     ) -> Result<(), E> {
-        if self.proto.is_none() {
-            self.sample.push((ctx, chunk.to_vec()));
-            self.sample_len += chunk.len();
-            if self.sample_len < SAMPLE {
-                return Ok(());
-            }
-            self.choose(emit)?;
-            return self.replay_sample(emit);
-        }
-        self.feed(ctx, chunk, emit)
+        let r = &mut self.r;
+        self.dec.push(ctx, chunk, &mut |rec| r.render(rec, emit))
     }
 
-    /// Say that the sender of `dir` on `stream` has paused (a live source knows: its write is
-    /// over): an Elliptec host command complete but for its optional terminator is framed now
-    /// instead of when the next byte comes. APT frames need no such hint.
+    /// Say that the sender of `dir` on `stream` has paused (see [`Decoder::cut`]).
     pub fn cut<E>(
         &mut self,
         stream: u32,
         dir: Dir,
         emit: &mut impl FnMut(&str) -> Result<(), E>,
     ) -> Result<(), E> {
-        if self.proto != Some(Proto::Elliptec) {
-            return Ok(());
-        }
-        for j in 0..self.lanes.len() {
-            if self.lanes[j].stream == stream && self.lanes[j].dir == Some(dir) {
-                self.lanes[j].ell.cut();
-                self.drain(j, emit)?;
-            }
-        }
-        Ok(())
+        let r = &mut self.r;
+        self.dec.cut(stream, dir, &mut |rec| r.render(rec, emit))
     }
 
     /// Report a problem of the input itself (a bad character in hex text, a corrupt capture
@@ -219,16 +137,8 @@ impl Pipeline {
         d: &Diag,
         emit: &mut impl FnMut(&str) -> Result<(), E>,
     ) -> Result<(), E> {
-        self.line.clear();
-        match self.fmt {
-            Format::Json => {
-                self.line.push_str("{\"type\":\"input\",\"diag\":");
-                json::diags(&mut self.line, std::iter::once(*d));
-                self.line.push('}');
-            }
-            Format::Text => text::input_diag_line(&mut self.line, d),
-        }
-        self.emit_or_hold(emit)
+        let r = &mut self.r;
+        self.dec.input_diag(d, &mut |rec| r.render(rec, emit))
     }
 
     /// Report a stream (port, device) the capture names: its index, name and line settings.
@@ -239,29 +149,9 @@ impl Pipeline {
         settings: Option<&str>,
         emit: &mut impl FnMut(&str) -> Result<(), E>,
     ) -> Result<(), E> {
-        self.line.clear();
-        match self.fmt {
-            Format::Json => {
-                let _ = write!(
-                    self.line,
-                    "{{\"type\":\"stream\",\"stream\":{id},\"stream_name\":"
-                );
-                json::string(&mut self.line, name);
-                if let Some(x) = settings {
-                    self.line.push_str(",\"settings\":");
-                    json::string(&mut self.line, x);
-                }
-                self.line.push('}');
-            }
-            Format::Text => {
-                let _ = write!(self.line, "# stream {id}: {name}");
-                if let Some(x) = settings {
-                    let _ = write!(self.line, " ({x})");
-                }
-            }
-        }
-        self.tag_line();
-        emit(&self.line)
+        let r = &mut self.r;
+        self.dec
+            .stream_info(id, name, settings, &mut |rec| r.render(rec, emit))
     }
 
     /// Report a capture-file problem given as text (kind and message) at a file offset.
@@ -272,220 +162,216 @@ impl Pipeline {
         msg: &str,
         emit: &mut impl FnMut(&str) -> Result<(), E>,
     ) -> Result<(), E> {
-        self.line.clear();
-        match self.fmt {
-            Format::Json => {
-                let _ = write!(self.line, "{{\"type\":\"input\",\"diag\":[{{\"kind\":");
-                json::string(&mut self.line, kind);
-                let _ = write!(self.line, ",\"offset\":{offset},\"msg\":");
-                json::string(&mut self.line, msg);
-                self.line.push_str("}]}");
-            }
-            Format::Text => {
-                let _ = write!(self.line, "     - {offset:>#10x}  !! file: {kind}: {msg}");
-            }
-        }
-        self.emit_or_hold(emit)
+        let r = &mut self.r;
+        self.dec
+            .file_diag(offset, kind, msg, &mut |rec| r.render(rec, emit))
     }
 
     /// End of capture: flush what is left and report commands that got no reply.
     pub fn finish<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
-        if self.proto.is_none() {
-            if self.sample.is_empty() {
-                // Nothing to detect from: only the diagnostics.
-                for (_, line) in std::mem::take(&mut self.held) {
-                    emit(&line)?;
+        let r = &mut self.r;
+        self.dec.finish(&mut |rec| r.render(rec, emit))
+    }
+}
+
+impl Renderer {
+    /// A renderer writing `fmt`.
+    pub fn new(fmt: Format) -> Self {
+        Renderer {
+            fmt,
+            line: String::with_capacity(512),
+            jline: String::with_capacity(512),
+            filter: None,
+            file_prefix: String::new(),
+        }
+    }
+
+    /// The line of one record, as [`Pipeline`] would emit it (file name and filter aside).
+    pub fn line(&mut self, rec: &Record<'_>) -> &str {
+        let _ = self.render(rec, &mut |_: &str| Ok::<(), ()>(()));
+        if self.fmt == Format::Json
+            && !matches!(
+                rec,
+                Record::Detect { .. }
+                    | Record::Stream { .. }
+                    | Record::Input(_)
+                    | Record::FileDiag { .. }
+                    | Record::Units(_)
+            )
+        {
+            &self.jline
+        } else {
+            &self.line
+        }
+    }
+
+    /// Render one record and emit it (frames and diagnostics through the filter).
+    fn render<E>(
+        &mut self,
+        rec: &Record<'_>,
+        emit: &mut impl FnMut(&str) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let want_json = self.fmt == Format::Json || self.filter.is_some();
+        let want_text = self.fmt == Format::Text;
+        self.line.clear();
+        self.jline.clear();
+        let (line, jline) = (&mut self.line, &mut self.jline);
+        match rec {
+            Record::Detect {
+                proto,
+                detection: d,
+                sample,
+            } => {
+                match self.fmt {
+                    Format::Json => {
+                        let _ = write!(
+                            line,
+                            "{{\"type\":\"detect\",\"proto\":\"{}\",\"certain\":{},\"apt\":{:.3},\"ell\":{:.3}}}",
+                            proto.code(),
+                            d.proto.is_some(),
+                            d.apt,
+                            d.elliptec
+                        );
+                    }
+                    Format::Text => {
+                        let verdict = if d.proto.is_some() {
+                            "detected"
+                        } else {
+                            "mixed or unknown stream; best guess"
+                        };
+                        let _ = write!(
+                            line,
+                            "# protocol {}: {verdict} ({:.0}% of the first {sample} bytes frame as APT, {:.0}% as Elliptec; --proto to choose)",
+                            proto.name(),
+                            d.apt * 100.0,
+                            d.elliptec * 100.0
+                        );
+                    }
                 }
-                return Ok(());
+                return self.emit_plain(emit);
             }
-            self.choose(emit)?;
-            self.replay_sample(emit)?;
+            Record::Stream { id, name, settings } => {
+                match self.fmt {
+                    Format::Json => {
+                        let _ = write!(
+                            line,
+                            "{{\"type\":\"stream\",\"stream\":{id},\"stream_name\":"
+                        );
+                        json::string(line, name);
+                        if let Some(x) = settings {
+                            line.push_str(",\"settings\":");
+                            json::string(line, x);
+                        }
+                        line.push('}');
+                    }
+                    Format::Text => {
+                        let _ = write!(line, "# stream {id}: {name}");
+                        if let Some(x) = settings {
+                            let _ = write!(line, " ({x})");
+                        }
+                    }
+                }
+                return self.emit_plain(emit);
+            }
+            Record::Input(d) => {
+                match self.fmt {
+                    Format::Json => {
+                        line.push_str("{\"type\":\"input\",\"diag\":");
+                        json::diags(line, std::iter::once(*d));
+                        line.push('}');
+                    }
+                    Format::Text => text::input_diag_line(line, d),
+                }
+                return self.emit_plain(emit);
+            }
+            Record::FileDiag { offset, kind, msg } => {
+                match self.fmt {
+                    Format::Json => {
+                        line.push_str("{\"type\":\"input\",\"diag\":[{\"kind\":");
+                        json::string(line, kind);
+                        let _ = write!(line, ",\"offset\":{offset},\"msg\":");
+                        json::string(line, msg);
+                        line.push_str("}]}");
+                    }
+                    Format::Text => {
+                        let _ = write!(line, "     - {offset:>#10x}  !! file: {kind}: {msg}");
+                    }
+                }
+                return self.emit_plain(emit);
+            }
+            Record::Units(nt) => {
+                // Not tagged with the file, as before; not filtered: it explains what follows.
+                match self.fmt {
+                    Format::Json => json::units_notice(line, nt),
+                    Format::Text => text::units_notice_line(line, nt),
+                }
+                return emit(line);
+            }
+            Record::Apt(a) => {
+                let m = &a.meta;
+                if want_json {
+                    json::apt_frame_in(jline, m.n, a.frame, a.pair, a.scale);
+                    let dir = a.dir().map_or("unknown", |d| d.as_str());
+                    close_json(jline, m.ts_ns, m.stream, Some(dir));
+                }
+                if want_text {
+                    text::apt_line_in(line, m.n, a.frame, m.rel_s, a.scale);
+                    text::pair_suffix(line, a.pair);
+                }
+            }
+            Record::Ell(e) => {
+                let m = &e.meta;
+                if want_json {
+                    json::ell_frame(jline, m.n, e.frame, e.obs);
+                    close_json(jline, m.ts_ns, m.stream, None);
+                }
+                if want_text {
+                    text::ell_line(line, m.n, e.frame, e.obs, m.rel_s);
+                }
+            }
+            Record::Garbage(g) => {
+                let m = &g.meta;
+                match g.kind {
+                    Some(kind) => {
+                        if want_json {
+                            json::apt_garbage(jline, m.n, g.offset, g.bytes, kind);
+                            let dir = m.cap_dir.map_or("unknown", |d| d.as_str());
+                            close_json(jline, m.ts_ns, m.stream, Some(dir));
+                        }
+                        if want_text {
+                            text::garbage_line(line, m.n, g.offset, g.bytes, kind, m.rel_s);
+                        }
+                    }
+                    None => {
+                        if want_json {
+                            json::ell_garbage(jline, m.n, g.offset, g.bytes);
+                            close_json(jline, m.ts_ns, m.stream, None);
+                        }
+                        if want_text {
+                            text::ell_garbage_line(line, m.n, g.offset, g.bytes, m.rel_s);
+                        }
+                    }
+                }
+            }
+            Record::NoReply(e) => {
+                let d = e.diag();
+                if want_json {
+                    json::late_diag(jline, e.proto.code(), e.n, d);
+                }
+                if want_text {
+                    text::late_diag_line(line, e.n, &d);
+                }
+            }
         }
-        for i in 0..self.lanes.len() {
-            self.lanes[i].apt.finish();
-            self.lanes[i].ell.finish();
-            self.drain(i, emit)?;
-        }
-        let mut left = vec![];
-        for (_, bus) in self.buses.iter_mut() {
-            left.extend(bus.finish());
-        }
-        left.sort_by_key(|e| e.n);
-        self.render_expired("ell", &left, emit)?;
-        let mut left: Vec<Expired> = vec![];
-        for (_, p) in self.pairers.iter_mut() {
-            left.extend(p.finish().into_iter().map(|u| Expired {
-                n: u.n,
-                offset: u.offset,
-                code: u.name,
-            }));
-        }
-        left.sort_by_key(|e| e.n);
-        self.render_expired("apt", &left, emit)
+        self.emit_record(emit)
     }
 
-    /// Emit the diagnostic line in `self.line`, or hold it while the protocol is not known (its
-    /// place is after the sample chunks held so far).
-    fn emit_or_hold<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
-        self.tag_line();
-        if self.proto.is_none() {
-            self.held.push((self.sample.len(), self.line.clone()));
-            return Ok(());
-        }
-        emit(&self.line)
-    }
-
-    /// Put the input's name into the JSON record in `self.line` (see [`Pipeline::set_file`]).
-    fn tag_line(&mut self) {
+    /// Emit a record rendered in `self.line` (detect, stream, input diagnostics): not filtered.
+    fn emit_plain<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
         if self.fmt == Format::Json && !self.file_prefix.is_empty() && self.line.starts_with('{') {
             self.line.replace_range(..1, &self.file_prefix);
         }
-    }
-
-    fn replay_sample<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
-        let mut held = std::mem::take(&mut self.held).into_iter().peekable();
-        for (i, (ctx, bytes)) in std::mem::take(&mut self.sample).into_iter().enumerate() {
-            while let Some((_, line)) = held.next_if(|(at, _)| *at <= i) {
-                emit(&line)?;
-            }
-            self.feed(ctx, &bytes, emit)?;
-        }
-        for (_, line) in held {
-            emit(&line)?;
-        }
-        self.sample_len = 0;
-        Ok(())
-    }
-
-    fn choose<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
-        let mut bytes = Vec::with_capacity(SAMPLE);
-        // Judge the busiest lane of the sample: interleaved lanes would confuse both framers.
-        let lane_of = |c: &Ctx| (c.stream, c.dir.map(|d| d.as_str()));
-        let mut best: Option<((u32, Option<&str>), usize)> = None;
-        for (c, b) in &self.sample {
-            let k = lane_of(c);
-            let total: usize = self
-                .sample
-                .iter()
-                .filter(|(x, _)| lane_of(x) == k)
-                .map(|(_, y)| y.len())
-                .sum();
-            if best.is_none_or(|(_, t)| total > t) {
-                best = Some((k, total));
-            }
-            let _ = b;
-        }
-        if let Some((k, _)) = best {
-            for (c, b) in &self.sample {
-                if lane_of(c) == k && bytes.len() < SAMPLE {
-                    bytes.extend_from_slice(b);
-                }
-            }
-        }
-        let d: Detection = detect(&bytes);
-        let proto = d.proto.unwrap_or(if d.elliptec > d.apt {
-            Proto::Elliptec
-        } else {
-            Proto::Apt
-        });
-        self.proto = Some(proto);
-        self.line.clear();
-        let verdict = if d.proto.is_some() {
-            "detected"
-        } else {
-            "mixed or unknown stream; best guess"
-        };
-        match self.fmt {
-            Format::Json => {
-                let _ = write!(
-                    self.line,
-                    "{{\"type\":\"detect\",\"proto\":\"{}\",\"certain\":{},\"apt\":{:.3},\"ell\":{:.3}}}",
-                    proto.code(),
-                    d.proto.is_some(),
-                    d.apt,
-                    d.elliptec
-                );
-            }
-            Format::Text => {
-                let _ = write!(
-                    self.line,
-                    "# protocol {}: {verdict} ({:.0}% of the first {} bytes frame as APT, {:.0}% as Elliptec; --proto to choose)",
-                    proto.name(),
-                    d.apt * 100.0,
-                    bytes.len().min(SAMPLE),
-                    d.elliptec * 100.0
-                );
-            }
-        }
-        self.tag_line();
         emit(&self.line)
-    }
-
-    fn lane(&mut self, ctx: &Ctx) -> usize {
-        if let Some(i) = self
-            .lanes
-            .iter()
-            .position(|l| l.stream == ctx.stream && l.dir == ctx.dir)
-        {
-            return i;
-        }
-        self.lanes.push(Lane {
-            stream: ctx.stream,
-            dir: ctx.dir,
-            apt: AptFramer::new(Table::global()),
-            ell: EllFramer::new(),
-            ts: None,
-            pushed: 0,
-            times: Default::default(),
-        });
-        self.lanes.len() - 1
-    }
-
-    fn feed<E>(
-        &mut self,
-        ctx: Ctx,
-        chunk: &[u8],
-        emit: &mut impl FnMut(&str) -> Result<(), E>,
-    ) -> Result<(), E> {
-        if self.first_ts.is_none() {
-            self.first_ts = ctx.ts_ns;
-        }
-        let i = self.lane(&ctx);
-        if self.proto == Some(Proto::Elliptec) && ctx.dir.is_some() {
-            // The other direction speaks: the host's last command is over, terminator or not.
-            for j in 0..self.lanes.len() {
-                let l = &self.lanes[j];
-                if j != i && l.stream == ctx.stream && l.dir.is_some() && l.dir != ctx.dir {
-                    self.lanes[j].ell.cut();
-                    self.drain(j, emit)?;
-                }
-            }
-        }
-        let lane = &mut self.lanes[i];
-        if let Some(t) = ctx.ts_ns {
-            lane.ts = Some(t);
-            lane.times.push_back((lane.pushed, t));
-        }
-        lane.pushed += chunk.len() as u64;
-        match self.proto {
-            Some(Proto::Apt) => lane.apt.push(chunk),
-            _ => lane.ell.push(chunk),
-        }
-        self.drain(i, emit)
-    }
-
-    /// Append the capture context to a JSON object (before its closing brace).
-    fn close_json(line: &mut String, ts: Option<u64>, stream: u32, dir: Option<&str>) {
-        if line.ends_with('}') {
-            line.pop();
-            if let Some(d) = dir {
-                let _ = write!(line, ",\"dir\":\"{d}\"");
-            }
-            if let Some(t) = ts {
-                let _ = write!(line, ",\"ts_ns\":{t}");
-            }
-            let _ = write!(line, ",\"stream\":{stream}}}");
-        }
     }
 
     /// Emit the record rendered in `self.jline` (JSON, when wanted) and `self.line` (text, when
@@ -505,209 +391,26 @@ impl Pipeline {
             Format::Text => emit(&self.line),
         }
     }
+}
 
-    fn want_json(&self) -> bool {
-        self.fmt == Format::Json || self.filter.is_some()
-    }
-
-    fn drain<E>(
-        &mut self,
-        i: usize,
-        emit: &mut impl FnMut(&str) -> Result<(), E>,
-    ) -> Result<(), E> {
-        let t = Table::global();
-        let first = self.first_ts;
-        let (ts, stream, cap_dir) = (self.lanes[i].ts, self.lanes[i].stream, self.lanes[i].dir);
-        let rel = |ts: Option<u64>| match (ts, first) {
-            (Some(a), Some(b)) => Some(a.saturating_sub(b) as f64 / 1e9),
-            _ => None,
-        };
-        let time = rel(ts);
-        let (want_json, want_text) = (self.want_json(), self.fmt == Format::Text);
-        if self.proto == Some(Proto::Apt) {
-            let pi_idx = match self.pairers.iter().position(|(s, _)| *s == stream) {
-                Some(p) => p,
-                None => {
-                    let mut p = AptPairer::new();
-                    p.timeout_ns = self.reply_timeout;
-                    self.pairers.push((stream, p));
-                    self.pairers.len() - 1
-                }
-            };
-            loop {
-                let lane = &mut self.lanes[i];
-                let Some(item) = lane.apt.next_item() else {
-                    break;
-                };
-                let (AptItem::Frame { offset: at, .. } | AptItem::Garbage { offset: at, .. }) =
-                    item;
-                let first_ts = Lane::time_at(&mut lane.times, ts, at);
-                let mut rec_ts = ts;
-                self.n += 1;
-                self.line.clear();
-                self.jline.clear();
-                let mut dir = cap_dir.map(|d| d.as_str());
-                let mut expired = vec![];
-                match item {
-                    AptItem::Frame {
-                        offset,
-                        bytes,
-                        truncated,
-                    } => {
-                        if let Some(f) = AptFrame::decode(t, offset, bytes, truncated) {
-                            if dir.is_none() {
-                                dir = f
-                                    .msg
-                                    .map(|m| m.dir)
-                                    .filter(|d| *d != Dir::Both)
-                                    .map(|d| d.as_str());
-                            }
-                            let pinfo = self.pairers[pi_idx].1.observe(t, self.n, &f, cap_dir, ts);
-                            expired = pinfo
-                                .expired
-                                .iter()
-                                .map(|u| Expired {
-                                    n: u.n,
-                                    offset: u.offset,
-                                    code: u.name,
-                                })
-                                .collect();
-                            let (scale, notice) = self.units.observe(stream, &f);
-                            if let Some(nt) = notice {
-                                // Before the frame: what its values are converted with.
-                                let mut l = String::new();
-                                match self.fmt {
-                                    Format::Json => json::units_notice(&mut l, &nt),
-                                    Format::Text => text::units_notice_line(&mut l, &nt),
-                                }
-                                emit(&l)?;
-                            }
-                            if want_json {
-                                json::apt_frame_in(&mut self.jline, self.n, &f, &pinfo, scale);
-                            }
-                            if want_text {
-                                text::apt_line_in(&mut self.line, self.n, &f, time, scale);
-                                text::pair_suffix(&mut self.line, &pinfo);
-                            }
-                        }
-                    }
-                    AptItem::Garbage {
-                        offset,
-                        bytes,
-                        kind,
-                    } => {
-                        rec_ts = first_ts;
-                        if want_json {
-                            json::apt_garbage(&mut self.jline, self.n, offset, bytes, kind);
-                        }
-                        if want_text {
-                            let t = rel(first_ts);
-                            text::garbage_line(&mut self.line, self.n, offset, bytes, kind, t);
-                        }
-                    }
-                }
-                Self::close_json(
-                    &mut self.jline,
-                    rec_ts,
-                    stream,
-                    Some(dir.unwrap_or("unknown")),
-                );
-                self.emit_record(emit)?;
-                self.render_expired("apt", &expired, emit)?;
-            }
-            return Ok(());
+/// Append the capture context to a JSON object (before its closing brace).
+fn close_json(line: &mut String, ts: Option<u64>, stream: u32, dir: Option<&str>) {
+    if line.ends_with('}') {
+        line.pop();
+        if let Some(d) = dir {
+            let _ = write!(line, ",\"dir\":\"{d}\"");
         }
-        let bus_idx = match self.buses.iter().position(|(s, _)| *s == stream) {
-            Some(b) => b,
-            None => {
-                let mut b = Bus::new();
-                b.timeout_ns = self.reply_timeout;
-                self.buses.push((stream, b));
-                self.buses.len() - 1
-            }
-        };
-        loop {
-            let lane = &mut self.lanes[i];
-            let Some(item) = lane.ell.next_item() else {
-                break;
-            };
-            let (EllItem::Frame { offset: at, .. } | EllItem::Garbage { offset: at, .. }) = item;
-            let first_ts = Lane::time_at(&mut lane.times, ts, at);
-            let mut rec_ts = ts;
-            self.n += 1;
-            self.line.clear();
-            self.jline.clear();
-            let mut expired: Vec<Expired> = vec![];
-            match item {
-                EllItem::Frame {
-                    offset,
-                    bytes,
-                    truncated,
-                } => {
-                    let Some(mut f) = EllFrame::decode(offset, bytes, truncated) else {
-                        continue;
-                    };
-                    let o = self.buses[bus_idx].1.observe(self.n, &f, ts);
-                    if o.unsolicited {
-                        f.push_diag(Diag {
-                            offset,
-                            kind: DiagKind::Unsolicited,
-                        });
-                    }
-                    expired.extend(o.expired.iter().copied());
-                    if want_json {
-                        json::ell_frame(&mut self.jline, self.n, &f, &o);
-                    }
-                    if want_text {
-                        text::ell_line(&mut self.line, self.n, &f, &o, time);
-                    }
-                }
-                EllItem::Garbage { offset, bytes, .. } => {
-                    rec_ts = first_ts;
-                    if want_json {
-                        json::ell_garbage(&mut self.jline, self.n, offset, bytes);
-                    }
-                    if want_text {
-                        let t = rel(first_ts);
-                        text::ell_garbage_line(&mut self.line, self.n, offset, bytes, t);
-                    }
-                }
-            }
-            Self::close_json(&mut self.jline, rec_ts, stream, None);
-            self.emit_record(emit)?;
-            self.render_expired("ell", &expired, emit)?;
+        if let Some(t) = ts {
+            let _ = write!(line, ",\"ts_ns\":{t}");
         }
-        Ok(())
-    }
-
-    fn render_expired<E>(
-        &mut self,
-        proto: &str,
-        list: &[Expired],
-        emit: &mut impl FnMut(&str) -> Result<(), E>,
-    ) -> Result<(), E> {
-        for e in list {
-            let d = Diag {
-                offset: e.offset,
-                kind: DiagKind::NoReply { cmd: e.n },
-            };
-            self.line.clear();
-            self.jline.clear();
-            if self.want_json() {
-                json::late_diag(&mut self.jline, proto, e.n, d);
-            }
-            if self.fmt == Format::Text {
-                text::late_diag_line(&mut self.line, e.n, &d);
-            }
-            self.emit_record(emit)?;
-        }
-        Ok(())
+        let _ = write!(line, ",\"stream\":{stream}}}");
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Table;
 
     /// Diagnostics met while the protocol is being detected keep their place among the frames.
     #[test]

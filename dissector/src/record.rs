@@ -1,0 +1,710 @@
+//! The one decode chain: captured chunks in, typed [`Record`]s out.
+//!
+//! A [`Decoder`] does protocol detection, keeps one framer per (stream, direction) lane, decodes
+//! frames, tracks devices' units and pairs requests with replies (APT pairer, Elliptec bus).
+//! Every view — text and NDJSON ([`crate::pipeline`]), MCAP, the terminal UI's index, `info`,
+//! `stats`, the replay — reads the records it yields; none rebuilds the chain.
+//!
+//! Records borrow the framers' buffers: they are handed to a callback and live until it returns
+//! (zero-copy; a consumer that keeps one copies what it needs). Pure: the caller feeds chunks.
+//!
+//! Frames come out in the order they complete, which for a capture read in time order is time
+//! order: the lanes are merged by time.
+
+use crate::apt::{AptFrame, AptFramer, GarbageKind, Item as AptItem};
+use crate::detect::{detect, Detection, Proto, SAMPLE};
+use crate::diag::{Diag, DiagKind};
+use crate::ell::{Bus, EllFrame, EllFramer, Expired, Item as EllItem, Observation};
+use crate::pair::{AptPairer, PairInfo};
+use crate::table::Dir;
+use crate::units::{Notice, Scale, Tracker, UnitsOpts};
+use crate::Table;
+use std::collections::VecDeque;
+
+/// A chunk's context: where and when its bytes were captured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Ctx {
+    /// Stream (port/device) index.
+    pub stream: u32,
+    /// Direction, when the capture records it.
+    pub dir: Option<Dir>,
+    /// Capture time in ns, when recorded.
+    pub ts_ns: Option<u64>,
+}
+
+/// Where and when a frame or garbage run was captured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Meta {
+    /// Record number, from 1, counting frames and garbage runs.
+    pub n: u64,
+    /// Stream (port/device) index.
+    pub stream: u32,
+    /// Direction as the capture recorded it.
+    pub cap_dir: Option<Dir>,
+    /// Capture time in ns (a frame: when its last byte arrived; garbage: its first byte).
+    pub ts_ns: Option<u64>,
+    /// Seconds since the first timed chunk of the capture.
+    pub rel_s: Option<f64>,
+}
+
+/// A decoded APT frame with what the chain learnt about it.
+#[derive(Debug)]
+pub struct AptRec<'r> {
+    /// Its context.
+    pub meta: Meta,
+    /// The decoded frame.
+    pub frame: &'r AptFrame<'r, 'static>,
+    /// Pairing.
+    pub pair: &'r PairInfo,
+    /// The stage conversion that applies to its motion values, if any.
+    pub scale: Option<&'r Scale>,
+}
+
+impl AptRec<'_> {
+    /// Direction: the capture's, else the message's own when the table fixes it.
+    pub fn dir(&self) -> Option<Dir> {
+        self.meta
+            .cap_dir
+            .or_else(|| self.frame.msg.map(|m| m.dir).filter(|d| *d != Dir::Both))
+    }
+}
+
+/// A decoded Elliptec frame with what the bus made of it.
+#[derive(Debug)]
+pub struct EllRec<'r> {
+    /// Its context.
+    pub meta: Meta,
+    /// The decoded frame (an `unsolicited` diagnostic already added).
+    pub frame: &'r EllFrame<'r>,
+    /// Pairing and the module's state.
+    pub obs: &'r Observation,
+}
+
+/// Bytes that are not a frame.
+#[derive(Debug)]
+pub struct GarbageRec<'r> {
+    /// Its context (time of its first byte).
+    pub meta: Meta,
+    /// Protocol whose framer rejected the bytes.
+    pub proto: Proto,
+    /// Offset of the first byte in its lane.
+    pub offset: u64,
+    /// The bytes.
+    pub bytes: &'r [u8],
+    /// What the APT framer saw (APT only).
+    pub kind: Option<GarbageKind>,
+}
+
+/// A request that got no reply before its timeout or the end of the capture.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NoReply {
+    /// Protocol of the request.
+    pub proto: Proto,
+    /// Stream of the request.
+    pub stream: u32,
+    /// Record number of the request.
+    pub n: u64,
+    /// Its offset in its lane.
+    pub offset: u64,
+    /// Its name (APT) or mnemonic (Elliptec).
+    pub name: &'static str,
+}
+
+impl NoReply {
+    /// The diagnostic saying so.
+    pub fn diag(&self) -> Diag {
+        Diag {
+            offset: self.offset,
+            kind: DiagKind::NoReply { cmd: self.n },
+        }
+    }
+}
+
+/// One record of the stream.
+#[derive(Debug)]
+pub enum Record<'r> {
+    /// The protocol chosen from the first bytes.
+    Detect {
+        /// Chosen protocol.
+        proto: Proto,
+        /// The detector's scores (`proto` is `None` when uncertain).
+        detection: Detection,
+        /// Bytes judged.
+        sample: usize,
+    },
+    /// A stream (port, device) the capture names.
+    Stream {
+        /// Its index.
+        id: u32,
+        /// Its name.
+        name: &'r str,
+        /// Line settings, when known.
+        settings: Option<&'r str>,
+    },
+    /// A problem of the input itself (bad hex text, a corrupt capture record).
+    Input(Diag),
+    /// A capture-file problem given as text.
+    FileDiag {
+        /// Offset in the file.
+        offset: u64,
+        /// Kind (`truncated_record` …).
+        kind: &'r str,
+        /// Text.
+        msg: &'r str,
+    },
+    /// The unit conversion that applies to a device from now on.
+    Units(&'r Notice),
+    /// An APT frame.
+    Apt(AptRec<'r>),
+    /// An Elliptec frame.
+    Ell(EllRec<'r>),
+    /// Bytes outside frames.
+    Garbage(GarbageRec<'r>),
+    /// A request without reply.
+    NoReply(NoReply),
+}
+
+impl Record<'_> {
+    /// The record's context, for frames and garbage.
+    pub fn meta(&self) -> Option<&Meta> {
+        match self {
+            Record::Apt(r) => Some(&r.meta),
+            Record::Ell(r) => Some(&r.meta),
+            Record::Garbage(r) => Some(&r.meta),
+            _ => None,
+        }
+    }
+}
+
+/// A diagnostic held back while the protocol is detected.
+enum Held {
+    Input(Diag),
+    File {
+        offset: u64,
+        kind: String,
+        msg: String,
+    },
+}
+
+struct Lane {
+    stream: u32,
+    dir: Option<Dir>,
+    apt: AptFramer<'static>,
+    ell: EllFramer,
+    /// Time of the latest chunk: the time a frame completing now gets.
+    ts: Option<u64>,
+    /// Bytes pushed so far, and the (first offset, time) of each timed chunk not yet behind
+    /// the records emitted: garbage gets the time its first byte arrived.
+    pushed: u64,
+    times: VecDeque<(u64, u64)>,
+}
+
+impl Lane {
+    /// Time of the byte at stream offset `at` from a lane's `times` (else `latest`). Records
+    /// come in offset order: what is before `at` is forgotten.
+    fn time_at(times: &mut VecDeque<(u64, u64)>, latest: Option<u64>, at: u64) -> Option<u64> {
+        while times.get(1).is_some_and(|(o, _)| *o <= at) {
+            times.pop_front();
+        }
+        times
+            .front()
+            .filter(|(o, _)| *o <= at)
+            .map(|(_, t)| *t)
+            .or(latest)
+    }
+}
+
+/// The decoder for one capture: the one chain from chunks to [`Record`]s.
+pub struct Decoder {
+    proto: Option<Proto>,
+    /// Chunks held back until the protocol is known.
+    sample: Vec<(Ctx, Vec<u8>)>,
+    sample_len: usize,
+    /// Input and file diagnostics met while the sample is held, with the number of sample
+    /// chunks before them: emitted in their place among the sample's records.
+    held: Vec<(usize, Held)>,
+    lanes: Vec<Lane>,
+    buses: Vec<(u32, Bus)>,
+    pairers: Vec<(u32, AptPairer)>,
+    first_ts: Option<u64>,
+    n: u64,
+    reply_timeout: Option<u64>,
+    /// Models seen per device and the stage conversion of motion values.
+    units: Tracker,
+    expired: Vec<NoReply>,
+}
+
+impl Decoder {
+    /// A decoder for `proto`, or auto-detection from the first 4 KiB when `None`.
+    pub fn new(proto: Option<Proto>) -> Self {
+        Decoder {
+            proto,
+            sample: vec![],
+            sample_len: 0,
+            held: vec![],
+            lanes: vec![],
+            buses: vec![],
+            pairers: vec![],
+            first_ts: None,
+            n: 0,
+            reply_timeout: None,
+            units: Tracker::new(UnitsOpts::default()),
+            expired: vec![],
+        }
+    }
+
+    /// Convert APT motion values to physical units with this stage or scale (see
+    /// [`crate::units`]). Without it only devices with a built-in stage convert.
+    pub fn set_units(&mut self, opts: UnitsOpts) {
+        self.units = Tracker::new(opts);
+    }
+
+    /// Use one reply timeout for every request instead of the per-message defaults.
+    pub fn set_reply_timeout(&mut self, ns: u64) {
+        self.reply_timeout = Some(ns);
+    }
+
+    /// The protocol in use (after detection).
+    pub fn proto(&self) -> Option<Proto> {
+        self.proto
+    }
+
+    /// Frames and garbage runs numbered so far.
+    pub fn records(&self) -> u64 {
+        self.n
+    }
+
+    /// Time of the first timed chunk.
+    pub fn first_ts(&self) -> Option<u64> {
+        self.first_ts
+    }
+
+    /// Feed one captured chunk; each record is passed to `emit`.
+    pub fn push<E>(
+        &mut self,
+        ctx: Ctx,
+        chunk: &[u8],
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        if self.proto.is_none() {
+            self.sample.push((ctx, chunk.to_vec()));
+            self.sample_len += chunk.len();
+            if self.sample_len < SAMPLE {
+                return Ok(());
+            }
+            self.choose(emit)?;
+            return self.replay_sample(emit);
+        }
+        self.feed(ctx, chunk, emit)
+    }
+
+    /// Say that the sender of `dir` on `stream` has paused (a live source knows: its write is
+    /// over): an Elliptec host command complete but for its optional terminator is framed now
+    /// instead of when the next byte comes. APT frames need no such hint.
+    pub fn cut<E>(
+        &mut self,
+        stream: u32,
+        dir: Dir,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        if self.proto != Some(Proto::Elliptec) {
+            return Ok(());
+        }
+        for j in 0..self.lanes.len() {
+            if self.lanes[j].stream == stream && self.lanes[j].dir == Some(dir) {
+                self.lanes[j].ell.cut();
+                self.drain(j, emit)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Report a problem of the input itself, with its offset in the file.
+    pub fn input_diag<E>(
+        &mut self,
+        d: &Diag,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        if self.proto.is_none() {
+            self.held.push((self.sample.len(), Held::Input(*d)));
+            return Ok(());
+        }
+        emit(&Record::Input(*d))
+    }
+
+    /// Report a capture-file problem given as text (kind and message) at a file offset.
+    pub fn file_diag<E>(
+        &mut self,
+        offset: u64,
+        kind: &str,
+        msg: &str,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        if self.proto.is_none() {
+            let h = Held::File {
+                offset,
+                kind: kind.to_string(),
+                msg: msg.to_string(),
+            };
+            self.held.push((self.sample.len(), h));
+            return Ok(());
+        }
+        emit(&Record::FileDiag { offset, kind, msg })
+    }
+
+    /// Report a stream (port, device) the capture names: its index, name and line settings.
+    pub fn stream_info<E>(
+        &mut self,
+        id: u32,
+        name: &str,
+        settings: Option<&str>,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        emit(&Record::Stream { id, name, settings })
+    }
+
+    /// End of capture: flush what is left and report requests that got no reply.
+    pub fn finish<E>(
+        &mut self,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        if self.proto.is_none() {
+            if self.sample.is_empty() {
+                // Nothing to detect from: only the diagnostics.
+                for (_, h) in std::mem::take(&mut self.held) {
+                    emit_held(&h, emit)?;
+                }
+                return Ok(());
+            }
+            self.choose(emit)?;
+            self.replay_sample(emit)?;
+        }
+        for i in 0..self.lanes.len() {
+            self.lanes[i].apt.finish();
+            self.lanes[i].ell.finish();
+            self.drain(i, emit)?;
+        }
+        let mut left = vec![];
+        for (stream, bus) in self.buses.iter_mut() {
+            left.extend(bus.finish().into_iter().map(|e| ell_no_reply(*stream, &e)));
+        }
+        for (stream, p) in self.pairers.iter_mut() {
+            left.extend(p.finish().into_iter().map(|u| NoReply {
+                proto: Proto::Apt,
+                stream: *stream,
+                n: u.n,
+                offset: u.offset,
+                name: u.name,
+            }));
+        }
+        left.sort_by_key(|e| e.n);
+        for e in &left {
+            emit(&Record::NoReply(*e))?;
+        }
+        Ok(())
+    }
+
+    fn replay_sample<E>(
+        &mut self,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let mut held = std::mem::take(&mut self.held).into_iter().peekable();
+        for (i, (ctx, bytes)) in std::mem::take(&mut self.sample).into_iter().enumerate() {
+            while let Some((_, h)) = held.next_if(|(at, _)| *at <= i) {
+                emit_held(&h, emit)?;
+            }
+            self.feed(ctx, &bytes, emit)?;
+        }
+        for (_, h) in held {
+            emit_held(&h, emit)?;
+        }
+        self.sample_len = 0;
+        Ok(())
+    }
+
+    fn choose<E>(&mut self, emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>) -> Result<(), E> {
+        let mut bytes = Vec::with_capacity(SAMPLE);
+        // Judge the busiest lane of the sample: interleaved lanes would confuse both framers.
+        let lane_of = |c: &Ctx| (c.stream, c.dir.map(|d| d.as_str()));
+        let mut best: Option<((u32, Option<&str>), usize)> = None;
+        for (c, _) in &self.sample {
+            let k = lane_of(c);
+            let total: usize = self
+                .sample
+                .iter()
+                .filter(|(x, _)| lane_of(x) == k)
+                .map(|(_, y)| y.len())
+                .sum();
+            if best.is_none_or(|(_, t)| total > t) {
+                best = Some((k, total));
+            }
+        }
+        if let Some((k, _)) = best {
+            for (c, b) in &self.sample {
+                if lane_of(c) == k && bytes.len() < SAMPLE {
+                    bytes.extend_from_slice(b);
+                }
+            }
+        }
+        let d: Detection = detect(&bytes);
+        let proto = d.proto.unwrap_or(if d.elliptec > d.apt {
+            Proto::Elliptec
+        } else {
+            Proto::Apt
+        });
+        self.proto = Some(proto);
+        emit(&Record::Detect {
+            proto,
+            detection: d,
+            sample: bytes.len().min(SAMPLE),
+        })
+    }
+
+    fn lane(&mut self, ctx: &Ctx) -> usize {
+        if let Some(i) = self
+            .lanes
+            .iter()
+            .position(|l| l.stream == ctx.stream && l.dir == ctx.dir)
+        {
+            return i;
+        }
+        self.lanes.push(Lane {
+            stream: ctx.stream,
+            dir: ctx.dir,
+            apt: AptFramer::new(Table::global()),
+            ell: EllFramer::new(),
+            ts: None,
+            pushed: 0,
+            times: Default::default(),
+        });
+        self.lanes.len() - 1
+    }
+
+    fn feed<E>(
+        &mut self,
+        ctx: Ctx,
+        chunk: &[u8],
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        if self.first_ts.is_none() {
+            self.first_ts = ctx.ts_ns;
+        }
+        let i = self.lane(&ctx);
+        if self.proto == Some(Proto::Elliptec) && ctx.dir.is_some() {
+            // The other direction speaks: the host's last command is over, terminator or not.
+            for j in 0..self.lanes.len() {
+                let l = &self.lanes[j];
+                if j != i && l.stream == ctx.stream && l.dir.is_some() && l.dir != ctx.dir {
+                    self.lanes[j].ell.cut();
+                    self.drain(j, emit)?;
+                }
+            }
+        }
+        let lane = &mut self.lanes[i];
+        if let Some(t) = ctx.ts_ns {
+            lane.ts = Some(t);
+            lane.times.push_back((lane.pushed, t));
+        }
+        lane.pushed += chunk.len() as u64;
+        match self.proto {
+            Some(Proto::Apt) => lane.apt.push(chunk),
+            _ => lane.ell.push(chunk),
+        }
+        self.drain(i, emit)
+    }
+
+    fn emit_expired<E>(
+        &mut self,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        for e in std::mem::take(&mut self.expired) {
+            emit(&Record::NoReply(e))?;
+        }
+        Ok(())
+    }
+
+    fn drain<E>(
+        &mut self,
+        i: usize,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let t = Table::global();
+        let first = self.first_ts;
+        let (ts, stream, cap_dir) = (self.lanes[i].ts, self.lanes[i].stream, self.lanes[i].dir);
+        let rel = |ts: Option<u64>| match (ts, first) {
+            (Some(a), Some(b)) => Some(a.saturating_sub(b) as f64 / 1e9),
+            _ => None,
+        };
+        if self.proto == Some(Proto::Apt) {
+            let pi_idx = match self.pairers.iter().position(|(s, _)| *s == stream) {
+                Some(p) => p,
+                None => {
+                    let mut p = AptPairer::new();
+                    p.timeout_ns = self.reply_timeout;
+                    self.pairers.push((stream, p));
+                    self.pairers.len() - 1
+                }
+            };
+            loop {
+                let lane = &mut self.lanes[i];
+                let Some(item) = lane.apt.next_item() else {
+                    break;
+                };
+                let (AptItem::Frame { offset: at, .. } | AptItem::Garbage { offset: at, .. }) =
+                    item;
+                let first_ts = Lane::time_at(&mut lane.times, ts, at);
+                self.n += 1;
+                let n = self.n;
+                match item {
+                    AptItem::Frame {
+                        offset,
+                        bytes,
+                        truncated,
+                    } => {
+                        let Some(f) = AptFrame::decode(t, offset, bytes, truncated) else {
+                            continue;
+                        };
+                        let pinfo = self.pairers[pi_idx].1.observe(t, n, &f, cap_dir, ts);
+                        self.expired.extend(pinfo.expired.iter().map(|u| NoReply {
+                            proto: Proto::Apt,
+                            stream,
+                            n: u.n,
+                            offset: u.offset,
+                            name: u.name,
+                        }));
+                        let (scale, notice) = self.units.observe(stream, &f);
+                        if let Some(nt) = notice {
+                            // Before the frame: what its values are converted with.
+                            emit(&Record::Units(&nt))?;
+                        }
+                        let meta = Meta {
+                            n,
+                            stream,
+                            cap_dir,
+                            ts_ns: ts,
+                            rel_s: rel(ts),
+                        };
+                        emit(&Record::Apt(AptRec {
+                            meta,
+                            frame: &f,
+                            pair: &pinfo,
+                            scale,
+                        }))?;
+                    }
+                    AptItem::Garbage {
+                        offset,
+                        bytes,
+                        kind,
+                    } => {
+                        let meta = Meta {
+                            n,
+                            stream,
+                            cap_dir,
+                            ts_ns: first_ts,
+                            rel_s: rel(first_ts),
+                        };
+                        emit(&Record::Garbage(GarbageRec {
+                            meta,
+                            proto: Proto::Apt,
+                            offset,
+                            bytes,
+                            kind: Some(kind),
+                        }))?;
+                    }
+                }
+                self.emit_expired(emit)?;
+            }
+            return Ok(());
+        }
+        let bus_idx = match self.buses.iter().position(|(s, _)| *s == stream) {
+            Some(b) => b,
+            None => {
+                let mut b = Bus::new();
+                b.timeout_ns = self.reply_timeout;
+                self.buses.push((stream, b));
+                self.buses.len() - 1
+            }
+        };
+        loop {
+            let lane = &mut self.lanes[i];
+            let Some(item) = lane.ell.next_item() else {
+                break;
+            };
+            let (EllItem::Frame { offset: at, .. } | EllItem::Garbage { offset: at, .. }) = item;
+            let first_ts = Lane::time_at(&mut lane.times, ts, at);
+            self.n += 1;
+            let n = self.n;
+            match item {
+                EllItem::Frame {
+                    offset,
+                    bytes,
+                    truncated,
+                } => {
+                    let Some(mut f) = EllFrame::decode(offset, bytes, truncated) else {
+                        continue;
+                    };
+                    let o = self.buses[bus_idx].1.observe(n, &f, ts);
+                    if o.unsolicited {
+                        f.push_diag(Diag {
+                            offset,
+                            kind: DiagKind::Unsolicited,
+                        });
+                    }
+                    self.expired
+                        .extend(o.expired.iter().map(|e| ell_no_reply(stream, e)));
+                    let meta = Meta {
+                        n,
+                        stream,
+                        cap_dir,
+                        ts_ns: ts,
+                        rel_s: rel(ts),
+                    };
+                    emit(&Record::Ell(EllRec {
+                        meta,
+                        frame: &f,
+                        obs: &o,
+                    }))?;
+                }
+                EllItem::Garbage { offset, bytes, .. } => {
+                    let meta = Meta {
+                        n,
+                        stream,
+                        cap_dir,
+                        ts_ns: first_ts,
+                        rel_s: rel(first_ts),
+                    };
+                    emit(&Record::Garbage(GarbageRec {
+                        meta,
+                        proto: Proto::Elliptec,
+                        offset,
+                        bytes,
+                        kind: None,
+                    }))?;
+                }
+            }
+            self.emit_expired(emit)?;
+        }
+        Ok(())
+    }
+}
+
+fn ell_no_reply(stream: u32, e: &Expired) -> NoReply {
+    NoReply {
+        proto: Proto::Elliptec,
+        stream,
+        n: e.n,
+        offset: e.offset,
+        name: e.code,
+    }
+}
+
+fn emit_held<E>(h: &Held, emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>) -> Result<(), E> {
+    match h {
+        Held::Input(d) => emit(&Record::Input(*d)),
+        Held::File { offset, kind, msg } => emit(&Record::FileDiag {
+            offset: *offset,
+            kind,
+            msg,
+        }),
+    }
+}
