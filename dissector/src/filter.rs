@@ -47,7 +47,9 @@ use nom::error::{ErrorKind, ParseError};
 use nom::sequence::pair;
 use nom::{Err as NomErr, IResult};
 use regex::{Regex, RegexBuilder};
-use serde_json::{Map, Value};
+use std::borrow::Cow;
+
+use crate::fields::{Fields, Key, Num, Role, Val, APT, ELL, KEYS, TOP};
 
 /// Deepest nesting of parentheses and `!` accepted (keeps recursion bounded on any input).
 const MAX_DEPTH: usize = 64;
@@ -132,8 +134,9 @@ impl Filter {
         }
     }
 
-    /// Does the decoded record `rec` (one NDJSON object of `decode --json`) pass the filter?
-    pub fn matches(&self, rec: &Value) -> bool {
+    /// Does the record pass the filter? `rec` is a typed [`crate::record::Record`] (or an
+    /// [`crate::fields::InFile`]), or one NDJSON object of `decode --json`: both read alike.
+    pub fn matches<F: Fields + ?Sized>(&self, rec: &F) -> bool {
         self.expr.eval(rec)
     }
 
@@ -230,11 +233,15 @@ enum Op {
     In,
 }
 
-/// A field reference resolved to a JSON path.
+/// A field reference resolved, once, to a record key and the path below it.
 #[derive(Clone, Debug)]
 struct FieldRef {
     proto: Option<&'static str>,
-    path: Vec<String>,
+    key: Key,
+    rest: Vec<String>,
+    /// `apt.X` where `X` is a record key and a field name too: `fields.X` (this path) is read
+    /// when the record has no key `X`.
+    fallback: Option<Vec<String>>,
     /// `ts`: `ts_ns` converted to seconds.
     ts_seconds: bool,
     /// Nanoseconds per unit of the field's value, for comparisons with durations.
@@ -243,8 +250,6 @@ struct FieldRef {
     dir_like: bool,
     /// Text compares with case (`cmd`).
     case_sensitive: bool,
-    /// Prefixed by a protocol: a name that is not a record key is looked up in `fields`.
-    fields_fallback: bool,
 }
 
 #[derive(Clone, Debug)]
@@ -270,106 +275,80 @@ impl Lit {
     }
 }
 
-/// A number: integers stay exact.
-#[derive(Clone, Copy, Debug)]
-enum N {
-    I(i128),
-    F(f64),
-}
+type N = Num;
 
-impl N {
-    fn f(self) -> f64 {
-        match self {
-            N::I(i) => i as f64,
-            N::F(f) => f,
-        }
-    }
-    fn cmp(self, o: N) -> Option<Ordering> {
-        match (self, o) {
-            (N::I(a), N::I(b)) => Some(a.cmp(&b)),
-            _ => self.f().partial_cmp(&o.f()),
-        }
-    }
-    fn of_json(n: &serde_json::Number) -> Option<N> {
-        if let Some(i) = n.as_i64() {
-            Some(N::I(i128::from(i)))
-        } else if let Some(u) = n.as_u64() {
-            Some(N::I(i128::from(u)))
-        } else {
-            n.as_f64().map(N::F)
-        }
-    }
-    fn text(self) -> String {
-        match self {
-            N::I(i) => i.to_string(),
-            N::F(f) => f.to_string(),
-        }
+fn num_cmp(a: N, b: N) -> Option<Ordering> {
+    match (a, b) {
+        (N::I(a), N::I(b)) => Some(a.cmp(&b)),
+        _ => a.f().partial_cmp(&b.f()),
     }
 }
 
-/// One value found at a field's path.
+fn num_text(n: N) -> String {
+    match n {
+        N::I(i) => i.to_string(),
+        N::F(f) => f.to_string(),
+    }
+}
+
+/// A value as a comparison sees it: an object stands for one of its members.
 #[derive(Clone, Copy, Debug)]
-enum Val<'a> {
+enum Scalar<'a> {
     Num(N),
     Str(&'a str),
     Bool(bool),
-    Obj(&'a Map<String, Value>),
 }
 
-impl<'a> Val<'a> {
-    fn of(v: &'a Value) -> Option<Val<'a>> {
-        match v {
-            Value::Null | Value::Array(_) => None,
-            Value::Bool(b) => Some(Val::Bool(*b)),
-            Value::Number(n) => N::of_json(n).map(Val::Num),
-            Value::String(s) => Some(Val::Str(s)),
-            Value::Object(m) => Some(Val::Obj(m)),
-        }
-    }
-    fn truthy(self) -> bool {
-        match self {
-            Val::Num(_) => true,
-            Val::Str(s) => !s.is_empty(),
-            Val::Bool(b) => b,
-            Val::Obj(m) => !m.is_empty(),
-        }
-    }
-    /// An object stands for one of its members: addresses by `name`/`addr`, sub-messages by
-    /// `name`/`id`, modules by `model`, diagnostics by `kind`, physical values by `value`.
-    fn coerce(self, numeric: bool) -> Option<Val<'a>> {
-        let Val::Obj(m) = self else { return Some(self) };
-        let keys: &[&str] = if numeric {
-            &["addr", "id", "value"]
-        } else {
-            &["name", "model", "kind"]
-        };
-        keys.iter()
-            .filter_map(|k| m.get(*k).and_then(Val::of))
-            .find(|v| matches!((v, numeric), (Val::Num(_), true) | (Val::Str(_), false)))
-    }
-    fn text(self) -> Option<String> {
-        match self.coerce(false)? {
-            Val::Num(n) => Some(n.text()),
-            Val::Str(s) => Some(s.to_string()),
-            Val::Bool(b) => Some(b.to_string()),
-            Val::Obj(_) => None,
-        }
+fn truthy(v: &Val<'_>) -> bool {
+    match v {
+        Val::Num(_) => true,
+        Val::Str(s) => !s.is_empty(),
+        Val::Bool(b) => *b,
+        Val::Obj(o) => o.nonempty,
     }
 }
 
-fn proto_is(rec: &Value, p: Option<&str>) -> bool {
+/// An object stands for one of its members: addresses by `name`/`addr`, sub-messages by
+/// `name`/`id`, modules by `model`, diagnostics by `kind`, physical values by `value`.
+fn coerce<'a>(v: &'a Val<'_>, numeric: bool) -> Option<Scalar<'a>> {
+    match v {
+        Val::Num(n) => Some(Scalar::Num(*n)),
+        Val::Str(s) => Some(Scalar::Str(s)),
+        Val::Bool(b) => Some(Scalar::Bool(*b)),
+        Val::Obj(o) if numeric => o.num.map(Scalar::Num),
+        Val::Obj(o) => o.text.as_deref().map(Scalar::Str),
+    }
+}
+
+fn text_of_val<'a>(v: &'a Val<'_>) -> Option<Cow<'a, str>> {
+    Some(match coerce(v, false)? {
+        Scalar::Num(n) => Cow::Owned(num_text(n)),
+        Scalar::Str(s) => Cow::Borrowed(s),
+        Scalar::Bool(b) => Cow::Borrowed(if b { "true" } else { "false" }),
+    })
+}
+
+fn proto_is<F: Fields + ?Sized>(rec: &F, p: Option<&str>) -> bool {
     match p {
         None => true,
-        Some(p) => rec.get("proto").and_then(Value::as_str) == Some(p),
+        Some(p) => rec.proto() == Some(p),
     }
 }
 
-fn diag_kinds(rec: &Value) -> impl Iterator<Item = &str> {
-    rec.get("diag")
-        .and_then(Value::as_array)
-        .into_iter()
-        .flatten()
-        .filter_map(|d| d.get("kind").and_then(Value::as_str))
+/// Does any value at `key`/`rest` satisfy `pred`?
+fn any_at<F: Fields + ?Sized>(
+    rec: &F,
+    key: Key,
+    rest: &[String],
+    pred: &mut dyn FnMut(&Val<'_>, Role) -> bool,
+) -> bool {
+    let mut hit = false;
+    rec.visit(key, rest, &mut |v, r| {
+        if !hit && pred(&v, r) {
+            hit = true;
+        }
+    });
+    hit
 }
 
 impl Expr {
@@ -396,17 +375,20 @@ impl Expr {
         if f.proto.is_some() {
             out.push("proto");
         }
-        if f.ts_seconds {
-            return out.push("ts_ns");
+        out.push(f.key.json_name());
+        if f.key == Key::Fields && f.rest.len() == 1 {
+            // `codes.X` is read beside `fields.X`.
+            out.push("codes");
         }
-        let first = f.path.first().map_or("", String::as_str);
-        out.push(first);
-        if f.fields_fallback {
-            fallback.push(first);
+        if let Some(p) = &f.fallback {
+            fallback.push(p[0].as_str());
+            if p.len() == 1 {
+                fallback.push("codes");
+            }
         }
     }
 
-    fn eval(&self, rec: &Value) -> bool {
+    fn eval<F: Fields + ?Sized>(&self, rec: &F) -> bool {
         match self {
             Expr::All => true,
             Expr::Or(xs) => xs.iter().any(|x| x.eval(rec)),
@@ -417,137 +399,135 @@ impl Expr {
     }
 }
 
+/// `diag.kind`, read by `unpaired`.
+fn kind_path() -> &'static [String] {
+    use std::sync::OnceLock;
+    static P: OnceLock<Vec<String>> = OnceLock::new();
+    P.get_or_init(|| vec!["kind".to_string()])
+}
+
 impl Test {
-    fn eval(&self, rec: &Value) -> bool {
+    fn eval<F: Fields + ?Sized>(&self, rec: &F) -> bool {
         match self {
             Test::Proto(p) => proto_is(rec, Some(p)),
             Test::Diag(p) => {
                 proto_is(rec, *p)
-                    && (rec
-                        .get("diag")
-                        .and_then(Value::as_array)
-                        .is_some_and(|d| !d.is_empty())
-                        || matches!(
-                            rec.get("type").and_then(Value::as_str),
-                            Some("input" | "diag" | "garbage")
-                        ))
+                    && (any_at(rec, Key::Diag, &[], &mut |_, _| true)
+                        || any_at(rec, Key::Type, &[], &mut |v, _| {
+                            matches!(v, Val::Str(s) if matches!(s.as_ref(), "input" | "diag" | "garbage"))
+                        }))
             }
             Test::Unpaired(p) => {
                 proto_is(rec, *p)
-                    && (rec.get("unpaired").and_then(Value::as_bool) == Some(true)
-                        || diag_kinds(rec)
-                            .any(|k| matches!(k, "no_reply" | "unsolicited" | "unanswered")))
+                    && (any_at(rec, Key::Unpaired, &[], &mut |v, _| {
+                        matches!(v, Val::Bool(true))
+                    }) || any_at(rec, Key::Diag, kind_path(), &mut |v, _| {
+                        matches!(v, Val::Str(s) if matches!(s.as_ref(), "no_reply" | "unsolicited" | "unanswered"))
+                    }))
             }
-            Test::Paired(p) => proto_is(rec, *p) && rec.get("pair").is_some_and(|v| !v.is_null()),
-            Test::Exists(f) => f
-                .values(rec)
-                .is_some_and(|vs| vs.iter().any(|(v, _)| v.truthy())),
-            Test::Cmp(f, op, lit) => {
-                let Some(vs) = f.values(rec) else {
-                    return false;
-                };
-                match op {
-                    CmpOp::Eq => vs
-                        .iter()
-                        .any(|(v, _)| f.compare(*v, lit, true) == Some(Ordering::Equal)),
-                    CmpOp::Ne => {
-                        let mut comparable = false;
-                        for (v, _) in &vs {
-                            match f.compare(*v, lit, true) {
-                                Some(Ordering::Equal) => return false,
-                                Some(_) => comparable = true,
-                                None => {}
-                            }
-                        }
-                        comparable
-                    }
-                    _ => vs.iter().any(|(v, _)| {
-                        f.compare(*v, lit, false).is_some_and(|o| match op {
-                            CmpOp::Lt => o == Ordering::Less,
-                            CmpOp::Le => o != Ordering::Greater,
-                            CmpOp::Gt => o == Ordering::Greater,
-                            _ => o != Ordering::Less,
-                        })
-                    }),
+            Test::Paired(p) => proto_is(rec, *p) && any_at(rec, Key::Pair, &[], &mut |_, _| true),
+            Test::Exists(f) => f.any(rec, &mut |v, r| r != Role::Code && truthy(v)),
+            Test::Cmp(f, op, lit) => match op {
+                CmpOp::Eq => f.any(rec, &mut |v, _| {
+                    f.compare(v, lit, true) == Some(Ordering::Equal)
+                }),
+                CmpOp::Ne => {
+                    // True when some value compares and none is equal.
+                    let (mut comparable, mut equal) = (false, false);
+                    f.each(rec, &mut |v, _| match f.compare(&v, lit, true) {
+                        Some(Ordering::Equal) => equal = true,
+                        Some(_) => comparable = true,
+                        None => {}
+                    });
+                    comparable && !equal
                 }
-            }
-            Test::Contains(f, lit) => f.values(rec).is_some_and(|vs| {
-                vs.iter().any(|(v, member)| {
-                    if *member {
-                        f.compare(*v, lit, true) == Some(Ordering::Equal)
-                    } else if let Some(Val::Str(s)) = v.coerce(false) {
+                _ => f.any(rec, &mut |v, _| {
+                    f.compare(v, lit, false).is_some_and(|o| match op {
+                        CmpOp::Lt => o == Ordering::Less,
+                        CmpOp::Le => o != Ordering::Greater,
+                        CmpOp::Gt => o == Ordering::Greater,
+                        _ => o != Ordering::Less,
+                    })
+                }),
+            },
+            Test::Contains(f, lit) => f.any(rec, &mut |v, role| match role {
+                Role::Member => f.compare(v, lit, true) == Some(Ordering::Equal),
+                Role::Code => false,
+                Role::Plain => match coerce(v, false) {
+                    Some(Scalar::Str(s)) => {
                         if f.case_sensitive {
                             s.contains(lit.text.as_str())
                         } else {
                             s.to_ascii_lowercase()
                                 .contains(&lit.text.to_ascii_lowercase())
                         }
-                    } else {
-                        false
                     }
-                })
+                    _ => false,
+                },
             }),
-            Test::Matches(f, re) => f.values(rec).is_some_and(|vs| {
-                vs.iter()
-                    .any(|(v, _)| v.text().is_some_and(|t| re.is_match(&t)))
+            Test::Matches(f, re) => f.any(rec, &mut |v, role| {
+                role != Role::Code && text_of_val(v).is_some_and(|t| re.is_match(&t))
             }),
-            Test::In(f, set) => f.values(rec).is_some_and(|vs| {
-                vs.iter().any(|(v, _)| {
-                    set.iter()
-                        .any(|lit| f.compare(*v, lit, true) == Some(Ordering::Equal))
-                })
+            Test::In(f, set) => f.any(rec, &mut |v, _| {
+                set.iter()
+                    .any(|lit| f.compare(v, lit, true) == Some(Ordering::Equal))
             }),
         }
     }
 }
 
 impl FieldRef {
-    /// The values at this field's path (lists flattened; `true` for list elements), or `None`
-    /// when the record is of another protocol.
-    fn values<'a>(&self, rec: &'a Value) -> Option<Vec<(Val<'a>, bool)>> {
+    /// Pass each value at this field to `g` (nothing when the record is of another protocol).
+    fn each<F: Fields + ?Sized>(&self, rec: &F, g: &mut dyn FnMut(Val<'_>, Role)) {
         if !proto_is(rec, self.proto) {
-            return None;
+            return;
         }
-        let mut out = Vec::new();
         if self.ts_seconds {
-            if let Some(ns) = rec.get("ts_ns").and_then(Value::as_f64) {
-                out.push((Val::Num(N::F(ns / 1e9)), false));
-            }
-            return Some(out);
-        }
-        collect(rec, &self.path, false, &mut out);
-        if out.is_empty() && self.fields_fallback {
-            let first = self.path.first().map(String::as_str).unwrap_or("");
-            if rec.get(first).is_none() {
-                if let Some(fields) = rec.get("fields") {
-                    collect(fields, &self.path, false, &mut out);
+            rec.visit(Key::TsNs, &[], &mut |v, _| {
+                if let Val::Num(n) = v {
+                    g(Val::Num(N::F(n.f() / 1e9)), Role::Plain);
                 }
-            }
+            });
+            return;
         }
-        Some(out)
+        let present = rec.visit(self.key, &self.rest, g);
+        if let (false, Some(p)) = (present, &self.fallback) {
+            rec.visit(Key::Fields, p, g);
+        }
+    }
+
+    /// Does any value at this field satisfy `pred`?
+    fn any<F: Fields + ?Sized>(&self, rec: &F, pred: &mut dyn FnMut(&Val<'_>, Role) -> bool) -> bool {
+        let mut hit = false;
+        self.each(rec, &mut |v, r| {
+            if !hit && pred(&v, r) {
+                hit = true;
+            }
+        });
+        hit
     }
 
     /// Compares one value with a literal; `None` when the types do not compare.
     /// `equality`: text ignores case (unless the field is case-sensitive).
-    fn compare(&self, v: Val<'_>, lit: &Lit, equality: bool) -> Option<Ordering> {
-        let v = v.coerce(lit.numeric())?;
+    fn compare(&self, v: &Val<'_>, lit: &Lit, equality: bool) -> Option<Ordering> {
+        let v = coerce(v, lit.numeric())?;
         let fold = equality && !self.case_sensitive;
         match (v, lit.kind) {
-            (Val::Num(a), LitKind::Num(b)) => a.cmp(b),
-            (Val::Num(a), LitKind::Dur(ns)) => {
+            (Scalar::Num(a), LitKind::Num(b)) => num_cmp(a, b),
+            (Scalar::Num(a), LitKind::Dur(ns)) => {
                 let unit = self.unit_ns?;
                 a.f().partial_cmp(&(ns / unit))
             }
-            (Val::Str(s), LitKind::Num(b)) => match parse_num(s) {
-                Some(a) => a.cmp(b),
+            (Scalar::Str(s), LitKind::Num(b)) => match parse_num(s) {
+                Some(a) => num_cmp(a, b),
                 None if equality => Some(text_cmp(s, &lit.text, fold)),
                 None => None,
             },
-            (Val::Str(s), LitKind::Str | LitKind::Word | LitKind::Bool(_)) => {
+            (Scalar::Str(s), LitKind::Str | LitKind::Word | LitKind::Bool(_)) => {
                 Some(text_cmp(s, &lit.text, fold))
             }
-            (Val::Bool(a), LitKind::Bool(b)) => Some(a.cmp(&b)),
-            (Val::Bool(a), LitKind::Str | LitKind::Word) => {
+            (Scalar::Bool(a), LitKind::Bool(b)) => Some(a.cmp(&b)),
+            (Scalar::Bool(a), LitKind::Str | LitKind::Word) => {
                 match lit.text.to_ascii_lowercase().as_str() {
                     "true" => Some(a.cmp(&true)),
                     "false" => Some(a.cmp(&false)),
@@ -556,27 +536,6 @@ impl FieldRef {
             }
             _ => None,
         }
-    }
-}
-
-fn collect<'a>(v: &'a Value, path: &[String], member: bool, out: &mut Vec<(Val<'a>, bool)>) {
-    match (v, path.split_first()) {
-        (Value::Array(items), _) => {
-            for it in items {
-                collect(it, path, member || path.is_empty(), out);
-            }
-        }
-        (_, None) => {
-            if let Some(x) = Val::of(v) {
-                out.push((x, member));
-            }
-        }
-        (Value::Object(m), Some((first, rest))) => {
-            if let Some(next) = m.get(first) {
-                collect(next, rest, false, out);
-            }
-        }
-        _ => {}
     }
 }
 
@@ -598,95 +557,20 @@ fn parse_num(s: &str) -> Option<N> {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Field names.
+// Field names: the keys come from [`crate::fields::KEYS`], the field names from the tables.
 
 /// Names usable without a protocol prefix.
-const TOP_LEVEL: &[&str] = &[
-    "file",
-    "dir",
-    "n",
-    "offset",
-    "len",
-    "raw",
-    "ts",
-    "ts_ns",
-    "stream",
-    "latency",
-    "latency_ms",
-    "pair",
-    "interim",
-    "proto",
-    "type",
-    "ref",
-    "diag",
-    "unpaired",
-    "paired",
-];
+fn top_level() -> impl Iterator<Item = &'static str> + Clone {
+    KEYS.iter().filter(|d| d.scope & TOP != 0).map(|d| d.name)
+}
 
-/// Record keys of APT records (frames, garbage, late diagnostics), with the filter's aliases.
-const APT_KEYS: &[&str] = &[
-    "n",
-    "proto",
-    "type",
-    "offset",
-    "len",
-    "raw",
-    "msgid",
-    "msgid_hex",
-    "name",
-    "msg_dir",
-    "src",
-    "dst",
-    "data_flag",
-    "data_len",
-    "form_note",
-    "channel",
-    "chan",
-    "sub",
-    "fields",
-    "phys",
-    "pair",
-    "latency",
-    "latency_ms",
-    "pair_other_address",
-    "diag",
-    "dir",
-    "ts",
-    "ts_ns",
-    "stream",
-    "ref",
-    "unpaired",
-    "paired",
-];
-
-/// Record keys of Elliptec records, with the filter's aliases.
-const ELL_KEYS: &[&str] = &[
-    "n",
-    "proto",
-    "type",
-    "offset",
-    "len",
-    "raw",
-    "text",
-    "addr",
-    "dir",
-    "cmd",
-    "name",
-    "fields",
-    "phys",
-    "module",
-    "pair",
-    "latency",
-    "latency_ms",
-    "interim",
-    "diag",
-    "ts",
-    "ts_ns",
-    "stream",
-    "ref",
-    "unpaired",
-    "paired",
-];
+fn scope_of(proto: &str) -> u8 {
+    if proto == "ell" {
+        ELL
+    } else {
+        APT
+    }
+}
 
 /// The field names a protocol's records can hold in `fields` (from the message tables, plus
 /// the keys the NDJSON derives beside a field).
@@ -738,18 +622,20 @@ fn field_names(proto: &str) -> &'static [&'static str] {
     }
 }
 
+
 /// Check that `rest` (the name after `apt.`/`ell.`) names something records of `proto` hold;
 /// if not, say so with the nearest names.
 fn check_name(proto: &str, rest: &[&str]) -> Result<(), String> {
-    let keys = if proto == "ell" { ELL_KEYS } else { APT_KEYS };
+    let scope = scope_of(proto);
+    let keys = || KEYS.iter().filter(move |d| d.scope & scope != 0).map(|d| d.name);
     let fields = field_names(proto);
     let first = rest.first().copied().unwrap_or("");
     let (ok, bad, cands): (bool, &str, Vec<&str>) = match (first, rest.get(1)) {
-        ("fields" | "phys", Some(f)) => (fields.contains(f), f, fields.to_vec()),
+        ("fields" | "phys" | "codes", Some(f)) => (fields.contains(f), f, fields.to_vec()),
         _ => (
-            keys.contains(&first) || fields.contains(&first),
+            Key::lookup(first, scope).is_some() || fields.contains(&first),
             first,
-            keys.iter().chain(fields.iter()).copied().collect(),
+            keys().chain(fields.iter().copied()).collect(),
         ),
     };
     if ok {
@@ -761,7 +647,7 @@ fn check_name(proto: &str, rest: &[&str]) -> Result<(), String> {
         format!("unknown field `{name}`: no {proto} record has `{bad}`")
     } else {
         let prefix = match (first, rest.get(1)) {
-            ("fields" | "phys", Some(_)) => format!("{proto}.{first}."),
+            ("fields" | "phys" | "codes", Some(_)) => format!("{proto}.{first}."),
             _ => format!("{proto}."),
         };
         let list: Vec<String> = near.iter().map(|n| format!("`{prefix}{n}`")).collect();
@@ -784,7 +670,8 @@ fn resolve(segs: &[&str]) -> Result<Ref, String> {
     let Some(first) = rest.first() else {
         return Ok(Ref::Proto(proto.unwrap_or("apt")));
     };
-    if proto.is_none() && !TOP_LEVEL.contains(first) {
+    let top = Key::lookup(first, TOP).filter(|_| proto.is_none());
+    if proto.is_none() && top.is_none() {
         let name = segs.join(".");
         // Suggest only names that exist: a protocol field of that name, or a record key.
         let mut near: Vec<String> = vec![];
@@ -794,7 +681,7 @@ fn resolve(segs: &[&str]) -> Result<Ref, String> {
             }
         }
         let last = rest.last().copied().unwrap_or(first);
-        for t in crate::suggest::nearest(last, TOP_LEVEL.iter().copied(), 3) {
+        for t in crate::suggest::nearest(last, top_level(), 3) {
             near.push(format!("`{t}`"));
         }
         return Err(if near.is_empty() {
@@ -806,39 +693,42 @@ fn resolve(segs: &[&str]) -> Result<Ref, String> {
             )
         });
     }
-    if let Some(p) = proto {
-        check_name(p, rest)?;
-    }
-    let mut path: Vec<String> = rest.iter().map(|s| s.to_string()).collect();
+    let owned = |s: &[&str]| s.iter().map(|x| x.to_string()).collect::<Vec<String>>();
+    let (key, path, fallback) = match proto {
+        None => (top.map_or(Key::Fields, |d| d.key), owned(&rest[1..]), None),
+        Some(p) => {
+            check_name(p, rest)?;
+            let is_field = field_names(p).contains(first);
+            match Key::lookup(first, scope_of(p)) {
+                Some(d) => (d.key, owned(&rest[1..]), is_field.then(|| owned(rest))),
+                // A field name alone: `apt.position` is `apt.fields.position`.
+                None => (Key::Fields, owned(rest), None),
+            }
+        }
+    };
     let mut ts_seconds = false;
     let mut unit_ns = None;
     if rest.len() == 1 {
         match *first {
             "ts" => {
-                path = vec!["ts_ns".to_string()];
                 ts_seconds = true;
                 unit_ns = Some(1e9);
             }
             "ts_ns" => unit_ns = Some(1.0),
-            "latency" | "latency_ms" => {
-                path = vec!["latency_ms".to_string()];
-                unit_ns = Some(1e6);
-            }
+            "latency" | "latency_ms" => unit_ns = Some(1e6),
             _ => {}
         }
-    }
-    if *first == "chan" {
-        path[0] = "channel".to_string();
     }
     let last = rest.last().copied().unwrap_or("");
     Ok(Ref::Field(FieldRef {
         proto,
-        path,
+        key,
+        rest: path,
+        fallback,
         ts_seconds,
         unit_ns,
         dir_like: matches!(last, "dir" | "msg_dir"),
         case_sensitive: last == "cmd",
-        fields_fallback: proto.is_some(),
     }))
 }
 
@@ -1175,10 +1065,10 @@ fn regex_msg(e: &regex::Error) -> String {
 fn bare(r: Ref) -> Test {
     match r {
         Ref::Proto(p) => Test::Proto(p),
-        Ref::Field(f) if f.path.len() == 1 && !f.ts_seconds => match f.path[0].as_str() {
-            "diag" => Test::Diag(f.proto),
-            "unpaired" => Test::Unpaired(f.proto),
-            "paired" => Test::Paired(f.proto),
+        Ref::Field(f) if f.rest.is_empty() && !f.ts_seconds => match f.key {
+            Key::Diag => Test::Diag(f.proto),
+            Key::Unpaired => Test::Unpaired(f.proto),
+            Key::Paired => Test::Paired(f.proto),
             _ => Test::Exists(f),
         },
         Ref::Field(f) => Test::Exists(f),
@@ -1363,7 +1253,7 @@ fn word_lit(i: &str) -> Res<'_, Lit> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use serde_json::json;
+    use serde_json::{json, Value};
 
     /// `aptscope decode --json samples/kdc101-session.pcapng`
     const KDC101: &str = r##"{"type":"stream","stream":0,"stream_name":"/dev/ttyUSB0","settings":"115200 8N1 RTS/CTS"}

@@ -252,7 +252,7 @@ pub fn apt_frame_in(
         out.push('}');
     }
     out.push_str(",\"fields\":{");
-    let mut phys = String::new();
+    let (mut phys, mut codes) = (String::new(), String::new());
     for (i, (fd, v)) in f.fields().enumerate() {
         if i > 0 {
             out.push(',');
@@ -260,13 +260,14 @@ pub fn apt_frame_in(
         string(out, fd.name);
         out.push(':');
         value(out, f.table(), fd, &v);
-        // The device's or stage's conversion when it applies (piezo % in V or µm, motion
-        // values in mm), else the table's fixed scale.
-        let conv = crate::apt::phys(fd, &v, scale).or_else(|| {
-            let (s, x) = fd.scale.zip(v.as_f64())?;
-            Some((x * s, fd.unit.unwrap_or("")))
-        });
-        if let Some((x, unit)) = conv {
+        if let Some(c) = crate::fields::apt_code(fd, &v) {
+            if !codes.is_empty() {
+                codes.push(',');
+            }
+            string(&mut codes, fd.name);
+            let _ = write!(codes, ":{c}");
+        }
+        if let Some((x, unit)) = apt_phys(fd, &v, scale) {
             if !phys.is_empty() {
                 phys.push(',');
             }
@@ -279,11 +280,8 @@ pub fn apt_frame_in(
         }
     }
     out.push('}');
-    if !phys.is_empty() {
-        out.push_str(",\"phys\":{");
-        out.push_str(&phys);
-        out.push('}');
-    }
+    close_map(out, "phys", &phys);
+    close_map(out, "codes", &codes);
     if let Some(x) = p.pair {
         out.push_str(",\"pair\":");
         uint(out, x);
@@ -295,6 +293,28 @@ pub fn apt_frame_in(
     if p.other_address {
         out.push_str(",\"pair_other_address\":true");
     }
+    out.push_str(",\"diag\":");
+    diags(out, apt_diags(f, p));
+    out.push('}');
+}
+
+/// `,"key":{members}` when there are members.
+fn close_map(out: &mut String, key: &str, members: &str) {
+    if !members.is_empty() {
+        out.push_str(",\"");
+        out.push_str(key);
+        out.push_str("\":{");
+        out.push_str(members);
+        out.push('}');
+    }
+}
+
+/// The diagnostics of an APT frame: the decoder's, then pairing's (`unsolicited`,
+/// `duplicate_reply`, `not_for_model`).
+pub fn apt_diags<'x>(
+    f: &'x AptFrame<'_, '_>,
+    p: &'x crate::pair::PairInfo,
+) -> impl Iterator<Item = Diag> + 'x {
     let extra = [
         p.unsolicited.then_some(DiagKind::Unsolicited),
         p.pair
@@ -302,13 +322,24 @@ pub fn apt_frame_in(
             .map(|request| DiagKind::DuplicateReply { request }),
         p.not_for_model.map(|model| DiagKind::NotForModel { model }),
     ];
-    let extra = extra.into_iter().flatten().map(|kind| Diag {
+    let extra = extra.into_iter().flatten().map(move |kind| Diag {
         offset: f.offset,
         kind,
     });
-    out.push_str(",\"diag\":");
-    diags(out, f.diags().chain(extra));
-    out.push('}');
+    f.diags().chain(extra)
+}
+
+/// A field's physical value and unit (`phys`): the device's or stage's conversion when it
+/// applies (piezo % in V or µm, motion values in mm), else the table's fixed scale.
+pub fn apt_phys<'s>(
+    fd: &Field,
+    v: &Value<'_>,
+    scale: Option<&'s crate::units::Scale>,
+) -> Option<(f64, &'s str)> {
+    crate::apt::phys(fd, v, scale).or_else(|| {
+        let (s, x) = fd.scale.zip(v.as_f64())?;
+        Some((x * s, fd.unit.unwrap_or("")))
+    })
 }
 
 /// Append the JSON object of a units notice: what converts a device's motion values from now
@@ -541,7 +572,7 @@ pub fn ell_frame(
     }
     let scale = o.module.as_ref().and_then(|m| m.scale());
     out.push_str(",\"fields\":{");
-    let mut phys = String::new();
+    let (mut phys, mut codes) = (String::new(), String::new());
     for (i, (fd, v)) in f.fields().enumerate() {
         if i > 0 {
             out.push(',');
@@ -587,6 +618,13 @@ pub fn ell_frame(
             let thread = if x & 0x80 != 0 { "imperial" } else { "metric" };
             let _ = write!(out, ",\"thread\":\"{thread}\",\"hw_release\":{}", x & 0x7F);
         }
+        if let Some(c) = crate::fields::ell_code(fd, &v) {
+            if !codes.is_empty() {
+                codes.push(',');
+            }
+            string(&mut codes, fd.name);
+            let _ = write!(codes, ":{c}");
+        }
         if let (Kind::Position, EllValue::I(p), Some((ppu, unit))) = (fd.kind, v, scale) {
             if ppu > 0.0 {
                 if !phys.is_empty() {
@@ -600,11 +638,8 @@ pub fn ell_frame(
         }
     }
     out.push('}');
-    if !phys.is_empty() {
-        out.push_str(",\"phys\":{");
-        out.push_str(&phys);
-        out.push('}');
-    }
+    close_map(out, "phys", &phys);
+    close_map(out, "codes", &codes);
     if let Some(m) = &o.module {
         out.push_str(",\"module\":{\"first_addr\":");
         uint(out, m.first_addr as u64);

@@ -11,6 +11,7 @@ pub mod apt;
 pub mod detect;
 pub mod diag;
 pub mod ell;
+pub mod fields;
 pub mod filter;
 pub mod hex;
 pub mod json;

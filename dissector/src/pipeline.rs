@@ -3,6 +3,8 @@
 
 use crate::detect::Proto;
 use crate::diag::Diag;
+use crate::fields::InFile;
+use crate::filter::Filter;
 use crate::record::{Decoder, Record};
 use crate::table::Dir;
 use crate::units::UnitsOpts;
@@ -33,13 +35,15 @@ pub struct Renderer {
     fmt: Format,
     line: String,
     jline: String,
-    filter: Option<RecordFilter>,
-    /// `{"file":NAME,` when records name their input (several inputs), else empty.
+    filter: Option<Filter>,
+    /// The input's name when records name it (several inputs).
+    file: Option<String>,
+    /// `{"file":NAME,` when records name their input, else empty.
     file_prefix: String,
+    /// Streams seen (announced or carrying records): the timeline names a record's stream
+    /// once there are two.
+    streams: Vec<u32>,
 }
-
-/// Decides, from its NDJSON object, whether a record is emitted.
-type RecordFilter = Box<dyn FnMut(&serde_json::Value) -> bool>;
 
 impl Pipeline {
     /// A pipeline for `proto`, or auto-detection from the first 4 KiB when `None`.
@@ -61,6 +65,7 @@ impl Pipeline {
     /// Name the input in every NDJSON record (`"file": name`, first key), for runs over several
     /// files: numbers, offsets and pairs count within a file.
     pub fn set_file(&mut self, name: &str) {
+        self.r.file = Some(name.to_string());
         let p = &mut self.r.file_prefix;
         p.clear();
         p.push_str("{\"file\":");
@@ -73,10 +78,11 @@ impl Pipeline {
         self.dec.set_reply_timeout(ns);
     }
 
-    /// Emit only the records `keep` accepts (it sees each record as its NDJSON object, whatever
-    /// the output format). Records are still numbered, so a kept record keeps its number.
-    pub fn set_filter(&mut self, keep: impl FnMut(&serde_json::Value) -> bool + 'static) {
-        self.r.filter = Some(Box::new(keep));
+    /// Emit only the frames, garbage and no-reply records `filter` accepts (read from the typed
+    /// records; only what is emitted is rendered). Records are still numbered, so a kept record
+    /// keeps its number. Detection, stream, input and units records always pass.
+    pub fn set_filter(&mut self, filter: Filter) {
+        self.r.filter = Some(filter);
     }
 
     /// The protocol in use (after detection).
@@ -182,8 +188,28 @@ impl Renderer {
             line: String::with_capacity(512),
             jline: String::with_capacity(512),
             filter: None,
+            file: None,
             file_prefix: String::new(),
+            streams: vec![],
         }
+    }
+
+    /// Whether a record passes the filter (every record when there is none).
+    fn keep(&self, rec: &Record<'_>) -> bool {
+        self.filter.as_ref().is_none_or(|f| {
+            f.matches(&InFile {
+                file: self.file.as_deref(),
+                rec,
+            })
+        })
+    }
+
+    /// Note a stream; true when the timeline should name streams (two or more seen).
+    fn saw_stream(&mut self, id: u32) -> bool {
+        if !self.streams.contains(&id) {
+            self.streams.push(id);
+        }
+        self.streams.len() > 1
     }
 
     /// The line of one record, as [`Pipeline`] would emit it (file name and filter aside).
@@ -211,8 +237,19 @@ impl Renderer {
         rec: &Record<'_>,
         emit: &mut impl FnMut(&str) -> Result<(), E>,
     ) -> Result<(), E> {
-        let want_json = self.fmt == Format::Json || self.filter.is_some();
+        if let Some(m) = rec.meta() {
+            self.saw_stream(m.stream);
+        }
+        if matches!(
+            rec,
+            Record::Apt(_) | Record::Ell(_) | Record::Garbage(_) | Record::NoReply(_)
+        ) && !self.keep(rec)
+        {
+            return Ok(());
+        }
+        let want_json = self.fmt == Format::Json;
         let want_text = self.fmt == Format::Text;
+        let stream_col = self.streams.len() > 1;
         self.line.clear();
         self.jline.clear();
         let (line, jline) = (&mut self.line, &mut self.jline);
@@ -251,6 +288,9 @@ impl Renderer {
                 return self.emit_plain(emit);
             }
             Record::Stream { id, name, settings } => {
+                if !self.streams.contains(id) {
+                    self.streams.push(*id);
+                }
                 match self.fmt {
                     Format::Json => {
                         let _ = write!(
@@ -300,19 +340,19 @@ impl Renderer {
                 return self.emit_plain(emit);
             }
             Record::Units(nt) => {
-                // Not tagged with the file, as before; not filtered: it explains what follows.
+                // Not filtered: it explains what follows.
                 match self.fmt {
                     Format::Json => json::units_notice(line, nt),
                     Format::Text => text::units_notice_line(line, nt),
                 }
-                return emit(line);
+                return self.emit_plain(emit);
             }
             Record::Apt(a) => {
                 let m = &a.meta;
                 if want_json {
                     json::apt_frame_in(jline, m.n, a.frame, a.pair, a.scale);
                     let dir = a.dir().map_or("unknown", |d| d.as_str());
-                    close_json(jline, m.ts_ns, m.stream, Some(dir));
+                    close_json(jline, m, Some(dir));
                 }
                 if want_text {
                     text::apt_line_in(line, m.n, a.frame, m.rel_s, a.scale);
@@ -323,7 +363,7 @@ impl Renderer {
                 let m = &e.meta;
                 if want_json {
                     json::ell_frame(jline, m.n, e.frame, e.obs);
-                    close_json(jline, m.ts_ns, m.stream, None);
+                    close_json(jline, m, None);
                 }
                 if want_text {
                     text::ell_line(line, m.n, e.frame, e.obs, m.rel_s);
@@ -336,7 +376,7 @@ impl Renderer {
                         if want_json {
                             json::apt_garbage(jline, m.n, g.offset, g.bytes, kind);
                             let dir = m.cap_dir.map_or("unknown", |d| d.as_str());
-                            close_json(jline, m.ts_ns, m.stream, Some(dir));
+                            close_json(jline, m, Some(dir));
                         }
                         if want_text {
                             text::garbage_line(line, m.n, g.offset, g.bytes, kind, m.rel_s);
@@ -345,7 +385,7 @@ impl Renderer {
                     None => {
                         if want_json {
                             json::ell_garbage(jline, m.n, g.offset, g.bytes);
-                            close_json(jline, m.ts_ns, m.stream, None);
+                            close_json(jline, m, None);
                         }
                         if want_text {
                             text::ell_garbage_line(line, m.n, g.offset, g.bytes, m.rel_s);
@@ -357,11 +397,26 @@ impl Renderer {
                 let d = e.diag();
                 if want_json {
                     json::late_diag(jline, e.proto.code(), e.n, d);
+                    if jline.ends_with('}') {
+                        jline.pop();
+                        let _ = write!(jline, ",\"stream\":{}}}", e.stream);
+                    }
                 }
                 if want_text {
                     text::late_diag_line(line, e.n, &d);
                 }
             }
+        }
+        if stream_col && want_text {
+            // Several streams: each line says which (`# stream N: NAME` names them).
+            let stream = rec.meta().map_or_else(
+                || match rec {
+                    Record::NoReply(e) => e.stream,
+                    _ => 0,
+                },
+                |m| m.stream,
+            );
+            line.insert_str(0, &format!("s{stream} "));
         }
         self.emit_record(emit)
     }
@@ -374,17 +429,10 @@ impl Renderer {
         emit(&self.line)
     }
 
-    /// Emit the record rendered in `self.jline` (JSON, when wanted) and `self.line` (text, when
-    /// wanted), if the filter lets it through.
+    /// Emit the record rendered in `self.jline` (JSON) or `self.line` (text).
     fn emit_record<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
         if !self.file_prefix.is_empty() && self.jline.starts_with('{') {
             self.jline.replace_range(..1, &self.file_prefix);
-        }
-        if let Some(f) = self.filter.as_mut() {
-            let keep = serde_json::from_str::<serde_json::Value>(&self.jline).is_ok_and(|v| f(&v));
-            if !keep {
-                return Ok(());
-            }
         }
         match self.fmt {
             Format::Json => emit(&self.jline),
@@ -394,9 +442,11 @@ impl Renderer {
 }
 
 /// Append the capture context to a JSON object (before its closing brace).
-fn close_json(line: &mut String, ts: Option<u64>, stream: u32, dir: Option<&str>) {
+fn close_json(line: &mut String, m: &crate::record::Meta, dir: Option<&str>) {
+    let (ts, stream) = (m.ts_ns, m.stream);
     if line.ends_with('}') {
         line.pop();
+        let _ = write!(line, ",\"cap_offset\":{}", m.cap_offset);
         if let Some(d) = dir {
             let _ = write!(line, ",\"dir\":\"{d}\"");
         }

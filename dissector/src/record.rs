@@ -45,6 +45,9 @@ pub struct Meta {
     pub ts_ns: Option<u64>,
     /// Seconds since the first timed chunk of the capture.
     pub rel_s: Option<f64>,
+    /// Offset of its first byte in the whole capture: the bytes of every stream and direction
+    /// in the order they were read (the frame's own `offset` counts in its lane only).
+    pub cap_offset: u64,
 }
 
 /// A decoded APT frame with what the chain learnt about it.
@@ -197,6 +200,8 @@ struct Lane {
     /// the records emitted: garbage gets the time its first byte arrived.
     pushed: u64,
     times: VecDeque<(u64, u64)>,
+    /// (lane offset, capture offset) of each chunk not yet behind the records emitted.
+    starts: VecDeque<(u64, u64)>,
 }
 
 impl Lane {
@@ -211,6 +216,17 @@ impl Lane {
             .filter(|(o, _)| *o <= at)
             .map(|(_, t)| *t)
             .or(latest)
+    }
+
+    /// Capture-wide offset of the byte at lane offset `at` (see [`Lane::time_at`]).
+    fn cap_at(starts: &mut VecDeque<(u64, u64)>, at: u64) -> u64 {
+        while starts.get(1).is_some_and(|(o, _)| *o <= at) {
+            starts.pop_front();
+        }
+        starts
+            .front()
+            .filter(|(o, _)| *o <= at)
+            .map_or(at, |(o, c)| c + (at - o))
     }
 }
 
@@ -228,6 +244,8 @@ pub struct Decoder {
     pairers: Vec<(u32, AptPairer)>,
     first_ts: Option<u64>,
     n: u64,
+    /// Bytes fed so far, all lanes.
+    cap_pushed: u64,
     reply_timeout: Option<u64>,
     /// Models seen per device and the stage conversion of motion values.
     units: Tracker,
@@ -247,6 +265,7 @@ impl Decoder {
             pairers: vec![],
             first_ts: None,
             n: 0,
+            cap_pushed: 0,
             reply_timeout: None,
             units: Tracker::new(UnitsOpts::default()),
             expired: vec![],
@@ -476,6 +495,7 @@ impl Decoder {
             ts: None,
             pushed: 0,
             times: Default::default(),
+            starts: Default::default(),
         });
         self.lanes.len() - 1
     }
@@ -505,7 +525,11 @@ impl Decoder {
             lane.ts = Some(t);
             lane.times.push_back((lane.pushed, t));
         }
+        if !chunk.is_empty() {
+            lane.starts.push_back((lane.pushed, self.cap_pushed));
+        }
         lane.pushed += chunk.len() as u64;
+        self.cap_pushed += chunk.len() as u64;
         match self.proto {
             Some(Proto::Apt) => lane.apt.push(chunk),
             _ => lane.ell.push(chunk),
@@ -553,6 +577,7 @@ impl Decoder {
                 let (AptItem::Frame { offset: at, .. } | AptItem::Garbage { offset: at, .. }) =
                     item;
                 let first_ts = Lane::time_at(&mut lane.times, ts, at);
+                let cap_offset = Lane::cap_at(&mut lane.starts, at);
                 self.n += 1;
                 let n = self.n;
                 match item {
@@ -583,6 +608,7 @@ impl Decoder {
                             cap_dir,
                             ts_ns: ts,
                             rel_s: rel(ts),
+                            cap_offset,
                         };
                         emit(&Record::Apt(AptRec {
                             meta,
@@ -602,6 +628,7 @@ impl Decoder {
                             cap_dir,
                             ts_ns: first_ts,
                             rel_s: rel(first_ts),
+                            cap_offset,
                         };
                         emit(&Record::Garbage(GarbageRec {
                             meta,
@@ -632,6 +659,7 @@ impl Decoder {
             };
             let (EllItem::Frame { offset: at, .. } | EllItem::Garbage { offset: at, .. }) = item;
             let first_ts = Lane::time_at(&mut lane.times, ts, at);
+            let cap_offset = Lane::cap_at(&mut lane.starts, at);
             self.n += 1;
             let n = self.n;
             match item {
@@ -658,6 +686,7 @@ impl Decoder {
                         cap_dir,
                         ts_ns: ts,
                         rel_s: rel(ts),
+                        cap_offset,
                     };
                     emit(&Record::Ell(EllRec {
                         meta,
@@ -672,6 +701,7 @@ impl Decoder {
                         cap_dir,
                         ts_ns: first_ts,
                         rel_s: rel(first_ts),
+                        cap_offset,
                     };
                     emit(&Record::Garbage(GarbageRec {
                         meta,

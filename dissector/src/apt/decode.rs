@@ -424,7 +424,10 @@ pub fn fmt_value_in(
             if let (Some(e), Some(r)) = (f.enumeration, raw) {
                 let def = table.enum_def(e);
                 match def.label(r) {
-                    Some(l) => out.push_str(l),
+                    // The number beside the name: what the manual and the device give.
+                    Some(l) => {
+                        let _ = write!(out, "{l} ({r})");
+                    }
                     None => {
                         let _ = write!(out, "{r}(not in enum {})", def.name);
                     }
@@ -452,6 +455,10 @@ pub fn fmt_value_in(
                     let _ = write!(out, "0x{rest:X}");
                 } else if first {
                     out.push('0');
+                }
+                if !first {
+                    // The whole word beside the names.
+                    let _ = write!(out, " (0x{:X})", r as u64);
                 }
                 return;
             }

@@ -336,7 +336,7 @@ fn addr_char(c: u8) -> Option<char> {
 pub fn fmt_value(f: &Field, v: &EllValue<'_>, scale: Option<(f64, &str)>, out: &mut String) {
     use std::fmt::Write;
     let _ = match (f.kind, v) {
-        (Kind::Status, EllValue::U(c)) => write!(out, "{}", status_name(*c as u32)),
+        (Kind::Status, EllValue::U(c)) => write!(out, "{} ({c})", status_name(*c as u32)),
         (Kind::Model, EllValue::U(m)) => write!(out, "ELL{m}"),
         (Kind::Firmware, EllValue::U(x)) => write!(out, "{}.{}", x >> 4, x & 15),
         (Kind::ThreadHw, EllValue::U(x)) => write!(

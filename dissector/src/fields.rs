@@ -1,0 +1,1058 @@
+//! Field access by name: what display filters ([`crate::filter`]) and statistics
+//! ([`crate::stats`]) read of a record, straight from the typed [`Record`] — no JSON rendered
+//! and parsed back.
+//!
+//! Names are the NDJSON keys (see the README's NDJSON section), listed once in [`KEYS`]: the
+//! filter's name check, its suggestions and the accessors below all read that list. A field is
+//! read as a [`Key`] (the top-level key, resolved once when a filter is compiled) and the rest
+//! of its dotted path. The same trait is implemented on `serde_json::Value` (one NDJSON object),
+//! for views that hold records as JSON; a test holds both implementations equal on every sample.
+
+use crate::apt::{text_of, AptFrame, Value as AptValue};
+use crate::diag::Diag;
+use crate::ell::table::Kind as EllKind;
+use crate::ell::EllValue;
+use crate::record::{AptRec, EllRec, Record};
+use std::borrow::Cow;
+
+/// The top-level keys of records, as filters and statistics name them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[allow(missing_docs)]
+pub enum Key {
+    File,
+    N,
+    Proto,
+    Type,
+    Offset,
+    CapOffset,
+    Len,
+    Raw,
+    Msgid,
+    MsgidHex,
+    Name,
+    MsgDir,
+    Src,
+    Dst,
+    DataFlag,
+    DataLen,
+    FormNote,
+    Channel,
+    Sub,
+    Fields,
+    Phys,
+    Codes,
+    Pair,
+    LatencyMs,
+    PairOtherAddress,
+    Interim,
+    Diag,
+    Dir,
+    TsNs,
+    Stream,
+    StreamName,
+    Ref,
+    Unpaired,
+    Paired,
+    Text,
+    Addr,
+    Cmd,
+    Module,
+}
+
+/// Usable without a protocol prefix.
+pub const TOP: u8 = 1;
+/// A key of APT records (`apt.` prefix).
+pub const APT: u8 = 2;
+/// A key of Elliptec records (`ell.` prefix).
+pub const ELL: u8 = 4;
+
+/// One name a filter may use: the key it reads and where it is valid.
+#[derive(Clone, Copy, Debug)]
+pub struct KeyDef {
+    /// The name as written in a filter (an NDJSON key, or an alias of one).
+    pub name: &'static str,
+    /// The key read.
+    pub key: Key,
+    /// [`TOP`], [`APT`], [`ELL`] bits.
+    pub scope: u8,
+}
+
+const fn k(name: &'static str, key: Key, scope: u8) -> KeyDef {
+    KeyDef { name, key, scope }
+}
+
+/// Every name of the filter language: NDJSON keys and the aliases `chan` (`channel`), `ts`
+/// (`ts_ns`, in seconds), `latency` (`latency_ms`). The one list the name check, the
+/// suggestions and the accessors share.
+pub const KEYS: &[KeyDef] = &[
+    k("file", Key::File, TOP),
+    k("n", Key::N, TOP | APT | ELL),
+    k("proto", Key::Proto, TOP | APT | ELL),
+    k("type", Key::Type, TOP | APT | ELL),
+    k("offset", Key::Offset, TOP | APT | ELL),
+    k("cap_offset", Key::CapOffset, TOP | APT | ELL),
+    k("len", Key::Len, TOP | APT | ELL),
+    k("raw", Key::Raw, TOP | APT | ELL),
+    k("msgid", Key::Msgid, APT),
+    k("msgid_hex", Key::MsgidHex, APT),
+    k("name", Key::Name, APT | ELL),
+    k("msg_dir", Key::MsgDir, APT),
+    k("src", Key::Src, APT),
+    k("dst", Key::Dst, APT),
+    k("data_flag", Key::DataFlag, APT),
+    k("data_len", Key::DataLen, APT),
+    k("form_note", Key::FormNote, APT),
+    k("channel", Key::Channel, APT),
+    k("chan", Key::Channel, APT),
+    k("sub", Key::Sub, APT),
+    k("text", Key::Text, ELL),
+    k("addr", Key::Addr, ELL),
+    k("cmd", Key::Cmd, ELL),
+    k("fields", Key::Fields, APT | ELL),
+    k("phys", Key::Phys, APT | ELL),
+    k("codes", Key::Codes, APT | ELL),
+    k("module", Key::Module, ELL),
+    k("pair", Key::Pair, TOP | APT | ELL),
+    k("latency", Key::LatencyMs, TOP | APT | ELL),
+    k("latency_ms", Key::LatencyMs, TOP | APT | ELL),
+    k("pair_other_address", Key::PairOtherAddress, APT),
+    k("interim", Key::Interim, TOP | ELL),
+    k("diag", Key::Diag, TOP | APT | ELL),
+    k("dir", Key::Dir, TOP | APT | ELL),
+    k("ts", Key::TsNs, TOP | APT | ELL),
+    k("ts_ns", Key::TsNs, TOP | APT | ELL),
+    k("stream", Key::Stream, TOP | APT | ELL),
+    k("stream_name", Key::StreamName, TOP),
+    k("ref", Key::Ref, TOP | APT | ELL),
+    k("unpaired", Key::Unpaired, TOP | APT | ELL),
+    k("paired", Key::Paired, TOP | APT | ELL),
+];
+
+impl Key {
+    /// The key's NDJSON name.
+    pub fn json_name(self) -> &'static str {
+        match self {
+            Key::Channel => "channel",
+            Key::LatencyMs => "latency_ms",
+            Key::TsNs => "ts_ns",
+            other => KEYS
+                .iter()
+                .find(|d| d.key == other)
+                .map_or("", |d| d.name),
+        }
+    }
+
+    /// The definition of a filter name valid in `scope`.
+    pub fn lookup(name: &str, scope: u8) -> Option<&'static KeyDef> {
+        KEYS.iter()
+            .find(|d| d.name == name && d.scope & scope != 0)
+    }
+}
+
+/// A number: integers stay exact.
+#[derive(Clone, Copy, Debug)]
+pub enum Num {
+    /// Integer.
+    I(i128),
+    /// Floating point.
+    F(f64),
+}
+
+impl Num {
+    /// As a float.
+    pub fn f(self) -> f64 {
+        match self {
+            Num::I(i) => i as f64,
+            Num::F(f) => f,
+        }
+    }
+    /// As an unsigned integer (a whole number within range).
+    pub fn u64(self) -> Option<u64> {
+        match self {
+            Num::I(i) => u64::try_from(i).ok(),
+            Num::F(f) if f >= 0.0 && f.fract() == 0.0 && f < 1.8e19 => Some(f as u64),
+            Num::F(_) => None,
+        }
+    }
+}
+
+/// An object found at a path, as a comparison sees it: by its numeric member (`addr`, `id`,
+/// `value`, the first present) or its text member (`name`, `model`, `kind`).
+#[derive(Clone, Debug, Default)]
+pub struct Obj<'a> {
+    /// What a number compares with.
+    pub num: Option<Num>,
+    /// What text compares with.
+    pub text: Option<Cow<'a, str>>,
+    /// Whether the object has members (an empty one is false on its own).
+    pub nonempty: bool,
+}
+
+/// One value found at a path.
+#[derive(Clone, Debug)]
+pub enum Val<'a> {
+    /// A number.
+    Num(Num),
+    /// Text.
+    Str(Cow<'a, str>),
+    /// A boolean.
+    Bool(bool),
+    /// An object.
+    Obj(Obj<'a>),
+}
+
+/// How a value was found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    /// The value at the path.
+    Plain,
+    /// An element of the list at the path.
+    Member,
+    /// The numeric code of the enum or flag field at the path (`codes.X` beside `fields.X`):
+    /// compared with, never on its own.
+    Code,
+}
+
+/// Read access to a record's fields by [`Key`] and path.
+pub trait Fields {
+    /// The record's protocol code (`apt`, `ell`), if it has one.
+    fn proto(&self) -> Option<&str>;
+
+    /// Pass each value at `key` then `rest` to `f` (list elements one by one, as
+    /// [`Role::Member`]; `fields.X` also gives `codes.X` as [`Role::Code`]). Returns whether
+    /// the record has `key` at all (a key that is there but null, or a path below it that is
+    /// not, still counts).
+    fn visit(&self, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool;
+}
+
+// ---------------------------------------------------------------------------------------------
+// NDJSON objects.
+
+impl Fields for serde_json::Value {
+    fn proto(&self) -> Option<&str> {
+        self.get("proto").and_then(serde_json::Value::as_str)
+    }
+
+    fn visit(&self, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
+        let Some(v) = self.get(key.json_name()) else {
+            return false;
+        };
+        collect(v, rest, false, f);
+        if key == Key::Fields && rest.len() == 1 {
+            if let Some(c) = self.get("codes").and_then(|c| c.get(&rest[0])) {
+                if let Some(Val::Num(n)) = of_json(c) {
+                    f(Val::Num(n), Role::Code);
+                }
+            }
+        }
+        true
+    }
+}
+
+fn num_of_json(n: &serde_json::Number) -> Option<Num> {
+    if let Some(i) = n.as_i64() {
+        Some(Num::I(i128::from(i)))
+    } else if let Some(u) = n.as_u64() {
+        Some(Num::I(i128::from(u)))
+    } else {
+        n.as_f64().map(Num::F)
+    }
+}
+
+fn of_json(v: &serde_json::Value) -> Option<Val<'_>> {
+    use serde_json::Value as J;
+    match v {
+        J::Null | J::Array(_) => None,
+        J::Bool(b) => Some(Val::Bool(*b)),
+        J::Number(n) => num_of_json(n).map(Val::Num),
+        J::String(s) => Some(Val::Str(Cow::Borrowed(s))),
+        J::Object(m) => {
+            let num = ["addr", "id", "value"]
+                .iter()
+                .filter_map(|k| m.get(*k).and_then(of_json))
+                .find_map(|v| match v {
+                    Val::Num(n) => Some(n),
+                    _ => None,
+                });
+            let text = ["name", "model", "kind"]
+                .iter()
+                .filter_map(|k| m.get(*k).and_then(of_json))
+                .find_map(|v| match v {
+                    Val::Str(s) => Some(s),
+                    _ => None,
+                });
+            Some(Val::Obj(Obj {
+                num,
+                text,
+                nonempty: !m.is_empty(),
+            }))
+        }
+    }
+}
+
+fn collect(v: &serde_json::Value, path: &[String], member: bool, f: &mut dyn FnMut(Val<'_>, Role)) {
+    use serde_json::Value as J;
+    match (v, path.split_first()) {
+        (J::Array(items), _) => {
+            for it in items {
+                collect(it, path, member || path.is_empty(), f);
+            }
+        }
+        (_, None) => {
+            if let Some(x) = of_json(v) {
+                f(x, if member { Role::Member } else { Role::Plain });
+            }
+        }
+        (J::Object(m), Some((first, rest))) => {
+            if let Some(next) = m.get(first) {
+                collect(next, rest, false, f);
+            }
+        }
+        _ => {}
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Typed records.
+
+/// A record with the input file it came from (runs over several files name it).
+#[derive(Debug, Clone, Copy)]
+pub struct InFile<'a, 'r> {
+    /// The input's name, when records name it.
+    pub file: Option<&'a str>,
+    /// The record.
+    pub rec: &'a Record<'r>,
+}
+
+impl Fields for InFile<'_, '_> {
+    fn proto(&self) -> Option<&str> {
+        self.rec.proto()
+    }
+    fn visit(&self, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
+        if key == Key::File {
+            return match self.file {
+                Some(name) => {
+                    scalar(rest, Val::Str(Cow::Borrowed(name)), f);
+                    true
+                }
+                None => false,
+            };
+        }
+        self.rec.visit(key, rest, f)
+    }
+}
+
+/// `v` when the path ends here (a scalar has nothing below it).
+fn scalar(rest: &[String], v: Val<'_>, f: &mut dyn FnMut(Val<'_>, Role)) {
+    if rest.is_empty() {
+        f(v, Role::Plain);
+    }
+}
+
+fn str_val(s: &str) -> Val<'_> {
+    Val::Str(Cow::Borrowed(s))
+}
+
+fn num(x: impl Into<i128>) -> Val<'static> {
+    Val::Num(Num::I(x.into()))
+}
+
+/// A float as NDJSON carries it: non-finite ones are `null`, no value.
+fn float(x: f64) -> Option<Val<'static>> {
+    x.is_finite().then_some(Val::Num(Num::F(x)))
+}
+
+fn hex(b: &[u8]) -> Val<'static> {
+    let mut s = String::with_capacity(b.len() * 2 + 2);
+    crate::json::hex(&mut s, b);
+    Val::Str(Cow::Owned(s.trim_matches('"').to_string()))
+}
+
+/// A member object given as `(name, value)` pairs: the path below it, or itself.
+fn object<'v>(
+    rest: &[String],
+    members: &[(&str, Option<Val<'v>>)],
+    role: Role,
+    f: &mut dyn FnMut(Val<'_>, Role),
+) {
+    match rest.split_first() {
+        None => {
+            let pick = |keys: [&str; 3], want_num: bool| {
+                keys.iter().find_map(|k| {
+                    members
+                        .iter()
+                        .find(|(n, _)| n == k)
+                        .and_then(|(_, v)| match (v, want_num) {
+                            (Some(Val::Num(n)), true) => Some(Val::Num(*n)),
+                            (Some(Val::Str(s)), false) => Some(Val::Str(s.clone())),
+                            _ => None,
+                        })
+                })
+            };
+            let num = match pick(["addr", "id", "value"], true) {
+                Some(Val::Num(n)) => Some(n),
+                _ => None,
+            };
+            let text = match pick(["name", "model", "kind"], false) {
+                Some(Val::Str(s)) => Some(s),
+                _ => None,
+            };
+            f(
+                Val::Obj(Obj {
+                    num,
+                    text,
+                    nonempty: !members.is_empty(),
+                }),
+                role,
+            );
+        }
+        Some((first, below)) => {
+            if below.is_empty() {
+                if let Some((_, Some(v))) = members.iter().find(|(n, _)| n == first) {
+                    f(v.clone(), Role::Plain);
+                }
+            }
+        }
+    }
+}
+
+fn addr_members(a: crate::apt::Addr) -> [(&'static str, Option<Val<'static>>); 3] {
+    use crate::apt::Addr;
+    const BAYS: [&str; 10] = [
+        "bay0", "bay1", "bay2", "bay3", "bay4", "bay5", "bay6", "bay7", "bay8", "bay9",
+    ];
+    let name: Cow<'static, str> = match a {
+        Addr::Host => "host".into(),
+        Addr::Rack => "rack".into(),
+        Addr::Usb => "usb".into(),
+        Addr::Bay(n) => BAYS
+            .get(n as usize)
+            .map_or_else(|| Cow::Owned(format!("bay{n}")), |s| Cow::Borrowed(*s)),
+        Addr::Unknown(x) => Cow::Owned(format!("0x{x:02X}")),
+    };
+    [
+        ("addr", Some(num(a.byte()))),
+        ("name", Some(Val::Str(name))),
+        ("bay", a.bay().map(num)),
+    ]
+}
+
+fn diag_list(rest: &[String], ds: impl Iterator<Item = Diag>, f: &mut dyn FnMut(Val<'_>, Role)) {
+    for d in ds {
+        let members = [
+            ("kind", Some(str_val(d.kind.name()))),
+            ("offset", Some(num(d.offset))),
+            (
+                "msg",
+                rest.first()
+                    .filter(|s| *s == "msg")
+                    .map(|_| Val::Str(Cow::Owned(d.kind.to_string()))),
+            ),
+        ];
+        // Elements of the list itself are members; what is below them is not.
+        object(rest, &members, Role::Member, f);
+    }
+}
+
+impl Record<'_> {
+    /// The record's protocol code, if it has one.
+    pub fn proto(&self) -> Option<&'static str> {
+        match self {
+            Record::Apt(_) => Some("apt"),
+            Record::Ell(_) => Some("ell"),
+            Record::Garbage(g) => Some(g.proto.code()),
+            Record::NoReply(e) => Some(e.proto.code()),
+            Record::Detect { proto, .. } => Some(proto.code()),
+            _ => None,
+        }
+    }
+}
+
+impl Fields for Record<'_> {
+    fn proto(&self) -> Option<&str> {
+        Record::proto(self)
+    }
+
+    fn visit(&self, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
+        match self {
+            Record::Apt(a) => apt_visit(a, key, rest, f),
+            Record::Ell(e) => ell_visit(e, key, rest, f),
+            Record::Garbage(g) => {
+                let m = &g.meta;
+                let v = match key {
+                    Key::N => num(m.n),
+                    Key::Proto => str_val(g.proto.code()),
+                    Key::Type => str_val("garbage"),
+                    Key::Offset => num(g.offset),
+                    Key::CapOffset => num(m.cap_offset),
+                    Key::Len => num(g.bytes.len() as u64),
+                    Key::Raw => hex(g.bytes),
+                    Key::Text if g.kind.is_none() => {
+                        Val::Str(String::from_utf8_lossy(g.bytes))
+                    }
+                    Key::Diag => {
+                        let d = match g.kind {
+                            Some(kind) => crate::json::garbage_diag(g.offset, g.bytes.len(), kind),
+                            None => Diag {
+                                offset: g.offset,
+                                kind: crate::DiagKind::Garbage {
+                                    len: g.bytes.len() as u32,
+                                },
+                            },
+                        };
+                        diag_list(rest, std::iter::once(d), f);
+                        return true;
+                    }
+                    // Elliptec garbage has no direction (the bus tells none).
+                    Key::Dir if g.kind.is_some() => {
+                        str_val(m.cap_dir.map_or("unknown", |d| d.as_str()))
+                    }
+                    Key::TsNs => match m.ts_ns {
+                        Some(t) => num(t),
+                        None => return false,
+                    },
+                    Key::Stream => num(m.stream),
+                    _ => return false,
+                };
+                scalar(rest, v, f);
+                true
+            }
+            Record::NoReply(e) => {
+                let v = match key {
+                    Key::Proto => str_val(e.proto.code()),
+                    Key::Type => str_val("diag"),
+                    Key::Ref => num(e.n),
+                    Key::Stream => num(e.stream),
+                    Key::Diag => {
+                        diag_list(rest, std::iter::once(e.diag()), f);
+                        return true;
+                    }
+                    _ => return false,
+                };
+                scalar(rest, v, f);
+                true
+            }
+            Record::Detect {
+                proto, detection, ..
+            } => {
+                let v = match key {
+                    Key::Type => str_val("detect"),
+                    Key::Proto => str_val(proto.code()),
+                    _ => return false,
+                };
+                let _ = detection;
+                scalar(rest, v, f);
+                true
+            }
+            Record::Stream { id, name, .. } => {
+                let v = match key {
+                    Key::Type => str_val("stream"),
+                    Key::Stream => num(*id),
+                    Key::StreamName => str_val(name),
+                    _ => return false,
+                };
+                scalar(rest, v, f);
+                true
+            }
+            Record::Input(d) => match key {
+                Key::Type => {
+                    scalar(rest, str_val("input"), f);
+                    true
+                }
+                Key::Diag => {
+                    diag_list(rest, std::iter::once(*d), f);
+                    true
+                }
+                _ => false,
+            },
+            Record::FileDiag { offset, kind, msg } => match key {
+                Key::Type => {
+                    scalar(rest, str_val("input"), f);
+                    true
+                }
+                Key::Diag => {
+                    let members = [
+                        ("kind", Some(str_val(kind))),
+                        ("offset", Some(num(*offset))),
+                        ("msg", Some(str_val(msg))),
+                    ];
+                    object(rest, &members, Role::Member, f);
+                    true
+                }
+                _ => false,
+            },
+            Record::Units(nt) => match key {
+                Key::Type => {
+                    scalar(rest, str_val("units"), f);
+                    true
+                }
+                Key::Stream => {
+                    scalar(rest, num(nt.stream), f);
+                    true
+                }
+                _ => false,
+            },
+        }
+    }
+}
+
+/// The value of an APT field as NDJSON gives it: enum label, flag names (a list), number,
+/// text, hex.
+fn apt_value<'v>(
+    fr: &AptFrame<'v, 'static>,
+    fd: &crate::table::Field,
+    v: &AptValue<'v>,
+    rest: &[String],
+    f: &mut dyn FnMut(Val<'_>, Role),
+) {
+    let t = fr.table();
+    match v {
+        AptValue::U(x) => {
+            if let Some(l) = fd.enumeration.and_then(|e| t.enum_def(e).label(*x as i64)) {
+                return scalar(rest, str_val(l), f);
+            }
+            if let Some(fl) = fd.flags {
+                if rest.is_empty() {
+                    for (m, l) in &t.flags_def(fl).items {
+                        if x & m == *m {
+                            f(str_val(l), Role::Member);
+                        }
+                    }
+                }
+                return;
+            }
+            scalar(rest, num(*x), f)
+        }
+        AptValue::I(x) => match fd.enumeration.and_then(|e| t.enum_def(e).label(*x)) {
+            Some(l) => scalar(rest, str_val(l), f),
+            None => scalar(rest, num(*x), f),
+        },
+        AptValue::F(x) => {
+            if let Some(v) = float(*x) {
+                scalar(rest, v, f)
+            }
+        }
+        AptValue::Str(b) => scalar(rest, Val::Str(text_of(b)), f),
+        AptValue::Bytes(b) => scalar(rest, hex(b), f),
+        AptValue::Array(..) => {
+            if rest.is_empty() {
+                for e in v.elements() {
+                    let x = match e {
+                        AptValue::U(x) => Some(num(x)),
+                        AptValue::I(x) => Some(num(x)),
+                        AptValue::F(x) => float(x),
+                        _ => None,
+                    };
+                    if let Some(x) = x {
+                        f(x, Role::Member);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The numeric code of an enum or flag field (what `codes` holds).
+pub fn apt_code(fd: &crate::table::Field, v: &AptValue<'_>) -> Option<i128> {
+    if fd.enumeration.is_none() && fd.flags.is_none() {
+        return None;
+    }
+    match v {
+        AptValue::U(x) => Some(i128::from(*x)),
+        AptValue::I(x) => Some(i128::from(*x)),
+        _ => None,
+    }
+}
+
+/// The numeric code of an Elliptec field shown by name (status codes).
+pub fn ell_code(fd: &crate::ell::table::Field, v: &EllValue<'_>) -> Option<u64> {
+    match (fd.kind, v) {
+        (EllKind::Status, EllValue::U(c)) => Some(*c),
+        _ => None,
+    }
+}
+
+fn apt_visit(a: &AptRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
+    let fr = a.frame;
+    let h = fr.header();
+    let m = &a.meta;
+    let v = match key {
+        Key::N => num(m.n),
+        Key::Proto => str_val("apt"),
+        Key::Type => str_val("frame"),
+        Key::Offset => num(fr.offset),
+        Key::CapOffset => num(m.cap_offset),
+        Key::Len => num(fr.bytes.len() as u64),
+        Key::Raw => hex(fr.bytes),
+        Key::Msgid => num(h.msg_id()),
+        Key::MsgidHex => Val::Str(Cow::Owned(format!("0x{:04X}", h.msg_id()))),
+        Key::Name => match fr.msg {
+            Some(d) => str_val(d.name),
+            None => return true,
+        },
+        Key::MsgDir => match fr.msg {
+            Some(d) => str_val(d.dir.as_str()),
+            None => return false,
+        },
+        Key::Src | Key::Dst => {
+            let ad = if key == Key::Src { h.src() } else { h.dst() };
+            let members = addr_members(ad);
+            let n = if members[2].1.is_some() { 3 } else { 2 };
+            object(rest, &members[..n], Role::Plain, f);
+            return true;
+        }
+        Key::DataFlag => Val::Bool(h.has_data()),
+        Key::DataLen => num(fr.data_len() as u64),
+        Key::FormNote => match fr.form.filter(|x| !x.note.is_empty()) {
+            Some(x) => str_val(x.note),
+            None => return false,
+        },
+        Key::Channel => match fr.channel() {
+            Some(c) => num(c),
+            None => return false,
+        },
+        Key::Sub => match fr.sub {
+            Some(s) => {
+                let members = [("id", Some(num(s.id))), ("name", Some(str_val(s.name)))];
+                object(rest, &members, Role::Plain, f);
+                return true;
+            }
+            None => return false,
+        },
+        Key::Fields => {
+            match rest.split_first() {
+                None => {
+                    let members: Vec<(&str, Option<Val<'_>>)> = fr
+                        .fields()
+                        .map(|(fd, v)| {
+                            let mut one = None;
+                            apt_value(fr, fd, &v, &[], &mut |x, r| {
+                                if r == Role::Plain && one.is_none() {
+                                    one = Some(own(x));
+                                }
+                            });
+                            (fd.name, one)
+                        })
+                        .collect();
+                    object(&[], &members, Role::Plain, f);
+                }
+                Some((name, below)) => {
+                    if let Some((fd, v)) = fr.field(name) {
+                        apt_value(fr, fd, &v, below, f);
+                        if below.is_empty() {
+                            if let Some(c) = apt_code(fd, &v) {
+                                f(Val::Num(Num::I(c)), Role::Code);
+                            }
+                        }
+                    }
+                }
+            }
+            return true;
+        }
+        Key::Phys => {
+            let conv = |fd: &crate::table::Field, v: &AptValue<'_>| {
+                crate::json::apt_phys(fd, v, a.scale)
+            };
+            let any = fr.fields().any(|(fd, v)| conv(fd, &v).is_some());
+            if !any {
+                return false;
+            }
+            match rest.split_first() {
+                None => f(
+                    Val::Obj(Obj {
+                        num: None,
+                        text: None,
+                        nonempty: true,
+                    }),
+                    Role::Plain,
+                ),
+                Some((name, below)) => {
+                    if let Some((x, unit)) = fr.field(name).and_then(|(fd, v)| conv(fd, &v)) {
+                        let members = [
+                            ("value", float(crate::apt::round_sig(x))),
+                            ("unit", Some(str_val(unit))),
+                        ];
+                        object(below, &members, Role::Plain, f);
+                    }
+                }
+            }
+            return true;
+        }
+        Key::Codes => {
+            let any = fr.fields().any(|(fd, v)| apt_code(fd, &v).is_some());
+            if !any {
+                return false;
+            }
+            match rest.split_first() {
+                None => {
+                    let members: Vec<(&str, Option<Val<'_>>)> = fr
+                        .fields()
+                        .filter_map(|(fd, v)| Some((fd.name, Some(Val::Num(Num::I(apt_code(fd, &v)?))))))
+                        .collect();
+                    object(&[], &members, Role::Plain, f);
+                }
+                Some((name, below)) => {
+                    if let Some(c) = fr.field(name).and_then(|(fd, v)| apt_code(fd, &v)) {
+                        scalar(below, Val::Num(Num::I(c)), f);
+                    }
+                }
+            }
+            return true;
+        }
+        Key::Pair => match a.pair.pair {
+            Some(p) => num(p),
+            None => return false,
+        },
+        Key::LatencyMs => match a.pair.latency_ns {
+            Some(l) => match float(l as f64 / 1e6) {
+                Some(v) => v,
+                None => return true,
+            },
+            None => return false,
+        },
+        Key::PairOtherAddress if a.pair.other_address => Val::Bool(true),
+        Key::Diag => {
+            diag_list(rest, crate::json::apt_diags(fr, a.pair), f);
+            return true;
+        }
+        Key::Dir => str_val(a.dir().map_or("unknown", |d| d.as_str())),
+        Key::TsNs => match m.ts_ns {
+            Some(t) => num(t),
+            None => return false,
+        },
+        Key::Stream => num(m.stream),
+        _ => return false,
+    };
+    scalar(rest, v, f);
+    true
+}
+
+/// An owned copy of a value (for objects built from computed members).
+fn own(v: Val<'_>) -> Val<'static> {
+    match v {
+        Val::Num(n) => Val::Num(n),
+        Val::Bool(b) => Val::Bool(b),
+        Val::Str(s) => Val::Str(Cow::Owned(s.into_owned())),
+        Val::Obj(o) => Val::Obj(Obj {
+            num: o.num,
+            text: o.text.map(|t| Cow::Owned(t.into_owned())),
+            nonempty: o.nonempty,
+        }),
+    }
+}
+
+/// The value of an Elliptec field, or of a key NDJSON derives beside it (`curve_points`,
+/// `<name>_name`, `<name>_version`, `thread`, `hw_release`), by name.
+fn ell_field(
+    fr: &crate::ell::EllFrame<'_>,
+    name: &str,
+    rest: &[String],
+    f: &mut dyn FnMut(Val<'_>, Role),
+) {
+    // The last key of that name wins, as in a JSON object with a repeated key.
+    let mut last: Option<(&crate::ell::table::Field, EllValue<'_>, u8)> = None;
+    for (fd, v) in fr.fields() {
+        let which = if fd.name == name {
+            1
+        } else {
+            match (fd.kind, v) {
+                (EllKind::Raw, EllValue::Raw(_)) if name == "curve_points" => 2,
+                (EllKind::Model, EllValue::U(_)) if name.strip_suffix("_name") == Some(fd.name) => 3,
+                (EllKind::Firmware, EllValue::U(_))
+                    if name.strip_suffix("_version") == Some(fd.name) =>
+                {
+                    4
+                }
+                (EllKind::ThreadHw, EllValue::U(_)) if name == "thread" => 5,
+                (EllKind::ThreadHw, EllValue::U(_)) if name == "hw_release" => 6,
+                _ => 0,
+            }
+        };
+        if which > 0 {
+            last = Some((fd, v, which));
+        }
+    }
+    let Some((fd, v, which)) = last else { return };
+    match (which, v) {
+        (1, v) => {
+            let x = match (fd.kind, v) {
+                (EllKind::Status, EllValue::U(c)) => {
+                    str_val(crate::ell::table::status_name(c as u32))
+                }
+                (_, EllValue::U(x)) => num(x),
+                (_, EllValue::I(x)) => num(x),
+                (_, EllValue::Char(c)) => Val::Str(Cow::Owned(c.to_string())),
+                (_, EllValue::Digits(d)) => Val::Str(Cow::Owned(d.to_string())),
+                (_, EllValue::Raw(b)) => hex(b),
+            };
+            scalar(rest, x, f);
+            if rest.is_empty() {
+                if let Some(c) = ell_code(fd, &v) {
+                    f(num(c), Role::Code);
+                }
+            }
+        }
+        (2, EllValue::Raw(b)) => {
+            for p in crate::ell::curve_points(b) {
+                let members = [
+                    ("period", Some(num(p.period))),
+                    ("current", Some(num(p.current))),
+                    ("hz", float(p.hz().round())),
+                    ("amps", float(crate::apt::round_sig(p.amps()))),
+                ];
+                object(rest, &members, Role::Member, f);
+            }
+        }
+        (3, EllValue::U(x)) => scalar(rest, Val::Str(Cow::Owned(format!("ELL{x}"))), f),
+        (4, EllValue::U(x)) => {
+            scalar(rest, Val::Str(Cow::Owned(format!("{}.{}", x >> 4, x & 15))), f)
+        }
+        (5, EllValue::U(x)) => scalar(
+            rest,
+            str_val(if x & 0x80 != 0 { "imperial" } else { "metric" }),
+            f,
+        ),
+        (6, EllValue::U(x)) => scalar(rest, num(x & 0x7F), f),
+        _ => {}
+    }
+}
+
+fn ell_visit(e: &EllRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
+    let fr = e.frame;
+    let m = &e.meta;
+    let scale = e.obs.module.as_ref().and_then(|m| m.scale());
+    let phys = |fd: &crate::ell::table::Field, v: &EllValue<'_>| match (fd.kind, v, scale) {
+        (EllKind::Position, EllValue::I(p), Some((ppu, unit))) if ppu > 0.0 => {
+            Some((crate::apt::round_sig(*p as f64 / ppu), unit))
+        }
+        _ => None,
+    };
+    let v = match key {
+        Key::N => num(m.n),
+        Key::Proto => str_val("ell"),
+        Key::Type => str_val("frame"),
+        Key::Offset => num(fr.offset),
+        Key::CapOffset => num(m.cap_offset),
+        Key::Len => num(fr.bytes.len() as u64),
+        Key::Raw => hex(fr.bytes),
+        Key::Text => Val::Str(String::from_utf8_lossy(fr.bytes)),
+        Key::Addr => Val::Str(Cow::Owned(fr.addr_char().to_string())),
+        Key::Dir => str_val(fr.dir().as_str()),
+        Key::Cmd => str_val(fr.code_str()),
+        Key::Name => match fr.cmd {
+            Some(c) => str_val(c.name),
+            None => return true,
+        },
+        Key::Fields => {
+            match rest.split_first() {
+                None => {
+                    let nonempty = fr.fields().next().is_some();
+                    // An object compares through `addr`/`id`/`value` or `name`/`model`/`kind`
+                    // members: no Elliptec field has those names.
+                    f(
+                        Val::Obj(Obj {
+                            num: None,
+                            text: None,
+                            nonempty,
+                        }),
+                        Role::Plain,
+                    );
+                }
+                Some((name, below)) => ell_field(fr, name, below, f),
+            }
+            return true;
+        }
+        Key::Phys => {
+            if !fr.fields().any(|(fd, v)| phys(fd, &v).is_some()) {
+                return false;
+            }
+            match rest.split_first() {
+                None => f(
+                    Val::Obj(Obj {
+                        num: None,
+                        text: None,
+                        nonempty: true,
+                    }),
+                    Role::Plain,
+                ),
+                Some((name, below)) => {
+                    let hit = fr
+                        .fields()
+                        .filter(|(fd, _)| fd.name == name.as_str())
+                        .filter_map(|(fd, v)| phys(fd, &v))
+                        .last();
+                    if let Some((x, unit)) = hit {
+                        let members = [("value", float(x)), ("unit", Some(str_val(unit)))];
+                        object(below, &members, Role::Plain, f);
+                    }
+                }
+            }
+            return true;
+        }
+        Key::Codes => {
+            if !fr.fields().any(|(fd, v)| ell_code(fd, &v).is_some()) {
+                return false;
+            }
+            match rest.split_first() {
+                None => {
+                    let members: Vec<(&str, Option<Val<'_>>)> = fr
+                        .fields()
+                        .filter_map(|(fd, v)| Some((fd.name, Some(num(ell_code(fd, &v)?)))))
+                        .collect();
+                    object(&[], &members, Role::Plain, f);
+                }
+                Some((name, below)) => {
+                    let hit = fr
+                        .fields()
+                        .filter(|(fd, _)| fd.name == name.as_str())
+                        .filter_map(|(fd, v)| ell_code(fd, &v))
+                        .last();
+                    if let Some(c) = hit {
+                        scalar(below, num(c), f);
+                    }
+                }
+            }
+            return true;
+        }
+        Key::Module => match &e.obs.module {
+            Some(md) => {
+                let members = [
+                    ("first_addr", Some(num(md.first_addr))),
+                    (
+                        "model",
+                        md.model.map(|x| Val::Str(Cow::Owned(format!("ELL{x}")))),
+                    ),
+                    ("serial", md.serial.as_deref().map(str_val)),
+                ];
+                let members: Vec<_> = members.into_iter().filter(|(_, v)| v.is_some()).collect();
+                object(rest, &members, Role::Plain, f);
+                return true;
+            }
+            None => return false,
+        },
+        Key::Pair => match e.obs.pair {
+            Some(p) => num(p),
+            None => return false,
+        },
+        Key::LatencyMs => match e.obs.latency_ns {
+            Some(l) => match float(l as f64 / 1e6) {
+                Some(v) => v,
+                None => return true,
+            },
+            None => return false,
+        },
+        Key::Interim if e.obs.interim => Val::Bool(true),
+        Key::Diag => {
+            diag_list(rest, fr.diags().iter().copied(), f);
+            return true;
+        }
+        Key::TsNs => match m.ts_ns {
+            Some(t) => num(t),
+            None => return false,
+        },
+        Key::Stream => num(m.stream),
+        _ => return false,
+    };
+    scalar(rest, v, f);
+    true
+}
