@@ -122,7 +122,8 @@ pub const KEYS: &[KeyDef] = &[
     k("ts", Key::TsNs, TOP | APT | ELL),
     k("ts_ns", Key::TsNs, TOP | APT | ELL),
     k("stream", Key::Stream, TOP | APT | ELL),
-    k("stream_name", Key::StreamName, TOP),
+    // Read by statistics, not offered to filters (it would be suggested for `name`).
+    k("stream_name", Key::StreamName, 0),
     k("ref", Key::Ref, TOP | APT | ELL),
     k("unpaired", Key::Unpaired, TOP | APT | ELL),
     k("paired", Key::Paired, TOP | APT | ELL),
@@ -223,6 +224,15 @@ pub trait Fields {
     /// the record has `key` at all (a key that is there but null, or a path below it that is
     /// not, still counts).
     fn visit(&self, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool;
+}
+
+impl<T: Fields + ?Sized> Fields for &T {
+    fn proto(&self) -> Option<&str> {
+        (**self).proto()
+    }
+    fn visit(&self, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
+        (**self).visit(key, rest, f)
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -588,6 +598,16 @@ impl Fields for Record<'_> {
                 }
                 Key::Stream => {
                     scalar(rest, num(nt.stream), f);
+                    true
+                }
+                Key::Raw => {
+                    use crate::units::Resolution;
+                    let why = match &nt.resolution {
+                        Resolution::Scale(_) => return false,
+                        Resolution::Raw(why) => Cow::Borrowed(why.as_ref()),
+                        Resolution::None => Cow::Borrowed("no stage"),
+                    };
+                    scalar(rest, Val::Str(why), f);
                     true
                 }
                 _ => false,
