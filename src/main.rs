@@ -10,16 +10,15 @@ use aptscope_dissector::apt::{encode_named_report, Addr, Named};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::filter::Filter;
 use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
+use aptscope_dissector::record::{Decoder, Record};
 use aptscope_dissector::stats::Stats;
 use aptscope_dissector::table::{Form, MsgDef};
 use aptscope_dissector::units::UnitsOpts;
 use aptscope_dissector::{json, Table};
 use aptscope_replay::{replay_main, ReplayOptions, Role};
 use clap::{Parser, Subcommand};
-use std::cell::RefCell;
 use std::io::{self, BufWriter, Write};
 use std::process::ExitCode;
-use std::rc::Rc;
 
 mod extcap;
 
@@ -855,28 +854,42 @@ fn stats(
     timeout: Option<u64>,
     units: UnitsOpts,
 ) -> io::Result<()> {
-    let mut f = filter.map(compile_filter).transpose()?;
+    let f = filter.map(compile_filter).transpose()?;
     let (mut reader, _, progress) = open_with_progress(file, opts)?;
     let mut ticker = Ticker::new(progress);
-    let st = Rc::new(RefCell::new(Stats::new(bin)));
-    let mut p = Pipeline::new(proto_of(proto), PFormat::Json);
-    p.set_units(units);
+    let mut st = Stats::new(bin);
+    let mut dec = Decoder::new(proto_of(proto));
+    dec.set_units(units);
     if let Some(t) = timeout {
-        p.set_reply_timeout(t);
+        dec.set_reply_timeout(t);
     }
-    let sink = st.clone();
-    p.set_filter(move |v| {
-        if f.as_mut().is_none_or(|f| f.matches(v)) {
-            sink.borrow_mut().add(v);
-        }
-        false
-    });
-    run_pipeline(reader.as_mut(), &mut p, &mut |_| {
+    // Counted straight from the typed records: frames, garbage and no-reply records the filter
+    // keeps, and the stream records that name the streams.
+    let mut each = |rec: &Record<'_>| -> io::Result<()> {
         ticker.tick();
+        match rec {
+            Record::Stream { .. } => st.add(rec),
+            Record::Apt(_) | Record::Ell(_) | Record::Garbage(_) | Record::NoReply(_) => {
+                if f.as_ref().is_none_or(|f| f.matches(rec)) {
+                    st.add(rec);
+                }
+            }
+            _ => {}
+        }
         Ok(())
-    })?;
+    };
+    while let Some(ev) = reader.next_event() {
+        match ev {
+            Event::Chunk(c) => dec.push(c.ctx(), c.bytes, &mut each)?,
+            Event::Diag(d) => {
+                fatal(&d)?;
+                dec.file_diag(d.offset, d.kind, &d.msg, &mut each)?
+            }
+            Event::Stream(s) => dec.stream_info(s.id, &s.name, s.settings.as_deref(), &mut each)?,
+        }
+    }
+    dec.finish(&mut each)?;
     ticker.done();
-    let st = st.borrow();
     if as_json {
         println!("{}", st.to_json());
     } else {
@@ -941,7 +954,7 @@ fn decode(file: &str, opts: OpenOptions, d: DecodeOpts<'_>) -> io::Result<()> {
         p.set_reply_timeout(t);
     }
     if let Some(f) = filter {
-        p.set_filter(move |v| f.matches(v));
+        p.set_filter(f);
     }
     run_pipeline(reader.as_mut(), &mut p, &mut emit)?;
     out.flush()

@@ -1,8 +1,9 @@
 //! `aptscope stats`: counts and bytes per message, per address, per direction; pair latency
-//! (min/median/p99/max) per request; diagnostics by kind; a time-binned rate. Built from the
-//! decoded records (the NDJSON objects), so what a filter selects is what is counted.
+//! (min/median/p99/max) per request; diagnostics by kind; a time-binned rate; per stream when
+//! a capture has several. Read from the typed records through [`Fields`] (NDJSON objects read
+//! alike), so what a filter selects is what is counted.
 
-use serde_json::Value;
+use crate::fields::{Fields, Key, Num, Role, Val};
 use std::collections::BTreeMap;
 use std::fmt::Write;
 
@@ -77,6 +78,15 @@ impl Latencies {
     }
 }
 
+/// Count and bytes of one stream, with its name when the capture gives one.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StreamStat {
+    /// The stream's name (port, device), from its `stream` record.
+    pub name: Option<String>,
+    /// Frames and their bytes.
+    pub tally: Tally,
+}
+
 /// Statistics over decoded records.
 #[derive(Debug, Clone)]
 pub struct Stats {
@@ -96,12 +106,19 @@ pub struct Stats {
     pub bins: BTreeMap<u64, u64>,
     /// Bin width in ns.
     pub bin_ns: u64,
+    /// Per stream (port, device): frames, and the name the capture gives it.
+    pub streams: BTreeMap<u64, StreamStat>,
+    /// Per stream and address, shown instead of `addresses` when there are several streams.
+    pub stream_addresses: BTreeMap<(u64, String), Tally>,
     first_ts: Option<u64>,
-    /// Recent request record number → message key (to attribute reply latency to the request);
-    /// bounded, so a long capture keeps flat memory.
-    requests: BTreeMap<u64, String>,
+    /// Recent request (stream, record number) → message key (to attribute reply latency to
+    /// the request); bounded, so a long capture keeps flat memory.
+    requests: BTreeMap<(u64, u64), String>,
     /// Reused to build keys without an allocation per record.
     scratch: String,
+    /// Paths read below keys, built once.
+    p_kind: Vec<String>,
+    p_name: Vec<String>,
 }
 
 /// At most this many rate bins are shown (text and JSON): a longer capture gets wider bins.
@@ -110,26 +127,38 @@ pub const MAX_RATE_BINS: u64 = 200;
 /// Requests remembered for their replies' latency: far more than the pairer can have waiting.
 const MAX_REQUESTS: usize = 1 << 16;
 
-/// Write the message key of `rec` (`apt NAME`, `ell cmd NAME`) into `out`.
-fn key_into(out: &mut String, rec: &Value) {
-    out.clear();
-    match rec["proto"].as_str() {
-        Some("ell") => {
-            out.push_str("ell ");
-            out.push_str(rec["cmd"].as_str().unwrap_or("?"));
-            out.push(' ');
-            out.push_str(rec["name"].as_str().unwrap_or("UNKNOWN"));
+/// Append the text at `key`/`rest` of `rec` to `out`; false when there is none.
+fn push_str<F: Fields + ?Sized>(rec: &F, key: Key, rest: &[String], out: &mut String) -> bool {
+    let mut found = false;
+    rec.visit(key, rest, &mut |v, r| {
+        if let (Val::Str(s), false, Role::Plain) = (v, found, r) {
+            out.push_str(&s);
+            found = true;
         }
-        _ => {
-            out.push_str("apt ");
-            out.push_str(
-                rec["name"]
-                    .as_str()
-                    .or_else(|| rec["msgid_hex"].as_str())
-                    .unwrap_or("?"),
-            );
+    });
+    found
+}
+
+/// The number at `key` of `rec`.
+fn number<F: Fields + ?Sized>(rec: &F, key: Key) -> Option<Num> {
+    let mut n = None;
+    rec.visit(key, &[], &mut |v, _| {
+        if let Val::Num(x) = v {
+            n.get_or_insert(x);
         }
-    }
+    });
+    n
+}
+
+/// Whether the text at `key` of `rec` is `want`.
+fn text_is<F: Fields + ?Sized>(rec: &F, key: Key, want: &str) -> bool {
+    let mut yes = false;
+    rec.visit(key, &[], &mut |v, _| {
+        if let Val::Str(s) = v {
+            yes |= s == want;
+        }
+    });
+    yes
 }
 
 /// The entry of `k` in `map`, created only when missing (no key allocation for a known one).
@@ -161,85 +190,151 @@ impl Stats {
             diags: BTreeMap::new(),
             bins: BTreeMap::new(),
             bin_ns: bin_ns.max(1),
+            streams: BTreeMap::new(),
+            stream_addresses: BTreeMap::new(),
             first_ts: None,
             requests: BTreeMap::new(),
             scratch: String::new(),
+            p_kind: vec!["kind".to_string()],
+            p_name: vec!["name".to_string()],
         }
     }
 
-    /// Count one record.
-    pub fn add(&mut self, rec: &Value) {
-        if let Some(ds) = rec["diag"].as_array() {
-            for d in ds {
-                if let Some(c) = entry(&mut self.diags, d["kind"].as_str().unwrap_or("?")) {
-                    *c += 1;
-                }
+    /// Count one record: a typed [`crate::record::Record`], or its NDJSON object (both read
+    /// through [`Fields`]). Frames and garbage are counted, diagnostics by kind; a `stream`
+    /// record names its stream.
+    pub fn add<F: Fields + ?Sized>(&mut self, rec: &F) {
+        let diags = &mut self.diags;
+        rec.visit(Key::Diag, &self.p_kind, &mut |v, _| {
+            let k = match &v {
+                Val::Str(s) => s.as_ref(),
+                _ => "?",
+            };
+            if let Some(c) = entry(diags, k) {
+                *c += 1;
             }
+        });
+        let len = number(rec, Key::Len).and_then(Num::u64).unwrap_or(0);
+        let stream = number(rec, Key::Stream).and_then(Num::u64);
+        if text_is(rec, Key::Type, "garbage") {
+            self.garbage.count += 1;
+            self.garbage.bytes += len;
+            return;
         }
-        let len = rec["len"].as_u64().unwrap_or(0);
-        match rec["type"].as_str() {
-            Some("frame") => {}
-            Some("garbage") => {
-                self.garbage.count += 1;
-                self.garbage.bytes += len;
-                return;
+        if text_is(rec, Key::Type, "stream") {
+            self.scratch.clear();
+            if let (Some(id), true) = (
+                stream,
+                push_str(rec, Key::StreamName, &[], &mut self.scratch),
+            ) {
+                self.streams.entry(id).or_default().name = Some(self.scratch.clone());
             }
-            _ => return,
+            return;
+        }
+        if !text_is(rec, Key::Type, "frame") {
+            return;
         }
         self.frames.count += 1;
         self.frames.bytes += len;
-        key_into(&mut self.scratch, rec);
+        let ell = rec.proto() == Some("ell");
+        // The message key: `apt NAME` (or its id when unknown), `ell cmd NAME`.
+        self.scratch.clear();
+        if ell {
+            self.scratch.push_str("ell ");
+            if !push_str(rec, Key::Cmd, &[], &mut self.scratch) {
+                self.scratch.push('?');
+            }
+            self.scratch.push(' ');
+            if !push_str(rec, Key::Name, &[], &mut self.scratch) {
+                self.scratch.push_str("UNKNOWN");
+            }
+        } else {
+            self.scratch.push_str("apt ");
+            if !push_str(rec, Key::Name, &[], &mut self.scratch)
+                && !push_str(rec, Key::MsgidHex, &[], &mut self.scratch)
+            {
+                self.scratch.push('?');
+            }
+        }
         if let Some(m) = entry(&mut self.messages, &self.scratch) {
             m.tally.count += 1;
             m.tally.bytes += len;
         }
-        let pair = rec["pair"].as_u64();
-        let from_device = rec["dir"].as_str().or_else(|| rec["msg_dir"].as_str()) == Some("d2h");
+        let pair = number(rec, Key::Pair).and_then(Num::u64);
+        let mut from_device = false;
+        let mut has_dir = false;
+        rec.visit(Key::Dir, &[], &mut |v, _| {
+            if let Val::Str(s) = v {
+                has_dir = true;
+                from_device = s == "d2h";
+            }
+        });
+        if !has_dir {
+            from_device = text_is(rec, Key::MsgDir, "d2h");
+        }
+        let s = stream.unwrap_or(0);
         // Only what can be a request is remembered (a reply names its request in `pair`).
-        if let (Some(n), None, false) = (rec["n"].as_u64(), pair, from_device) {
-            self.requests.insert(n, self.scratch.clone());
+        if let (Some(n), None, false) = (number(rec, Key::N).and_then(Num::u64), pair, from_device)
+        {
+            self.requests.insert((s, n), self.scratch.clone());
             if self.requests.len() > MAX_REQUESTS {
                 self.requests.pop_first();
             }
         }
-        if let (Some(p), Some(l)) = (pair, rec["latency_ms"].as_f64()) {
-            if let Some(req) = self.requests.get(&p) {
-                if let Some(s) = self.messages.get_mut(req) {
-                    s.latencies.push(l);
+        if let (Some(p), Some(l)) = (pair, number(rec, Key::LatencyMs)) {
+            if let Some(req) = self.requests.get(&(s, p)) {
+                if let Some(m) = self.messages.get_mut(req) {
+                    m.latencies.push(l.f());
                 }
             }
         }
         self.scratch.clear();
-        match rec["proto"].as_str() {
-            Some("ell") => {
-                self.scratch.push_str("ell ");
-                self.scratch.push_str(rec["addr"].as_str().unwrap_or("?"));
+        if ell {
+            self.scratch.push_str("ell ");
+            if !push_str(rec, Key::Addr, &[], &mut self.scratch) {
+                self.scratch.push('?');
             }
-            _ => {
-                self.scratch.push_str("apt ");
-                self.scratch
-                    .push_str(rec["src"]["name"].as_str().unwrap_or("?"));
-                self.scratch.push_str(" → ");
-                self.scratch
-                    .push_str(rec["dst"]["name"].as_str().unwrap_or("?"));
+        } else {
+            self.scratch.push_str("apt ");
+            if !push_str(rec, Key::Src, &self.p_name, &mut self.scratch) {
+                self.scratch.push('?');
+            }
+            self.scratch.push_str(" → ");
+            if !push_str(rec, Key::Dst, &self.p_name, &mut self.scratch) {
+                self.scratch.push('?');
             }
         }
         if let Some(a) = entry(&mut self.addresses, &self.scratch) {
             a.count += 1;
             a.bytes += len;
         }
-        if let Some(d) = entry(
-            &mut self.directions,
-            rec["dir"].as_str().unwrap_or("unknown"),
-        ) {
+        if let Some(id) = stream {
+            let st = &mut self.streams.entry(id).or_default().tally;
+            st.count += 1;
+            st.bytes += len;
+            let key = (id, std::mem::take(&mut self.scratch));
+            let a = self.stream_addresses.entry(key).or_default();
+            a.count += 1;
+            a.bytes += len;
+        }
+        self.scratch.clear();
+        if !push_str(rec, Key::Dir, &[], &mut self.scratch) {
+            self.scratch.push_str("unknown");
+        }
+        if let Some(d) = entry(&mut self.directions, &self.scratch) {
             d.count += 1;
             d.bytes += len;
         }
-        if let Some(ts) = rec["ts_ns"].as_u64() {
+        if let Some(ts) = number(rec, Key::TsNs).and_then(Num::u64) {
             let first = *self.first_ts.get_or_insert(ts);
             let bin = ts.saturating_sub(first) / self.bin_ns * self.bin_ns;
             *self.bins.entry(bin).or_default() += 1;
         }
+    }
+
+    /// Whether the statistics break down per stream: more than one stream carried frames.
+    pub fn per_stream(&self) -> bool {
+        self.streams.values().filter(|s| s.tally.count > 0).count() > 1
     }
 
     /// The rate histogram as shown: every bin from the first frame's to the last one's, the
@@ -305,9 +400,22 @@ impl Stats {
             }
             s.push('\n');
         }
-        let _ = writeln!(s, "\nAddresses{:>43}{:>10}", "count", "bytes");
-        for (k, t) in &self.addresses {
-            let _ = writeln!(s, "  {k:<48}{:>6}{:>10}", t.count, t.bytes);
+        if self.per_stream() {
+            let _ = writeln!(s, "\nStreams{:>45}{:>10}", "count", "bytes");
+            for (id, st) in &self.streams {
+                let k = format!("s{id} {}", st.name.as_deref().unwrap_or(""));
+                let _ = writeln!(s, "  {k:<48}{:>6}{:>10}", st.tally.count, st.tally.bytes);
+            }
+            let _ = writeln!(s, "\nAddresses per stream{:>32}{:>10}", "count", "bytes");
+            for ((id, k), t) in &self.stream_addresses {
+                let k = format!("s{id} {k}");
+                let _ = writeln!(s, "  {k:<48}{:>6}{:>10}", t.count, t.bytes);
+            }
+        } else {
+            let _ = writeln!(s, "\nAddresses{:>43}{:>10}", "count", "bytes");
+            for (k, t) in &self.addresses {
+                let _ = writeln!(s, "  {k:<48}{:>6}{:>10}", t.count, t.bytes);
+            }
         }
         let _ = writeln!(s, "\nDirections{:>42}{:>10}", "count", "bytes");
         for (k, t) in &self.directions {
@@ -385,6 +493,30 @@ impl Stats {
                 tally(&mut s, t);
             }
         }
+        s.push_str("},\"streams\":{");
+        for (i, (id, st)) in self.streams.iter().enumerate() {
+            let _ = write!(s, "{}\"{id}\":{{", if i > 0 { "," } else { "" });
+            if let Some(n) = &st.name {
+                s.push_str("\"name\":");
+                crate::json::string(&mut s, n);
+                s.push(',');
+            }
+            let _ = write!(
+                s,
+                "\"count\":{},\"bytes\":{},\"addresses\":{{",
+                st.tally.count, st.tally.bytes
+            );
+            let of_stream = self.stream_addresses.range((*id, String::new())..);
+            for (j, ((_, k), t)) in of_stream.take_while(|((x, _), _)| x == id).enumerate() {
+                if j > 0 {
+                    s.push(',');
+                }
+                crate::json::string(&mut s, k);
+                s.push(':');
+                tally(&mut s, t);
+            }
+            s.push_str("}}");
+        }
         s.push_str("},\"diags\":{");
         for (i, (k, n)) in self.diags.iter().enumerate() {
             let _ = write!(s, "{}\"{k}\":{n}", if i > 0 { "," } else { "" });
@@ -411,7 +543,7 @@ impl Stats {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use serde_json::json;
+    use serde_json::{json, Value};
 
     #[test]
     fn counts_latencies_and_bins() {
