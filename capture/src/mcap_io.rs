@@ -1163,6 +1163,11 @@ fn common(o: &mut SchemaObj, proto: &str) {
             "integer",
             Some("byte offset of the record in its lane's byte stream"),
         )
+        .prop(
+            "cap_offset",
+            "integer",
+            Some("byte offset of the record in the whole capture (all lanes, read order)"),
+        )
         .prop("len", "integer", Some("record length in bytes"))
         .prop("raw", "string", Some("the bytes, as hex"))
         .prop(
@@ -1324,8 +1329,23 @@ pub fn apt_schema(t: &Table, m: &MsgDef) -> String {
     if any_phys {
         o.raw("phys", &po.build());
     }
+    let coded = fields.iter().filter(|f| f.enumeration.is_some() || f.flags.is_some());
+    codes_schema(&mut o, coded.map(|f| f.name));
     o.raw("diag", &diag_array());
     o.build()
+}
+
+/// `codes`: the number of each enum or flag field named in `fields` (when there are any).
+fn codes_schema<'a>(o: &mut SchemaObj, names: impl Iterator<Item = &'a str>) {
+    let mut co = SchemaObj::new(None, Some("numbers of the enum and flag fields"));
+    let mut any = false;
+    for n in names {
+        co.prop(n, "integer", None);
+        any = true;
+    }
+    if any {
+        o.raw("codes", &co.build());
+    }
 }
 
 fn apt_unknown_schema() -> String {
@@ -1489,6 +1509,9 @@ pub fn ell_schema(cmd: Option<&Cmd>) -> String {
     if any_phys {
         o.raw("phys", &po.build());
     }
+    let fields = cmd.map_or(&[][..], |c| c.fields);
+    let coded = fields.iter().filter(|f| f.kind == Kind::Status);
+    codes_schema(&mut o, coded.map(|f| f.name));
     let mut mo = SchemaObj::new(None, Some("what the bus knows of the module"));
     mo.prop(
         "first_addr",
