@@ -1329,7 +1329,9 @@ pub fn apt_schema(t: &Table, m: &MsgDef) -> String {
     if any_phys {
         o.raw("phys", &po.build());
     }
-    let coded = fields.iter().filter(|f| f.enumeration.is_some() || f.flags.is_some());
+    let coded = fields
+        .iter()
+        .filter(|f| f.enumeration.is_some() || f.flags.is_some());
     codes_schema(&mut o, coded.map(|f| f.name));
     o.raw("diag", &diag_array());
     o.build()

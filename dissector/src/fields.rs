@@ -136,17 +136,13 @@ impl Key {
             Key::Channel => "channel",
             Key::LatencyMs => "latency_ms",
             Key::TsNs => "ts_ns",
-            other => KEYS
-                .iter()
-                .find(|d| d.key == other)
-                .map_or("", |d| d.name),
+            other => KEYS.iter().find(|d| d.key == other).map_or("", |d| d.name),
         }
     }
 
     /// The definition of a filter name valid in `scope`.
     pub fn lookup(name: &str, scope: u8) -> Option<&'static KeyDef> {
-        KEYS.iter()
-            .find(|d| d.name == name && d.scope & scope != 0)
+        KEYS.iter().find(|d| d.name == name && d.scope & scope != 0)
     }
 }
 
@@ -497,9 +493,7 @@ impl Fields for Record<'_> {
                     Key::CapOffset => num(m.cap_offset),
                     Key::Len => num(g.bytes.len() as u64),
                     Key::Raw => hex(g.bytes),
-                    Key::Text if g.kind.is_none() => {
-                        Val::Str(String::from_utf8_lossy(g.bytes))
-                    }
+                    Key::Text if g.kind.is_none() => Val::Str(String::from_utf8_lossy(g.bytes)),
                     Key::Diag => {
                         let d = match g.kind {
                             Some(kind) => crate::json::garbage_diag(g.offset, g.bytes.len(), kind),
@@ -770,9 +764,8 @@ fn apt_visit(a: &AptRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_
             return true;
         }
         Key::Phys => {
-            let conv = |fd: &crate::table::Field, v: &AptValue<'_>| {
-                crate::json::apt_phys(fd, v, a.scale)
-            };
+            let conv =
+                |fd: &crate::table::Field, v: &AptValue<'_>| crate::json::apt_phys(fd, v, a.scale);
             let any = fr.fields().any(|(fd, v)| conv(fd, &v).is_some());
             if !any {
                 return false;
@@ -807,7 +800,9 @@ fn apt_visit(a: &AptRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_
                 None => {
                     let members: Vec<(&str, Option<Val<'_>>)> = fr
                         .fields()
-                        .filter_map(|(fd, v)| Some((fd.name, Some(Val::Num(Num::I(apt_code(fd, &v)?))))))
+                        .filter_map(|(fd, v)| {
+                            Some((fd.name, Some(Val::Num(Num::I(apt_code(fd, &v)?)))))
+                        })
                         .collect();
                     object(&[], &members, Role::Plain, f);
                 }
@@ -877,7 +872,9 @@ fn ell_field(
         } else {
             match (fd.kind, v) {
                 (EllKind::Raw, EllValue::Raw(_)) if name == "curve_points" => 2,
-                (EllKind::Model, EllValue::U(_)) if name.strip_suffix("_name") == Some(fd.name) => 3,
+                (EllKind::Model, EllValue::U(_)) if name.strip_suffix("_name") == Some(fd.name) => {
+                    3
+                }
                 (EllKind::Firmware, EllValue::U(_))
                     if name.strip_suffix("_version") == Some(fd.name) =>
                 {
@@ -924,9 +921,11 @@ fn ell_field(
             }
         }
         (3, EllValue::U(x)) => scalar(rest, Val::Str(Cow::Owned(format!("ELL{x}"))), f),
-        (4, EllValue::U(x)) => {
-            scalar(rest, Val::Str(Cow::Owned(format!("{}.{}", x >> 4, x & 15))), f)
-        }
+        (4, EllValue::U(x)) => scalar(
+            rest,
+            Val::Str(Cow::Owned(format!("{}.{}", x >> 4, x & 15))),
+            f,
+        ),
         (5, EllValue::U(x)) => scalar(
             rest,
             str_val(if x & 0x80 != 0 { "imperial" } else { "metric" }),

@@ -413,17 +413,23 @@ impl Test {
             Test::Diag(p) => {
                 proto_is(rec, *p)
                     && (any_at(rec, Key::Diag, &[], &mut |_, _| true)
-                        || any_at(rec, Key::Type, &[], &mut |v, _| {
-                            matches!(v, Val::Str(s) if matches!(s.as_ref(), "input" | "diag" | "garbage"))
-                        }))
+                        || any_at(
+                            rec,
+                            Key::Type,
+                            &[],
+                            &mut |v, _| matches!(v, Val::Str(s) if matches!(s.as_ref(), "input" | "diag" | "garbage")),
+                        ))
             }
             Test::Unpaired(p) => {
                 proto_is(rec, *p)
                     && (any_at(rec, Key::Unpaired, &[], &mut |v, _| {
                         matches!(v, Val::Bool(true))
-                    }) || any_at(rec, Key::Diag, kind_path(), &mut |v, _| {
-                        matches!(v, Val::Str(s) if matches!(s.as_ref(), "no_reply" | "unsolicited" | "unanswered"))
-                    }))
+                    }) || any_at(
+                        rec,
+                        Key::Diag,
+                        kind_path(),
+                        &mut |v, _| matches!(v, Val::Str(s) if matches!(s.as_ref(), "no_reply" | "unsolicited" | "unanswered")),
+                    ))
             }
             Test::Paired(p) => proto_is(rec, *p) && any_at(rec, Key::Pair, &[], &mut |_, _| true),
             Test::Exists(f) => f.any(rec, &mut |v, r| r != Role::Code && truthy(v)),
@@ -497,7 +503,11 @@ impl FieldRef {
     }
 
     /// Does any value at this field satisfy `pred`?
-    fn any<F: Fields + ?Sized>(&self, rec: &F, pred: &mut dyn FnMut(&Val<'_>, Role) -> bool) -> bool {
+    fn any<F: Fields + ?Sized>(
+        &self,
+        rec: &F,
+        pred: &mut dyn FnMut(&Val<'_>, Role) -> bool,
+    ) -> bool {
         let mut hit = false;
         self.each(rec, &mut |v, r| {
             if !hit && pred(&v, r) {
@@ -622,12 +632,15 @@ fn field_names(proto: &str) -> &'static [&'static str] {
     }
 }
 
-
 /// Check that `rest` (the name after `apt.`/`ell.`) names something records of `proto` hold;
 /// if not, say so with the nearest names.
 fn check_name(proto: &str, rest: &[&str]) -> Result<(), String> {
     let scope = scope_of(proto);
-    let keys = || KEYS.iter().filter(move |d| d.scope & scope != 0).map(|d| d.name);
+    let keys = || {
+        KEYS.iter()
+            .filter(move |d| d.scope & scope != 0)
+            .map(|d| d.name)
+    };
     let fields = field_names(proto);
     let first = rest.first().copied().unwrap_or("");
     let (ok, bad, cands): (bool, &str, Vec<&str>) = match (first, rest.get(1)) {

@@ -527,6 +527,75 @@ mod tests {
             .collect()
     }
 
+    /// Two streams: text lines name theirs, every record carries it and a capture-wide
+    /// offset, a filter reads the typed records (what it drops is not emitted), and a
+    /// record's file comes first when the pipeline names one.
+    #[test]
+    fn streams_offsets_files_and_filters() {
+        let req = frame("HW_REQ_INFO", &[], 0x50, 0x01);
+        let info = frame("HW_GET_INFO", &[("model_number", "KDC101")], 0x01, 0x50);
+        let run = |fmt: Format, filter: Option<&str>| -> Vec<String> {
+            let mut p = Pipeline::new(Some(Proto::Apt), fmt);
+            p.set_file("a.bin");
+            if let Some(f) = filter {
+                p.set_filter(crate::filter::Filter::parse(f).expect("filter"));
+            }
+            let mut out: Vec<String> = vec![];
+            let mut emit = |l: &str| -> Result<(), ()> {
+                out.push(l.to_string());
+                Ok(())
+            };
+            p.stream_info(0, "/dev/ttyUSB0", None, &mut emit).unwrap();
+            p.stream_info(1, "/dev/ttyUSB1", None, &mut emit).unwrap();
+            for (stream, dir, b) in [
+                (0, Dir::HostToDevice, &req),
+                (1, Dir::HostToDevice, &req),
+                (1, Dir::DeviceToHost, &info),
+            ] {
+                let ctx = Ctx {
+                    stream,
+                    dir: Some(dir),
+                    ts_ns: None,
+                };
+                p.push_chunk(ctx, b, &mut emit).unwrap();
+            }
+            p.finish(&mut emit).unwrap();
+            out
+        };
+        let text = run(Format::Text, None);
+        let frames: Vec<&String> = text.iter().filter(|l| l.contains("HW_")).collect();
+        assert_eq!(frames.len(), 3, "{text:?}");
+        assert!(
+            frames[0].starts_with("s0 ") && frames[1].starts_with("s1 "),
+            "{text:?}"
+        );
+        assert!(text
+            .iter()
+            .any(|l| l.starts_with("s0 ") && l.contains("!! #1")));
+        let json = run(Format::Json, None);
+        let recs: Vec<serde_json::Value> = json
+            .iter()
+            .map(|l| serde_json::from_str(l).expect("JSON"))
+            .collect();
+        assert!(recs.iter().all(|r| r["file"] == "a.bin"), "{json:?}");
+        let frames: Vec<&serde_json::Value> =
+            recs.iter().filter(|r| r["type"] == "frame").collect();
+        // Requests #1 and #2 are both at offset 0 of their lanes; not in the capture.
+        let offs: Vec<(u64, u64)> = frames
+            .iter()
+            .filter_map(|r| Some((r["offset"].as_u64()?, r["cap_offset"].as_u64()?)))
+            .collect();
+        assert_eq!(offs, [(0, 0), (0, 6), (0, 12)]);
+        let late = recs.iter().find(|r| r["type"] == "diag").expect("no_reply");
+        assert_eq!((&late["ref"], &late["stream"]), (&1.into(), &0.into()));
+        let only = run(Format::Json, Some("stream == 1 && apt.name ~ GET"));
+        let kept: Vec<&String> = only.iter().filter(|l| l.contains("\"n\"")).collect();
+        assert_eq!(kept.len(), 1, "{only:?}");
+        assert!(kept[0].contains("\"n\":3") && kept[0].contains("\"pair\":2"));
+        let none = run(Format::Text, Some("file contains b.bin"));
+        assert!(none.iter().all(|l| l.starts_with('#')), "{none:?}");
+    }
+
     const VEL: &[(&str, &str)] = &[
         ("chan_ident", "CH1"),
         ("min_vel", "0"),

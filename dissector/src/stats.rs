@@ -637,6 +637,88 @@ mod tests {
 }
 
 #[cfg(test)]
+mod typed {
+    use super::*;
+    use crate::pipeline::{Format, Renderer};
+    use crate::record::{Ctx, Decoder, Record};
+    use crate::table::Dir;
+    use crate::Table;
+
+    fn frame(name: &str, values: &[(&str, &str)], dst: u8, src: u8) -> Vec<u8> {
+        let n = crate::apt::Named {
+            name,
+            sub: None,
+            values,
+            form: None,
+            dst,
+            src,
+        };
+        crate::apt::encode_named(Table::global(), &n).expect("valid frame")
+    }
+
+    /// Two controllers on two ports: counted per stream, named by their `stream` records, each
+    /// reply's latency attributed to its request on its own stream; the typed records and their
+    /// NDJSON give the same statistics.
+    #[test]
+    fn typed_records_count_per_stream_like_their_ndjson() {
+        let req = frame("HW_REQ_INFO", &[], 0x50, 0x01);
+        let info = frame("HW_GET_INFO", &[("model_number", "KDC101")], 0x01, 0x50);
+        let mut dec = Decoder::new(Some(crate::detect::Proto::Apt));
+        let (mut typed, mut json) = (Stats::new(1_000_000_000), Stats::new(1_000_000_000));
+        let mut r = Renderer::new(Format::Json);
+        let mut each = |rec: &Record<'_>| -> Result<(), String> {
+            typed.add(rec);
+            let v: serde_json::Value =
+                serde_json::from_str(r.line(rec)).map_err(|e| e.to_string())?;
+            json.add(&v);
+            Ok(())
+        };
+        let mut run = || -> Result<(), String> {
+            dec.stream_info(0, "/dev/ttyUSB0", None, &mut each)?;
+            dec.stream_info(1, "/dev/ttyUSB1", None, &mut each)?;
+            for (i, (stream, dir, b, ms)) in [
+                (0, Dir::HostToDevice, &req, 0),
+                (1, Dir::HostToDevice, &req, 1),
+                (1, Dir::DeviceToHost, &info, 5),
+                (0, Dir::DeviceToHost, &info, 9),
+                (1, Dir::HostToDevice, &req, 20),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let ctx = Ctx {
+                    stream,
+                    dir: Some(dir),
+                    ts_ns: Some(ms * 1_000_000 + i as u64),
+                };
+                dec.push(ctx, b, &mut each)?;
+            }
+            dec.finish(&mut each)
+        };
+        run().expect("decodes");
+        assert_eq!(typed.to_json(), json.to_json());
+        assert!(typed.per_stream());
+        assert_eq!(typed.streams[&0].name.as_deref(), Some("/dev/ttyUSB0"));
+        assert_eq!(
+            (typed.streams[&0].tally.count, typed.streams[&1].tally.count),
+            (2, 3)
+        );
+        let (n, min, _, _, max) = typed.latency("apt HW_REQ_INFO").expect("latencies");
+        assert_eq!(n, 2);
+        assert!(
+            (min - 4.0).abs() < 0.01 && (max - 9.0).abs() < 0.01,
+            "{min} {max}"
+        );
+        assert_eq!(typed.diags.get("no_reply"), Some(&1));
+        let text = typed.to_text();
+        assert!(text.contains("s1 /dev/ttyUSB1"), "{text}");
+        assert!(text.contains("s0 apt usb → host"), "{text}");
+        let j: serde_json::Value = serde_json::from_str(&typed.to_json()).expect("JSON");
+        assert_eq!(j["streams"]["1"]["addresses"]["apt host → usb"]["count"], 2);
+    }
+}
+
+#[cfg(test)]
 mod bounded {
     use super::*;
     use serde_json::json;

@@ -160,7 +160,9 @@ const FILTERS: &[&str] = &[
 ];
 
 fn sample(name: &str) -> Vec<u8> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../samples").join(name);
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../samples")
+        .join(name);
     std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
@@ -228,7 +230,11 @@ fn typed_records_and_their_ndjson_match_the_same_filters() {
         ("bsc203".into(), sample("sessions/bsc203.bin"), None),
         ("kpz101".into(), sample("sessions/kpz101.bin"), None),
         ("session kdc101".into(), sample("sessions/kdc101.bin"), None),
-        ("elliptec".into(), sample("elliptec-bus.txt"), Some(Proto::Elliptec)),
+        (
+            "elliptec".into(),
+            sample("elliptec-bus.txt"),
+            Some(Proto::Elliptec),
+        ),
         (
             "every form".into(),
             aptscope_dissector::synth::stream(t, 7, 3000, true),
@@ -244,7 +250,11 @@ fn typed_records_and_their_ndjson_match_the_same_filters() {
     }
     // Not a vacuous agreement: the filters do select records, and not all of them.
     assert!(hits > seen, "{hits} matches over {seen} records");
-    assert!(hits < seen * filters.len() / 2, "{hits} of {}", seen * filters.len());
+    assert!(
+        hits < seen * filters.len() / 2,
+        "{hits} of {}",
+        seen * filters.len()
+    );
 }
 
 /// Every filter in the list selects something somewhere (else it tests nothing).
