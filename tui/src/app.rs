@@ -2,7 +2,8 @@
 //! the state; [`crate::ui::draw`] renders it.
 
 use crate::as_filter;
-use crate::decode::{json_of, tree, Node};
+use crate::decode::{tree, Node};
+use crate::fields;
 use crate::index::Shared;
 use crate::scan::Scan;
 use aptscope_dissector::filter::{Filter, FilterError};
@@ -99,8 +100,15 @@ pub struct App {
     pub sel: usize,
     /// First shown row of the timeline.
     pub top: usize,
-    /// Keep the selection on the last record as the index grows.
+    /// Keep the selection on the last record as the index grows (`f` toggles it; moving up
+    /// stops it, `G`/End resumes it).
     pub follow: bool,
+    /// The source is live: the status bar shows LIVE (following) or PAUSED with the count of
+    /// records not yet seen.
+    pub live: bool,
+    /// Rows of the shown list seen so far: every row while following, else up to the last
+    /// row that was on screen.
+    pub seen: usize,
     /// Time column mode.
     pub time_mode: TimeMode,
     /// The applied display filter text (empty: none).
@@ -157,6 +165,8 @@ impl App {
             sel: 0,
             top: 0,
             follow: false,
+            live: false,
+            seen: 0,
             time_mode: TimeMode::Relative,
             filter_text: String::new(),
             filter_error: None,
@@ -180,6 +190,23 @@ impl App {
         };
         app.scan.start(app.shared.clone(), None, app.background);
         app
+    }
+
+    /// Say whether the source is live (a tap, a simulator, a file being written): a live view
+    /// follows new records from the start and shows LIVE / PAUSED in the status bar.
+    pub fn set_live(&mut self, live: bool) {
+        self.live = live;
+        self.shared
+            .live
+            .store(live, std::sync::atomic::Ordering::Relaxed);
+        if live {
+            self.follow = true;
+        }
+    }
+
+    /// Rows of the shown list not seen yet (arrived below the screen while paused).
+    pub fn unseen(&self) -> usize {
+        self.len().saturating_sub(self.seen)
     }
 
     /// Number of rows in the shown list (all records, or those the filter matches).
@@ -263,13 +290,21 @@ impl App {
         }
     }
 
-    /// Per-frame housekeeping: follow mode.
+    /// Per-frame housekeeping: follow mode, and what has been seen.
     pub fn tick(&mut self) {
+        if !self.background {
+            // No scan thread: scan what the index gained here.
+            self.scan.catch_up(&self.shared);
+        }
+        let len = self.len();
         if self.follow {
-            let len = self.len();
             if len > 0 {
                 self.select(len - 1);
             }
+            self.seen = len;
+        } else {
+            let shown = (self.top + self.list_rows.max(1)).min(len);
+            self.seen = self.seen.max(shown).min(len);
         }
     }
 
@@ -351,7 +386,6 @@ impl App {
             Some(f) => f,
             None => return,
         };
-        let mut buf = String::new();
         let mut pos = self.sel;
         const CHUNK: usize = 4096;
         loop {
@@ -369,7 +403,7 @@ impl App {
             let Ok(ix) = self.shared.index.read() else {
                 return;
             };
-            let hit = |n: &u64| json_of(&ix, *n, &mut buf).is_some_and(|v| f.matches(&v));
+            let hit = |n: &u64| fields::matches(&f, &ix, *n);
             let found = if forward {
                 ns.iter().position(hit)
             } else {
@@ -522,7 +556,11 @@ impl App {
             }
             KeyCode::Char('F') | KeyCode::Char('f') => {
                 self.follow = !self.follow;
-                self.message = Some(format!("follow {}", if self.follow { "on" } else { "off" }));
+                if !self.live {
+                    self.message =
+                        Some(format!("follow {}", if self.follow { "on" } else { "off" }));
+                }
+                self.tick();
             }
             KeyCode::Char('1') => self.view = View::Timeline,
             KeyCode::Char('2') | KeyCode::Char('S') => self.view = View::Stats,
@@ -611,7 +649,13 @@ impl App {
                     self.follow = false;
                     self.select(0);
                 }
-                M::Bottom => self.select(self.len().saturating_sub(1)),
+                M::Bottom => {
+                    // At the end of a live capture: follow it again (as `tail -f`).
+                    if self.live {
+                        self.follow = true;
+                    }
+                    self.select(self.len().saturating_sub(1));
+                }
                 M::Toggle => self.focus = Pane::Detail,
                 _ => {}
             },

@@ -2,11 +2,11 @@
 //! details): the display filter that selects the records sharing the selected detail-tree
 //! line's value, in the language of [`aptscope_dissector::filter`].
 //!
-//! Values come from the record's NDJSON object (what filters read), not from the tree's text,
-//! so every filter built here matches the record it was built from (`tui/tests/as_filter.rs`
-//! checks it on every line of every sample).
+//! Values come from the record's NDJSON object (as `decode --json` writes it), not from the
+//! tree's text, so every filter built here matches the record it was built from
+//! (`tui/tests/as_filter.rs` checks it on every line of every sample).
 
-use crate::decode::{json_of, tree, Node, NodeKind};
+use crate::decode::{json_value, tree, Node, NodeKind};
 use crate::index::Index;
 use aptscope_dissector::filter::Filter;
 use serde_json::Value;
@@ -14,8 +14,7 @@ use serde_json::Value;
 /// The filter for detail line `node` of record `n`; `None` for a line without a value to
 /// filter on (a section heading, the terminator …).
 pub fn for_node(ix: &Index, n: u64, node: &Node) -> Option<String> {
-    let mut buf = String::new();
-    let rec = json_of(ix, n, &mut buf)?;
+    let rec = json_value(ix, n)?;
     let proto = rec.get("proto").and_then(Value::as_str).unwrap_or("apt");
     let id = node.id.as_str();
     let s = match id {

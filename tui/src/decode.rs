@@ -1,13 +1,14 @@
 //! Decoding one record of the index on demand: its timeline row, its detail tree, its NDJSON
-//! object (for display filters and statistics: whole, or only the keys a filter reads, built
-//! directly or picked from the rendered text). Only what is on screen is decoded.
+//! object (the pipeline's renderer on the record re-decoded by [`with_record`]). Only what is
+//! on screen is decoded.
 
+use crate::fields::{garbage_kind, module_of};
+pub use crate::fields::{latency, scale_of, with_record};
 use crate::index::*;
 use aptscope_dissector::apt::{fmt_value_in, summary_in, AptFrame, Value};
 use aptscope_dissector::diag::{Diag, DiagKind};
-use aptscope_dissector::ell::{self, head, EllFrame, Observation};
-use aptscope_dissector::json;
-use aptscope_dissector::pair::PairInfo;
+use aptscope_dissector::ell::{self, head, EllFrame};
+use aptscope_dissector::pipeline::{Format, Renderer};
 use aptscope_dissector::table::{Dir, FormKind};
 use aptscope_dissector::Table;
 use std::fmt::Write;
@@ -45,6 +46,8 @@ pub struct Row {
     pub n: u64,
     /// Capture time.
     pub ts: Option<u64>,
+    /// Stream (port/device) index.
+    pub stream: u16,
     /// Direction.
     pub way: Way,
     /// `apt` or `ell`.
@@ -101,34 +104,16 @@ fn ell_family(code: &[u8; 2]) -> Family {
     }
 }
 
-/// Latency between a reply and its request.
-pub fn latency(ix: &Index, r: &Rec) -> Option<u64> {
-    if !r.has(F_IS_REPLY) {
-        return None;
-    }
-    let req = ix.rec(r.pair as u64)?;
-    Some(r.ts()?.saturating_sub(req.ts()?))
-}
-
 fn garbage_diag(r: &Rec, bytes: &[u8]) -> Diag {
-    let kind = if r.has(F_ABSURD) && bytes.len() >= 4 {
-        DiagKind::AbsurdLength {
-            msg_id: u16::from_le_bytes([bytes[0], bytes[1]]),
-            len: u16::from_le_bytes([bytes[2], bytes[3]]),
-        }
-    } else if r.has(F_TRAILING) {
-        DiagKind::TrailingBytes {
-            len: bytes.len() as u32,
-        }
-    } else {
-        DiagKind::Garbage {
-            len: bytes.len() as u32,
-        }
-    };
-    Diag {
-        offset: r.offset,
-        kind,
+    if r.has(F_ELL) {
+        return Diag {
+            offset: r.offset,
+            kind: DiagKind::Garbage {
+                len: bytes.len() as u32,
+            },
+        };
     }
+    aptscope_dissector::json::garbage_diag(r.offset, bytes.len(), garbage_kind(r, bytes))
 }
 
 fn pair_diags(r: &Rec, out: &mut String) {
@@ -153,23 +138,6 @@ fn push_sep(out: &mut String, s: &str) {
     out.push_str(s);
 }
 
-/// The stage conversion of an APT record's motion values, when one applies.
-pub fn scale_of<'a>(ix: &'a Index, r: &Rec) -> Option<&'a aptscope_dissector::units::Scale> {
-    if r.has(F_ELL) {
-        return None;
-    }
-    (r.module as usize)
-        .checked_sub(1)
-        .and_then(|i| ix.scales.get(i))
-}
-
-fn module_of(ix: &Index, r: &Rec) -> Option<ell::Module> {
-    (r.module as usize)
-        .checked_sub(1)
-        .and_then(|i| ix.modules.get(i))
-        .cloned()
-}
-
 /// Decode the timeline row of record `n`.
 pub fn row(ix: &Index, n: u64) -> Option<Row> {
     let r = ix.rec(n)?;
@@ -177,6 +145,7 @@ pub fn row(ix: &Index, n: u64) -> Option<Row> {
     let mut row = Row {
         n,
         ts: r.ts(),
+        stream: r.stream,
         way: way_of(r, None),
         proto: if r.has(F_ELL) { "ell" } else { "apt" },
         src: String::new(),
@@ -759,454 +728,15 @@ fn ell_tree(ix: &Index, r: &Rec, _n: u64, bytes: &[u8], t: &mut Tree) {
     }
 }
 
-/// What [`render`] knows about a record beyond its JSON text.
-#[derive(Debug, Clone, Copy)]
-pub struct Rendered {
-    /// Record number.
-    pub n: u64,
-    /// Stream offset.
-    pub offset: u64,
-    /// A request that got no reply: a `no_reply` diagnostic belongs in its `diag`.
-    pub no_reply: bool,
-}
-
-/// Render the NDJSON object of record `n` as `aptscope decode --json` prints it into `buf`
-/// (without the `no_reply` diagnostic; see [`Rendered`]).
-pub fn render(ix: &Index, n: u64, buf: &mut String) -> Option<Rendered> {
-    let r = ix.rec(n)?;
-    let bytes = ix.bytes(r);
-    buf.clear();
-    let mut dir: Option<&str> = r.cap_dir().map(|d| d.as_str());
-    let ell = r.has(F_ELL);
-    if r.has(F_GARBAGE) {
-        if ell {
-            json::ell_garbage(buf, n, r.offset, bytes);
-        } else {
-            let d = garbage_diag(r, bytes);
-            let kind = match d.kind {
-                DiagKind::AbsurdLength { msg_id, len } => {
-                    aptscope_dissector::apt::GarbageKind::AbsurdLength { msg_id, len }
-                }
-                DiagKind::TrailingBytes { .. } => {
-                    aptscope_dissector::apt::GarbageKind::TrailingBytes
-                }
-                _ => aptscope_dissector::apt::GarbageKind::NoHeader,
-            };
-            json::apt_garbage(buf, n, r.offset, bytes, kind);
-            dir = dir.or(Some("unknown"));
-        }
-    } else if ell {
-        let mut f = EllFrame::decode(r.offset, bytes, r.has(F_TRUNCATED))?;
-        if r.has(F_UNSOLICITED) {
-            f.push_diag(Diag {
-                offset: r.offset,
-                kind: DiagKind::Unsolicited,
-            });
-        }
-        let o = Observation {
-            pair: r
-                .has(F_IS_REPLY)
-                .then_some(r.pair as u64)
-                .filter(|p| *p != 0),
-            latency_ns: latency(ix, r),
-            unsolicited: r.has(F_UNSOLICITED),
-            interim: r.has(F_INTERIM),
-            module: module_of(ix, r),
-            expired: vec![],
-        };
-        json::ell_frame(buf, n, &f, &o);
-        dir = None;
-    } else {
-        let f = AptFrame::decode(Table::global(), r.offset, bytes, r.has(F_TRUNCATED))?;
-        if dir.is_none() {
-            dir = f
-                .msg
-                .map(|m| m.dir)
-                .filter(|d| *d != Dir::Both)
-                .map(|d| d.as_str());
-        }
-        let p = PairInfo {
-            pair: r
-                .has(F_IS_REPLY)
-                .then_some(r.pair as u64)
-                .filter(|p| *p != 0),
-            latency_ns: latency(ix, r),
-            other_address: r.has(F_OTHER_ADDR),
-            unsolicited: r.has(F_UNSOLICITED),
-            duplicate: r.has(F_DUPLICATE),
-            expired: vec![],
-            not_for_model: r
-                .has(F_NOT_FOR_MODEL)
-                .then(|| ix.not_for_model.get(&n).copied())
-                .flatten(),
-        };
-        json::apt_frame_in(buf, n, &f, &p, scale_of(ix, r));
-        if dir.is_none() {
-            dir = Some("unknown");
-        }
-    }
-    if buf.ends_with('}') {
-        buf.pop();
-        if let Some(d) = dir.filter(|_| !ell) {
-            let _ = write!(buf, ",\"dir\":\"{d}\"");
-        }
-        if let Some(t) = r.ts() {
-            let _ = write!(buf, ",\"ts_ns\":{t}");
-        }
-        let _ = write!(buf, ",\"stream\":{}}}", r.stream);
-    }
-    Some(Rendered {
-        n,
-        offset: r.offset,
-        no_reply: r.has(F_NO_REPLY),
+/// The NDJSON object of record `n`, as `aptscope decode --json` prints it: the pipeline's
+/// renderer on the re-decoded record.
+pub fn json_of(ix: &Index, n: u64) -> Option<String> {
+    with_record(ix, n, |rec| {
+        Renderer::new(Format::Json).line(rec).to_string()
     })
 }
 
-/// The NDJSON object of record `n`, as `aptscope decode --json` prints it (with a `no_reply`
-/// diagnostic added to a request that got no reply), rendered into `buf`.
-pub fn json_of(ix: &Index, n: u64, buf: &mut String) -> Option<serde_json::Value> {
-    let rd = render(ix, n, buf)?;
-    let mut v: serde_json::Value = serde_json::from_str(buf).ok()?;
-    if rd.no_reply {
-        add_no_reply(&mut v, &rd);
-    }
-    Some(v)
-}
-
-/// Append the `no_reply` diagnostic to the `diag` list of a record.
-fn add_no_reply(v: &mut serde_json::Value, rd: &Rendered) {
-    let mut s = String::new();
-    json::diags(
-        &mut s,
-        std::iter::once(Diag {
-            offset: rd.offset,
-            kind: DiagKind::NoReply { cmd: rd.n },
-        }),
-    );
-    if let (Ok(serde_json::Value::Array(add)), Some(arr)) = (
-        serde_json::from_str::<serde_json::Value>(&s),
-        v.get_mut("diag").and_then(|d| d.as_array_mut()),
-    ) {
-        arr.extend(add);
-    }
-}
-
-/// The object rendered into `buf` by [`render`], reduced to the top-level `keys` (and, given
-/// `fields`, its `fields` object to those names): each kept key has the
-/// value [`json_of`] would give it (the `no_reply` diagnostic included); the others are
-/// skipped without being built.
-pub fn project(
-    buf: &str,
-    rd: &Rendered,
-    keys: &[&str],
-    fields: Option<&[&str]>,
-) -> Option<serde_json::Value> {
-    let mut v = serde_json::Value::Object(project_map(buf, keys, fields)?);
-    if rd.no_reply {
-        add_no_reply(&mut v, rd);
-    }
-    Some(v)
-}
-
-/// The JSON object `text` reduced to `keys`; with `fields`, its `fields` object reduced to
-/// those names.
-fn project_map(
-    text: &str,
-    keys: &[&str],
-    fields: Option<&[&str]>,
-) -> Option<serde_json::Map<String, serde_json::Value>> {
-    let mut map = serde_json::Map::new();
-    let b = text.as_bytes();
-    let mut i = ws(b, 0);
-    if b.get(i) != Some(&b'{') {
-        return None;
-    }
-    i = ws(b, i + 1);
-    if b.get(i) == Some(&b'}') {
-        i += 1;
-    } else {
-        loop {
-            let k0 = i;
-            if b.get(k0) != Some(&b'"') {
-                return None;
-            }
-            i = skip_value(b, i)?;
-            let key = text.get(k0..i)?;
-            i = ws(b, i);
-            if b.get(i) != Some(&b':') {
-                return None;
-            }
-            let v0 = ws(b, i + 1);
-            i = skip_value(b, v0)?;
-            // Keys are plain names; one with an escape is decoded to be sure.
-            let name = match key.get(1..key.len() - 1) {
-                Some(k) if !k.contains('\\') => std::borrow::Cow::Borrowed(k),
-                _ => std::borrow::Cow::Owned(serde_json::from_str::<String>(key).ok()?),
-            };
-            if keys.iter().any(|k| *k == name) {
-                let value = text.get(v0..i)?;
-                let v = match fields {
-                    Some(sub) if name == "fields" && value.starts_with('{') => {
-                        serde_json::Value::Object(project_map(value, sub, None)?)
-                    }
-                    _ => serde_json::from_str(value).ok()?,
-                };
-                map.insert(name.into_owned(), v);
-            }
-            i = ws(b, i);
-            match b.get(i) {
-                Some(b',') => i = ws(b, i + 1),
-                Some(b'}') => {
-                    i += 1;
-                    break;
-                }
-                _ => return None,
-            }
-        }
-    }
-    if ws(b, i) != b.len() {
-        return None;
-    }
-    Some(map)
-}
-
-fn ws(b: &[u8], mut i: usize) -> usize {
-    while b.get(i).is_some_and(|c| c.is_ascii_whitespace()) {
-        i += 1;
-    }
-    i
-}
-
-/// The end of the JSON value starting at `b[i]` (well-formed input; `None` when it ends
-/// early). Only finds the extent: the kept values are parsed by `serde_json`.
-fn skip_value(b: &[u8], mut i: usize) -> Option<usize> {
-    let mut depth = 0usize;
-    loop {
-        match *b.get(i)? {
-            b'"' => {
-                i += 1;
-                loop {
-                    i += b.get(i..)?.iter().position(|c| matches!(c, b'"' | b'\\'))?;
-                    if b[i] == b'"' {
-                        break;
-                    }
-                    i += 2;
-                }
-                i += 1;
-            }
-            b'{' | b'[' => {
-                depth += 1;
-                i += 1;
-            }
-            b'}' | b']' => {
-                depth = depth.checked_sub(1)?;
-                i += 1;
-            }
-            b',' | b':' if depth == 0 => return Some(i),
-            _ if depth == 0 => {
-                // A number or literal: up to the next delimiter.
-                while b.get(i).is_some_and(|c| {
-                    !matches!(c, b',' | b'}' | b']' | b':') && !c.is_ascii_whitespace()
-                }) {
-                    i += 1;
-                }
-                return Some(i);
-            }
-            _ => i += 1,
-        }
-        if depth == 0 {
-            return Some(i);
-        }
-    }
-}
-
-/// Keys of an APT frame record [`direct`] does not build (it renders instead).
-pub const NOT_DIRECT: &[&str] = &["phys"];
-
-/// The object of record `n` reduced to `keys` (any but [`NOT_DIRECT`]; `fields` is built
-/// with only the names in `fields`), built from the frame and the index record without
-/// rendering it whole, equal to what [`project`] gives from [`render`] (`tui/tests/scan.rs`
-/// checks it on every key). Only for APT frames; `None` otherwise (render instead).
-pub fn direct(ix: &Index, n: u64, keys: &[&str], fields: &[&str]) -> Option<serde_json::Value> {
-    build(ix, n, keys, fields, false)
-}
-
-/// [`direct`] with only what [`aptscope_dissector::stats::Stats::add`] reads of the `keys`:
-/// addresses by `name`, diagnostics by `kind` (none: no `diag`), `msgid_hex` when there is no
-/// `name`, no `proto` (it takes a record without one for APT). Statistics of these equal those
-/// of the whole records (`tui/tests/scan.rs` checks it).
-pub fn direct_for_stats(ix: &Index, n: u64, keys: &[&str]) -> Option<serde_json::Value> {
-    build(ix, n, keys, &[], true)
-}
-
-fn build(
-    ix: &Index,
-    n: u64,
-    keys: &[&str],
-    fields: &[&str],
-    lean: bool,
-) -> Option<serde_json::Value> {
-    use serde_json::Value as J;
-    let r = ix.rec(n)?;
-    if r.has(F_ELL | F_GARBAGE) {
-        return None;
-    }
-    let f = AptFrame::decode(Table::global(), r.offset, ix.bytes(r), r.has(F_TRUNCATED))?;
-    let h = f.header();
-    let pair = r
-        .has(F_IS_REPLY)
-        .then_some(r.pair as u64)
-        .filter(|p| *p != 0);
-    let mut m = serde_json::Map::new();
-    for &k in keys {
-        let v = match k {
-            "n" => J::from(n),
-            // `Stats::add` reads a record without `proto` as APT, and an empty `diag` as none.
-            "proto" if lean => continue,
-            "proto" => J::from("apt"),
-            "type" => J::from("frame"),
-            "offset" => J::from(f.offset),
-            "len" => J::from(f.bytes.len() as u64),
-            "msgid" => J::from(h.msg_id() as u64),
-            "msgid_hex" if lean && f.msg.is_some() => continue,
-            "msgid_hex" => J::from(format!("0x{:04X}", h.msg_id())),
-            "name" => f.msg.map_or(J::Null, |m| J::from(m.name)),
-            "msg_dir" => match f.msg {
-                Some(m) => J::from(m.dir.as_str()),
-                None => continue,
-            },
-            "src" => addr_json(h.src(), lean),
-            "dst" => addr_json(h.dst(), lean),
-            "data_flag" => J::from(h.has_data()),
-            "data_len" => J::from(f.data_len() as u64),
-            "channel" => match f.channel() {
-                Some(c) => J::from(c),
-                None => continue,
-            },
-            "sub" => match f.sub {
-                Some(s) => {
-                    let mut o = serde_json::Map::new();
-                    o.insert("id".into(), J::from(s.id as u64));
-                    o.insert("name".into(), J::from(s.name));
-                    J::Object(o)
-                }
-                None => continue,
-            },
-            "pair" => match pair {
-                Some(p) => J::from(p),
-                None => continue,
-            },
-            "latency_ms" => match latency(ix, r).filter(|_| pair.is_some()) {
-                Some(l) => {
-                    // Through the text, so the number is the one `serde_json` reads back.
-                    let mut s = String::new();
-                    json::float(&mut s, l as f64 / 1e6);
-                    serde_json::from_str(&s).ok()?
-                }
-                None => continue,
-            },
-            "pair_other_address" if r.has(F_OTHER_ADDR) => J::Bool(true),
-            "diag"
-                if !r.has(F_DIAG | F_UNSOLICITED | F_DUPLICATE | F_NO_REPLY | F_NOT_FOR_MODEL) =>
-            {
-                if lean {
-                    continue;
-                }
-                J::Array(vec![])
-            }
-            "diag" => {
-                // As `json::apt_frame_paired` and [`json_of`] list them.
-                let extra = [
-                    r.has(F_UNSOLICITED).then_some(DiagKind::Unsolicited),
-                    pair.filter(|_| r.has(F_DUPLICATE))
-                        .map(|request| DiagKind::DuplicateReply { request }),
-                    r.has(F_NOT_FOR_MODEL)
-                        .then(|| ix.not_for_model.get(&n))
-                        .flatten()
-                        .map(|&model| DiagKind::NotForModel { model }),
-                    r.has(F_NO_REPLY).then_some(DiagKind::NoReply { cmd: n }),
-                ];
-                let extra = extra.into_iter().flatten().map(|kind| Diag {
-                    offset: f.offset,
-                    kind,
-                });
-                // Each as `json::diags` writes it.
-                let diag = |d: Diag| {
-                    let mut o = serde_json::Map::new();
-                    o.insert("kind".into(), J::from(d.kind.name()));
-                    if !lean {
-                        o.insert("offset".into(), J::from(d.offset));
-                        o.insert("msg".into(), J::from(d.kind.to_string()));
-                    }
-                    J::Object(o)
-                };
-                J::Array(f.diags().chain(extra).map(diag).collect())
-            }
-            "dir" => {
-                let d = r
-                    .cap_dir()
-                    .or(f.msg.map(|m| m.dir).filter(|d| *d != Dir::Both))
-                    .map_or("unknown", |d| d.as_str());
-                J::from(d)
-            }
-            "ts_ns" => match r.ts() {
-                Some(t) => J::from(t),
-                None => continue,
-            },
-            "stream" => J::from(r.stream as u64),
-            "fields" => {
-                // Each value as `json::apt_frame_paired` writes it, through its text.
-                let mut o = serde_json::Map::new();
-                let mut s = String::new();
-                for (fd, v) in f.fields().filter(|(fd, _)| fields.contains(&fd.name)) {
-                    s.clear();
-                    json::value(&mut s, f.table(), fd, &v);
-                    o.insert(fd.name.to_string(), serde_json::from_str(&s).ok()?);
-                }
-                J::Object(o)
-            }
-            "raw" => {
-                let mut s = String::new();
-                json::hex(&mut s, f.bytes);
-                J::from(s.trim_matches('"'))
-            }
-            "form_note" => match f.form {
-                Some(form) if !form.note.is_empty() => J::from(form.note),
-                _ => continue,
-            },
-            "phys" => return None,
-            // Not a key of APT frame records.
-            _ => continue,
-        };
-        m.insert(k.to_string(), v);
-    }
-    Some(J::Object(m))
-}
-
-/// An address object as `json.rs` writes it.
-fn addr_json(a: aptscope_dissector::apt::Addr, lean: bool) -> serde_json::Value {
-    use aptscope_dissector::apt::Addr;
-    const BAYS: [&str; 10] = [
-        "bay0", "bay1", "bay2", "bay3", "bay4", "bay5", "bay6", "bay7", "bay8", "bay9",
-    ];
-    let name = match a {
-        Addr::Host => "host".to_string(),
-        Addr::Rack => "rack".to_string(),
-        Addr::Usb => "usb".to_string(),
-        Addr::Bay(n) => match BAYS.get(n as usize) {
-            Some(b) => b.to_string(),
-            None => format!("bay{}", (b'0' + n) as char),
-        },
-        Addr::Unknown(x) => format!("0x{x:02X}"),
-    };
-    let mut o = serde_json::Map::new();
-    o.insert("name".into(), serde_json::Value::from(name));
-    if lean {
-        return serde_json::Value::Object(o);
-    }
-    o.insert("addr".into(), serde_json::Value::from(a.byte() as u64));
-    if let Some(b) = a.bay() {
-        o.insert("bay".into(), serde_json::Value::from(b as u64));
-    }
-    serde_json::Value::Object(o)
+/// [`json_of`] as a JSON value (for building filters from a record's values).
+pub fn json_value(ix: &Index, n: u64) -> Option<serde_json::Value> {
+    serde_json::from_str(&json_of(ix, n)?).ok()
 }

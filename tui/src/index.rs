@@ -2,18 +2,21 @@
 //! fixed-size record plus its bytes in one arena), built by a background thread while the UI
 //! already shows what has been read.
 //!
-//! Nothing rendered is stored: the UI decodes the rows it shows from the arena.
+//! The records come from the one decode chain ([`aptscope_dissector::record::Decoder`]): the
+//! indexer keeps of each [`Record`] what the timeline, filters and statistics read without
+//! decoding (a [`Rec`]) and its bytes. Nothing rendered is stored: the UI decodes the rows it
+//! shows from the arena.
 
-use aptscope_capture::model::{Direction, Event};
+use aptscope_capture::model::{Event, Reader};
 use aptscope_capture::open::{open_with_progress, OpenOptions};
-use aptscope_dissector::apt::{AptFrame, AptFramer, GarbageKind, Item as AptItem};
-use aptscope_dissector::detect::{detect, Proto, SAMPLE};
-use aptscope_dissector::ell::{Bus, EllFrame, EllFramer, Item as EllItem, Module};
-use aptscope_dissector::pair::AptPairer;
+use aptscope_dissector::apt::GarbageKind;
+use aptscope_dissector::detect::Proto;
+use aptscope_dissector::diag::DiagKind;
+use aptscope_dissector::ell::Module;
+use aptscope_dissector::record::{AptRec, Ctx, Decoder, EllRec, GarbageRec, Record};
 use aptscope_dissector::table::Dir;
-use aptscope_dissector::units::{Scale, Tracker, UnitsOpts};
-use aptscope_dissector::Table;
-use std::collections::BTreeMap;
+use aptscope_dissector::units::{Scale, UnitsOpts};
+use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, RwLock};
 use std::time::{Duration, Instant};
@@ -46,13 +49,16 @@ pub const F_IS_REPLY: u16 = 2048;
 /// [`Index::not_for_model`]).
 pub const F_NOT_FOR_MODEL: u16 = 4096;
 
-/// One record of the capture (a frame or a garbage run), about 40 bytes.
+/// One record of the capture (a frame or a garbage run), 56 bytes: what the timeline, filters
+/// and statistics read without decoding the frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Rec {
     /// Start of the bytes in the arena.
     pub start: u64,
     /// Stream offset of the first byte.
     pub offset: u64,
+    /// Offset of the first byte in the whole capture (every stream and direction).
+    pub cap_offset: u64,
     /// Capture time in ns, `u64::MAX` when not recorded.
     pub ts: u64,
     /// Record number of the paired record (request of a reply, first reply of a request), 0 if
@@ -69,6 +75,12 @@ pub struct Rec {
     pub flags: u16,
     /// Direction as captured: 0 unknown, 1 host → device, 2 device → host.
     pub dir: u8,
+    /// APT: source address byte. Elliptec: bus address (0–15).
+    pub src: u8,
+    /// APT: destination address byte.
+    pub dst: u8,
+    /// APT: message id. Elliptec: the two command characters (first in the high byte).
+    pub id: u16,
 }
 
 impl Rec {
@@ -87,6 +99,18 @@ impl Rec {
             2 => Some(Dir::DeviceToHost),
             _ => None,
         }
+    }
+    /// Elliptec: the command characters as written.
+    pub fn code(&self) -> [u8; 2] {
+        self.id.to_be_bytes()
+    }
+}
+
+fn dir_code(d: Option<Dir>) -> u8 {
+    match d {
+        Some(Dir::HostToDevice) => 1,
+        Some(Dir::DeviceToHost) => 2,
+        _ => 0,
     }
 }
 
@@ -114,6 +138,9 @@ pub struct Index {
     pub first_ts: Option<u64>,
     /// Stream names by index.
     pub streams: Vec<String>,
+    /// Streams records were seen on (bit per stream index, the first 64): the timeline shows
+    /// the stream of each row when there is more than one.
+    pub streams_seen: u64,
     /// Capture format.
     pub format: String,
     /// Problems reading the file (offset, kind, message).
@@ -139,6 +166,10 @@ impl Index {
     pub fn rec(&self, n: u64) -> Option<&Rec> {
         self.recs.get((n as usize).checked_sub(1)?)
     }
+    /// Whether records were seen on more than one stream.
+    pub fn multi_stream(&self) -> bool {
+        self.streams_seen.count_ones() > 1
+    }
 }
 
 /// The index shared between the indexing thread and the UI.
@@ -150,8 +181,11 @@ pub struct Shared {
     pub read: Arc<AtomicU64>,
     /// The file size when known.
     pub total: Option<u64>,
-    /// Set to stop the indexing thread.
-    pub cancel: AtomicBool,
+    /// Set to stop the indexing thread (and, shared with a live source, the source).
+    pub cancel: Arc<AtomicBool>,
+    /// The source is live (a tap, a simulator, a file being written): the index keeps growing
+    /// until it stops, and every record read is published at once.
+    pub live: AtomicBool,
 }
 
 impl Shared {
@@ -162,6 +196,20 @@ impl Shared {
             _ => 0.0,
         }
     }
+}
+
+/// How to decode a capture for the index.
+#[derive(Debug, Clone, Default)]
+pub struct IndexOpts {
+    /// Decode as this protocol instead of detecting it.
+    pub proto: Option<Proto>,
+    /// Stage or scale for APT motion values.
+    pub units: UnitsOpts,
+    /// The source is live (see [`Shared::live`]).
+    pub live: bool,
+    /// A stop flag to share with the source (its reader returns when it is set): the viewer
+    /// sets it when the user quits. A new one when `None`.
+    pub cancel: Option<Arc<AtomicBool>>,
 }
 
 /// Open a capture and index it in a background thread. The returned [`Shared`] fills as the
@@ -186,15 +234,39 @@ pub fn spawn_with(
     proto: Option<Proto>,
     units: UnitsOpts,
 ) -> std::io::Result<Arc<Shared>> {
-    // Readers are not `Send`: open in the indexing thread, hand back the shared index.
-    let (tx, rx) = std::sync::mpsc::channel();
     let path = path.to_string();
+    let iopts = IndexOpts {
+        proto,
+        units,
+        ..IndexOpts::default()
+    };
+    spawn_source(
+        move || {
+            let (reader, _, progress) = open_with_progress(&path, opts)?;
+            Ok((reader, Some(progress)))
+        },
+        iopts,
+    )
+}
+
+/// What a source opener gives: the reader, and how far it has read when that is known.
+pub type Opened = (Box<dyn Reader>, Option<aptscope_capture::open::Progress>);
+
+/// Index what the reader `open` returns in a background thread (readers are not `Send`: it is
+/// opened in that thread). For live sources (`opts.live`), the reader's `next_event` may block
+/// until more data comes or the stop flag ([`Shared::cancel`], `opts.cancel` when given) is set.
+pub fn spawn_source<F>(open: F, opts: IndexOpts) -> std::io::Result<Arc<Shared>>
+where
+    F: FnOnce() -> std::io::Result<Opened> + Send + 'static,
+{
+    let (tx, rx) = std::sync::mpsc::channel();
     std::thread::Builder::new()
         .name("aptscope-index".into())
-        .spawn(move || match opened(&path, opts) {
-            Ok((shared, reader)) => {
+        .spawn(move || match open() {
+            Ok((reader, progress)) => {
+                let shared = shared_for(reader.as_ref(), progress, &opts);
                 let _ = tx.send(Ok(shared.clone()));
-                Indexer::new(shared, proto, units).run(reader);
+                Indexer::new(shared, opts.proto, opts.units).run(reader);
             }
             Err(e) => {
                 let _ = tx.send(Err(e));
@@ -204,26 +276,35 @@ pub fn spawn_with(
         .map_err(|_| std::io::Error::other("indexing thread failed"))?
 }
 
-type Opened = (Arc<Shared>, Box<dyn aptscope_capture::model::Reader>);
-
-fn opened(path: &str, opts: OpenOptions) -> std::io::Result<Opened> {
-    let (reader, _, progress) = open_with_progress(path, opts)?;
+/// A new shared index for a source.
+fn shared_for(
+    reader: &dyn Reader,
+    progress: Option<aptscope_capture::open::Progress>,
+    opts: &IndexOpts,
+) -> Arc<Shared> {
+    let (read, total) = progress.map_or((Arc::default(), None), |p| (p.read, p.total));
     let shared = Arc::new(Shared {
-        read: progress.read.clone(),
-        total: progress.total,
+        read,
+        total,
+        cancel: opts.cancel.clone().unwrap_or_default(),
+        live: AtomicBool::new(opts.live),
         ..Shared::default()
     });
     if let Ok(mut ix) = shared.index.write() {
         ix.format = reader.format();
     }
+    shared
+}
+
+fn opened(path: &str, opts: OpenOptions) -> std::io::Result<(Arc<Shared>, Box<dyn Reader>)> {
+    let (reader, _, progress) = open_with_progress(path, opts)?;
+    let shared = shared_for(reader.as_ref(), Some(progress), &IndexOpts::default());
     Ok((shared, reader))
 }
 
 /// Open and index a capture completely, in the calling thread (tests, small files).
 pub fn load(path: &str, opts: OpenOptions) -> std::io::Result<Arc<Shared>> {
-    let (shared, reader) = opened(path, opts)?;
-    Indexer::new(shared.clone(), None, UnitsOpts::default()).run(reader);
-    Ok(shared)
+    load_with(path, opts, UnitsOpts::default())
 }
 
 /// [`load`] with a stage or scale for APT motion values.
@@ -233,23 +314,108 @@ pub fn load_with(path: &str, opts: OpenOptions, units: UnitsOpts) -> std::io::Re
     Ok(shared)
 }
 
-struct Lane {
-    stream: u32,
-    dir: u8,
-    apt: AptFramer<'static>,
-    ell: EllFramer,
-    ts: Option<u64>,
+/// Builds the index: feeds a [`Decoder`] and keeps a [`Rec`] of each record, publishing to
+/// the [`Shared`] index in batches. [`Indexer::run`] reads a whole source; a caller that gets
+/// its bytes another way (a simulator's own traffic, tests) feeds [`Indexer::chunk`] and
+/// publishes with [`Indexer::flush`].
+pub struct Indexer {
+    shared: Arc<Shared>,
+    dec: Decoder,
+    sink: Sink,
+    last_flush: Instant,
 }
 
-/// The indexing state: framers per lane, pairing, and a batch not yet published.
-struct Indexer {
-    shared: Arc<Shared>,
-    proto: Option<Proto>,
-    sample: Vec<(u32, u8, Option<u64>, Vec<u8>)>,
-    sample_len: usize,
-    lanes: Vec<Lane>,
-    pairers: Vec<(u32, AptPairer)>,
-    buses: Vec<(u32, Bus, Vec<Option<u32>>)>,
+impl Indexer {
+    /// An indexer filling `shared`; `proto` given: no detection.
+    pub fn new(shared: Arc<Shared>, proto: Option<Proto>, units: UnitsOpts) -> Self {
+        if let (Some(p), Ok(mut ix)) = (proto, shared.index.write()) {
+            ix.proto = Some(p);
+            ix.proto_certain = true;
+        }
+        let mut dec = Decoder::new(proto);
+        dec.set_units(units);
+        Indexer {
+            shared,
+            dec,
+            sink: Sink::default(),
+            last_flush: Instant::now(),
+        }
+    }
+
+    /// Read `reader` to its end (or until cancelled), then finish and publish.
+    pub fn run(mut self, mut reader: Box<dyn Reader>) {
+        let live = self.shared.live.load(Ordering::Relaxed);
+        while let Some(ev) = reader.next_event() {
+            if self.shared.cancel.load(Ordering::Relaxed) {
+                break;
+            }
+            self.event(ev);
+            // A live source's reader blocks until more comes: publish what it gave now.
+            if live || self.last_flush.elapsed() > Duration::from_millis(50) {
+                self.flush();
+            }
+        }
+        self.finish();
+    }
+
+    /// Index one event of a capture reader.
+    pub fn event(&mut self, ev: Event<'_>) {
+        let sink = &mut self.sink;
+        let _ = match ev {
+            Event::Stream(s) => {
+                self.dec
+                    .stream_info(s.id, &s.name, s.settings.as_deref(), &mut |r| sink.on(r))
+            }
+            Event::Diag(d) => self
+                .dec
+                .file_diag(d.offset, d.kind, &d.msg, &mut |r| sink.on(r)),
+            Event::Chunk(c) => self.dec.push(c.ctx(), c.bytes, &mut |r| sink.on(r)),
+        };
+    }
+
+    /// Index one captured chunk.
+    pub fn chunk(&mut self, ctx: Ctx, bytes: &[u8]) {
+        let sink = &mut self.sink;
+        let _ = self.dec.push(ctx, bytes, &mut |r| sink.on(r));
+    }
+
+    /// Say that the sender of `dir` on `stream` has paused (see [`Decoder::cut`]).
+    pub fn cut(&mut self, stream: u32, dir: Dir) {
+        let sink = &mut self.sink;
+        let _ = self.dec.cut(stream, dir, &mut |r| sink.on(r));
+    }
+
+    /// Publish what was indexed since the last call.
+    pub fn flush(&mut self) {
+        self.last_flush = Instant::now();
+        self.sink.first_ts = self.dec.first_ts();
+        if let Ok(mut ix) = self.shared.index.write() {
+            self.sink.publish(&mut ix, false);
+        }
+    }
+
+    /// End of the source: requests without reply are marked, everything is published and the
+    /// index is complete.
+    pub fn finish(mut self) {
+        let sink = &mut self.sink;
+        let _ = self.dec.finish(&mut |r| sink.on(r));
+        self.sink.first_ts = self.dec.first_ts();
+        if let Ok(mut ix) = self.shared.index.write() {
+            self.sink.publish(&mut ix, true);
+            if ix.proto.is_none() {
+                ix.proto = self.dec.proto();
+            }
+        }
+    }
+}
+
+/// Which plotted quantity a series holds.
+const QUANTITIES: [&str; 2] = ["position", "velocity"];
+
+/// What the indexer keeps of the records: a batch not yet published and what it needs to link
+/// records that are.
+#[derive(Default)]
+struct Sink {
     /// Records not yet published, numbered from `base + 1`.
     batch: Vec<Rec>,
     arena: Vec<u8>,
@@ -257,10 +423,11 @@ struct Indexer {
     arena_base: u64,
     /// Records already published.
     base: u64,
+    proto: Option<(Proto, bool)>,
     modules: Vec<Module>,
     modules_base: usize,
-    /// Models per device and the conversion of their motion values.
-    units: Tracker,
+    /// Per stream, the module entry last given to each bus address.
+    slots: Vec<(u32, [Option<u32>; 16])>,
     /// Every conversion given out so far (`Rec::module - 1` indexes them), and how many of
     /// them are published.
     scales: Vec<Scale>,
@@ -268,180 +435,45 @@ struct Indexer {
     units_notes: Vec<String>,
     /// Pair links and flags for already-published records: (record number, pair, flags to set).
     patches: Vec<(u64, u32, u16)>,
-    series: BTreeMap<String, Vec<Point>>,
+    /// Plot series by key, points not yet published; `series_at` finds a key's entry.
+    series: Vec<(String, Vec<Point>)>,
+    series_at: HashMap<String, usize>,
+    /// Whether an APT message id is plotted: 0 not known yet, 1 yes, 2 no.
+    plotted: Vec<u8>,
+    scratch: String,
     not_for_model: Vec<(u64, [u8; 8])>,
     first_ts: Option<u64>,
     streams: Vec<String>,
+    streams_seen: u64,
     file_diags: Vec<(u64, String)>,
-    last_flush: Instant,
 }
 
-impl Indexer {
-    /// An indexer; `proto` given: no detection.
-    fn new(shared: Arc<Shared>, proto: Option<Proto>, units: UnitsOpts) -> Self {
-        if let (Some(p), Ok(mut ix)) = (proto, shared.index.write()) {
-            ix.proto = Some(p);
-            ix.proto_certain = true;
-        }
-        Indexer {
-            shared,
-            proto,
-            sample: vec![],
-            sample_len: 0,
-            lanes: vec![],
-            pairers: vec![],
-            buses: vec![],
-            batch: Vec::with_capacity(4096),
-            arena: Vec::with_capacity(1 << 16),
-            arena_base: 0,
-            base: 0,
-            modules: vec![],
-            modules_base: 0,
-            units: Tracker::new(units),
-            scales: vec![],
-            scales_published: 0,
-            units_notes: vec![],
-            patches: vec![],
-            series: BTreeMap::new(),
-            not_for_model: vec![],
-            first_ts: None,
-            streams: vec![],
-            file_diags: vec![],
-            last_flush: Instant::now(),
-        }
-    }
-
-    fn run(mut self, mut reader: Box<dyn aptscope_capture::model::Reader>) {
-        while let Some(ev) = reader.next_event() {
-            if self.shared.cancel.load(Ordering::Relaxed) {
-                return;
-            }
-            match ev {
-                Event::Stream(s) => {
-                    let i = s.id as usize;
-                    if self.streams.len() <= i {
-                        self.streams.resize(i + 1, String::new());
-                    }
-                    self.streams[i] = s.name.clone();
+impl Sink {
+    fn on(&mut self, rec: &Record<'_>) -> Result<(), ()> {
+        match rec {
+            Record::Detect {
+                proto, detection, ..
+            } => self.proto = Some((*proto, detection.proto.is_some())),
+            Record::Stream { id, name, .. } => {
+                let i = *id as usize;
+                if self.streams.len() <= i {
+                    self.streams.resize(i + 1, String::new());
                 }
-                Event::Diag(d) => self
-                    .file_diags
-                    .push((d.offset, format!("{}: {}", d.kind, d.msg))),
-                Event::Chunk(c) => {
-                    let dir = match c.dir {
-                        Direction::HostToDevice => 1,
-                        Direction::DeviceToHost => 2,
-                        Direction::Unknown => 0,
-                    };
-                    self.push(c.stream, dir, c.ts_ns, c.bytes);
-                }
+                self.streams[i] = name.to_string();
             }
-            if self.last_flush.elapsed() > Duration::from_millis(50) {
-                self.flush(false);
+            Record::Input(d) => self
+                .file_diags
+                .push((d.offset, format!("{}: {}", d.kind.name(), d.kind))),
+            Record::FileDiag { offset, kind, msg } => {
+                self.file_diags.push((*offset, format!("{kind}: {msg}")))
             }
+            Record::Units(nt) => self.units_notes.push(nt.text()),
+            Record::Apt(a) => self.apt(a),
+            Record::Ell(e) => self.ell(e),
+            Record::Garbage(g) => self.garbage(g),
+            Record::NoReply(e) => self.set(e.n, 0, F_NO_REPLY),
         }
-        self.finish();
-        self.flush(true);
-    }
-
-    fn push(&mut self, stream: u32, dir: u8, ts: Option<u64>, bytes: &[u8]) {
-        if self.proto.is_none() {
-            self.sample.push((stream, dir, ts, bytes.to_vec()));
-            self.sample_len += bytes.len();
-            if self.sample_len >= SAMPLE {
-                self.choose();
-            }
-            return;
-        }
-        self.feed(stream, dir, ts, bytes);
-    }
-
-    fn choose(&mut self) {
-        // Judge the busiest lane of the sample.
-        let mut totals: BTreeMap<(u32, u8), usize> = BTreeMap::new();
-        for (s, d, _, b) in &self.sample {
-            *totals.entry((*s, *d)).or_default() += b.len();
-        }
-        let best = totals.iter().max_by_key(|(_, t)| **t).map(|(k, _)| *k);
-        let mut bytes = Vec::with_capacity(SAMPLE);
-        for (s, d, _, b) in &self.sample {
-            if Some((*s, *d)) == best && bytes.len() < SAMPLE {
-                bytes.extend_from_slice(b);
-            }
-        }
-        let det = detect(&bytes);
-        let proto = det.proto.unwrap_or(if det.elliptec > det.apt {
-            Proto::Elliptec
-        } else {
-            Proto::Apt
-        });
-        self.proto = Some(proto);
-        if let Ok(mut ix) = self.shared.index.write() {
-            ix.proto = Some(proto);
-            ix.proto_certain = det.proto.is_some();
-        }
-        for (s, d, ts, b) in std::mem::take(&mut self.sample) {
-            self.feed(s, d, ts, &b);
-        }
-        self.sample_len = 0;
-    }
-
-    fn lane(&mut self, stream: u32, dir: u8) -> usize {
-        if let Some(i) = self
-            .lanes
-            .iter()
-            .position(|l| l.stream == stream && l.dir == dir)
-        {
-            return i;
-        }
-        self.lanes.push(Lane {
-            stream,
-            dir,
-            apt: AptFramer::new(Table::global()),
-            ell: EllFramer::new(),
-            ts: None,
-        });
-        self.lanes.len() - 1
-    }
-
-    fn feed(&mut self, stream: u32, dir: u8, ts: Option<u64>, bytes: &[u8]) {
-        if self.first_ts.is_none() {
-            self.first_ts = ts;
-        }
-        let i = self.lane(stream, dir);
-        let lane = &mut self.lanes[i];
-        if ts.is_some() {
-            lane.ts = ts;
-        }
-        match self.proto {
-            Some(Proto::Apt) => lane.apt.push(bytes),
-            _ => lane.ell.push(bytes),
-        }
-        self.drain(i);
-    }
-
-    fn finish(&mut self) {
-        if self.proto.is_none() {
-            if self.sample.is_empty() {
-                return;
-            }
-            self.choose();
-        }
-        for i in 0..self.lanes.len() {
-            self.lanes[i].apt.finish();
-            self.lanes[i].ell.finish();
-            self.drain(i);
-        }
-        let mut left = vec![];
-        for (_, bus, _) in self.buses.iter_mut() {
-            left.extend(bus.finish().into_iter().map(|e| e.n));
-        }
-        for (_, p) in self.pairers.iter_mut() {
-            left.extend(p.finish().into_iter().map(|u| u.n));
-        }
-        for n in left {
-            self.set(n, 0, F_NO_REPLY);
-        }
+        Ok(())
     }
 
     /// Set a pair link (when `pair != 0` and none yet) and flags on record `n`.
@@ -458,272 +490,247 @@ impl Indexer {
         }
     }
 
-    fn next_n(&self) -> u64 {
-        self.base + self.batch.len() as u64 + 1
-    }
-
-    fn add(&mut self, lane: usize, offset: u64, bytes: &[u8], flags: u16) -> u64 {
-        let l = &self.lanes[lane];
-        let rec = Rec {
-            start: self.arena_base + self.arena.len() as u64,
-            offset,
-            ts: l.ts.unwrap_or(u64::MAX),
-            pair: 0,
-            len: bytes.len() as u32,
-            module: 0,
-            stream: l.stream.min(u16::MAX as u32) as u16,
-            flags,
-            dir: l.dir,
-        };
+    /// Append record `n` (numbers the decoder skipped get an empty garbage record, so that
+    /// record `n` stays at index `n - 1`).
+    fn add(&mut self, n: u64, mut rec: Rec, bytes: &[u8]) {
+        while self.base + (self.batch.len() as u64) + 1 < n {
+            let start = self.arena_base + self.arena.len() as u64;
+            self.batch.push(Rec {
+                start,
+                len: 0,
+                flags: F_GARBAGE | (rec.flags & F_ELL),
+                ..rec
+            });
+        }
+        rec.start = self.arena_base + self.arena.len() as u64;
+        rec.len = bytes.len() as u32;
+        if rec.stream < 64 {
+            self.streams_seen |= 1 << rec.stream;
+        }
         self.arena.extend_from_slice(bytes);
         self.batch.push(rec);
-        self.base + self.batch.len() as u64
     }
 
-    fn x_of(&self, ts: Option<u64>, n: u64) -> f64 {
-        match (ts, self.first_ts) {
-            (Some(t), Some(f)) => t.saturating_sub(f) as f64 / 1e9,
-            _ => n as f64,
-        }
-    }
-
-    fn drain(&mut self, i: usize) {
-        let t = Table::global();
-        let (ts, stream, dir) = (self.lanes[i].ts, self.lanes[i].stream, self.lanes[i].dir);
-        let cap_dir = match dir {
-            1 => Some(Dir::HostToDevice),
-            2 => Some(Dir::DeviceToHost),
-            _ => None,
-        };
-        if self.proto == Some(Proto::Apt) {
-            let pi = match self.pairers.iter().position(|(s, _)| *s == stream) {
-                Some(p) => p,
-                None => {
-                    self.pairers.push((stream, AptPairer::new()));
-                    self.pairers.len() - 1
-                }
-            };
-            loop {
-                let n = self.next_n();
-                let Some(item) = self.lanes[i].apt.next_item() else {
-                    break;
-                };
-                // Copy out what we need: the framer borrow ends here.
-                let (offset, bytes, kind) = match item {
-                    AptItem::Frame {
-                        offset,
-                        bytes,
-                        truncated,
-                    } => (offset, bytes.to_vec(), Err(truncated)),
-                    AptItem::Garbage {
-                        offset,
-                        bytes,
-                        kind,
-                    } => (offset, bytes.to_vec(), Ok(kind)),
-                };
-                match kind {
-                    Ok(k) => {
-                        let f = F_GARBAGE
-                            | match k {
-                                GarbageKind::NoHeader => 0,
-                                GarbageKind::AbsurdLength { .. } => F_ABSURD,
-                                GarbageKind::TrailingBytes => F_TRAILING,
-                            };
-                        self.add(i, offset, &bytes, f);
-                    }
-                    Err(truncated) => {
-                        let Some(fr) = AptFrame::decode(t, offset, &bytes, truncated) else {
-                            self.add(i, offset, &bytes, F_GARBAGE);
-                            continue;
-                        };
-                        let p = self.pairers[pi].1.observe(t, n, &fr, cap_dir, ts);
-                        let mut flags = 0;
-                        if truncated {
-                            flags |= F_TRUNCATED;
-                        }
-                        if fr.has_diags() {
-                            flags |= F_DIAG;
-                        }
-                        if p.unsolicited {
-                            flags |= F_UNSOLICITED;
-                        }
-                        if p.duplicate {
-                            flags |= F_DUPLICATE;
-                        }
-                        if p.other_address {
-                            flags |= F_OTHER_ADDR;
-                        }
-                        if let Some(m) = p.not_for_model {
-                            flags |= F_NOT_FOR_MODEL;
-                            self.not_for_model.push((n, m));
-                        }
-                        let (scale, notice) = self.units.observe(stream, &fr);
-                        if let Some(nt) = notice {
-                            self.units_notes.push(nt.text());
-                        }
-                        let mut pts = vec![];
-                        if let Some(name) = fr.name() {
-                            if name.contains("STATUSUPDATE") || name.ends_with("GET_POSCOUNTER") {
-                                let src = fr.src().name().to_string();
-                                let ch =
-                                    fr.channel().map(|c| format!(" ch{c}")).unwrap_or_default();
-                                for q in ["position", "velocity"] {
-                                    let Some((fd, v)) = fr.field(q) else {
-                                        continue;
-                                    };
-                                    // In mm (deg) once the stage is known: its own series.
-                                    match aptscope_dissector::apt::phys(fd, &v, scale) {
-                                        Some((x, unit)) => {
-                                            pts.push((format!("{q} {src}{ch} ({unit})"), x))
-                                        }
-                                        None => {
-                                            if let Some(x) = v.as_f64() {
-                                                pts.push((format!("{q} {src}{ch}"), x));
-                                            }
-                                        }
-                                    }
-                                }
-                            }
-                        }
-                        let scale_id = match scale {
-                            Some(sc) => match self.scales.iter().position(|x| x == sc) {
-                                Some(i) => i as u32 + 1,
-                                None => {
-                                    self.scales.push(sc.clone());
-                                    self.scales.len() as u32
-                                }
-                            },
-                            None => 0,
-                        };
-                        let x = self.x_of(ts, n);
-                        for (k, v) in pts {
-                            self.series.entry(k).or_default().push((x, v));
-                        }
-                        for u in &p.expired {
-                            self.set(u.n, 0, F_NO_REPLY);
-                        }
-                        if let Some(req) = p.pair {
-                            flags |= F_IS_REPLY;
-                            self.set(req, n as u32, 0);
-                        }
-                        let me = self.add(i, offset, &bytes, flags);
-                        if let Some(r) = self.batch.last_mut() {
-                            if let Some(req) = p.pair {
-                                r.pair = req as u32;
-                            }
-                            r.module = scale_id;
-                        }
-                        let _ = me;
-                    }
-                }
-            }
-            return;
-        }
-        let bi = match self.buses.iter().position(|(s, _, _)| *s == stream) {
-            Some(b) => b,
+    /// Add a point to the series named by `self.scratch`.
+    fn point(&mut self, x: f64, y: f64) {
+        let i = match self.series_at.get(self.scratch.as_str()) {
+            Some(i) => *i,
             None => {
-                self.buses.push((stream, Bus::new(), vec![None; 16]));
-                self.buses.len() - 1
+                self.series.push((self.scratch.clone(), vec![]));
+                self.series_at
+                    .insert(self.scratch.clone(), self.series.len() - 1);
+                self.series.len() - 1
             }
         };
-        loop {
-            let n = self.next_n();
-            let Some(item) = self.lanes[i].ell.next_item() else {
-                break;
-            };
-            let (offset, bytes, frame) = match item {
-                EllItem::Frame {
-                    offset,
-                    bytes,
-                    truncated,
-                } => (offset, bytes.to_vec(), Some(truncated)),
-                EllItem::Garbage { offset, bytes, .. } => (offset, bytes.to_vec(), None),
-            };
-            let Some(truncated) = frame else {
-                self.add(i, offset, &bytes, F_ELL | F_GARBAGE);
-                continue;
-            };
-            let Some(fr) = EllFrame::decode(offset, &bytes, truncated) else {
-                self.add(i, offset, &bytes, F_ELL | F_GARBAGE);
-                continue;
-            };
-            let o = self.buses[bi].1.observe(n, &fr, ts);
-            let mut flags = F_ELL;
-            if truncated {
+        self.series[i].1.push((x, y));
+    }
+
+    fn apt(&mut self, a: &AptRec<'_>) {
+        use std::fmt::Write;
+        let (fr, p, m) = (a.frame, a.pair, &a.meta);
+        let h = fr.header();
+        let mut flags = 0;
+        if fr.has_diags() {
+            flags |= F_DIAG;
+            if fr
+                .diags()
+                .any(|d| matches!(d.kind, DiagKind::Truncated { .. }))
+            {
                 flags |= F_TRUNCATED;
             }
-            if !fr.diags().is_empty() {
-                flags |= F_DIAG;
-            }
-            if o.unsolicited {
-                flags |= F_UNSOLICITED;
-            }
-            if o.interim {
-                flags |= F_INTERIM;
-            }
-            for e in &o.expired {
-                self.set(e.n, 0, F_NO_REPLY);
-            }
-            // Module: reuse the last entry for this address when unchanged.
-            let mut module = 0u32;
-            if let Some(m) = &o.module {
-                let slot = (fr.addr & 15) as usize;
-                let known =
-                    self.buses[bi].2[slot].and_then(|ix| self.module_at(ix).map(|k| (ix, k == m)));
-                module = match known {
-                    Some((ix, true)) => ix,
-                    _ => {
-                        self.modules.push(m.clone());
-                        let ix = (self.modules_base + self.modules.len()) as u32;
-                        self.buses[bi].2[slot] = Some(ix);
-                        ix
-                    }
-                };
-                if fr.code == *b"PO" || fr.code == *b"GP" {
-                    if let Some(p) = fr.field("position").and_then(|v| v.as_i64()) {
-                        let (v, unit) = match m.scale() {
-                            Some((ppu, u)) if ppu > 0.0 => (p as f64 / ppu, u),
-                            _ => (p as f64, "pulses"),
-                        };
-                        let x = self.x_of(ts, n);
-                        self.series
-                            .entry(format!("position ell {} ({unit})", fr.addr_char()))
-                            .or_default()
-                            .push((x, v));
-                    }
-                }
-            }
-            if let Some(req) = o.pair {
-                flags |= F_IS_REPLY;
-                if !o.interim {
-                    self.set(req, n as u32, 0);
-                }
-            }
-            self.add(i, offset, &bytes, flags);
-            if let Some(r) = self.batch.last_mut() {
-                r.module = module;
-                if let Some(req) = o.pair {
-                    r.pair = req as u32;
-                }
-            }
         }
-    }
-
-    fn module_at(&self, ix: u32) -> Option<&Module> {
-        let i = (ix as usize).checked_sub(1)?;
-        if i >= self.modules_base {
-            self.modules.get(i - self.modules_base)
-        } else {
-            None // published: treat as changed (cheap, rare)
+        if p.unsolicited {
+            flags |= F_UNSOLICITED;
         }
-    }
-
-    /// Publish the batch to the shared index.
-    fn flush(&mut self, done: bool) {
-        self.last_flush = Instant::now();
-        let Ok(mut ix) = self.shared.index.write() else {
-            return;
+        if p.duplicate {
+            flags |= F_DUPLICATE;
+        }
+        if p.other_address {
+            flags |= F_OTHER_ADDR;
+        }
+        if let Some(model) = p.not_for_model {
+            flags |= F_NOT_FOR_MODEL;
+            self.not_for_model.push((m.n, model));
+        }
+        if let Some(req) = p.pair {
+            flags |= F_IS_REPLY;
+            self.set(req, m.n as u32, 0);
+        }
+        let module = match a.scale {
+            Some(sc) => match self.scales.iter().position(|x| x == sc) {
+                Some(i) => i as u32 + 1,
+                None => {
+                    self.scales.push(sc.clone());
+                    self.scales.len() as u32
+                }
+            },
+            None => 0,
         };
+        // Positions and velocities of status updates, for the plot.
+        if let Some(msg) = fr.msg {
+            let id = h.msg_id() as usize;
+            if self.plotted.is_empty() {
+                self.plotted = vec![0; 1 << 16];
+            }
+            if self.plotted[id] == 0 {
+                let yes = msg.name.contains("STATUSUPDATE") || msg.name.ends_with("GET_POSCOUNTER");
+                self.plotted[id] = if yes { 1 } else { 2 };
+            }
+            if self.plotted[id] == 1 {
+                let x = m.rel_s.unwrap_or(m.n as f64);
+                for q in QUANTITIES {
+                    let Some((fd, v)) = fr.field(q) else {
+                        continue;
+                    };
+                    self.scratch.clear();
+                    let _ = write!(self.scratch, "{q} {}", fr.src().name());
+                    if let Some(c) = fr.channel() {
+                        let _ = write!(self.scratch, " ch{c}");
+                    }
+                    // In mm (deg) once the stage is known: its own series.
+                    let y = match aptscope_dissector::apt::phys(fd, &v, a.scale) {
+                        Some((y, unit)) => {
+                            let _ = write!(self.scratch, " ({unit})");
+                            Some(y)
+                        }
+                        None => v.as_f64(),
+                    };
+                    if let Some(y) = y {
+                        self.point(x, y);
+                    }
+                }
+            }
+        }
+        let rec = Rec {
+            start: 0,
+            offset: fr.offset,
+            cap_offset: m.cap_offset,
+            ts: m.ts_ns.unwrap_or(u64::MAX),
+            pair: p.pair.map_or(0, |r| r as u32),
+            len: 0,
+            module,
+            stream: m.stream.min(u16::MAX as u32) as u16,
+            flags,
+            dir: dir_code(m.cap_dir),
+            src: h.src_byte(),
+            dst: h.dst_byte(),
+            id: h.msg_id(),
+        };
+        self.add(m.n, rec, fr.bytes);
+    }
+
+    fn ell(&mut self, e: &EllRec<'_>) {
+        let (fr, o, m) = (e.frame, e.obs, &e.meta);
+        let mut flags = F_ELL;
+        // The decoder adds the bus's `unsolicited` to the frame's diagnostics: a flag of its own.
+        for d in fr.diags() {
+            match d.kind {
+                DiagKind::Unsolicited => {}
+                DiagKind::Truncated { .. } => flags |= F_DIAG | F_TRUNCATED,
+                _ => flags |= F_DIAG,
+            }
+        }
+        if o.unsolicited {
+            flags |= F_UNSOLICITED;
+        }
+        if o.interim {
+            flags |= F_INTERIM;
+        }
+        if let Some(req) = o.pair {
+            flags |= F_IS_REPLY;
+            if !o.interim {
+                self.set(req, m.n as u32, 0);
+            }
+        }
+        // Module: reuse the last entry of this address while it is unchanged.
+        let mut module = 0u32;
+        if let Some(md) = &o.module {
+            let si = match self.slots.iter().position(|(s, _)| *s == m.stream) {
+                Some(i) => i,
+                None => {
+                    self.slots.push((m.stream, [None; 16]));
+                    self.slots.len() - 1
+                }
+            };
+            let slot = (fr.addr & 15) as usize;
+            let known = self.slots[si].1[slot].and_then(|ix| {
+                let i = (ix as usize).checked_sub(1 + self.modules_base)?;
+                self.modules.get(i).map(|k| (ix, k == md))
+            });
+            module = match known {
+                Some((ix, true)) => ix,
+                _ => {
+                    self.modules.push(md.clone());
+                    let ix = (self.modules_base + self.modules.len()) as u32;
+                    self.slots[si].1[slot] = Some(ix);
+                    ix
+                }
+            };
+            if fr.code == *b"PO" || fr.code == *b"GP" {
+                if let Some(pos) = fr.field("position").and_then(|v| v.as_i64()) {
+                    let (v, unit) = match md.scale() {
+                        Some((ppu, u)) if ppu > 0.0 => (pos as f64 / ppu, u),
+                        _ => (pos as f64, "pulses"),
+                    };
+                    let x = m.rel_s.unwrap_or(m.n as f64);
+                    self.scratch.clear();
+                    self.scratch
+                        .push_str(&format!("position ell {} ({unit})", fr.addr_char()));
+                    self.point(x, v);
+                }
+            }
+        }
+        let rec = Rec {
+            start: 0,
+            offset: fr.offset,
+            cap_offset: m.cap_offset,
+            ts: m.ts_ns.unwrap_or(u64::MAX),
+            pair: o.pair.map_or(0, |r| r as u32),
+            len: 0,
+            module,
+            stream: m.stream.min(u16::MAX as u32) as u16,
+            flags,
+            dir: dir_code(m.cap_dir),
+            src: fr.addr,
+            dst: 0,
+            id: u16::from_be_bytes(fr.code),
+        };
+        self.add(m.n, rec, fr.bytes);
+    }
+
+    fn garbage(&mut self, g: &GarbageRec<'_>) {
+        let m = &g.meta;
+        let flags = F_GARBAGE
+            | match g.kind {
+                None => F_ELL,
+                Some(GarbageKind::NoHeader) => 0,
+                Some(GarbageKind::AbsurdLength { .. }) => F_ABSURD,
+                Some(GarbageKind::TrailingBytes) => F_TRAILING,
+            };
+        let rec = Rec {
+            start: 0,
+            offset: g.offset,
+            cap_offset: m.cap_offset,
+            ts: m.ts_ns.unwrap_or(u64::MAX),
+            pair: 0,
+            len: 0,
+            module: 0,
+            stream: m.stream.min(u16::MAX as u32) as u16,
+            flags,
+            dir: dir_code(m.cap_dir),
+            src: 0,
+            dst: 0,
+            id: 0,
+        };
+        self.add(m.n, rec, g.bytes);
+    }
+
+    /// Move the batch into the shared index.
+    fn publish(&mut self, ix: &mut Index, done: bool) {
+        if let Some((p, certain)) = self.proto.take() {
+            ix.proto = Some(p);
+            ix.proto_certain = certain;
+        }
         ix.recs.append(&mut self.batch);
         ix.arena.append(&mut self.arena);
         self.modules_base += self.modules.len();
@@ -741,19 +748,27 @@ impl Indexer {
             }
         }
         ix.not_for_model.extend(self.not_for_model.drain(..));
-        for (k, v) in std::mem::take(&mut self.series) {
-            ix.series.entry(k).or_default().extend(v);
+        for (k, pts) in self.series.iter_mut() {
+            if pts.is_empty() {
+                continue;
+            }
+            match ix.series.get_mut(k.as_str()) {
+                Some(v) => v.append(pts),
+                None => {
+                    ix.series.insert(k.clone(), std::mem::take(pts));
+                }
+            }
         }
         ix.first_ts = self.first_ts;
-        ix.streams.clone_from(&self.streams);
+        if ix.streams != self.streams {
+            ix.streams.clone_from(&self.streams);
+        }
+        ix.streams_seen |= self.streams_seen;
         ix.file_diags.append(&mut self.file_diags);
         self.base = ix.recs.len() as u64;
         self.arena_base = ix.arena.len() as u64;
         if done {
             ix.done = true;
-            if ix.proto.is_none() {
-                ix.proto = self.proto;
-            }
         }
     }
 }

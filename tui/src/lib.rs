@@ -1,16 +1,23 @@
 //! aptscope-tui: the terminal UI of `aptscope view FILE`.
 //!
 //! Architecture (state → events → view): [`index`] builds a compact index of the capture in a
-//! background thread; [`scan`] runs the display filter and statistics over it in another;
+//! background thread from the one decode chain's records; [`scan`] runs the display filter and
+//! statistics over it in another, reading the compact records through [`fields::View`];
 //! [`app::App`] holds the UI state and handles keys and mouse events without a terminal;
 //! [`ui::draw`] renders the state, decoding only the visible rows ([`decode`]);
 //! [`as_filter`] turns a detail line into a display filter.
+//!
+//! Files open with [`run_with`]; live sources (a tap, a simulator, a file still being written)
+//! with [`run_source`] and `live: true`: the index grows while the view is open, the timeline
+//! follows it (LIVE / PAUSED in the status bar) and filters and statistics extend as records
+//! arrive.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod app;
 pub mod as_filter;
 pub mod decode;
+pub mod fields;
 pub mod index;
 pub mod scan;
 pub mod ui;
@@ -69,8 +76,31 @@ pub fn run_with(
     let title = std::path::Path::new(path)
         .file_name()
         .map_or_else(|| path.to_string(), |n| n.to_string_lossy().into_owned());
-    let mut app = app::App::new(shared.clone(), &title, true);
+    let app = app::App::new(shared, &title, true);
+    run_app(app)
+}
 
+/// Run the viewer on the records of the reader `open` returns (opened in the indexing thread:
+/// readers are not `Send`), until the user quits; then the stop flag (`opts.cancel`, or the
+/// index's own) is set, so a live reader blocked in `next_event` returns.
+///
+/// For a live source (a tap, `sim --view`, `view --follow`) give `opts.live = true`: the
+/// timeline follows new records (LIVE / PAUSED in the status bar, `f` toggles, `G` resumes) and
+/// every event the reader gives is shown at once. `title` names the source in the title bar.
+pub fn run_source<F>(title: &str, open: F, opts: index::IndexOpts) -> io::Result<()>
+where
+    F: FnOnce() -> io::Result<index::Opened> + Send + 'static,
+{
+    let live = opts.live;
+    let shared = index::spawn_source(open, opts)?;
+    let mut app = app::App::new(shared, title, true);
+    app.set_live(live);
+    run_app(app)
+}
+
+/// The terminal loop: draw, handle events, until the user quits.
+fn run_app(mut app: app::App) -> io::Result<()> {
+    let shared = app.shared.clone();
     let hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
         restore_terminal();

@@ -1,15 +1,20 @@
-//! The background scan: every record rendered as its NDJSON object, matched against the display
-//! filter (the matching record numbers are what the timeline shows) and counted into the
-//! statistics. Follows the index while it is still being built; a new filter starts a new scan.
+//! The background scan: the display filter over every record of the index (the matching record
+//! numbers are what the timeline shows) and the statistics of the matching records. It reads the
+//! compact records ([`crate::fields::View`]): record-level filter terms and the counts cost no
+//! decoding; only field terms, and diagnostics of damaged records, decode the frame's bytes.
+//! Follows the index while it grows (a live source, or a file still being indexed): the results
+//! extend as records arrive; a new filter starts a new scan.
 
-use crate::decode::{direct, direct_for_stats, project, render, Rendered, NOT_DIRECT};
-use crate::index::Index;
-use crate::index::Shared;
+use crate::fields::{self, View, DIAG_FLAGS};
+use crate::index::{Index, Rec, Shared, F_ELL, F_GARBAGE, F_IS_REPLY};
+use aptscope_dissector::fields::{Fields, Key, Val};
 use aptscope_dissector::filter::Filter;
-use aptscope_dissector::stats::Stats;
+use aptscope_dissector::stats::{Latencies, Stats, StreamStat, Tally};
+use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::hash::{BuildHasherDefault, Hasher};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// What a scan has found so far.
 #[derive(Debug)]
@@ -22,11 +27,15 @@ pub struct ScanState {
     pub matches: Vec<u64>,
     /// Records scanned.
     pub scanned: u64,
-    /// Statistics of the matching records.
+    /// Statistics of the matching records (brought up to date every few tenths of a second
+    /// and at the end).
     pub stats: Stats,
     /// The whole index has been scanned (and the index is complete).
     pub done: bool,
 }
+
+/// Width of the statistics' rate bins.
+pub const BIN_NS: u64 = 1_000_000_000;
 
 impl ScanState {
     fn new(gen: u64, filter: Option<Filter>) -> Self {
@@ -35,7 +44,7 @@ impl ScanState {
             filter,
             matches: vec![],
             scanned: 0,
-            stats: Stats::new(1_000_000_000),
+            stats: Stats::new(BIN_NS),
             done: false,
         }
     }
@@ -47,6 +56,8 @@ pub struct Scan {
     /// The state.
     pub state: Mutex<ScanState>,
     gen: AtomicU64,
+    /// Where the scan is and what it counted (held by whoever scans).
+    work: Mutex<Work>,
 }
 
 impl Default for Scan {
@@ -54,166 +65,403 @@ impl Default for Scan {
         Scan {
             state: Mutex::new(ScanState::new(0, None)),
             gen: AtomicU64::new(0),
+            work: Mutex::new(Work::new(0, None)),
         }
     }
 }
 
-const BATCH: usize = 2048;
+/// The scanning side of a scan.
+#[derive(Debug)]
+struct Work {
+    gen: u64,
+    filter: Option<Filter>,
+    /// Next record to scan.
+    next: u64,
+    counts: Counts,
+    /// When the statistics shown were last rebuilt.
+    shown: Instant,
+    found: Vec<u64>,
+}
 
-/// The top-level record keys [`Stats::add`] reads (sorted): statistics of records reduced to
-/// these keys equal those of the full records (`tui/tests/scan.rs` checks it).
-pub const STATS_KEYS: &[&str] = &[
-    "addr",
-    "cmd",
-    "diag",
-    "dir",
-    "dst",
-    "latency_ms",
-    "len",
-    "msgid_hex",
-    "n",
-    "name",
-    "pair",
-    "proto",
-    "src",
-    "ts_ns",
-    "type",
-];
+impl Work {
+    fn new(gen: u64, filter: Option<Filter>) -> Self {
+        Work {
+            gen,
+            filter,
+            next: 1,
+            counts: Counts::default(),
+            shown: Instant::now(),
+            found: vec![],
+        }
+    }
+}
+
+/// What one step of a scan came to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Step {
+    /// Records are left to scan.
+    More,
+    /// Every record of the index so far is scanned; more may come.
+    CaughtUp,
+    /// The complete index is scanned.
+    Finished,
+    /// A newer scan replaced this one (or the viewer is closing).
+    Stale,
+}
+
+/// Records scanned per hold of the index lock.
+const BATCH: u64 = 1 << 15;
+
+/// How often the statistics shown are rebuilt while a scan runs.
+const STATS_EVERY: Duration = Duration::from_millis(200);
 
 impl Scan {
     /// Start a scan with `filter` (replacing any running one). With `background` false the
-    /// scan runs to the end of the (complete) index in the calling thread.
+    /// scan runs to the end of the index so far in the calling thread; [`Scan::catch_up`]
+    /// scans what the index gains later.
     pub fn start(self: &Arc<Self>, index: Arc<Shared>, filter: Option<Filter>, background: bool) {
         let gen = self.gen.fetch_add(1, Ordering::SeqCst) + 1;
+        if let Ok(mut w) = self.work.lock() {
+            *w = Work::new(gen, filter.clone());
+        }
         if let Ok(mut s) = self.state.lock() {
-            *s = ScanState::new(gen, filter.clone());
+            *s = ScanState::new(gen, filter);
+        }
+        if !background {
+            self.catch_up(&index);
+            return;
         }
         let me = self.clone();
-        let work = move || me.run(gen, index, filter);
-        if background {
-            let _ = std::thread::Builder::new()
-                .name("aptscope-scan".into())
-                .spawn(work);
+        let _ = std::thread::Builder::new()
+            .name("aptscope-scan".into())
+            .spawn(move || loop {
+                match me.step(gen, &index, false) {
+                    Step::More => {}
+                    Step::CaughtUp => std::thread::sleep(Duration::from_millis(30)),
+                    Step::Finished | Step::Stale => return,
+                }
+            });
+    }
+
+    /// Scan the records the index gained since the last step (a synchronous scan: tests, and
+    /// the viewer without background threads). The matches and statistics extend; nothing is
+    /// scanned twice.
+    pub fn catch_up(&self, index: &Shared) {
+        let gen = self.gen.load(Ordering::SeqCst);
+        while self.step(gen, index, true) == Step::More {}
+    }
+
+    /// Scan the next batch of records of scan `gen`; `sync`: the caller waits for it (the
+    /// statistics are brought up to date when it catches up).
+    fn step(&self, gen: u64, index: &Shared, sync: bool) -> Step {
+        if self.gen.load(Ordering::SeqCst) != gen || index.cancel.load(Ordering::Relaxed) {
+            return Step::Stale;
+        }
+        let Ok(mut guard) = self.work.lock() else {
+            return Step::Stale;
+        };
+        let w = &mut *guard;
+        if w.gen != gen {
+            return Step::Stale;
+        }
+        w.found.clear();
+        let Ok(ix) = index.index.read() else {
+            return Step::Stale;
+        };
+        let len = ix.recs.len() as u64;
+        let (from, end) = (w.next, (w.next + BATCH).min(len + 1));
+        let recs = ix
+            .recs
+            .get((from - 1) as usize..(end - 1) as usize)
+            .unwrap_or(&[]);
+        for (i, r) in recs.iter().enumerate() {
+            let n = from + i as u64;
+            if let Some(f) = &w.filter {
+                if !f.matches(&View { ix: &ix, n, r }) {
+                    continue;
+                }
+                w.found.push(n);
+            }
+            w.counts.add(&ix, n, r);
+        }
+        w.next = end;
+        let caught_up = end > len;
+        let finished = ix.done && caught_up;
+        // The statistics: rebuilt now and then, and at the end.
+        let due = w.shown.elapsed() > STATS_EVERY;
+        let stats =
+            (finished || due || (caught_up && from < end && sync)).then(|| w.counts.stats(&ix));
+        drop(ix);
+        if stats.is_some() {
+            w.shown = Instant::now();
+        }
+        if let Ok(mut s) = self.state.lock() {
+            if s.gen != gen {
+                return Step::Stale;
+            }
+            s.matches.extend_from_slice(&w.found);
+            if let Some(st) = stats {
+                s.stats = st;
+            }
+            s.scanned = end - 1;
+            s.done = finished;
+        }
+        if finished {
+            Step::Finished
+        } else if caught_up {
+            Step::CaughtUp
         } else {
-            work();
-        }
-    }
-
-    fn run(&self, gen: u64, index: Arc<Shared>, filter: Option<Filter>) {
-        let mut buf = String::with_capacity(512);
-        // Only the keys the filter reads (then, for matches, those the statistics read) are
-        // built: from the index record and frame header when they can be, else rendered to
-        // NDJSON text as `decode --json` writes it and parsed (key by key). `fields`, the
-        // largest value, only when the filter needs it (see `Filter::record_keys_split`).
-        let (keys, fallback) = filter
-            .as_ref()
-            .map(Filter::record_keys_split)
-            .unwrap_or_default();
-        let all_keys = filter.as_ref().map(Filter::record_keys).unwrap_or_default();
-        let mut stats_keys = Keys::new(STATS_KEYS, None);
-        stats_keys.lean = true;
-        // Read through the fallback only, `fields` is read at those names only.
-        let sub = (!keys.contains(&"fields")).then_some(&fallback[..]);
-        let (keys, all_keys) = (Keys::new(&keys, None), Keys::new(&all_keys, sub));
-        let mut next: u64 = 1;
-        loop {
-            if self.gen.load(Ordering::SeqCst) != gen || index.cancel.load(Ordering::Relaxed) {
-                return;
-            }
-            let mut found = vec![];
-            let mut recs = vec![];
-            let (len, done) = {
-                let Ok(ix) = index.index.read() else { return };
-                let len = ix.recs.len() as u64;
-                let end = (next + BATCH as u64).min(len + 1);
-                for n in next..end {
-                    let mut rd = None;
-                    if let Some(f) = &filter {
-                        let v = keys.get(&ix, n, &mut buf, &mut rd).and_then(|v| {
-                            if fallback.iter().all(|k| v.get(k).is_some()) {
-                                Some(v)
-                            } else {
-                                all_keys.get(&ix, n, &mut buf, &mut rd)
-                            }
-                        });
-                        match v {
-                            Some(v) if f.matches(&v) => found.push(n),
-                            _ => continue,
-                        }
-                    }
-                    if let Some(v) = stats_keys.get(&ix, n, &mut buf, &mut rd) {
-                        recs.push(v);
-                    }
-                }
-                next = end;
-                (len, ix.done)
-            };
-            let finished = done && next > len;
-            if let Ok(mut s) = self.state.lock() {
-                if s.gen != gen {
-                    return;
-                }
-                s.matches.extend(found);
-                for v in &recs {
-                    s.stats.add(v);
-                }
-                s.scanned = next - 1;
-                s.done = finished;
-            }
-            if finished {
-                return;
-            }
-            if next > len {
-                std::thread::sleep(Duration::from_millis(30));
-            }
+            Step::More
         }
     }
 }
 
-/// A set of record keys to build.
-struct Keys<'k> {
-    keys: &'k [&'k str],
-    /// Only these names of `fields` (else all).
-    fields: Option<&'k [&'k str]>,
-    /// All can be built by [`direct`].
-    direct: bool,
-    /// For statistics only: [`direct_for_stats`].
-    lean: bool,
-}
+/// A hasher for the small integer keys of [`Counts`] (one multiply).
+#[derive(Default)]
+struct IdHasher(u64);
 
-impl<'k> Keys<'k> {
-    fn new(keys: &'k [&'k str], fields: Option<&'k [&'k str]>) -> Self {
-        let direct = keys
-            .iter()
-            .all(|k| !NOT_DIRECT.contains(k) && (*k != "fields" || fields.is_some()));
-        Keys {
-            keys,
-            fields,
-            direct,
-            lean: false,
+impl Hasher for IdHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.0 = (self.0 ^ *b as u64).wrapping_mul(0x100_0000_01B3);
         }
     }
+    fn write_u64(&mut self, x: u64) {
+        self.0 = (x ^ (x >> 29)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+    fn write_u32(&mut self, x: u32) {
+        self.write_u64(x as u64);
+    }
+}
 
-    /// Record `n` reduced to the keys; `rd` caches the rendering in `buf` (`Some(None)`: the
-    /// record does not render, and is skipped as [`crate::decode::json_of`] skips it).
-    fn get(
-        &self,
-        ix: &Index,
-        n: u64,
-        buf: &mut String,
-        rd: &mut Option<Option<Rendered>>,
-    ) -> Option<serde_json::Value> {
-        if self.direct {
-            let v = if self.lean {
-                direct_for_stats(ix, n, self.keys)
+type IdMap<K, V> = HashMap<K, V, BuildHasherDefault<IdHasher>>;
+
+/// Frames of one kind (protocol, message, addresses, direction, stream): one of them and the
+/// count and bytes of all.
+#[derive(Debug, Clone, Copy)]
+struct Class {
+    rep: u64,
+    count: u64,
+    bytes: u64,
+}
+
+/// Requests remembered for their replies' latency (as [`Stats`] does).
+const MAX_REQUESTS: usize = 1 << 16;
+
+/// Rate bins counted in a vector; later ones (a time jump) in a map.
+const DENSE_BINS: u64 = 1 << 20;
+
+/// The statistics of the matching records, counted by kind from the compact records and made
+/// into a [`Stats`] (the names read from one record of each kind through [`View`]): equal to
+/// [`Stats::add`] over the records' NDJSON objects (`tui/tests/scan.rs` checks it).
+#[derive(Debug, Default)]
+struct Counts {
+    frames: Tally,
+    garbage: Tally,
+    classes: IdMap<u64, Class>,
+    /// Latencies by message of the request (protocol and message id).
+    latencies: IdMap<u32, Latencies>,
+    /// Recent requests: (record number, message), in record order.
+    requests: VecDeque<(u64, u32)>,
+    diags: BTreeMap<String, u64>,
+    first_ts: Option<u64>,
+    bins: Vec<u64>,
+    far_bins: BTreeMap<u64, u64>,
+}
+
+/// The path `diag.kind`.
+fn kind_path() -> &'static [String] {
+    static P: std::sync::OnceLock<Vec<String>> = std::sync::OnceLock::new();
+    P.get_or_init(|| vec!["kind".to_string()])
+}
+
+fn name_path() -> &'static [String] {
+    static P: std::sync::OnceLock<Vec<String>> = std::sync::OnceLock::new();
+    P.get_or_init(|| vec!["name".to_string()])
+}
+
+fn add_to<K: Ord>(map: &mut BTreeMap<K, Tally>, k: K, c: &Class) {
+    let t = map.entry(k).or_default();
+    t.count += c.count;
+    t.bytes += c.bytes;
+}
+
+/// The text of a field of a record (its first value).
+fn text(v: &View<'_>, key: Key, rest: &[String]) -> Option<String> {
+    let mut out = None;
+    v.visit(key, rest, &mut |x, _| {
+        if let (None, Val::Str(s)) = (&out, x) {
+            out = Some(s.into_owned());
+        }
+    });
+    out
+}
+
+impl Counts {
+    fn add(&mut self, ix: &Index, n: u64, r: &Rec) {
+        let v = View { ix, n, r };
+        if r.flags & DIAG_FLAGS != 0 {
+            let diags = &mut self.diags;
+            v.visit(Key::Diag, kind_path(), &mut |x, _| {
+                let k = match &x {
+                    Val::Str(s) => s.as_ref(),
+                    _ => "?",
+                };
+                match diags.get_mut(k) {
+                    Some(c) => *c += 1,
+                    None => {
+                        diags.insert(k.to_string(), 1);
+                    }
+                }
+            });
+        }
+        let len = r.len as u64;
+        if r.has(F_GARBAGE) {
+            self.garbage.count += 1;
+            self.garbage.bytes += len;
+            return;
+        }
+        self.frames.count += 1;
+        self.frames.bytes += len;
+        let ell = r.has(F_ELL);
+        let class = (ell as u64) << 63
+            | (r.stream as u64) << 40
+            | (r.dir as u64) << 32
+            | (r.id as u64) << 16
+            | (r.src as u64) << 8
+            | r.dst as u64;
+        let c = self.classes.entry(class).or_insert(Class {
+            rep: n,
+            count: 0,
+            bytes: 0,
+        });
+        c.count += 1;
+        c.bytes += len;
+        let msg = (ell as u32) << 16 | r.id as u32;
+        let pair = (r.has(F_IS_REPLY) && r.pair != 0).then_some(r.pair as u64);
+        match pair {
+            None => {
+                // A request, unless it comes from the device (which one is a view's business).
+                let from_device = if ell {
+                    r.code()[0].is_ascii_uppercase()
+                } else {
+                    let mut d = false;
+                    v.visit(Key::Dir, &[], &mut |x, _| {
+                        d = matches!(x, Val::Str(s) if s == "d2h")
+                    });
+                    d
+                };
+                if !from_device {
+                    self.requests.push_back((n, msg));
+                    if self.requests.len() > MAX_REQUESTS {
+                        self.requests.pop_front();
+                    }
+                }
+            }
+            Some(p) => {
+                if let Some(l) = fields::latency(ix, r) {
+                    if let Ok(i) = self.requests.binary_search_by_key(&p, |x| x.0) {
+                        let req = self.requests[i].1;
+                        self.latencies.entry(req).or_default().push(l as f64 / 1e6);
+                    }
+                }
+            }
+        }
+        if let Some(ts) = r.ts() {
+            let first = *self.first_ts.get_or_insert(ts);
+            let bin = ts.saturating_sub(first) / BIN_NS;
+            if bin < DENSE_BINS {
+                let i = bin as usize;
+                if self.bins.len() <= i {
+                    self.bins.resize(i + 1, 0);
+                }
+                self.bins[i] += 1;
             } else {
-                direct(ix, n, self.keys, self.fields.unwrap_or_default())
-            };
-            if v.is_some() {
-                return v;
+                *self.far_bins.entry(bin * BIN_NS).or_default() += 1;
             }
         }
-        let rd = *rd.get_or_insert_with(|| render(ix, n, buf));
-        project(buf, &rd?, self.keys, self.fields)
+    }
+
+    /// The [`Stats`] of what was counted.
+    fn stats(&self, ix: &Index) -> Stats {
+        let mut s = Stats::new(BIN_NS);
+        s.frames = self.frames.clone();
+        s.garbage = self.garbage.clone();
+        s.diags = self.diags.clone();
+        let mut keys: IdMap<u32, String> = IdMap::default();
+        // Streams the capture names, as its `stream` records do.
+        for (i, name) in ix.streams.iter().enumerate() {
+            if !name.is_empty() {
+                s.streams.insert(
+                    i as u64,
+                    StreamStat {
+                        name: Some(name.clone()),
+                        tally: Tally::default(),
+                    },
+                );
+            }
+        }
+        for c in self.classes.values() {
+            let Some(r) = ix.rec(c.rep) else { continue };
+            let v = View { ix, n: c.rep, r };
+            let ell = r.has(F_ELL);
+            let msg = (ell as u32) << 16 | r.id as u32;
+            // As `Stats` names them: `apt NAME` (or its id), `ell cmd NAME`; `apt SRC → DST`,
+            // `ell ADDR`; the direction or `unknown`.
+            let key = keys
+                .entry(msg)
+                .or_insert_with(|| {
+                    if ell {
+                        format!(
+                            "ell {} {}",
+                            text(&v, Key::Cmd, &[]).unwrap_or_else(|| "?".into()),
+                            text(&v, Key::Name, &[]).unwrap_or_else(|| "UNKNOWN".into())
+                        )
+                    } else {
+                        let name = text(&v, Key::Name, &[])
+                            .or_else(|| text(&v, Key::MsgidHex, &[]))
+                            .unwrap_or_else(|| "?".into());
+                        format!("apt {name}")
+                    }
+                })
+                .clone();
+            let m = s.messages.entry(key).or_default();
+            m.tally.count += c.count;
+            m.tally.bytes += c.bytes;
+            let addr = if ell {
+                format!(
+                    "ell {}",
+                    text(&v, Key::Addr, &[]).unwrap_or_else(|| "?".into())
+                )
+            } else {
+                let name = |k| text(&v, k, name_path()).unwrap_or_else(|| "?".into());
+                format!("apt {} → {}", name(Key::Src), name(Key::Dst))
+            };
+            let st = r.stream as u64;
+            add_to(&mut s.stream_addresses, (st, addr.clone()), c);
+            add_to(&mut s.addresses, addr, c);
+            let t = &mut s.streams.entry(st).or_default().tally;
+            t.count += c.count;
+            t.bytes += c.bytes;
+            let dir = text(&v, Key::Dir, &[]).unwrap_or_else(|| "unknown".into());
+            add_to(&mut s.directions, dir, c);
+        }
+        for (msg, lat) in &self.latencies {
+            if let Some(m) = keys.get(msg).and_then(|k| s.messages.get_mut(k)) {
+                m.latencies = lat.clone();
+            }
+        }
+        s.bins = self
+            .bins
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| **c > 0)
+            .map(|(i, c)| (i as u64 * BIN_NS, *c))
+            .chain(self.far_bins.iter().map(|(b, c)| (*b, *c)))
+            .collect();
+        s
     }
 }

@@ -43,7 +43,10 @@ pub const HELP: &[(&str, &str)] = &[
     ("p", "jump to the paired request / reply"),
     (":", "go to record number"),
     ("t", "time: relative / delta / absolute"),
-    ("f", "follow the end of the capture"),
+    (
+        "f",
+        "follow new records on/off (live: LIVE / PAUSED in the status bar; G resumes)",
+    ),
     ("1 2 3", "timeline / statistics / plot"),
     ("mouse", "wheel scrolls, click selects"),
     ("? q ^C", "help / quit (q: back from a view)"),
@@ -227,7 +230,7 @@ fn draw_title(f: &mut Frame<'_>, app: &App, area: Rect) {
             if sdone { "" } else { " (filtering…)" }
         ));
     }
-    if app.follow {
+    if app.follow && !app.live {
         s.push_str("  [follow]");
     }
     let style = Style::new().fg(Color::Black).bg(Color::Blue);
@@ -298,7 +301,24 @@ struct Columns {
     proto: bool,
     /// Message name.
     name: usize,
+    /// Width of the stream (port) column: 0 when the capture has one stream.
+    port: usize,
 }
+
+/// Short label of stream `i` for the timeline: the last part of its name (`ttyUSB0`), else its
+/// index.
+fn port_label(ix: &Index, i: u16) -> String {
+    match ix.streams.get(i as usize).filter(|s| !s.is_empty()) {
+        Some(s) => {
+            let tail = s.rsplit(['/', '\\']).next().unwrap_or(s);
+            tail.chars().take(PORT_MAX).collect()
+        }
+        None => format!("#{i}"),
+    }
+}
+
+/// Widest stream label.
+const PORT_MAX: usize = 12;
 
 impl Columns {
     fn of(ix: &Index, mode: TimeMode, width: u16) -> Self {
@@ -316,11 +336,22 @@ impl Columns {
             (_, TimeMode::Delta) => rel + 2,
         };
         let proto = width >= 110;
+        let port = if ix.multi_stream() {
+            (0..64u16)
+                .filter(|i| ix.streams_seen & (1 << i) != 0)
+                .map(|i| port_label(ix, i).chars().count())
+                .max()
+                .unwrap_or(2)
+                .max(4)
+        } else {
+            0
+        };
         Columns {
             n,
             time,
             proto,
             name: if proto { 30 } else { 23 },
+            port,
         }
     }
 
@@ -330,6 +361,9 @@ impl Columns {
         let mut s = format!("{:>nw$} {:>tw$} ", "No.", "Time");
         if self.proto {
             s.push_str("Proto ");
+        }
+        if self.port > 0 {
+            s.push_str(&format!("{:<w$} ", "Port", w = self.port));
         }
         s.push_str(&format!(
             "  {:>5} → {:<5} {:<name_w$} Info",
@@ -366,12 +400,17 @@ fn draw_list(f: &mut Frame<'_>, app: &App, area: Rect) {
     };
     let first = ix.first_ts;
     let cols = Columns::of(&ix, app.time_mode, inner.width);
-    let rows: Vec<Option<(Row, Option<usize>)>> = ns
+    let rows: Vec<Option<(Row, Option<usize>, String)>> = ns
         .iter()
         .map(|n| {
             let r = row(&ix, *n)?;
             let rule = ix.rec(*n).and_then(|rec| colour_rule(rec, r.way));
-            Some((r, rule))
+            let port = if cols.port > 0 {
+                port_label(&ix, r.stream)
+            } else {
+                String::new()
+            };
+            Some((r, rule, port))
         })
         .collect();
     drop(ix);
@@ -391,7 +430,7 @@ fn draw_list(f: &mut Frame<'_>, app: &App, area: Rect) {
         if pos < app.top {
             continue;
         }
-        let Some((r, rule)) = r else {
+        let Some((r, rule, port)) = r else {
             lines.push(Line::from("?"));
             continue;
         };
@@ -407,6 +446,9 @@ fn draw_list(f: &mut Frame<'_>, app: &App, area: Rect) {
         ))];
         if cols.proto {
             spans.push(Span::raw(format!("{:<6}", r.proto)));
+        }
+        if cols.port > 0 {
+            spans.push(Span::raw(format!("{port:<w$} ", w = cols.port)));
         }
         // Garbage has no addresses, but the side it came from is known when captured.
         let (src, dst) = if r.garbage {
@@ -739,6 +781,9 @@ fn draw_status(f: &mut Frame<'_>, app: &App, area: Rect) {
         f.render_widget(Paragraph::new(lines), area);
         return;
     }
+    let marker = live_marker(app);
+    let room =
+        (area.width as usize).saturating_sub(marker.as_ref().map_or(0, |m| m.0.chars().count()));
     let s = match &app.message {
         Some(m) => m.clone(),
         None => {
@@ -758,7 +803,7 @@ fn draw_status(f: &mut Frame<'_>, app: &App, area: Rect) {
             ];
             let mut s = String::new();
             for h in HINTS {
-                if s.chars().count() + 1 + h.chars().count() > area.width as usize {
+                if s.chars().count() + 1 + h.chars().count() > room {
                     break;
                 }
                 s.push(' ');
@@ -767,10 +812,44 @@ fn draw_status(f: &mut Frame<'_>, app: &App, area: Rect) {
             s
         }
     };
-    f.render_widget(
-        Paragraph::new(s).style(Style::new().fg(Color::Black).bg(Color::Gray)),
-        area,
-    );
+    let bar = Style::new().fg(Color::Black).bg(Color::Gray);
+    let mut spans = vec![];
+    if let Some((text, style)) = marker {
+        spans.push(Span::styled(text, style));
+    }
+    spans.push(Span::raw(s));
+    f.render_widget(Paragraph::new(Line::from(spans)).style(bar), area);
+}
+
+/// The status bar's marker of a live source: LIVE while following, else PAUSED with the
+/// count of records not yet seen.
+pub fn live_marker(app: &App) -> Option<(String, Style)> {
+    if !app.live {
+        return None;
+    }
+    let stopped = app.shared.index.read().is_ok_and(|ix| ix.done);
+    Some(if stopped {
+        (
+            " ENDED ".to_string(),
+            Style::new().fg(Color::White).bg(Color::DarkGray),
+        )
+    } else if app.follow {
+        (
+            " LIVE ".to_string(),
+            Style::new()
+                .fg(Color::Black)
+                .bg(Color::Green)
+                .add_modifier(Modifier::BOLD),
+        )
+    } else {
+        (
+            format!(" PAUSED · {} new (f/G: follow) ", app.unseen()),
+            Style::new()
+                .fg(Color::Black)
+                .bg(Color::Yellow)
+                .add_modifier(Modifier::BOLD),
+        )
+    })
 }
 
 /// Width of the key column of the help overlay.

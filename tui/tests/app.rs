@@ -100,9 +100,8 @@ fn filter_goto_pair_search() {
     typed(&mut a, "apt.name ~ MOVE_HOMED");
     key(&mut a, KeyCode::Enter);
     let hit = a.selected().expect("a hit");
-    let mut buf = String::new();
     let ix = a.shared.index.read().expect("lock");
-    let v = aptscope_tui::decode::json_of(&ix, hit, &mut buf).expect("json");
+    let v = aptscope_tui::decode::json_value(&ix, hit).expect("json");
     drop(ix);
     assert_eq!(v["name"], "MOT_MOVE_HOMED");
     key(&mut a, KeyCode::Char('n'));
@@ -160,9 +159,8 @@ fn indexes_like_decode() {
         let a = app(name);
         let ix = a.shared.index.read().expect("lock");
         assert!(ix.done);
-        let mut buf = String::new();
         for n in 1..=ix.recs.len() as u64 {
-            let v = aptscope_tui::decode::json_of(&ix, n, &mut buf).expect("json");
+            let v = aptscope_tui::decode::json_value(&ix, n).expect("json");
             assert_eq!(v["n"], n, "{name} #{n}");
             assert!(aptscope_tui::decode::row(&ix, n).is_some());
             assert!(!aptscope_tui::decode::tree(&ix, n).is_empty());
@@ -223,11 +221,10 @@ fn records_equal_the_pipeline_ndjson() {
         p.finish(&mut emit).expect("finish");
         let a = app(name);
         let ix = a.shared.index.read().expect("lock");
-        let mut buf = String::new();
         let mut count = 0;
         for want in out.iter().filter(|v| v.get("n").is_some()) {
             let n = want["n"].as_u64().expect("n");
-            let mut got = aptscope_tui::decode::json_of(&ix, n, &mut buf).expect("record");
+            let mut got = aptscope_tui::decode::json_value(&ix, n).expect("record");
             if let Some(d) = got["diag"].as_array_mut() {
                 d.retain(|x| x["kind"] != "no_reply");
             }
@@ -374,11 +371,10 @@ fn a_stage_shows_motion_values_in_mm_everywhere() {
         }
     }
     p.finish(&mut emit).expect("finish");
-    let mut buf = String::new();
     let mut with_phys = 0;
     for want in out.iter().filter(|v| v.get("n").is_some()) {
         let n = want["n"].as_u64().expect("n");
-        let mut got = aptscope_tui::decode::json_of(&ix, n, &mut buf).expect("record");
+        let mut got = aptscope_tui::decode::json_value(&ix, n).expect("record");
         if let Some(d) = got["diag"].as_array_mut() {
             d.retain(|x| x["kind"] != "no_reply");
         }

@@ -1,15 +1,17 @@
-//! The filter/statistics scan gives exactly what rendering every record to NDJSON, parsing it
-//! and matching the filter on the whole object gives (and what `decode -Y` selects).
+//! The filter/statistics scan over the compact index gives exactly what `decode --json -Y`
+//! selects and what the statistics of those NDJSON records are; the compact view of a record
+//! answers every field as the decoded record does.
 
 use aptscope_capture::model::Event;
 use aptscope_capture::open::OpenOptions;
+use aptscope_dissector::fields::{Fields, Key, Role, Val, KEYS};
 use aptscope_dissector::filter::Filter;
 use aptscope_dissector::pipeline::{Format, Pipeline};
 use aptscope_dissector::stats::Stats;
 use aptscope_dissector::{synth, Table};
-use aptscope_tui::decode::{direct, json_of, project, render, NOT_DIRECT};
-use aptscope_tui::index::{load, Shared};
-use aptscope_tui::scan::{Scan, STATS_KEYS};
+use aptscope_tui::fields::{with_record, View};
+use aptscope_tui::index::{load, Shared, F_NO_REPLY};
+use aptscope_tui::scan::{Scan, BIN_NS};
 use serde_json::Value;
 use std::sync::Arc;
 
@@ -103,142 +105,24 @@ fn scan(shared: &Arc<Shared>, filter: Option<Filter>) -> (Vec<u64>, String) {
 
 fn stats_text(s: &Stats) -> String {
     format!(
-        "{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}",
-        s.frames, s.garbage, s.messages, s.addresses, s.directions, s.diags, s.bins, s.bin_ns
+        "{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{}",
+        s.frames,
+        s.garbage,
+        s.messages,
+        s.addresses,
+        s.directions,
+        s.diags,
+        s.bins,
+        s.bin_ns,
+        s.streams,
+        s.stream_addresses,
+        s.to_text()
     )
 }
 
-/// What the scan did before: every record rendered and parsed whole.
-fn reference(shared: &Arc<Shared>, filter: Option<&Filter>) -> (Vec<u64>, String) {
-    let ix = shared.index.read().expect("lock");
-    let mut buf = String::new();
-    let mut found = vec![];
-    let mut stats = Stats::new(1_000_000_000);
-    for n in 1..=ix.recs.len() as u64 {
-        let Some(v) = json_of(&ix, n, &mut buf) else {
-            continue;
-        };
-        if filter.is_none_or(|f| f.matches(&v)) {
-            if filter.is_some() {
-                found.push(n);
-            }
-            stats.add(&v);
-        }
-    }
-    (found, stats_text(&stats))
-}
-
-/// Every key of every record: `project` of the rendering and `direct` give the values of the
-/// whole parsed object.
-fn check_records(name: &str, shared: &Arc<Shared>) {
-    let ix = shared.index.read().expect("lock");
-    let mut buf = String::new();
-    let mut direct_count = 0;
-    for n in 1..=ix.recs.len() as u64 {
-        let Some(full) = json_of(&ix, n, &mut buf) else {
-            assert!(render(&ix, n, &mut buf).is_none(), "{name} #{n}");
-            continue;
-        };
-        let obj = full.as_object().expect("object");
-        let rd = render(&ix, n, &mut buf).expect("renders");
-        let mut keys: Vec<&str> = obj.keys().map(String::as_str).collect();
-        keys.push("not_a_key");
-        assert_eq!(
-            project(&buf, &rd, &keys, None).as_ref(),
-            Some(&full),
-            "{name} #{n}"
-        );
-        let some: Vec<&str> = keys.iter().copied().step_by(3).collect();
-        let want: serde_json::Map<String, Value> = obj
-            .iter()
-            .filter(|(k, _)| some.contains(&k.as_str()))
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect();
-        assert_eq!(
-            project(&buf, &rd, &some, None),
-            Some(Value::Object(want)),
-            "{name} #{n}"
-        );
-        // `fields` reduced to some of its names (and one that is not there).
-        let names: Vec<String> = obj
-            .get("fields")
-            .and_then(Value::as_object)
-            .map(|m| m.keys().step_by(2).cloned().collect())
-            .unwrap_or_default();
-        let mut sub: Vec<&str> = names.iter().map(String::as_str).collect();
-        sub.push("no_such_field");
-        let mut want_sub = full.clone();
-        if let Some(m) = want_sub.get_mut("fields").and_then(Value::as_object_mut) {
-            m.retain(|k, _| sub.contains(&k.as_str()));
-        }
-        assert_eq!(
-            project(&buf, &rd, &keys, Some(&sub)).as_ref(),
-            Some(&want_sub),
-            "{name} #{n}"
-        );
-        // Every key but those rendered, and some that APT frames do not have.
-        let dkeys: Vec<&str> = keys
-            .iter()
-            .copied()
-            .filter(|k| !NOT_DIRECT.contains(k))
-            .chain(["addr", "cmd", "position", "module", "interim", "unpaired"])
-            .collect();
-        if let Some(d) = direct(&ix, n, &dkeys, &sub) {
-            let want: serde_json::Map<String, Value> = want_sub
-                .as_object()
-                .expect("object")
-                .iter()
-                .filter(|(k, _)| dkeys.contains(&k.as_str()))
-                .map(|(k, v)| (k.clone(), v.clone()))
-                .collect();
-            assert_eq!(d, Value::Object(want), "{name} #{n}");
-            direct_count += 1;
-        }
-    }
-    if ix.proto == Some(aptscope_dissector::detect::Proto::Apt) {
-        assert!(direct_count > 0, "{name}");
-    }
-}
-
-#[test]
-fn stats_keys_are_sorted_and_buildable() {
-    let mut s = STATS_KEYS.to_vec();
-    s.sort_unstable();
-    assert_eq!(s, STATS_KEYS);
-    assert!(STATS_KEYS.iter().all(|k| !NOT_DIRECT.contains(k)));
-}
-
-#[test]
-fn reduced_records_equal_the_whole_ones() {
-    for path in samples() {
-        let shared = load(&path, OpenOptions::default()).expect("opens");
-        check_records(&path, &shared);
-    }
-    let (_dir, path) = synthetic();
-    let shared = load(&path, OpenOptions::default()).expect("opens");
-    check_records("synthetic", &shared);
-}
-
-#[test]
-fn scan_equals_matching_whole_records() {
-    let (_dir, synth) = synthetic();
-    for path in samples().into_iter().chain([synth]) {
-        let shared = load(&path, OpenOptions::default()).expect("opens");
-        assert_eq!(scan(&shared, None), reference(&shared, None), "{path}");
-        for text in FILTERS {
-            let f = Filter::parse(text).expect("filter");
-            assert_eq!(
-                scan(&shared, Some(f.clone())),
-                reference(&shared, Some(&f)),
-                "{path}: {text}"
-            );
-        }
-    }
-}
-
-/// The records `decode --json -Y FILTER` selects, with each late `no_reply` diagnostic merged
-/// into the record it refers to (as the viewer shows it).
-fn pipeline_matches(path: &str, filters: &[Filter]) -> Vec<Vec<u64>> {
+/// The records of `decode --json`: the streams, then the frames and garbage, with each late
+/// `no_reply` diagnostic merged into the record it refers to (as the viewer shows it).
+fn pipeline_records(path: &str) -> Vec<Value> {
     let (mut r, _) = aptscope_capture::open::open(path, OpenOptions::default()).expect("opens");
     let mut p = Pipeline::new(None, Format::Json);
     let mut out: Vec<Value> = vec![];
@@ -247,9 +131,12 @@ fn pipeline_matches(path: &str, filters: &[Filter]) -> Vec<Vec<u64>> {
         Ok(())
     };
     while let Some(ev) = r.next_event() {
-        if let Event::Chunk(c) = ev {
-            let ctx = c.ctx();
-            p.push_chunk(ctx, c.bytes, &mut emit).expect("push");
+        match ev {
+            Event::Chunk(c) => p.push_chunk(c.ctx(), c.bytes, &mut emit).expect("push"),
+            Event::Stream(s) => p
+                .stream_info(s.id, &s.name, s.settings.as_deref(), &mut emit)
+                .expect("stream"),
+            Event::Diag(_) => {}
         }
     }
     p.finish(&mut emit).expect("finish");
@@ -257,6 +144,11 @@ fn pipeline_matches(path: &str, filters: &[Filter]) -> Vec<Vec<u64>> {
         .iter()
         .filter(|v| v["type"] == "diag")
         .filter_map(|v| Some((v["ref"].as_u64()?, v["diag"].as_array()?.clone())))
+        .collect();
+    let streams: Vec<Value> = out
+        .iter()
+        .filter(|v| v["type"] == "stream")
+        .cloned()
         .collect();
     let mut recs: Vec<Value> = out.into_iter().filter(|v| v.get("n").is_some()).collect();
     for (n, ds) in late {
@@ -266,31 +158,54 @@ fn pipeline_matches(path: &str, filters: &[Filter]) -> Vec<Vec<u64>> {
             .expect("late diag refers to a record");
         rec["diag"].as_array_mut().expect("diag list").extend(ds);
     }
-    filters
-        .iter()
-        .map(|f| {
-            recs.iter()
-                .filter(|v| f.matches(v))
-                .filter_map(|v| v["n"].as_u64())
-                .collect()
-        })
-        .collect()
+    streams.into_iter().chain(recs).collect()
+}
+
+/// What `decode --json -Y FILTER` selects, and `stats` of it.
+fn reference(recs: &[Value], filter: Option<&Filter>) -> (Vec<u64>, String) {
+    let mut found = vec![];
+    let mut stats = Stats::new(BIN_NS);
+    for v in recs {
+        // The viewer names every stream, whatever the filter.
+        if v["type"] == "stream" {
+            stats.add(v);
+            continue;
+        }
+        if filter.is_none_or(|f| f.matches(v)) {
+            if filter.is_some() {
+                found.extend(v["n"].as_u64());
+            }
+            stats.add(v);
+        }
+    }
+    (found, stats_text(&stats))
 }
 
 #[test]
-fn scan_matches_equal_the_pipeline_selection() {
+fn scan_equals_the_pipeline_selection_and_its_statistics() {
     let filters: Vec<Filter> = FILTERS
         .iter()
         .map(|t| Filter::parse(t).expect("filter"))
         .collect();
     let mut total = vec![0; filters.len()];
-    for path in samples() {
-        let want = pipeline_matches(&path, &filters);
+    let (_dir, synth) = synthetic();
+    for path in samples().into_iter().chain([synth]) {
+        let recs = pipeline_records(&path);
         let shared = load(&path, OpenOptions::default()).expect("opens");
-        for (i, (f, want)) in filters.iter().zip(want).enumerate() {
-            let (got, _) = scan(&shared, Some(f.clone()));
-            assert_eq!(got, want, "{path}: {f}");
-            total[i] += got.len();
+        assert_eq!(
+            shared.index.read().expect("lock").recs.len(),
+            recs.iter().filter(|v| v.get("n").is_some()).count(),
+            "{path}"
+        );
+        let (got, want) = (scan(&shared, None), reference(&recs, None));
+        for (a, b) in got.1.lines().zip(want.1.lines()) {
+            assert_eq!(a, b, "{path}");
+        }
+        assert_eq!(got, want, "{path}");
+        for (i, f) in filters.iter().enumerate() {
+            let got = scan(&shared, Some(f.clone()));
+            assert_eq!(got, reference(&recs, Some(f)), "{path}: {f}");
+            total[i] += got.0.len();
         }
     }
     // Every filter selects something somewhere (the comparison is not vacuous).
@@ -300,4 +215,59 @@ fn scan_matches_equal_the_pipeline_selection() {
             "{f} matches nothing"
         );
     }
+}
+
+/// Everything a visit passes on, as text.
+fn visit_text(rec: &dyn Fields, key: Key, rest: &[String]) -> (bool, Vec<String>) {
+    let mut vals = vec![];
+    let there = rec.visit(key, rest, &mut |v: Val<'_>, r: Role| {
+        vals.push(format!("{v:?} {r:?}"))
+    });
+    (there, vals)
+}
+
+/// The compact view answers every key (and a path below it) as the re-decoded record does,
+/// but for the `no_reply` diagnostic it adds to requests without reply.
+#[test]
+fn the_compact_view_reads_like_the_decoded_record() {
+    let (_dir, synth) = synthetic();
+    let paths = [
+        sample("kdc101-session.pcapng"),
+        sample("elliptec-bus.txt"),
+        sample("damaged.bin"),
+        sample("bsc203-rack.hex"),
+        synth,
+    ];
+    let below = [vec![], vec!["name".to_string()], vec!["kind".to_string()]];
+    let mut compared = 0;
+    for path in paths {
+        let shared = load(&path, OpenOptions::default()).expect("opens");
+        let ix = shared.index.read().expect("lock");
+        for (i, r) in ix.recs.iter().enumerate().take(3000) {
+            let n = i as u64 + 1;
+            let view = View { ix: &ix, n, r };
+            assert_eq!(
+                view.proto().map(str::to_string),
+                with_record(&ix, n, |rec| rec.proto().map(str::to_string)).flatten(),
+                "{path} #{n}"
+            );
+            for def in KEYS {
+                if def.key == Key::Diag && r.has(F_NO_REPLY) {
+                    continue;
+                }
+                for rest in &below {
+                    let want = with_record(&ix, n, |rec| visit_text(rec, def.key, rest))
+                        .expect("record decodes");
+                    assert_eq!(
+                        visit_text(&view, def.key, rest),
+                        want,
+                        "{path} #{n} {}{rest:?}",
+                        def.name
+                    );
+                    compared += 1;
+                }
+            }
+        }
+    }
+    assert!(compared > 10_000);
 }

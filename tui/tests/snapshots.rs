@@ -156,6 +156,7 @@ fn synthetic(count: u64) -> App {
             .map(|i| Rec {
                 start: 0,
                 offset: i * 6,
+                cap_offset: i * 6,
                 ts: i * 1_000_000,
                 pair: 0,
                 len: 6,
@@ -163,6 +164,9 @@ fn synthetic(count: u64) -> App {
                 stream: 0,
                 flags: 0,
                 dir: 1,
+                src: 0x01,
+                dst: 0x50,
+                id: 0x0005,
             })
             .collect();
         ix.first_ts = Some(0);
