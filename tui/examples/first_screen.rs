@@ -1,11 +1,28 @@
 //! Time to the first screen of `aptscope view` on a capture (`first_screen FILE`): opens it like
 //! the viewer does (background indexing), draws into an off-screen 120×40 terminal until a full
-//! screen of rows is shown, then waits for the index to finish. Prints both times as JSON.
+//! screen of rows is shown, then waits for the index to finish. Prints both times as JSON, and
+//! the CPU time of the process when the index was complete (indexing, the statistics scan and
+//! the drawing: on a busy machine wall times say little).
 //! `bench/tui-first-screen.sh` runs it on a generated 10 M-frame capture.
 
 use aptscope_tui::{app::App, index, ui};
 use ratatui::{backend::TestBackend, Terminal};
 use std::time::{Duration, Instant};
+
+/// CPU time of the process so far in seconds (Linux `/proc/self/stat`, 100 Hz ticks).
+fn process_cpu() -> f64 {
+    let Ok(s) = std::fs::read_to_string("/proc/self/stat") else {
+        return f64::NAN;
+    };
+    // Fields after the command name (which may hold spaces): utime and stime are 14th, 15th.
+    let rest = s.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let tick = |i: usize| f.get(i).and_then(|x| x.parse::<f64>().ok());
+    match (tick(11), tick(12)) {
+        (Some(u), Some(k)) => (u + k) / 100.0,
+        _ => f64::NAN,
+    }
+}
 
 fn main() -> std::io::Result<()> {
     let Some(path) = std::env::args().nth(1) else {
@@ -29,6 +46,7 @@ fn main() -> std::io::Result<()> {
         app.tick();
     }
     let total = t0.elapsed();
+    let cpu = process_cpu();
     // Scrolling to the end and drawing stays instant: only visible rows are decoded.
     let t1 = Instant::now();
     app.select(app.len().saturating_sub(1));
@@ -36,7 +54,7 @@ fn main() -> std::io::Result<()> {
     let jump = t1.elapsed();
     let records = shared.index.read().map(|i| i.recs.len()).unwrap_or(0);
     println!(
-        "{{\"first_screen_ms\":{:.1},\"records_at_first_screen\":{frames_at_first},\"index_s\":{:.2},\"records\":{records},\"jump_to_end_and_draw_ms\":{:.1}}}",
+        "{{\"first_screen_ms\":{:.1},\"records_at_first_screen\":{frames_at_first},\"index_s\":{:.2},\"cpu_s_when_indexed\":{cpu:.2},\"records\":{records},\"jump_to_end_and_draw_ms\":{:.1}}}",
         first.as_secs_f64() * 1e3,
         total.as_secs_f64(),
         jump.as_secs_f64() * 1e3

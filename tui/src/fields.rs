@@ -152,6 +152,56 @@ pub fn with_record<T>(ix: &Index, n: u64, f: impl FnOnce(&Record<'_>) -> T) -> O
     })))
 }
 
+/// Pass the kind of each diagnostic in the `diag` list of record `n` to `f` (as
+/// `View::visit(Key::Diag, ["kind"])` gives them, in another order): from the compact record,
+/// decoding the frame only when the index could not keep its list.
+pub fn diag_kinds(ix: &Index, n: u64, r: &Rec, f: &mut dyn FnMut(&str)) {
+    if r.flags & DIAG_FLAGS == 0 {
+        return;
+    }
+    if r.has(F_GARBAGE) {
+        let len = r.len as usize;
+        let d = if r.has(F_ELL) {
+            DiagKind::Garbage { len: len as u32 }
+        } else {
+            aptscope_dissector::json::garbage_diag(r.offset, len, garbage_kind(r, ix.bytes(r))).kind
+        };
+        return f(d.name());
+    }
+    let set = (r.diags as usize)
+        .checked_sub(1)
+        .and_then(|i| ix.diag_sets.get(i));
+    match set {
+        Some(kinds) => kinds.iter().for_each(|k| f(k)),
+        None if r.has(F_DIAG) => {
+            // Not kept: decode (the pairing ones are added below).
+            let _ = with_record(ix, n, |rec| match rec {
+                Record::Apt(a) => a.frame.diags().for_each(|d| f(d.kind.name())),
+                Record::Ell(e) => e
+                    .frame
+                    .diags()
+                    .iter()
+                    .filter(|d| d.kind != DiagKind::Unsolicited)
+                    .for_each(|d| f(d.kind.name())),
+                _ => {}
+            });
+        }
+        None => {}
+    }
+    if r.has(F_UNSOLICITED) {
+        f(DiagKind::Unsolicited.name());
+    }
+    if r.has(F_DUPLICATE) && reply_to(r).is_some() && !r.has(F_ELL) {
+        f(DiagKind::DuplicateReply { request: 0 }.name());
+    }
+    if r.has(F_NOT_FOR_MODEL) && ix.not_for_model.contains_key(&n) {
+        f(DiagKind::NotForModel { model: [0; 8] }.name());
+    }
+    if r.has(F_NO_REPLY) {
+        f(DiagKind::NoReply { cmd: n }.name());
+    }
+}
+
 /// Flags that put something in a record's `diag` list.
 pub const DIAG_FLAGS: u16 =
     F_DIAG | F_GARBAGE | F_UNSOLICITED | F_DUPLICATE | F_NO_REPLY | F_NOT_FOR_MODEL;
@@ -175,8 +225,9 @@ fn num(x: impl Into<i128>) -> Val<'static> {
 }
 
 impl View<'_> {
-    /// Direction as NDJSON gives it, when it follows from the compact record.
-    fn dir(&self) -> Option<&'static str> {
+    /// Direction as NDJSON gives it (`h2d`, `d2h`, `unknown`), from the compact record;
+    /// `None` for Elliptec garbage (the bus gives it none).
+    pub fn dir(&self) -> Option<&'static str> {
         let r = self.r;
         if r.has(F_ELL) {
             // Elliptec: the case of the command; garbage has none.

@@ -81,6 +81,9 @@ pub struct Rec {
     pub dst: u8,
     /// APT: message id. Elliptec: the two command characters (first in the high byte).
     pub id: u16,
+    /// The kinds of the frame's own diagnostics (decoding's, not pairing's): index + 1 in
+    /// [`Index::diag_sets`], 0 when it has none.
+    pub diags: u16,
 }
 
 impl Rec {
@@ -148,6 +151,8 @@ pub struct Index {
     /// Plot series: positions and velocities from status updates, keyed by
     /// `quantity source` (e.g. `position usb ch1`, `position ell 0`).
     pub series: BTreeMap<String, Vec<Point>>,
+    /// Kinds of diagnostics frames have (each list once), indexed by `Rec::diags - 1`.
+    pub diag_sets: Vec<Vec<&'static str>>,
     /// For records flagged [`F_NOT_FOR_MODEL`]: the device's model, by record number.
     pub not_for_model: BTreeMap<u64, [u8; 8]>,
     /// Whether the whole file has been read.
@@ -409,6 +414,9 @@ impl Indexer {
     }
 }
 
+/// Conversions remembered for reuse (one per device).
+const MAX_SCALE_AT: usize = 4096;
+
 /// Which plotted quantity a series holds.
 const QUANTITIES: [&str; 2] = ["position", "velocity"];
 
@@ -432,12 +440,20 @@ struct Sink {
     /// them are published.
     scales: Vec<Scale>,
     scales_published: usize,
+    /// The entry last given for a conversion of the decoder, by its address.
+    scale_at: HashMap<usize, u32>,
     units_notes: Vec<String>,
     /// Pair links and flags for already-published records: (record number, pair, flags to set).
     patches: Vec<(u64, u32, u16)>,
     /// Plot series by key, points not yet published; `series_at` finds a key's entry.
     series: Vec<(String, Vec<Point>)>,
     series_at: HashMap<String, usize>,
+    /// Lists of diagnostic kinds given out (`Rec::diags - 1`), how many are published, and
+    /// the entry of each.
+    diag_sets: Vec<Vec<&'static str>>,
+    diag_sets_published: usize,
+    diag_set_ids: HashMap<Vec<&'static str>, u16>,
+    kinds: Vec<&'static str>,
     /// Whether an APT message id is plotted: 0 not known yet, 1 yes, 2 no.
     plotted: Vec<u8>,
     scratch: String,
@@ -525,20 +541,59 @@ impl Sink {
         self.series[i].1.push((x, y));
     }
 
+    /// The entry (+ 1) of the diagnostic kinds in `self.kinds`; 0 when there are none, or too
+    /// many lists (filters then decode the frame).
+    fn diag_set(&mut self) -> u16 {
+        if self.kinds.is_empty() {
+            return 0;
+        }
+        if let Some(id) = self.diag_set_ids.get(&self.kinds) {
+            return *id;
+        }
+        if self.diag_sets.len() >= u16::MAX as usize - 1 {
+            return 0;
+        }
+        self.diag_sets.push(self.kinds.clone());
+        let id = self.diag_sets.len() as u16;
+        self.diag_set_ids.insert(self.kinds.clone(), id);
+        id
+    }
+
+    /// The entry of a conversion in `scales` (+ 1): the one last given for the decoder's
+    /// conversion at that address when still equal (one comparison: a device's conversion
+    /// changes seldom), else a new one.
+    fn scale_id(&mut self, sc: &Scale) -> u32 {
+        let key = sc as *const Scale as usize;
+        if let Some(&id) = self.scale_at.get(&key) {
+            if self.scales.get(id as usize - 1) == Some(sc) {
+                return id;
+            }
+        }
+        self.scales.push(sc.clone());
+        let id = self.scales.len() as u32;
+        if self.scale_at.len() >= MAX_SCALE_AT {
+            self.scale_at.clear();
+        }
+        self.scale_at.insert(key, id);
+        id
+    }
+
     fn apt(&mut self, a: &AptRec<'_>) {
         use std::fmt::Write;
         let (fr, p, m) = (a.frame, a.pair, &a.meta);
         let h = fr.header();
         let mut flags = 0;
+        self.kinds.clear();
         if fr.has_diags() {
             flags |= F_DIAG;
-            if fr
-                .diags()
-                .any(|d| matches!(d.kind, DiagKind::Truncated { .. }))
-            {
-                flags |= F_TRUNCATED;
+            for d in fr.diags() {
+                if matches!(d.kind, DiagKind::Truncated { .. }) {
+                    flags |= F_TRUNCATED;
+                }
+                self.kinds.push(d.kind.name());
             }
         }
+        let diags = self.diag_set();
         if p.unsolicited {
             flags |= F_UNSOLICITED;
         }
@@ -557,13 +612,7 @@ impl Sink {
             self.set(req, m.n as u32, 0);
         }
         let module = match a.scale {
-            Some(sc) => match self.scales.iter().position(|x| x == sc) {
-                Some(i) => i as u32 + 1,
-                None => {
-                    self.scales.push(sc.clone());
-                    self.scales.len() as u32
-                }
-            },
+            Some(sc) => self.scale_id(sc),
             None => 0,
         };
         // Positions and velocities of status updates, for the plot.
@@ -615,6 +664,7 @@ impl Sink {
             src: h.src_byte(),
             dst: h.dst_byte(),
             id: h.msg_id(),
+            diags,
         };
         self.add(m.n, rec, fr.bytes);
     }
@@ -623,13 +673,16 @@ impl Sink {
         let (fr, o, m) = (e.frame, e.obs, &e.meta);
         let mut flags = F_ELL;
         // The decoder adds the bus's `unsolicited` to the frame's diagnostics: a flag of its own.
+        self.kinds.clear();
         for d in fr.diags() {
             match d.kind {
-                DiagKind::Unsolicited => {}
+                DiagKind::Unsolicited => continue,
                 DiagKind::Truncated { .. } => flags |= F_DIAG | F_TRUNCATED,
                 _ => flags |= F_DIAG,
             }
+            self.kinds.push(d.kind.name());
         }
+        let diags = self.diag_set();
         if o.unsolicited {
             flags |= F_UNSOLICITED;
         }
@@ -694,6 +747,7 @@ impl Sink {
             src: fr.addr,
             dst: 0,
             id: u16::from_be_bytes(fr.code),
+            diags,
         };
         self.add(m.n, rec, fr.bytes);
     }
@@ -721,6 +775,7 @@ impl Sink {
             src: 0,
             dst: 0,
             id: 0,
+            diags: 0,
         };
         self.add(m.n, rec, g.bytes);
     }
@@ -747,6 +802,9 @@ impl Sink {
                 r.flags |= flags;
             }
         }
+        ix.diag_sets
+            .extend(self.diag_sets[self.diag_sets_published..].iter().cloned());
+        self.diag_sets_published = self.diag_sets.len();
         ix.not_for_model.extend(self.not_for_model.drain(..));
         for (k, pts) in self.series.iter_mut() {
             if pts.is_empty() {

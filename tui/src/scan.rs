@@ -5,7 +5,7 @@
 //! Follows the index while it grows (a live source, or a file still being indexed): the results
 //! extend as records arrive; a new filter starts a new scan.
 
-use crate::fields::{self, View, DIAG_FLAGS};
+use crate::fields::{self, View};
 use crate::index::{Index, Rec, Shared, F_ELL, F_GARBAGE, F_IS_REPLY};
 use aptscope_dissector::fields::{Fields, Key, Val};
 use aptscope_dissector::filter::Filter;
@@ -239,13 +239,24 @@ impl Hasher for IdHasher {
 
 type IdMap<K, V> = HashMap<K, V, BuildHasherDefault<IdHasher>>;
 
-/// Frames of one kind (protocol, message, addresses, direction, stream): one of them and the
-/// count and bytes of all.
+/// Count and bytes of frames of one kind, with one of them (whose names the kind takes).
 #[derive(Debug, Clone, Copy)]
 struct Class {
     rep: u64,
     count: u64,
     bytes: u64,
+}
+
+impl Class {
+    fn add(slot: &mut Option<Class>, n: u64, len: u64) {
+        let c = slot.get_or_insert(Class {
+            rep: n,
+            count: 0,
+            bytes: 0,
+        });
+        c.count += 1;
+        c.bytes += len;
+    }
 }
 
 /// Requests remembered for their replies' latency (as [`Stats`] does).
@@ -254,15 +265,31 @@ const MAX_REQUESTS: usize = 1 << 16;
 /// Rate bins counted in a vector; later ones (a time jump) in a map.
 const DENSE_BINS: u64 = 1 << 20;
 
-/// The statistics of the matching records, counted by kind from the compact records and made
-/// into a [`Stats`] (the names read from one record of each kind through [`View`]): equal to
-/// [`Stats::add`] over the records' NDJSON objects (`tui/tests/scan.rs` checks it).
+/// Directions as NDJSON names them, by [`dir_slot`].
+const DIRS: [&str; 3] = ["h2d", "d2h", "unknown"];
+
+fn dir_slot(d: Option<&str>) -> usize {
+    match d {
+        Some("h2d") => 0,
+        Some("d2h") => 1,
+        _ => 2,
+    }
+}
+
+/// The statistics of the matching records, counted from the compact records by message (its
+/// protocol and id), address pair and stream, direction, and made into a [`Stats`] with the
+/// names read from one record of each kind through [`View`]: equal to [`Stats::add`] over the
+/// records themselves (`tui/tests/scan.rs` checks it).
 #[derive(Debug, Default)]
 struct Counts {
     frames: Tally,
     garbage: Tally,
-    classes: IdMap<u64, Class>,
-    /// Latencies by message of the request (protocol and message id).
+    /// By message: `(ell << 16 | id)`.
+    messages: Vec<Option<Class>>,
+    /// By stream, protocol and addresses.
+    addresses: IdMap<u64, Class>,
+    directions: [Tally; 3],
+    /// Latencies by message of the request.
     latencies: IdMap<u32, Latencies>,
     /// Recent requests: (record number, message), in record order.
     requests: VecDeque<(u64, u32)>,
@@ -270,12 +297,6 @@ struct Counts {
     first_ts: Option<u64>,
     bins: Vec<u64>,
     far_bins: BTreeMap<u64, u64>,
-}
-
-/// The path `diag.kind`.
-fn kind_path() -> &'static [String] {
-    static P: std::sync::OnceLock<Vec<String>> = std::sync::OnceLock::new();
-    P.get_or_init(|| vec!["kind".to_string()])
 }
 
 fn name_path() -> &'static [String] {
@@ -303,21 +324,13 @@ fn text(v: &View<'_>, key: Key, rest: &[String]) -> Option<String> {
 impl Counts {
     fn add(&mut self, ix: &Index, n: u64, r: &Rec) {
         let v = View { ix, n, r };
-        if r.flags & DIAG_FLAGS != 0 {
-            let diags = &mut self.diags;
-            v.visit(Key::Diag, kind_path(), &mut |x, _| {
-                let k = match &x {
-                    Val::Str(s) => s.as_ref(),
-                    _ => "?",
-                };
-                match diags.get_mut(k) {
-                    Some(c) => *c += 1,
-                    None => {
-                        diags.insert(k.to_string(), 1);
-                    }
-                }
-            });
-        }
+        let diags = &mut self.diags;
+        fields::diag_kinds(ix, n, r, &mut |k| match diags.get_mut(k) {
+            Some(c) => *c += 1,
+            None => {
+                diags.insert(k.to_string(), 1);
+            }
+        });
         let len = r.len as u64;
         if r.has(F_GARBAGE) {
             self.garbage.count += 1;
@@ -327,34 +340,27 @@ impl Counts {
         self.frames.count += 1;
         self.frames.bytes += len;
         let ell = r.has(F_ELL);
-        let class = (ell as u64) << 63
-            | (r.stream as u64) << 40
-            | (r.dir as u64) << 32
-            | (r.id as u64) << 16
-            | (r.src as u64) << 8
-            | r.dst as u64;
-        let c = self.classes.entry(class).or_insert(Class {
+        let msg = (ell as u32) << 16 | r.id as u32;
+        if self.messages.is_empty() {
+            self.messages = vec![None; 2 << 16];
+        }
+        Class::add(&mut self.messages[msg as usize], n, len);
+        let (src, dst) = if ell { (r.src, 0) } else { (r.src, r.dst) };
+        let addr = (r.stream as u64) << 24 | (ell as u64) << 16 | (src as u64) << 8 | dst as u64;
+        let c = self.addresses.entry(addr).or_insert(Class {
             rep: n,
             count: 0,
             bytes: 0,
         });
         c.count += 1;
         c.bytes += len;
-        let msg = (ell as u32) << 16 | r.id as u32;
-        let pair = (r.has(F_IS_REPLY) && r.pair != 0).then_some(r.pair as u64);
-        match pair {
+        let dir = dir_slot(v.dir());
+        self.directions[dir].count += 1;
+        self.directions[dir].bytes += len;
+        match (r.has(F_IS_REPLY) && r.pair != 0).then_some(r.pair as u64) {
             None => {
-                // A request, unless it comes from the device (which one is a view's business).
-                let from_device = if ell {
-                    r.code()[0].is_ascii_uppercase()
-                } else {
-                    let mut d = false;
-                    v.visit(Key::Dir, &[], &mut |x, _| {
-                        d = matches!(x, Val::Str(s) if s == "d2h")
-                    });
-                    d
-                };
-                if !from_device {
+                // What can be a request is remembered (a reply names its request in `pair`).
+                if dir != 1 {
                     self.requests.push_back((n, msg));
                     if self.requests.len() > MAX_REQUESTS {
                         self.requests.pop_front();
@@ -391,7 +397,6 @@ impl Counts {
         s.frames = self.frames.clone();
         s.garbage = self.garbage.clone();
         s.diags = self.diags.clone();
-        let mut keys: IdMap<u32, String> = IdMap::default();
         // Streams the capture names, as its `stream` records do.
         for (i, name) in ix.streams.iter().enumerate() {
             if !name.is_empty() {
@@ -404,34 +409,34 @@ impl Counts {
                 );
             }
         }
-        for c in self.classes.values() {
-            let Some(r) = ix.rec(c.rep) else { continue };
-            let v = View { ix, n: c.rep, r };
-            let ell = r.has(F_ELL);
-            let msg = (ell as u32) << 16 | r.id as u32;
-            // As `Stats` names them: `apt NAME` (or its id), `ell cmd NAME`; `apt SRC → DST`,
-            // `ell ADDR`; the direction or `unknown`.
-            let key = keys
-                .entry(msg)
-                .or_insert_with(|| {
-                    if ell {
-                        format!(
-                            "ell {} {}",
-                            text(&v, Key::Cmd, &[]).unwrap_or_else(|| "?".into()),
-                            text(&v, Key::Name, &[]).unwrap_or_else(|| "UNKNOWN".into())
-                        )
-                    } else {
-                        let name = text(&v, Key::Name, &[])
-                            .or_else(|| text(&v, Key::MsgidHex, &[]))
-                            .unwrap_or_else(|| "?".into());
-                        format!("apt {name}")
-                    }
-                })
-                .clone();
+        let view = |n: u64| ix.rec(n).map(|r| View { ix, n, r });
+        // As `Stats` names them: `apt NAME` (or its id), `ell cmd NAME`.
+        for (msg, c) in self.messages.iter().enumerate() {
+            let Some(c) = c else { continue };
+            let Some(v) = view(c.rep) else { continue };
+            let key = if msg >> 16 != 0 {
+                format!(
+                    "ell {} {}",
+                    text(&v, Key::Cmd, &[]).unwrap_or_else(|| "?".into()),
+                    text(&v, Key::Name, &[]).unwrap_or_else(|| "UNKNOWN".into())
+                )
+            } else {
+                let name = text(&v, Key::Name, &[])
+                    .or_else(|| text(&v, Key::MsgidHex, &[]))
+                    .unwrap_or_else(|| "?".into());
+                format!("apt {name}")
+            };
             let m = s.messages.entry(key).or_default();
             m.tally.count += c.count;
             m.tally.bytes += c.bytes;
-            let addr = if ell {
+            if let Some(lat) = self.latencies.get(&(msg as u32)) {
+                m.latencies = lat.clone();
+            }
+        }
+        // `apt SRC → DST`, `ell ADDR`; per stream too.
+        for (k, c) in &self.addresses {
+            let Some(v) = view(c.rep) else { continue };
+            let addr = if v.r.has(F_ELL) {
                 format!(
                     "ell {}",
                     text(&v, Key::Addr, &[]).unwrap_or_else(|| "?".into())
@@ -440,18 +445,16 @@ impl Counts {
                 let name = |k| text(&v, k, name_path()).unwrap_or_else(|| "?".into());
                 format!("apt {} → {}", name(Key::Src), name(Key::Dst))
             };
-            let st = r.stream as u64;
+            let st = k >> 24;
             add_to(&mut s.stream_addresses, (st, addr.clone()), c);
             add_to(&mut s.addresses, addr, c);
             let t = &mut s.streams.entry(st).or_default().tally;
             t.count += c.count;
             t.bytes += c.bytes;
-            let dir = text(&v, Key::Dir, &[]).unwrap_or_else(|| "unknown".into());
-            add_to(&mut s.directions, dir, c);
         }
-        for (msg, lat) in &self.latencies {
-            if let Some(m) = keys.get(msg).and_then(|k| s.messages.get_mut(k)) {
-                m.latencies = lat.clone();
+        for (d, t) in DIRS.iter().zip(&self.directions) {
+            if t.count > 0 {
+                s.directions.insert(d.to_string(), t.clone());
             }
         }
         s.bins = self

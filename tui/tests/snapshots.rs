@@ -167,6 +167,7 @@ fn synthetic(count: u64) -> App {
                 src: 0x01,
                 dst: 0x50,
                 id: 0x0005,
+                diags: 0,
             })
             .collect();
         ix.first_ts = Some(0);
