@@ -155,7 +155,7 @@ pub fn with_record<T>(ix: &Index, n: u64, f: impl FnOnce(&Record<'_>) -> T) -> O
 /// Pass the kind of each diagnostic in the `diag` list of record `n` to `f` (as
 /// `View::visit(Key::Diag, ["kind"])` gives them, in another order): from the compact record,
 /// decoding the frame only when the index could not keep its list.
-pub fn diag_kinds(ix: &Index, n: u64, r: &Rec, f: &mut dyn FnMut(&str)) {
+pub fn diag_kinds(ix: &Index, n: u64, r: &Rec, f: &mut dyn FnMut(&'static str)) {
     if r.flags & DIAG_FLAGS == 0 {
         return;
     }
@@ -202,6 +202,9 @@ pub fn diag_kinds(ix: &Index, n: u64, r: &Rec, f: &mut dyn FnMut(&str)) {
     }
 }
 
+/// Directions as NDJSON names them (the order of [`View::dir_slot`]).
+pub const DIRS: [&str; 3] = ["h2d", "d2h", "unknown"];
+
 /// Flags that put something in a record's `diag` list.
 pub const DIAG_FLAGS: u16 =
     F_DIAG | F_GARBAGE | F_UNSOLICITED | F_DUPLICATE | F_NO_REPLY | F_NOT_FOR_MODEL;
@@ -228,22 +231,35 @@ impl View<'_> {
     /// Direction as NDJSON gives it (`h2d`, `d2h`, `unknown`), from the compact record;
     /// `None` for Elliptec garbage (the bus gives it none).
     pub fn dir(&self) -> Option<&'static str> {
+        self.dir_slot().map(|i| DIRS[i])
+    }
+
+    /// [`View::dir`] as an index in [`DIRS`].
+    pub fn dir_slot(&self) -> Option<usize> {
         let r = self.r;
+        let slot = |d: Option<Dir>| match d {
+            Some(Dir::HostToDevice) => 0,
+            Some(Dir::DeviceToHost) => 1,
+            _ => 2,
+        };
         if r.has(F_ELL) {
             // Elliptec: the case of the command; garbage has none.
             return (!r.has(F_GARBAGE)).then(|| {
                 if r.code()[0].is_ascii_lowercase() {
-                    Dir::HostToDevice.as_str()
+                    0
                 } else {
-                    Dir::DeviceToHost.as_str()
+                    1
                 }
             });
+        }
+        if let Some(d) = r.cap_dir() {
+            return Some(slot(Some(d)));
         }
         let table = (!r.has(F_GARBAGE))
             .then(|| Table::global().msg(r.id).map(|m| m.dir))
             .flatten()
             .filter(|d| *d != Dir::Both);
-        Some(r.cap_dir().or(table).map_or("unknown", |d| d.as_str()))
+        Some(slot(table))
     }
 
     fn decoded(&self, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {

@@ -5,7 +5,7 @@
 //! Follows the index while it grows (a live source, or a file still being indexed): the results
 //! extend as records arrive; a new filter starts a new scan.
 
-use crate::fields::{self, View};
+use crate::fields::{self, View, DIRS};
 use crate::index::{Index, Rec, Shared, F_ELL, F_GARBAGE, F_IS_REPLY};
 use aptscope_dissector::fields::{Fields, Key, Val};
 use aptscope_dissector::filter::Filter;
@@ -265,17 +265,6 @@ const MAX_REQUESTS: usize = 1 << 16;
 /// Rate bins counted in a vector; later ones (a time jump) in a map.
 const DENSE_BINS: u64 = 1 << 20;
 
-/// Directions as NDJSON names them, by [`dir_slot`].
-const DIRS: [&str; 3] = ["h2d", "d2h", "unknown"];
-
-fn dir_slot(d: Option<&str>) -> usize {
-    match d {
-        Some("h2d") => 0,
-        Some("d2h") => 1,
-        _ => 2,
-    }
-}
-
 /// The statistics of the matching records, counted from the compact records by message (its
 /// protocol and id), address pair and stream, direction, and made into a [`Stats`] with the
 /// names read from one record of each kind through [`View`]: equal to [`Stats::add`] over the
@@ -293,7 +282,8 @@ struct Counts {
     latencies: IdMap<u32, Latencies>,
     /// Recent requests: (record number, message), in record order.
     requests: VecDeque<(u64, u32)>,
-    diags: BTreeMap<String, u64>,
+    /// Diagnostics by kind.
+    diags: Vec<(&'static str, u64)>,
     first_ts: Option<u64>,
     bins: Vec<u64>,
     far_bins: BTreeMap<u64, u64>,
@@ -325,10 +315,14 @@ impl Counts {
     fn add(&mut self, ix: &Index, n: u64, r: &Rec) {
         let v = View { ix, n, r };
         let diags = &mut self.diags;
-        fields::diag_kinds(ix, n, r, &mut |k| match diags.get_mut(k) {
-            Some(c) => *c += 1,
-            None => {
-                diags.insert(k.to_string(), 1);
+        fields::diag_kinds(ix, n, r, &mut |k| {
+            // Kinds are static names: found by address (one comparison) in a short list.
+            match diags
+                .iter_mut()
+                .find(|(x, _)| std::ptr::eq(*x, k) || *x == k)
+            {
+                Some((_, c)) => *c += 1,
+                None => diags.push((k, 1)),
             }
         });
         let len = r.len as u64;
@@ -354,7 +348,7 @@ impl Counts {
         });
         c.count += 1;
         c.bytes += len;
-        let dir = dir_slot(v.dir());
+        let dir = v.dir_slot().unwrap_or(2);
         self.directions[dir].count += 1;
         self.directions[dir].bytes += len;
         match (r.has(F_IS_REPLY) && r.pair != 0).then_some(r.pair as u64) {
@@ -396,7 +390,9 @@ impl Counts {
         let mut s = Stats::new(BIN_NS);
         s.frames = self.frames.clone();
         s.garbage = self.garbage.clone();
-        s.diags = self.diags.clone();
+        for (k, c) in &self.diags {
+            *s.diags.entry(k.to_string()).or_default() += c;
+        }
         // Streams the capture names, as its `stream` records do.
         for (i, name) in ix.streams.iter().enumerate() {
             if !name.is_empty() {
