@@ -83,6 +83,12 @@ fn rack_bays() {
 }
 
 #[test]
+fn several_streams_show_their_port() {
+    // Three controllers on three ports: each row says which.
+    both("sessions/laser-tec-quad.pcapng", "", "several_streams");
+}
+
+#[test]
 fn filter_error_column() {
     both("kdc101-session.pcapng", "/apt.name == ", "filter_error");
 }
