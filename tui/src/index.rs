@@ -349,13 +349,13 @@ impl Indexer {
 
     /// Read `reader` to its end (or until cancelled), then finish and publish.
     pub fn run(mut self, mut reader: Box<dyn Reader>) {
-        let live = self.shared.live.load(Ordering::Relaxed);
         while let Some(ev) = reader.next_event() {
             if self.shared.cancel.load(Ordering::Relaxed) {
                 break;
             }
             self.event(ev);
             // A live source's reader blocks until more comes: publish what it gave now.
+            let live = self.shared.live.load(Ordering::Relaxed);
             if live || self.last_flush.elapsed() > Duration::from_millis(50) {
                 self.flush();
             }
