@@ -308,7 +308,7 @@ impl Info {
         string(&mut s, &self.format);
         match self.proto {
             Some((p, c)) => {
-                let _ = write!(s, ",\"proto\":\"{}\",\"proto_certain\":{c}", p.name());
+                let _ = write!(s, ",\"proto\":\"{}\",\"proto_certain\":{c}", p.code());
             }
             None => s.push_str(",\"proto\":null"),
         }
