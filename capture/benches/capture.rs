@@ -1,7 +1,7 @@
 //! Throughput of capture reading and writing: pcapng read, usbmon read with FTDI unwrapping,
 //! MCAP write (raw and decoded channels). Criterion prints MB/s of serial payload and chunks/s.
 
-use aptscope_capture::mcap_io::McapWriter;
+use aptscope_capture::mcap::McapWriter;
 use aptscope_capture::model::{Event, Reader, Writer};
 use aptscope_capture::pcap::{PcapNgOut, PcapReader};
 use aptscope_capture::usb::synth_usbmon;
