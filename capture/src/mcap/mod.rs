@@ -8,11 +8,18 @@
 //!   `log_time` = `publish_time` = its capture time in ns, `sequence` = the chunk's number.
 //!   Chunks without a capture time go to a channel of the same topic whose metadata says
 //!   `time: missing` (their `log_time` is 0), so a reader restores "no time" exactly;
-//! - decoded channels, one per message type: `/apt/<NAME>` (`/apt/unknown`, `/apt/garbage`)
-//!   or `/ell/<cmd>` (`/ell/unknown`, `/ell/garbage`, `/ell/diag`), message encoding `json`
-//!   (the object `aptscope decode --json` writes for the record, capture context `dir`,
-//!   `ts_ns`, `stream` included), schema encoding `jsonschema` generated from the message
-//!   table; `log_time` is the time of the chunk that completed the frame. Plot
+//! - decoded channels, message encoding `json`: each message is the line `aptscope decode
+//!   --json` writes for one record of the decode chain ([`aptscope_dissector::record`]),
+//!   byte for byte and in the same order (pairing, latency, units, capture context `dir`,
+//!   `ts_ns`, `stream` included). One channel per message type: `/apt/<NAME>` (`/apt/unknown`,
+//!   `/apt/garbage`, `/apt/diag` for requests without reply, `/apt/units` for unit notices) or
+//!   `/ell/<cmd>` (`/ell/unknown`, `/ell/garbage`, `/ell/diag`); and `/aptscope/detect`,
+//!   `/aptscope/stream` for the detector's verdict and the streams, `/aptscope/input` for
+//!   problems of the input file its caller reports ([`McapWriter::file_diag`]). Schema encoding `jsonschema`, generated from the message tables to
+//!   match those lines. `log_time` is the time of the chunk that completed a frame (garbage:
+//!   of its first byte; 0 when unknown; detection: the first chunk's; other records: the
+//!   latest chunk's), `sequence` the
+//!   record number (0 for records without one). Plot
 //!   `/apt/MOT_GET_DCSTATUSUPDATE.fields.position` in Foxglove, for example;
 //! - metadata records: `aptscope` (version, what is lossless), `aptscope.stream` (one per
 //!   declared stream, in order), `aptscope.decode` (protocol and how it was chosen) and
