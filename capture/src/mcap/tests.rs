@@ -1102,3 +1102,42 @@ fn streams_without_chunks_and_untimed_chunks_survive() {
     assert_eq!(got.streams, streams);
     assert_eq!(got.chunks, chunks);
 }
+
+/// Every sample, written as MCAP: each decoded message conforms to its channel's schema (every
+/// key declared, with its type) and every schema is one Foxglove reads.
+#[test]
+fn every_sample_conforms_to_its_channels_schemas() {
+    use crate::open::{open, OpenOptions};
+    let root = format!("{}/../samples", env!("CARGO_MANIFEST_DIR"));
+    let mut paths = vec![];
+    for dir in [root.clone(), format!("{root}/sessions")] {
+        for e in std::fs::read_dir(&dir).unwrap().flatten() {
+            let p = e.path();
+            let ext = p.extension().and_then(|x| x.to_str()).unwrap_or("");
+            if p.is_file() && !matches!(ext, "sh" | "py" | "md") {
+                paths.push(p);
+            }
+        }
+    }
+    paths.sort();
+    let mut msgs = 0;
+    for p in &paths {
+        let name = p.display().to_string();
+        let (mut r, _) = open(&name, OpenOptions::default()).unwrap();
+        let mut w = McapWriter::new(Cursor::new(Vec::new()), None).unwrap();
+        while let Some(ev) = r.next_event() {
+            match ev {
+                Event::Stream(s) => w.stream(&s).unwrap(),
+                Event::Chunk(c) => w.chunk(&c).unwrap(),
+                Event::Diag(d) => w.file_diag(d.offset, d.kind, &d.msg).unwrap(),
+            }
+        }
+        w.finish().unwrap();
+        let bytes = w.into_inner().unwrap().into_inner();
+        let dec = decoded(&bytes);
+        assert!(!dec.is_empty(), "{name}");
+        msgs += dec.values().map(|d| d.2.len()).sum::<usize>();
+    }
+    assert!(paths.len() >= 30, "{} samples", paths.len());
+    assert!(msgs > 1000, "{msgs} messages");
+}
