@@ -6,7 +6,7 @@
 
 pub mod info;
 pub mod live;
-pub mod mcap_io;
+pub mod mcap;
 pub mod model;
 pub mod open;
 pub mod pcap;

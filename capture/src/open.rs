@@ -2,7 +2,7 @@
 
 use crate::model::{Chunk, Direction, Event, ReadDiag, Reader, Writer};
 use crate::raw::{ByteSource, InputFormat};
-use crate::{mcap_io, pcap, textlog};
+use crate::{mcap, pcap, textlog};
 use std::fs::File;
 use std::io::{self, BufReader, Cursor, Read};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -114,7 +114,7 @@ pub fn sniff(head: &[u8]) -> Format {
         Format::PcapNg
     } else if pcap::sniff_pcap(head) {
         Format::Pcap
-    } else if mcap_io::sniff(head) {
+    } else if mcap::sniff(head) {
         Format::Mcap
     } else if let Some(t) = textlog::sniff(head) {
         Format::Text(t)
@@ -384,7 +384,7 @@ fn finish_open(
         Format::Pcap | Format::PcapNg => Box::new(
             pcap::PcapReader::new(stream, opts.usb_device).expect_pcapng(format == Format::PcapNg),
         ),
-        Format::Mcap => Box::new(mcap_io::McapReader::new(stream)),
+        Format::Mcap => Box::new(mcap::McapReader::new(stream)),
         Format::Text(t) => textlog::open(t, BufReader::new(stream)),
         Format::Hex => Box::new(ByteReader::new(stream, true)),
         Format::Raw => Box::new(ByteReader::new(stream, false)),
@@ -415,7 +415,7 @@ pub fn create(path: &str, format: Format, force: bool) -> io::Result<Box<dyn Wri
     })?;
     if format == Format::Mcap {
         let w = io::BufWriter::with_capacity(1 << 16, file);
-        return Ok(Box::new(mcap_io::McapWriter::new(w, None)?));
+        return Ok(Box::new(mcap::McapWriter::new(w, None)?));
     }
     create_on(file, format)
 }
