@@ -460,6 +460,7 @@ pub(super) fn late_diag_schema(proto: Proto) -> String {
         "integer",
         Some("record number the diagnostic is about"),
     )
+    .prop("stream", "integer", Some("capture stream of that record"))
     .raw("diag", &diag_array());
     o.build()
 }
