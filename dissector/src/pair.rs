@@ -7,6 +7,7 @@
 
 use crate::apt::AptFrame;
 use crate::apt::Value;
+use crate::diag::{Diag, DiagKind};
 use crate::table::{Class, DeviceProfile, Dir, MsgDef, Table, DEFAULT_TIMEOUT_MS};
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 
@@ -61,6 +62,25 @@ pub struct PairInfo {
     /// The device's model (named earlier by its HW_GET_INFO) does not implement this message,
     /// according to the spec's device lists.
     pub not_for_model: Option<[u8; 8]>,
+}
+
+impl PairInfo {
+    /// The diagnostics pairing adds to a frame at `offset`: `unsolicited`, `duplicate_reply`,
+    /// `not_for_model`.
+    pub fn diags(&self, offset: u64) -> impl Iterator<Item = Diag> {
+        let kinds = [
+            self.unsolicited.then_some(DiagKind::Unsolicited),
+            self.pair
+                .filter(|_| self.duplicate)
+                .map(|request| DiagKind::DuplicateReply { request }),
+            self.not_for_model
+                .map(|model| DiagKind::NotForModel { model }),
+        ];
+        kinds
+            .into_iter()
+            .flatten()
+            .map(move |kind| Diag { offset, kind })
+    }
 }
 
 /// Bound on requests waiting (a device that never answers must not grow memory). High enough
