@@ -6,7 +6,7 @@ use crate::port::Link;
 use crate::safety::{is_motion, is_pseudo_terminal};
 use crate::script::{host_schedule, Bound, Script, Selection, Side, Timing};
 use aptscope_capture::live::sim::termination_signals;
-use aptscope_capture::live::tap::{Flow, LineSettings};
+use aptscope_capture::live::serial::{Flow, LineSettings};
 use aptscope_capture::open::{create, Format, OpenOptions};
 use aptscope_capture::Writer;
 use aptscope_dissector::detect::Proto;

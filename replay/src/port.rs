@@ -5,7 +5,7 @@
 
 use aptscope_capture::live::serial::{open_serial, SerialFd};
 use aptscope_capture::live::sim::Pty;
-use aptscope_capture::live::tap::LineSettings;
+use aptscope_capture::live::serial::LineSettings;
 use nix::errno::Errno;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use serialport::SerialPort;
