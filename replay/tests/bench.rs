@@ -1,8 +1,8 @@
 //! Replays on a bench made of real pseudo-terminals: the simulator on one end, the replay on the
 //! other; and the replay impersonating a device towards a scripted host.
 
-use aptscope_capture::live::sim::{serve_pty, stop_pair, AptModel, AptSim, Pty, Simulator};
 use aptscope_capture::live::serial::LineSettings;
+use aptscope_capture::live::sim::{serve_pty, stop_pair, AptModel, AptSim, Pty, Simulator};
 use aptscope_capture::open::{create, Format, OpenOptions};
 use aptscope_capture::{Chunk, Direction, StreamInfo};
 use aptscope_dissector::apt::{encode, FieldValue};
