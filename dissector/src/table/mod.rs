@@ -6,7 +6,7 @@ mod model;
 mod parse;
 
 pub use model::*;
-pub use parse::{example_bytes, parse_int};
+pub use parse::{example_bytes, parse_int, TableError, TableErrors};
 
 use std::sync::OnceLock;
 
@@ -44,7 +44,7 @@ impl Table {
         static T: OnceLock<Table> = OnceLock::new();
         T.get_or_init(|| match Table::from_sources(sources::SOURCES) {
             Ok(t) => t,
-            Err(e) => panic!("the embedded message table has errors:\n{}", e.join("\n")),
+            Err(e) => panic!("the embedded message table has errors:\n{e}"),
         })
     }
 
@@ -125,7 +125,7 @@ impl Table {
     }
 
     /// Parse table files (`(file name, text)`, in order).
-    pub fn from_sources(src: &[(&'static str, &'static str)]) -> Result<Table, Vec<String>> {
+    pub fn from_sources(src: &[(&'static str, &'static str)]) -> Result<Table, TableErrors> {
         let data = parse::parse_sources(src)?;
         let mut by_id = vec![u16::MAX; 65536].into_boxed_slice();
         for (i, m) in data.msgs.iter().enumerate() {
@@ -287,7 +287,7 @@ impl Table {
 mod tests {
     use super::*;
 
-    fn one_field(field: &'static str) -> Result<Table, Vec<String>> {
+    fn one_field(field: &'static str) -> Result<Table, TableErrors> {
         let text: &'static str = Box::leak(
             format!("msg 0x0413 MOT_SET_VELPARAMS h2d\n  form 4\n    {field}\n").into_boxed_str(),
         );
@@ -319,7 +319,7 @@ mod tests {
             ("bytes[4] position unit=counts q=pos", "not one number"),
             ("i32[2] position unit=counts q=pos", "not one number"),
         ] {
-            let e = one_field(field).expect_err(field).join("\n");
+            let e = one_field(field).expect_err(field).to_string();
             assert!(e.contains(says), "{field}: {e}");
         }
         // Positions without `q=` (encoder readbacks) stay plain counts.
