@@ -1,6 +1,9 @@
 //! What the end-to-end tests share: running the `aptscope` binary.
 #![allow(dead_code)]
 
+mod scratch;
+
+pub use scratch::scratch;
 use std::io::Write;
 use std::process::{Command, Stdio};
 

@@ -1721,24 +1721,12 @@ mod tests {
     use super::*;
     use crate::model::Event;
     use crate::open::{open, OpenOptions};
+    use crate::scratch::scratch;
     use std::os::unix::fs::OpenOptionsExt;
     use std::path::Path;
-    use std::sync::atomic::AtomicUsize;
 
     /// Generous: only reached when something is broken.
     const DEADLINE: Duration = Duration::from_secs(60);
-
-    fn scratch(name: &str) -> PathBuf {
-        static N: AtomicUsize = AtomicUsize::new(0);
-        let d = std::env::temp_dir().join(format!(
-            "aptscope-tap-{}-{}-{name}",
-            std::process::id(),
-            N.fetch_add(1, Ordering::SeqCst)
-        ));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
-    }
 
     /// A pseudo-terminal standing in for a device: the test holds the master, the tap opens
     /// the slave path like a serial port.
