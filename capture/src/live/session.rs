@@ -20,12 +20,13 @@ use super::sim::{
 use super::tap::{tap_main, TapOptions, TapStats};
 use crate::model::{Direction, Event, OwnedChunk, StreamInfo};
 use crate::open::{create, open, Format, OpenOptions};
-use aptscope_dissector::apt::{
-    encode_named, AptFrame, AptFramer, EncodeError, Item as AptItem, Named,
-};
+use aptscope_dissector::apt::{encode_named, EncodeError, Named};
 use aptscope_dissector::detect::Proto;
-use aptscope_dissector::ell::{EllFrame, EllFramer, Item as EllItem};
+use aptscope_dissector::record::{Ctx, Decoder, Record};
+use aptscope_dissector::table::Dir;
+use aptscope_dissector::DiagKind;
 use aptscope_dissector::Table;
+use std::convert::Infallible;
 use std::io::{self, Read, Write};
 use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
@@ -644,11 +645,9 @@ pub fn session(name: &str) -> Result<Session, SessionError> {
 
 // ------------------------------------------------------------------------------- the host's ear
 
-/// What the host reads, and the names of the replies in it.
+/// What the host reads, and the names of the replies in it (decoded by the decode chain).
 struct HostRx {
-    proto: Proto,
-    apt: AptFramer<'static>,
-    line: Vec<u8>,
+    dec: Decoder,
     names: Vec<String>,
     cursor: usize,
 }
@@ -656,45 +655,21 @@ struct HostRx {
 impl HostRx {
     fn new(proto: Proto) -> HostRx {
         HostRx {
-            proto,
-            apt: AptFramer::new(Table::global()),
-            line: vec![],
+            dec: Decoder::new(Some(proto)),
             names: vec![],
             cursor: 0,
         }
     }
 
     fn push(&mut self, b: &[u8]) {
-        match self.proto {
-            Proto::Apt => {
-                self.apt.push(b);
-                while let Some(item) = self.apt.next_item() {
-                    if let AptItem::Frame {
-                        bytes,
-                        truncated: false,
-                        ..
-                    } = item
-                    {
-                        if let Some(f) = AptFrame::decode(Table::global(), 0, bytes, false) {
-                            self.names.push(f.name().unwrap_or("?").to_string());
-                        }
-                    }
-                }
-            }
-            Proto::Elliptec => {
-                for &c in b {
-                    if c == b'\n' {
-                        let l: Vec<u8> = self.line.drain(..).filter(|c| *c != b'\r').collect();
-                        if l.len() >= 3 {
-                            self.names
-                                .push(String::from_utf8_lossy(&l[..3]).to_ascii_uppercase());
-                        }
-                    } else {
-                        self.line.push(c);
-                    }
-                }
-            }
-        }
+        let ctx = Ctx {
+            stream: 0,
+            dir: Some(Dir::DeviceToHost),
+            ts_ns: None,
+        };
+        let mut got = vec![];
+        let Ok(()) = self.dec.push(ctx, b, &mut |r| name_of(r, &mut got));
+        self.names.extend(got.into_iter().map(|(_, n)| n));
     }
 
     /// Take the next reply named `name` (skipping others before it).
@@ -916,115 +891,63 @@ pub fn damage(chunks: &[OwnedChunk]) -> Vec<OwnedChunk> {
 }
 
 /// For each chunk, the names of the frames that end in it (APT message names; Elliptec address
-/// and command as sent: `0in`, `0PO`), one framer per stream and direction.
+/// and command as sent: `0in`, `0PO`), from the decode chain (one lane per stream and
+/// direction).
 pub fn chunk_names(proto: Proto, chunks: &[OwnedChunk]) -> Vec<Vec<String>> {
-    Lanes::new(proto).names(chunks)
+    names(proto, chunks)
+        .0
+        .into_iter()
+        .map(|c| c.into_iter().map(|(_, n)| n).collect())
+        .collect()
 }
 
 /// The frame names of a capture in order, with directions: [`chunk_names`] flattened, then
-/// the frames the framers only complete at the end of the capture.
+/// the frames only completed at the end of the capture.
 pub fn frame_names(proto: Proto, chunks: &[OwnedChunk]) -> Vec<(Direction, String)> {
-    let mut lanes = Lanes::new(proto);
-    let names = lanes.names(chunks);
+    let (per_chunk, end) = names(proto, chunks);
     let mut out = vec![];
-    for (c, n) in chunks.iter().zip(names) {
-        out.extend(n.into_iter().map(|n| (c.dir, n)));
+    for n in per_chunk {
+        out.extend(n);
     }
-    for ((_, dir), lane) in &mut lanes.lanes {
-        out.extend(lane.finish().into_iter().map(|n| (*dir, n)));
-    }
+    out.extend(end);
     out
 }
 
-/// One framer per (stream, direction).
-struct Lanes {
+/// The names of the whole frames completed while each chunk is fed, and at the end, with the
+/// direction each frame was captured in.
+#[allow(clippy::type_complexity)]
+fn names(
     proto: Proto,
-    lanes: Vec<((u32, Direction), Lane)>,
+    chunks: &[OwnedChunk],
+) -> (Vec<Vec<(Direction, String)>>, Vec<(Direction, String)>) {
+    let mut dec = Decoder::new(Some(proto));
+    let mut per_chunk = vec![];
+    for c in chunks {
+        let mut got = vec![];
+        let Ok(()) = dec.push(c.as_chunk().ctx(), &c.bytes, &mut |r| name_of(r, &mut got));
+        per_chunk.push(got);
+    }
+    let mut end = vec![];
+    let Ok(()) = dec.finish(&mut |r| name_of(r, &mut end));
+    (per_chunk, end)
 }
 
-impl Lanes {
-    fn new(proto: Proto) -> Lanes {
-        Lanes {
-            proto,
-            lanes: vec![],
-        }
+/// A whole frame's name (APT message name; Elliptec address and command as sent) and the
+/// direction it was captured in.
+fn name_of(r: &Record<'_>, out: &mut Vec<(Direction, String)>) -> Result<(), Infallible> {
+    let truncated = |d: aptscope_dissector::Diag| matches!(d.kind, DiagKind::Truncated { .. });
+    match r {
+        Record::Apt(a) if !a.frame.diags().any(truncated) => out.push((
+            Direction::from_dir(a.meta.cap_dir),
+            a.frame.name().unwrap_or("?").to_string(),
+        )),
+        Record::Ell(e) if !e.frame.diags().iter().copied().any(truncated) => out.push((
+            Direction::from_dir(e.meta.cap_dir),
+            format!("{}{}", e.frame.addr_char(), e.frame.code_str()),
+        )),
+        _ => {}
     }
-
-    fn names(&mut self, chunks: &[OwnedChunk]) -> Vec<Vec<String>> {
-        let mut out = vec![];
-        for c in chunks {
-            let key = (c.stream, c.dir);
-            let i = match self.lanes.iter().position(|(k, _)| *k == key) {
-                Some(i) => i,
-                None => {
-                    self.lanes.push((key, Lane::new(self.proto)));
-                    self.lanes.len() - 1
-                }
-            };
-            out.push(self.lanes[i].1.push(&c.bytes));
-        }
-        out
-    }
-}
-
-struct Lane {
-    proto: Proto,
-    apt: AptFramer<'static>,
-    ell: EllFramer,
-}
-
-impl Lane {
-    fn new(proto: Proto) -> Lane {
-        Lane {
-            proto,
-            apt: AptFramer::new(Table::global()),
-            ell: EllFramer::new(),
-        }
-    }
-
-    /// The frames completed at the end of the stream.
-    fn finish(&mut self) -> Vec<String> {
-        self.apt.finish();
-        self.ell.finish();
-        self.push(&[])
-    }
-
-    fn push(&mut self, b: &[u8]) -> Vec<String> {
-        let mut out = vec![];
-        match self.proto {
-            Proto::Apt => {
-                self.apt.push(b);
-                while let Some(item) = self.apt.next_item() {
-                    if let AptItem::Frame {
-                        bytes,
-                        truncated: false,
-                        ..
-                    } = item
-                    {
-                        if let Some(f) = AptFrame::decode(Table::global(), 0, bytes, false) {
-                            out.push(f.name().unwrap_or("?").to_string());
-                        }
-                    }
-                }
-            }
-            Proto::Elliptec => {
-                self.ell.push(b);
-                while let Some(item) = self.ell.next_item() {
-                    if let EllItem::Frame {
-                        bytes,
-                        truncated: false,
-                        ..
-                    } = item
-                    {
-                        if let Some(f) = EllFrame::decode(0, bytes, false) {
-                            out.push(format!("{}{}", f.addr_char(), f.code_str()));
-                        }
-                    }
-                }
-            }
-        }
-        out
-    }
+    Ok(())
 }
 
 // ------------------------------------------------------------------------------------ writing
