@@ -270,9 +270,10 @@ impl AptPairer {
             Some(p) => {
                 // The same message also answers other waiting requests to that device and
                 // channel (MOVE_STOPPED completes a move and the stop that ended it; one
-                // MOVE_COMPLETED ends a move and the moves it superseded). A GET answers one
-                // REQ: repeated requests wait for their own replies.
-                let one_to_one = m.name.contains("_GET_");
+                // MOVE_COMPLETED ends a move and the moves it superseded: `class=end_of_move`
+                // in the table). Any other reply (a GET) answers one request: repeated
+                // requests wait for their own replies.
+                let one_to_one = !m.class.has(Class::END_OF_MOVE);
                 let also: Vec<u64> = self
                     .by_reply
                     .get(&m.id)

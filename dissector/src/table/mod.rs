@@ -274,13 +274,33 @@ impl Table {
     pub fn replies_of<'a>(&'a self, m: &'a MsgDef) -> Vec<&'a MsgDef> {
         let mut out: Vec<&MsgDef> = m.reply.iter().filter_map(|r| self.msg_by_name(r)).collect();
         if out.is_empty() {
-            if let Some(i) = m.name.find("_REQ_") {
-                let get = format!("{}_GET_{}", &m.name[..i], &m.name[i + 5..]);
-                out.extend(self.msg_by_name(&get));
+            if let Some((get, Access::Req)) = self.readback_of(m) {
+                out.push(get);
             }
         }
         out
     }
+
+    /// For a SET_x or REQ_x message, the GET_x that carries its values, and which of the two
+    /// `m` is. The spec's naming rule (SET_x / REQ_x / GET_x), applied here only.
+    pub fn readback_of(&self, m: &MsgDef) -> Option<(&MsgDef, Access)> {
+        let (i, access) = match (m.name.find("_SET_"), m.name.find("_REQ_")) {
+            (Some(i), _) => (i, Access::Set),
+            (None, Some(i)) => (i, Access::Req),
+            (None, None) => return None,
+        };
+        let get = format!("{}_GET_{}", &m.name[..i], &m.name[i + 5..]);
+        Some((self.msg_by_name(&get)?, access))
+    }
+}
+
+/// What a SET_x or REQ_x message does with the values of its GET_x ([`Table::readback_of`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Access {
+    /// SET_x: sets them.
+    Set,
+    /// REQ_x: asks for them.
+    Req,
 }
 
 #[cfg(test)]
@@ -292,6 +312,24 @@ mod tests {
             format!("msg 0x0413 MOT_SET_VELPARAMS h2d\n  form 4\n    {field}\n").into_boxed_str(),
         );
         Table::from_sources(&[("t.apt", text)])
+    }
+
+    /// SET_x and REQ_x find their GET_x; other messages have none.
+    #[test]
+    fn readback_follows_the_naming_rule() {
+        let t = Table::global();
+        let m = |n: &str| t.msg_by_name(n).expect(n);
+        let rb = |n: &str| t.readback_of(m(n)).map(|(g, a)| (g.name, a));
+        assert_eq!(
+            rb("MOT_SET_VELPARAMS"),
+            Some(("MOT_GET_VELPARAMS", Access::Set))
+        );
+        assert_eq!(
+            rb("MOT_REQ_VELPARAMS"),
+            Some(("MOT_GET_VELPARAMS", Access::Req))
+        );
+        assert_eq!(rb("MOT_MOVE_HOME"), None);
+        assert_eq!(rb("MOT_GET_VELPARAMS"), None);
     }
 
     /// `q=` marks a motion value and must come with the raw unit that names it honestly.

@@ -2,7 +2,7 @@
 
 use super::{earliest, Line, Simulator, MS, SEC};
 use aptscope_dissector::apt::{encode, AptFrame, AptFramer, FieldValue, Item, Value};
-use aptscope_dissector::table::{FormKind, Table, Ty};
+use aptscope_dissector::table::{Access, FormKind, Table, Ty};
 
 /// Host address.
 const HOST: u8 = 0x01;
@@ -896,11 +896,10 @@ impl AptSim {
         }
         let chan = f.channel().filter(|c| *c > 0).unwrap_or(1);
         let addr = self.units[ui].addr;
-        if m.name.contains("_SET_") {
-            let get = m.name.replacen("_SET_", "_GET_", 1);
-            let Some(gm) = Table::global().msg_by_name(&get) else {
-                return;
-            };
+        let Some((gm, access)) = Table::global().readback_of(m) else {
+            return;
+        };
+        if access == Access::Set {
             let Some(slot) = self.units[ui]
                 .params
                 .iter_mut()
@@ -926,9 +925,8 @@ impl AptSim {
                     slot.1.push((field.name, fv));
                 }
             }
-        } else if m.name.contains("_REQ_") {
-            let get = m.name.replacen("_REQ_", "_GET_", 1);
-            let Some((gname, p)) = self.units[ui].params.iter().find(|(n, _)| *n == get) else {
+        } else {
+            let Some((gname, p)) = self.units[ui].params.iter().find(|(n, _)| *n == gm.name) else {
                 return;
             };
             let mut vals: Params = vec![("chan_ident", int(chan))];
@@ -943,16 +941,10 @@ impl AptSim {
     /// readings where the block has them.
     fn sub_message(&mut self, ui: usize, f: &AptFrame<'_, '_>, now: u64) {
         let Some(m) = f.msg else { return };
-        let (get, set) = if m.name.contains("_SET_") {
-            (m.name.replacen("_SET_", "_GET_", 1), true)
-        } else if m.name.contains("_REQ_") {
-            (m.name.replacen("_REQ_", "_GET_", 1), false)
-        } else {
+        let Some((gm, access)) = Table::global().readback_of(m) else {
             return;
         };
-        let Some(gm) = Table::global().msg_by_name(&get) else {
-            return;
-        };
+        let set = access == Access::Set;
         let id = f
             .field("sub_id")
             .and_then(|(_, v)| v.as_i64())
