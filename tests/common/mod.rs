@@ -3,6 +3,7 @@
 
 mod scratch;
 
+#[allow(unused_imports)] // Not every test file makes directories.
 pub use scratch::scratch;
 use std::io::Write;
 use std::process::{Command, Stdio};
