@@ -262,7 +262,8 @@ impl Collector {
         if !p.diags.is_empty() {
             self.notes.push(what(&p));
         }
-        // The decoded fields for filters and the field comparison, as `decode --json` has them.
+        // The decoded fields for display filters and the field comparison, as `decode --json`
+        // has them: the one JSON parse left, until filters read records (issue 14, item 3).
         let rec = serde_json::from_str(self.json.line(rec)).unwrap_or(Value::Null);
         self.msgs.push(Msg {
             n: p.n,
