@@ -15,6 +15,11 @@ pub mod textlog;
 pub mod tools;
 pub mod usb;
 
+/// The scratch directories of the tests (one source for every crate's tests).
+#[cfg(test)]
+#[path = "../../tests/common/scratch.rs"]
+mod scratch;
+
 pub use model::{Chunk, Direction, Event, OwnedChunk, ReadDiag, Reader, StreamInfo, Writer};
 pub use raw::{ByteSource, InputFormat, CHUNK};
 
