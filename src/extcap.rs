@@ -5,7 +5,8 @@
 //! a pseudo-terminal for the host program in front of the real port, written as pcapng into
 //! the FIFO Wireshark reads, flushed packet by packet.
 
-use aptscope_capture::live::tap::{tap_main, Flow, TapOptions};
+use aptscope_capture::live::serial::Flow;
+use aptscope_capture::live::tap::{tap_main, TapOptions};
 use aptscope_dissector::detect::Proto;
 use std::ffi::OsStr;
 use std::io::{self, Write};

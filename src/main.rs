@@ -2,8 +2,9 @@
 #![forbid(unsafe_code)]
 
 use aptscope_capture::info::summarize;
+use aptscope_capture::live::serial::Flow;
 use aptscope_capture::live::sim::{sim_apt_main, sim_elliptec_main, SimLine};
-use aptscope_capture::live::tap::{sniff_main, tap_main, Flow, SniffOptions, TapOptions, TapStats};
+use aptscope_capture::live::tap::{sniff_main, tap_main, SniffOptions, TapOptions, TapStats};
 use aptscope_capture::open::{create, open, open_with_progress, Format, OpenOptions, Progress};
 use aptscope_capture::Event;
 use aptscope_dissector::apt::{encode_named_report, Addr, Named};
@@ -15,7 +16,7 @@ use aptscope_dissector::stats::Stats;
 use aptscope_dissector::table::{Form, MsgDef};
 use aptscope_dissector::units::UnitsOpts;
 use aptscope_dissector::{json, Table};
-use aptscope_replay::{replay_main, ReplayOptions, Role};
+use aptscope_replay::{parse_duration, replay_main, ReplayArgs, ReplayOptions};
 use clap::{Parser, Subcommand};
 use std::io::{self, BufWriter, Write};
 use std::process::ExitCode;
@@ -139,12 +140,6 @@ struct LiveArgs {
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
-enum RoleArg {
-    Host,
-    Device,
-}
-
-#[derive(Clone, Copy, clap::ValueEnum)]
 enum ExportArg {
     /// A Wireshark/tshark Lua dissector generated from the tables.
     WiresharkLua,
@@ -255,91 +250,18 @@ enum Cmd {
     /// Replay a capture to a port with its timing, as the host (to a device or simulator) or
     /// as the device (to a host program), and compare the replies with the captured ones.
     Replay {
-        /// The capture (any readable format).
-        file: String,
-        /// Serial port to talk on (a simulator's or a tap's pseudo-terminal works too).
-        #[arg(long)]
-        port: Option<String>,
-        /// As device: create a pseudo-terminal for the host program, symlinked here.
-        #[arg(long)]
-        pty: Option<String>,
-        /// Which side of the capture to play.
-        #[arg(long = "as", value_enum, default_value_t = RoleArg::Host)]
-        role: RoleArg,
+        /// The options the replay takes as given.
+        #[command(flatten)]
+        args: ReplayArgs,
         /// Protocol (default: detected from the capture).
         #[arg(long, value_enum, default_value_t = ProtoArg::Auto)]
         proto: ProtoArg,
         /// Input format instead of detecting it.
         #[arg(long, short = 'F')]
         format: Option<String>,
-        /// Baud rate (default 115200 for APT, 9600 for Elliptec).
-        #[arg(long)]
-        baud: Option<u32>,
         /// Flow control: none, rtscts, xonxoff (default: the protocol's).
         #[arg(long)]
         flow: Option<String>,
-        /// Time factor: 2.0 replays twice as fast.
-        #[arg(long, default_value_t = 1.0)]
-        speed: f64,
-        /// Ignore the captured gaps.
-        #[arg(long)]
-        asap: bool,
-        /// Send each message only after the replies its captured request got (or a timeout).
-        #[arg(long)]
-        wait_replies: bool,
-        /// How much longer than captured a reply may take before it is missing (default: per
-        /// message, as pairing: 2 s, 120 s for moves and homing).
-        #[arg(long, value_parser = parse_duration)]
-        reply_timeout: Option<u64>,
-        /// Replay only the messages this display filter accepts (host messages as host,
-        /// device messages as device).
-        #[arg(short = 'Y', long)]
-        filter: Option<String>,
-        /// From this record number or time (`12`, `2.5s`).
-        #[arg(long)]
-        from: Option<String>,
-        /// Up to this record number or time.
-        #[arg(long)]
-        to: Option<String>,
-        /// Replay the selection this many times.
-        #[arg(long = "loop", default_value_t = 1)]
-        loops: u32,
-        /// Stream to replay, when the capture has several.
-        #[arg(long)]
-        stream: Option<u32>,
-        /// Record the session (both directions) here; format from the extension, else pcapng.
-        #[arg(short = 'w', long)]
-        write: Option<String>,
-        /// Overwrite the recording if it exists.
-        #[arg(long)]
-        force: bool,
-        /// NDJSON timeline and a JSON report.
-        #[arg(long)]
-        json: bool,
-        /// Exit with 1 when replies differ from the capture.
-        #[arg(long)]
-        check: bool,
-        /// Do not compare this field (repeatable): `serial_number`, `src`.
-        #[arg(long)]
-        ignore: Vec<String>,
-        /// Count latency changes beyond this as differences.
-        #[arg(long, value_parser = parse_duration)]
-        latency_tolerance: Option<u64>,
-        /// Print what would be sent and when; send nothing.
-        #[arg(long)]
-        dry_run: bool,
-        /// Do not ask before motion commands go to a real port.
-        #[arg(long)]
-        yes: bool,
-        /// On Ctrl-C, send MOT_MOVE_STOP to channels the replay left moving.
-        #[arg(long)]
-        stop_on_abort: bool,
-        /// Do not print the live timeline.
-        #[arg(long)]
-        quiet: bool,
-        /// As device: stop after this long.
-        #[arg(long, value_parser = parse_duration)]
-        duration: Option<u64>,
     },
     /// Passive sniff of a Y-cable with two receive-only adapters, merged by time.
     Sniff {
@@ -534,34 +456,10 @@ fn main() -> ExitCode {
             tap_main(o).and_then(check_stats)
         }),
         Cmd::Replay {
-            file,
-            port,
-            pty,
-            role,
+            args,
             proto,
             format,
-            baud,
             flow,
-            speed,
-            asap,
-            wait_replies,
-            reply_timeout,
-            filter,
-            from,
-            to,
-            loops,
-            stream,
-            write,
-            force,
-            json,
-            check,
-            ignore,
-            latency_tolerance,
-            dry_run,
-            yes,
-            stop_on_abort,
-            quiet,
-            duration,
         } => open_opts(format.as_deref(), false, None).and_then(|open| {
             let flow = match flow {
                 None => None,
@@ -570,37 +468,10 @@ fn main() -> ExitCode {
                 })?),
             };
             let o = ReplayOptions {
-                file,
+                args,
                 open,
                 proto: proto_of(proto),
-                port,
-                pty,
-                role: match role {
-                    RoleArg::Host => Role::Host,
-                    RoleArg::Device => Role::Device,
-                },
-                baud,
                 flow,
-                speed,
-                asap,
-                wait_replies,
-                reply_timeout_ns: reply_timeout,
-                filter,
-                from,
-                to,
-                loops,
-                stream,
-                write,
-                force,
-                json,
-                check,
-                ignore,
-                latency_tolerance_ns: latency_tolerance,
-                dry_run,
-                yes,
-                stop_on_abort,
-                quiet,
-                duration_ns: duration,
             };
             match replay_main(o) {
                 Ok(true) => Ok(()),
@@ -1195,29 +1066,6 @@ impl Ticker {
             eprint!("\r{:30}\r", "");
         }
     }
-}
-
-/// A duration (`500ms`, `2s`, `1.5s`, `200us`, `2min`, or plain seconds) in ns.
-fn parse_duration(s: &str) -> Result<u64, String> {
-    let s = s.trim();
-    let split = s.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(s.len());
-    let (num, unit) = s.split_at(split);
-    let v: f64 = num
-        .trim()
-        .parse()
-        .map_err(|_| format!("`{s}` is not a duration (500ms, 2s)"))?;
-    let scale = match unit {
-        "" | "s" => 1e9,
-        "ms" => 1e6,
-        "us" => 1e3,
-        "ns" => 1.0,
-        "min" => 60e9,
-        u => return Err(format!("unknown unit `{u}` (ns, us, ms, s, min)")),
-    };
-    if !(v.is_finite() && v >= 0.0) {
-        return Err(format!("`{s}` is not a duration"));
-    }
-    Ok((v * scale) as u64)
 }
 
 fn live_opts(l: &LiveArgs) -> io::Result<(Proto, Option<Flow>)> {

@@ -1,9 +1,11 @@
 //! End to end, what a first-time user trips over: messages that say only what is true for this
 //! input, and errors that say what is wrong (the path, the reason, what to do instead).
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use common::scratch;
+use std::path::Path;
 use std::process::{Command, Output, Stdio};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 
@@ -24,19 +26,6 @@ fn run_in(dir: Option<&Path>, args: &[&str]) -> (String, String, bool) {
 
 fn run(args: &[&str]) -> (String, String, bool) {
     run_in(None, args)
-}
-
-/// A new empty directory for one test.
-fn scratch(name: &str) -> PathBuf {
-    static N: AtomicUsize = AtomicUsize::new(0);
-    let d = std::env::temp_dir().join(format!(
-        "aptscope-first-use-{}-{}-{name}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::SeqCst)
-    ));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("scratch dir");
-    d
 }
 
 fn s(p: &Path) -> &str {

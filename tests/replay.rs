@@ -1,28 +1,18 @@
 //! `aptscope replay` end to end: real processes on real pseudo-terminals.
 
+mod common;
+
+use common::scratch;
 use serde_json::Value;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 const BIN: &str = env!("CARGO_BIN_EXE_aptscope");
 const SAMPLE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/samples/kdc101-session.pcapng");
 /// Generous: only reached when something is broken.
 const DEADLINE: Duration = Duration::from_secs(60);
-
-fn scratch(name: &str) -> PathBuf {
-    static N: AtomicUsize = AtomicUsize::new(0);
-    let d = std::env::temp_dir().join(format!(
-        "aptscope-replay-e2e-{}-{}-{name}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::SeqCst)
-    ));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 /// A child process killed when the test ends, however it ends.
 struct Proc(Child);

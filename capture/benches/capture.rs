@@ -1,7 +1,7 @@
 //! Throughput of capture reading and writing: pcapng read, usbmon read with FTDI unwrapping,
 //! MCAP write (raw and decoded channels). Criterion prints MB/s of serial payload and chunks/s.
 
-use aptscope_capture::mcap_io::McapWriter;
+use aptscope_capture::mcap::McapWriter;
 use aptscope_capture::model::{Event, Reader, Writer};
 use aptscope_capture::pcap::{PcapNgOut, PcapReader};
 use aptscope_capture::usb::synth_usbmon;
@@ -47,10 +47,30 @@ fn read_all(r: &mut dyn Reader) -> u64 {
     n
 }
 
+/// The MCAP options `APTSCOPE_MCAP_COMPRESSION` asks for (`zstd:LEVEL`, `lz4`, `none`), to
+/// compare compressions; the writer's defaults without it.
+fn mcap_options() -> Option<mcap::WriteOptions> {
+    let c = std::env::var("APTSCOPE_MCAP_COMPRESSION").ok()?;
+    let o = mcap::WriteOptions::new().compression_threads(0);
+    Some(match c.split_once(':') {
+        _ if c == "none" => o.compression(None),
+        _ if c == "lz4" => o.compression(Some(mcap::Compression::Lz4)),
+        Some(("zstd", l)) => o
+            .compression(Some(mcap::Compression::Zstd))
+            .compression_level(l.parse().expect("zstd:LEVEL")),
+        _ => panic!("APTSCOPE_MCAP_COMPRESSION: zstd:LEVEL, lz4 or none"),
+    })
+}
+
 /// Write `cs` as MCAP (raw and decoded channels).
 #[inline(never)]
 fn mcap_write_once(cs: &[OwnedChunk], port: &StreamInfo) -> Vec<u8> {
-    let mut w = McapWriter::new(Cursor::new(Vec::with_capacity(64 << 20)), None).expect("mcap");
+    let out = Cursor::new(Vec::with_capacity(64 << 20));
+    let mut w = match mcap_options() {
+        Some(o) => McapWriter::with_options(out, None, o),
+        None => McapWriter::new(out, None),
+    }
+    .expect("mcap");
     w.stream(port).expect("stream");
     for ch in cs {
         w.chunk(&ch.as_chunk()).expect("chunk");

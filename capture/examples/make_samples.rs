@@ -2,7 +2,7 @@
 //! pcap, MCAP and a usbmon USB capture of the FTDI chip, all from the same timed, directed
 //! chunks. Run from the repository root: `cargo run -p aptscope-capture --example make_samples`.
 
-use aptscope_capture::mcap_io::McapWriter;
+use aptscope_capture::mcap::McapWriter;
 use aptscope_capture::pcap::{PcapNgOut, PcapOut};
 use aptscope_capture::usb::synth_usbmon;
 use aptscope_capture::{Direction, OwnedChunk, StreamInfo, Writer};

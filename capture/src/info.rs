@@ -1,10 +1,9 @@
 //! `aptscope info`: what a capture holds, like capinfos.
 
 use crate::model::{Direction, Event, ReadDiag, Reader, StreamInfo};
-use aptscope_dissector::apt::{AptFrame, AptFramer, Item as AptItem};
-use aptscope_dissector::detect::{detect, Proto, SAMPLE};
-use aptscope_dissector::ell::{EllFrame, EllFramer, Item as EllItem};
-use aptscope_dissector::Table;
+use aptscope_dissector::detect::Proto;
+use aptscope_dissector::record::{Decoder, Record};
+use aptscope_dissector::table::Dir;
 use std::fmt::Write;
 
 /// Counts for one (stream, direction).
@@ -47,61 +46,70 @@ pub struct Info {
     pub file_diag_count: u64,
 }
 
-enum Framer {
-    Apt(AptFramer<'static>),
-    Ell(EllFramer),
+/// The lane of a (stream, direction), made on first use.
+fn lane(lanes: &mut Vec<LaneStats>, stream: u32, dir: Option<Direction>) -> &mut LaneStats {
+    let i = match lanes
+        .iter()
+        .position(|l| l.stream == stream && l.dir == dir)
+    {
+        Some(i) => i,
+        None => {
+            lanes.push(LaneStats {
+                stream,
+                dir,
+                ..LaneStats::default()
+            });
+            lanes.len() - 1
+        }
+    };
+    &mut lanes[i]
 }
 
-fn count(f: &mut Framer, s: &mut LaneStats) {
-    match f {
-        Framer::Apt(a) => {
-            while let Some(it) = a.next_item() {
-                match it {
-                    AptItem::Frame {
-                        offset,
-                        bytes,
-                        truncated,
-                    } => {
-                        s.frames += 1;
-                        if AptFrame::decode(Table::global(), offset, bytes, truncated)
-                            .is_none_or(|x| x.has_diags())
-                        {
-                            s.frames_with_diags += 1;
-                        }
-                    }
-                    AptItem::Garbage { bytes, .. } => s.garbage_bytes += bytes.len() as u64,
-                }
-            }
-        }
-        Framer::Ell(e) => {
-            while let Some(it) = e.next_item() {
-                match it {
-                    EllItem::Frame {
-                        offset,
-                        bytes,
-                        truncated,
-                    } => {
-                        s.frames += 1;
-                        if EllFrame::decode(offset, bytes, truncated)
-                            .is_none_or(|x| !x.diags().is_empty())
-                        {
-                            s.frames_with_diags += 1;
-                        }
-                    }
-                    EllItem::Garbage { bytes, .. } => s.garbage_bytes += bytes.len() as u64,
-                }
-            }
-        }
+/// The capture's direction as the decoder keeps it.
+fn direction(d: Option<Dir>) -> Option<Direction> {
+    match d {
+        Some(Dir::HostToDevice) => Some(Direction::HostToDevice),
+        Some(Dir::DeviceToHost) => Some(Direction::DeviceToHost),
+        _ => None,
     }
+}
+
+/// Count one record of the decoder in its lane (frames, frames with a diagnostic as `decode`
+/// shows them, garbage bytes) and note the protocol it chose.
+fn count(info: &mut Info, rec: &Record<'_>) {
+    let (meta, diags) = match rec {
+        Record::Detect {
+            proto, detection, ..
+        } => {
+            info.proto = Some((*proto, detection.proto.is_some()));
+            return;
+        }
+        Record::Apt(a) => {
+            let p = a.pair;
+            let paired =
+                p.unsolicited || (p.duplicate && p.pair.is_some()) || p.not_for_model.is_some();
+            (&a.meta, a.frame.has_diags() || paired)
+        }
+        Record::Ell(e) => (&e.meta, !e.frame.diags().is_empty()),
+        Record::Garbage(g) => {
+            lane(&mut info.lanes, g.meta.stream, direction(g.meta.cap_dir)).garbage_bytes +=
+                g.bytes.len() as u64;
+            return;
+        }
+        _ => return,
+    };
+    let l = lane(&mut info.lanes, meta.stream, direction(meta.cap_dir));
+    l.frames += 1;
+    l.frames_with_diags += u64::from(diags);
 }
 
 /// Read a whole capture (streaming) and count what it holds. `proto` forces the protocol.
 pub fn summarize(r: &mut dyn Reader, proto: Option<Proto>) -> Info {
-    let mut info = Info::default();
-    let mut framers: Vec<Framer> = vec![];
-    let mut sample: Vec<(usize, Vec<u8>)> = vec![];
-    let mut sample_len = 0usize;
-    let mut chosen = proto.map(|p| (p, true));
+    let mut info = Info {
+        proto: proto.map(|p| (p, true)),
+        ..Info::default()
+    };
+    let mut dec = Decoder::new(proto);
     while let Some(ev) = r.next_event() {
         match ev {
             Event::Stream(s) => info.streams.push(s),
@@ -113,103 +121,26 @@ pub fn summarize(r: &mut dyn Reader, proto: Option<Proto>) -> Info {
             }
             Event::Chunk(c) => {
                 let dir = Some(c.dir).filter(|d| *d != Direction::Unknown);
-                let i = match info
-                    .lanes
-                    .iter()
-                    .position(|l| l.stream == c.stream && l.dir == dir)
-                {
-                    Some(i) => i,
-                    None => {
-                        info.lanes.push(LaneStats {
-                            stream: c.stream,
-                            dir,
-                            ..LaneStats::default()
-                        });
-                        info.lanes.len() - 1
-                    }
-                };
-                let l = &mut info.lanes[i];
+                let l = lane(&mut info.lanes, c.stream, dir);
                 l.chunks += 1;
                 l.bytes += c.bytes.len() as u64;
                 if let Some(t) = c.ts_ns {
                     info.first_ts = Some(info.first_ts.map_or(t, |f| f.min(t)));
                     info.last_ts = Some(info.last_ts.map_or(t, |f| f.max(t)));
                 }
-                match chosen {
-                    None => {
-                        sample_len += c.bytes.len();
-                        sample.push((i, c.bytes.to_vec()));
-                        if sample_len >= SAMPLE {
-                            chosen = Some(decide(&sample));
-                        }
-                    }
-                    Some((p, _)) => {
-                        feed(&mut framers, &mut info.lanes, i, p, c.bytes);
-                    }
-                }
-                if let (Some((p, _)), false) = (chosen, sample.is_empty()) {
-                    for (li, b) in std::mem::take(&mut sample) {
-                        feed(&mut framers, &mut info.lanes, li, p, &b);
-                    }
-                }
+                let _ = dec.push(c.ctx(), c.bytes, &mut |rec: &Record<'_>| {
+                    count(&mut info, rec);
+                    Ok::<(), ()>(())
+                });
             }
         }
     }
-    if chosen.is_none() && !sample.is_empty() {
-        chosen = Some(decide(&sample));
-        let p = chosen.map_or(Proto::Apt, |c| c.0);
-        for (li, b) in std::mem::take(&mut sample) {
-            feed(&mut framers, &mut info.lanes, li, p, &b);
-        }
-    }
-    for (i, f) in framers.iter_mut().enumerate() {
-        match f {
-            Framer::Apt(a) => a.finish(),
-            Framer::Ell(e) => e.finish(),
-        }
-        count(f, &mut info.lanes[i]);
-    }
-    info.proto = chosen;
+    let _ = dec.finish(&mut |rec: &Record<'_>| {
+        count(&mut info, rec);
+        Ok::<(), ()>(())
+    });
     info.format = r.format();
     info
-}
-
-/// Frame `b` on lane `i` (creating its framer for protocol `p` on first use) and count what
-/// comes out.
-fn feed(framers: &mut Vec<Framer>, lanes: &mut [LaneStats], i: usize, p: Proto, b: &[u8]) {
-    while framers.len() <= i {
-        framers.push(match p {
-            Proto::Apt => Framer::Apt(AptFramer::new(Table::global())),
-            Proto::Elliptec => Framer::Ell(EllFramer::new()),
-        });
-    }
-    match &mut framers[i] {
-        Framer::Apt(a) => a.push(b),
-        Framer::Ell(e) => e.push(b),
-    }
-    count(&mut framers[i], &mut lanes[i]);
-}
-
-fn decide(sample: &[(usize, Vec<u8>)]) -> (Proto, bool) {
-    let first = sample.first().map_or(0, |s| s.0);
-    let bytes: Vec<u8> = sample
-        .iter()
-        .filter(|s| s.0 == first)
-        .flat_map(|s| s.1.iter().copied())
-        .take(SAMPLE)
-        .collect();
-    let d = detect(&bytes);
-    match d.proto {
-        Some(p) => (p, true),
-        None => (
-            if d.elliptec > d.apt {
-                Proto::Elliptec
-            } else {
-                Proto::Apt
-            },
-            false,
-        ),
-    }
 }
 
 /// A UTC time as `YYYY-MM-DD hh:mm:ss.nnnnnnnnn`.
@@ -308,7 +239,7 @@ impl Info {
         string(&mut s, &self.format);
         match self.proto {
             Some((p, c)) => {
-                let _ = write!(s, ",\"proto\":\"{}\",\"proto_certain\":{c}", p.name());
+                let _ = write!(s, ",\"proto\":\"{}\",\"proto_certain\":{c}", p.code());
             }
             None => s.push_str(",\"proto\":null"),
         }
@@ -357,7 +288,60 @@ impl Info {
 
 #[cfg(test)]
 mod tests {
-    use super::utc;
+    use super::*;
+    use crate::open::{open, OpenOptions};
+
+    fn sample(name: &str) -> String {
+        format!("{}/../samples/{name}", env!("CARGO_MANIFEST_DIR"))
+    }
+
+    /// `info` counts what the decode chain yields: per lane, frames (with diagnostics as
+    /// `decode` shows them: pairing's included) and garbage bytes.
+    #[test]
+    fn counts_the_records_of_the_decode_chain() {
+        let (mut r, _) =
+            open(&sample("sessions/kdc101.pcapng"), OpenOptions::default()).expect("sample opens");
+        let i = summarize(r.as_mut(), None);
+        assert_eq!(i.proto, Some((Proto::Apt, true)));
+        // What the chain yields for the same capture.
+        let (mut r, _) =
+            open(&sample("sessions/kdc101.pcapng"), OpenOptions::default()).expect("sample opens");
+        let mut want: Vec<(u32, Option<Direction>, u64, u64)> = vec![];
+        let mut dec = Decoder::new(None);
+        let mut tally = |rec: &Record<'_>| {
+            if let Record::Apt(a) = rec {
+                let d = direction(a.meta.cap_dir);
+                let k = match want.iter().position(|w| (w.0, w.1) == (a.meta.stream, d)) {
+                    Some(k) => k,
+                    None => {
+                        want.push((a.meta.stream, d, 0, 0));
+                        want.len() - 1
+                    }
+                };
+                want[k].2 += 1;
+                want[k].3 += u64::from(a.frame.has_diags() || a.pair.unsolicited);
+            }
+            Ok::<(), ()>(())
+        };
+        while let Some(ev) = r.next_event() {
+            if let Event::Chunk(c) = ev {
+                dec.push(c.ctx(), c.bytes, &mut tally).expect("no error");
+            }
+        }
+        dec.finish(&mut tally).expect("no error");
+        let got: Vec<_> = i
+            .lanes
+            .iter()
+            .map(|l| (l.stream, l.dir, l.frames, l.frames_with_diags))
+            .collect();
+        assert_eq!(got, want);
+        assert!(got.iter().map(|g| g.2).sum::<u64>() > 20, "{got:?}");
+        let (mut r, _) =
+            open(&sample("damaged.bin"), OpenOptions::default()).expect("sample opens");
+        let i = summarize(r.as_mut(), Some(Proto::Apt));
+        assert!(i.lanes[0].garbage_bytes > 0, "{:?}", i.lanes);
+        assert!(i.lanes[0].frames_with_diags > 0, "{:?}", i.lanes);
+    }
 
     #[test]
     fn utc_formats_known_instants() {

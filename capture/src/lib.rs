@@ -6,7 +6,7 @@
 
 pub mod info;
 pub mod live;
-pub mod mcap_io;
+pub mod mcap;
 pub mod model;
 pub mod open;
 pub mod pcap;
@@ -14,6 +14,11 @@ pub mod raw;
 pub mod textlog;
 pub mod tools;
 pub mod usb;
+
+/// The scratch directories of the tests (one source for every crate's tests).
+#[cfg(test)]
+#[path = "../../tests/common/scratch.rs"]
+mod scratch;
 
 pub use model::{Chunk, Direction, Event, OwnedChunk, ReadDiag, Reader, StreamInfo, Writer};
 pub use raw::{ByteSource, InputFormat, CHUNK};

@@ -34,6 +34,15 @@ impl Direction {
         }
     }
 
+    /// From the dissector's direction (`None`: not recorded).
+    pub fn from_dir(d: Option<Dir>) -> Direction {
+        match d {
+            Some(Dir::HostToDevice) => Direction::HostToDevice,
+            Some(Dir::DeviceToHost) => Direction::DeviceToHost,
+            _ => Direction::Unknown,
+        }
+    }
+
     /// Parse `h2d`/`d2h`/`unknown` (and `tx`/`rx`, `out`/`in`).
     pub fn parse(s: &str) -> Option<Direction> {
         Some(match s {

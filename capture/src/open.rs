@@ -2,7 +2,7 @@
 
 use crate::model::{Chunk, Direction, Event, ReadDiag, Reader, Writer};
 use crate::raw::{ByteSource, InputFormat};
-use crate::{mcap_io, pcap, textlog};
+use crate::{mcap, pcap, textlog};
 use std::fs::File;
 use std::io::{self, BufReader, Cursor, Read};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -84,7 +84,7 @@ impl Format {
     /// The format to write `path` in: `forced` (a format flag) when given, else the one its
     /// extension names, pcapng when it has none. An extension that names no format written
     /// (`.txt`) is refused rather than filled with another format.
-    pub fn for_writing(path: &str, forced: Option<Format>) -> io::Result<Format> {
+    pub fn for_writing(path: &str, forced: Option<Format>) -> Result<Format, CreateError> {
         if let Some(f) = forced {
             return Ok(f);
         }
@@ -93,15 +93,118 @@ impl Format {
         }
         match std::path::Path::new(path).extension() {
             None => Ok(Format::PcapNg),
-            Some(ext) => Err(io::Error::new(
-                io::ErrorKind::InvalidInput,
-                format!(
-                    "{path}: .{} names no capture format written (.pcapng, .pcap, .mcap, .hex, \
-                     .bin): rename it, or give the format (--to / --write-format)",
-                    ext.to_string_lossy()
-                ),
-            )),
+            Some(ext) => Err(CreateError::Extension {
+                path: path.to_string(),
+                ext: ext.to_string_lossy().into_owned(),
+            }),
         }
+    }
+}
+
+/// Why a capture could not be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenError {
+    /// The file could not be opened or read.
+    #[error("{path}: {source}")]
+    File {
+        /// The path given.
+        path: String,
+        /// What the system said.
+        source: io::Error,
+    },
+    /// The path is a directory.
+    #[error("{path} is a directory: give a capture file in it")]
+    Directory {
+        /// The path given.
+        path: String,
+    },
+    /// `--format` names a container the content is not.
+    #[error(
+        "--format {forced} but the content is {found}: leave --format out to detect it, or \
+         give --format {found}"
+    )]
+    ContainerMismatch {
+        /// The format asked for.
+        forced: &'static str,
+        /// The format the first bytes show.
+        found: &'static str,
+    },
+    /// `--usb-device` given for an input that is not a USB capture.
+    #[error(
+        "--usb-device {bus}:{addr} selects a device of a USB capture (usbmon or USBPcap in pcap \
+         or pcapng), and this input is {format}"
+    )]
+    NotUsb {
+        /// Bus asked for.
+        bus: u16,
+        /// Device address asked for.
+        addr: u8,
+        /// The input's format.
+        format: &'static str,
+    },
+    /// Reading the first bytes (to detect the format) failed.
+    #[error("{0}")]
+    Read(#[from] io::Error),
+}
+
+impl From<OpenError> for io::Error {
+    fn from(e: OpenError) -> io::Error {
+        let kind = match &e {
+            OpenError::File { source, .. } | OpenError::Read(source) => source.kind(),
+            _ => io::ErrorKind::InvalidInput,
+        };
+        io::Error::new(kind, e)
+    }
+}
+
+/// Why a capture could not be created.
+#[derive(Debug, thiserror::Error)]
+pub enum CreateError {
+    /// The file exists and overwriting was not asked for.
+    #[error("{path} exists (use --force to overwrite)")]
+    Exists {
+        /// The path given.
+        path: String,
+    },
+    /// The file could not be created.
+    #[error("{path}: {source}")]
+    File {
+        /// The path given.
+        path: String,
+        /// What the system said.
+        source: io::Error,
+    },
+    /// The extension names no format that is written.
+    #[error(
+        "{path}: .{ext} names no capture format written (.pcapng, .pcap, .mcap, .hex, .bin): \
+         rename it, or give the format (--to / --write-format)"
+    )]
+    Extension {
+        /// The path given.
+        path: String,
+        /// Its extension.
+        ext: String,
+    },
+    /// MCAP asked for on standard output.
+    #[error("MCAP is written to a file (its index needs seeking), not to standard output")]
+    McapToStdout,
+    /// A format that is read but not written.
+    #[error("aptscope reads {0} logs but does not write them")]
+    ReadOnly(&'static str),
+    /// Writing the file's header failed.
+    #[error("{0}")]
+    Write(#[from] io::Error),
+}
+
+impl From<CreateError> for io::Error {
+    fn from(e: CreateError) -> io::Error {
+        let kind = match &e {
+            CreateError::Exists { .. } => io::ErrorKind::AlreadyExists,
+            CreateError::File { source, .. } | CreateError::Write(source) => source.kind(),
+            CreateError::Extension { .. } => io::ErrorKind::InvalidInput,
+            CreateError::McapToStdout | CreateError::ReadOnly(_) => io::ErrorKind::Unsupported,
+        };
+        io::Error::new(kind, e)
     }
 }
 
@@ -114,7 +217,7 @@ pub fn sniff(head: &[u8]) -> Format {
         Format::PcapNg
     } else if pcap::sniff_pcap(head) {
         Format::Pcap
-    } else if mcap_io::sniff(head) {
+    } else if mcap::sniff(head) {
         Format::Mcap
     } else if let Some(t) = textlog::sniff(head) {
         Format::Text(t)
@@ -258,7 +361,7 @@ impl<R: Read> Read for Counted<R> {
 
 /// Open a capture (`-` = standard input), detecting its format from its first bytes unless
 /// `opts.format` says. Returns the reader and the format used.
-pub fn open(path: &str, opts: OpenOptions) -> io::Result<(Box<dyn Reader>, Format)> {
+pub fn open(path: &str, opts: OpenOptions) -> Result<(Box<dyn Reader>, Format), OpenError> {
     open_with_progress(path, opts).map(|(r, f, _)| (r, f))
 }
 
@@ -266,7 +369,7 @@ pub fn open(path: &str, opts: OpenOptions) -> io::Result<(Box<dyn Reader>, Forma
 pub fn open_with_progress(
     path: &str,
     opts: OpenOptions,
-) -> io::Result<(Box<dyn Reader>, Format, Progress)> {
+) -> Result<(Box<dyn Reader>, Format, Progress), OpenError> {
     let progress = Progress::default();
     let mut input: Box<dyn Read> = if path == "-" {
         Box::new(Counted {
@@ -274,13 +377,15 @@ pub fn open_with_progress(
             read: progress.read.clone(),
         })
     } else {
-        let f = File::open(path).map_err(|e| io::Error::new(e.kind(), format!("{path}: {e}")))?;
+        let f = File::open(path).map_err(|source| OpenError::File {
+            path: path.to_string(),
+            source,
+        })?;
         let meta = f.metadata().ok();
         if meta.as_ref().is_some_and(|m| m.is_dir()) {
-            return Err(io::Error::new(
-                io::ErrorKind::InvalidInput,
-                format!("{path} is a directory: give a capture file in it"),
-            ));
+            return Err(OpenError::Directory {
+                path: path.to_string(),
+            });
         }
         let total = meta.map(|m| m.len());
         let p = Progress {
@@ -347,7 +452,7 @@ fn finish_open(
     mut input: Box<dyn Read>,
     opts: OpenOptions,
     progress: Progress,
-) -> io::Result<(Box<dyn Reader>, Format, Progress)> {
+) -> Result<(Box<dyn Reader>, Format, Progress), OpenError> {
     let mut head = Vec::with_capacity(SNIFF_LEN);
     (&mut input).take(SNIFF_LEN as u64).read_to_end(&mut head)?;
     let sniffed = sniff(&head);
@@ -355,36 +460,27 @@ fn finish_open(
     let container = |f: Format| matches!(f, Format::Pcap | Format::PcapNg | Format::Mcap);
     if container(format) && container(sniffed) && format != sniffed {
         // Reading one container as another cannot work: say what the file is.
-        return Err(io::Error::new(
-            io::ErrorKind::InvalidInput,
-            format!(
-                "--format {} but the content is {}: leave --format out to detect it, or give \
-                 --format {}",
-                format.name(),
-                sniffed.name(),
-                sniffed.name()
-            ),
-        ));
+        return Err(OpenError::ContainerMismatch {
+            forced: format.name(),
+            found: sniffed.name(),
+        });
     }
     if let (Some((bus, addr)), false) = (
         opts.usb_device,
         matches!(format, Format::Pcap | Format::PcapNg),
     ) {
-        return Err(io::Error::new(
-            io::ErrorKind::InvalidInput,
-            format!(
-                "--usb-device {bus}:{addr} selects a device of a USB capture (usbmon or USBPcap \
-                 in pcap or pcapng), and this input is {}",
-                format.name()
-            ),
-        ));
+        return Err(OpenError::NotUsb {
+            bus,
+            addr,
+            format: format.name(),
+        });
     }
     let stream: Box<dyn Read> = Box::new(Cursor::new(head).chain(input));
     let reader: Box<dyn Reader> = match format {
         Format::Pcap | Format::PcapNg => Box::new(
             pcap::PcapReader::new(stream, opts.usb_device).expect_pcapng(format == Format::PcapNg),
         ),
-        Format::Mcap => Box::new(mcap_io::McapReader::new(stream)),
+        Format::Mcap => Box::new(mcap::McapReader::new(stream)),
         Format::Text(t) => textlog::open(t, BufReader::new(stream)),
         Format::Hex => Box::new(ByteReader::new(stream, true)),
         Format::Raw => Box::new(ByteReader::new(stream, false)),
@@ -394,7 +490,7 @@ fn finish_open(
 
 /// Create a capture writer for `path` in `format`, refusing to overwrite unless `force`; `-`
 /// is standard output (for every format but MCAP, which needs a file to seek in).
-pub fn create(path: &str, format: Format, force: bool) -> io::Result<Box<dyn Writer>> {
+pub fn create(path: &str, format: Format, force: bool) -> Result<Box<dyn Writer>, CreateError> {
     if path == "-" {
         return create_on(io::stdout(), format);
     }
@@ -403,35 +499,31 @@ pub fn create(path: &str, format: Format, force: bool) -> io::Result<Box<dyn Wri
     } else {
         File::options().write(true).create_new(true).open(path)
     }
-    .map_err(|e| {
-        if e.kind() == io::ErrorKind::AlreadyExists {
-            io::Error::new(
-                e.kind(),
-                format!("{path} exists (use --force to overwrite)"),
-            )
+    .map_err(|source| {
+        let path = path.to_string();
+        if source.kind() == io::ErrorKind::AlreadyExists {
+            CreateError::Exists { path }
         } else {
-            io::Error::new(e.kind(), format!("{path}: {e}"))
+            CreateError::File { path, source }
         }
     })?;
     if format == Format::Mcap {
         let w = io::BufWriter::with_capacity(1 << 16, file);
-        return Ok(Box::new(mcap_io::McapWriter::new(w, None)?));
+        return Ok(Box::new(mcap::McapWriter::new(w, None)?));
     }
     create_on(file, format)
 }
 
 /// A writer of `format` (any but MCAP) on `out`.
-fn create_on(out: impl io::Write + 'static, format: Format) -> io::Result<Box<dyn Writer>> {
+fn create_on(
+    out: impl io::Write + 'static,
+    format: Format,
+) -> Result<Box<dyn Writer>, CreateError> {
     let w = io::BufWriter::with_capacity(1 << 16, out);
     Ok(match format {
         Format::PcapNg => Box::new(pcap::PcapNgOut::new(w)?),
         Format::Pcap => Box::new(pcap::PcapOut::new(w)?),
-        Format::Mcap => {
-            return Err(io::Error::new(
-                io::ErrorKind::Unsupported,
-                "MCAP is written to a file (its index needs seeking), not to standard output",
-            ))
-        }
+        Format::Mcap => return Err(CreateError::McapToStdout),
         Format::Hex | Format::Raw => Box::new(BytesOut {
             w,
             hex: format == Format::Hex,
@@ -440,12 +532,7 @@ fn create_on(out: impl io::Write + 'static, format: Format) -> io::Result<Box<dy
             directed: 0,
             streams: vec![],
         }),
-        Format::Text(t) => {
-            return Err(io::Error::new(
-                io::ErrorKind::Unsupported,
-                format!("aptscope reads {} logs but does not write them", t.name()),
-            ))
-        }
+        Format::Text(t) => return Err(CreateError::ReadOnly(t.name())),
     })
 }
 

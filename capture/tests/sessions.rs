@@ -4,6 +4,9 @@
 //! pseudo-terminal, the real tap and a host program, give the capture the virtual recording
 //! predicts.
 
+#[path = "../../tests/common/scratch.rs"]
+mod scratch;
+
 use aptscope_capture::live::session::{
     formats, frame_names, read_capture, record, run_real, session, write_recording, Recording,
     NAMES, STATUS_UPDATES,
@@ -11,23 +14,11 @@ use aptscope_capture::live::session::{
 use aptscope_capture::{Direction, OwnedChunk};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::pipeline::{Format as OutFormat, Pipeline};
+use scratch::scratch;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 fn samples() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../samples/sessions")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    static N: AtomicU64 = AtomicU64::new(0);
-    let d = std::env::temp_dir().join(format!(
-        "aptscope-sessions-{}-{}-{name}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::SeqCst)
-    ));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
 }
 
 fn recording(name: &str) -> Recording {

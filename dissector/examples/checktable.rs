@@ -52,9 +52,7 @@ fn main() {
     let table = match Table::from_sources(&sources) {
         Ok(t) => t,
         Err(errs) => {
-            let (own, other): (Vec<_>, Vec<_>) = errs
-                .iter()
-                .partition(|e| mine(e.split(':').next().unwrap_or("")));
+            let (own, other): (Vec<_>, Vec<_>) = errs.iter().partition(|e| mine(&e.file));
             for e in &own {
                 println!("ERROR {e}");
             }
@@ -64,7 +62,7 @@ fn main() {
                     other.len()
                 );
             }
-            let bad: Vec<&str> = other.iter().filter_map(|e| e.split(':').next()).collect();
+            let bad: Vec<&str> = other.iter().map(|e| e.file.as_str()).collect();
             let kept: Vec<_> = sources
                 .iter()
                 .copied()

@@ -1,8 +1,10 @@
 //! Display filters: a small Wireshark-like language over decoded records.
 //!
 //! One language is used by `aptscope decode -Y`, `stats -Y` and the TUI filter bar. A filter is
-//! compiled once with [`Filter::parse`] and tested against records as `decode --json` writes them
-//! with [`Filter::matches`].
+//! compiled once with [`Filter::parse`] (names resolved to [`crate::fields::Key`]s there) and
+//! tested with [`Filter::matches`] against a typed [`crate::record::Record`] — read through
+//! [`crate::fields::Fields`], nothing rendered — or against the NDJSON object `decode --json`
+//! writes for it; both read alike (`dissector/tests/fields.rs` holds them equal).
 //!
 //! ```text
 //! expr    := and ( ("||" | "or") and )*
@@ -17,7 +19,7 @@
 //! value   := "string" | 123 | 0x1F | -5 | 1.5 | 50ms | true | false | bare_word
 //! ```
 //!
-//! Fields name NDJSON keys, with a few aliases: `apt.chan` is `channel`, `ts` is `ts_ns` in
+//! Fields name NDJSON keys (the list is [`crate::fields::KEYS`]), with a few aliases: `apt.chan` is `channel`, `ts` is `ts_ns` in
 //! seconds (capture time, not relative to the first record), `latency` is `latency_ms`;
 //! durations (`50ms`, `1.5s`, `200us`, `2min`) convert to the unit of `ts`, `ts_ns` and
 //! `latency`, plain numbers are in that unit. `len` (also `apt.len`) is the record's length in
@@ -27,7 +29,9 @@
 //! compared through their `name` (or `model`, `kind`) with text and their `addr` (or `id`,
 //! `value`) with numbers. A protocol-prefixed name that is not a key of the record is looked up
 //! in its `fields` too (`apt.position` is `apt.fields.position`). A field that holds a list
-//! (`status_bits`, `diag.kind`) matches when any element does; `!=` when none is equal. A number
+//! (`status_bits`, `diag.kind`) matches when any element does; `!=` when none is equal. An enum
+//! or flag field is also its number (`codes.X`) in comparisons: `ell.status == 12` and
+//! `ell.status == OUT_OF_RANGE` both match; `~`, `contains` and existence read the names only. A number
 //! compares with a number, and with text as written (`ell.addr == 5`, `ell.fields.year > 2021`);
 //! other mixes of types are simply false, as is any comparison with a missing field. Text equality, `contains` and `~` ignore case (labels;
 //! `(?-i)` in a regex turns that off), except for `cmd`, where case is the Elliptec direction

@@ -7,6 +7,7 @@
 
 use crate::apt::AptFrame;
 use crate::apt::Value;
+use crate::diag::{Diag, DiagKind};
 use crate::table::{Class, DeviceProfile, Dir, MsgDef, Table, DEFAULT_TIMEOUT_MS};
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 
@@ -61,6 +62,25 @@ pub struct PairInfo {
     /// The device's model (named earlier by its HW_GET_INFO) does not implement this message,
     /// according to the spec's device lists.
     pub not_for_model: Option<[u8; 8]>,
+}
+
+impl PairInfo {
+    /// The diagnostics pairing adds to a frame at `offset`: `unsolicited`, `duplicate_reply`,
+    /// `not_for_model`.
+    pub fn diags(&self, offset: u64) -> impl Iterator<Item = Diag> {
+        let kinds = [
+            self.unsolicited.then_some(DiagKind::Unsolicited),
+            self.pair
+                .filter(|_| self.duplicate)
+                .map(|request| DiagKind::DuplicateReply { request }),
+            self.not_for_model
+                .map(|model| DiagKind::NotForModel { model }),
+        ];
+        kinds
+            .into_iter()
+            .flatten()
+            .map(move |kind| Diag { offset, kind })
+    }
 }
 
 /// Bound on requests waiting (a device that never answers must not grow memory). High enough
@@ -250,9 +270,10 @@ impl AptPairer {
             Some(p) => {
                 // The same message also answers other waiting requests to that device and
                 // channel (MOVE_STOPPED completes a move and the stop that ended it; one
-                // MOVE_COMPLETED ends a move and the moves it superseded). A GET answers one
-                // REQ: repeated requests wait for their own replies.
-                let one_to_one = m.name.contains("_GET_");
+                // MOVE_COMPLETED ends a move and the moves it superseded: `class=end_of_move`
+                // in the table). Any other reply (a GET) answers one request: repeated
+                // requests wait for their own replies.
+                let one_to_one = !m.class.has(Class::END_OF_MOVE);
                 let also: Vec<u64> = self
                     .by_reply
                     .get(&m.id)

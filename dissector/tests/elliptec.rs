@@ -1,8 +1,11 @@
 //! Elliptec: every example of the ELLx manual (`ell_examples.txt`), framing in any chunking,
 //! bus state across address changes, pairing, and bad input.
 
-use aptscope_dissector::ell::{Bus, EllFrame, EllFramer, EllValue, Item};
+mod common;
+
+use aptscope_dissector::ell::{Bus, EllFrame, EllFramer, EllValue, Item as EllItem};
 use aptscope_dissector::DiagKind;
+use common::{frames_and_garbage, run_ell, Item};
 
 struct Example {
     line: String,
@@ -51,23 +54,9 @@ fn examples() -> Vec<Example> {
     v
 }
 
-/// Frame and decode `input`: (frames, garbage bytes).
+/// Frame `input`: (frames, garbage bytes).
 fn frames(input: &[u8]) -> (Vec<(u64, Vec<u8>, bool)>, usize) {
-    let mut f = EllFramer::new();
-    f.push(input);
-    f.finish();
-    let (mut out, mut garbage) = (vec![], 0);
-    while let Some(it) = f.next_item() {
-        match it {
-            Item::Frame {
-                offset,
-                bytes,
-                truncated,
-            } => out.push((offset, bytes.to_vec(), truncated)),
-            Item::Garbage { bytes, .. } => garbage += bytes.len(),
-        }
-    }
-    (out, garbage)
+    frames_and_garbage(&run_ell(input, &[]))
 }
 
 fn value_str(v: &EllValue<'_>) -> String {
@@ -206,21 +195,13 @@ fn typos_the_lenient_decoder_recovers_from() {
 }
 
 fn run_bus(input: &[u8]) -> Vec<(String, Option<u64>, bool, Option<String>)> {
-    let mut f = EllFramer::new();
-    f.push(input);
-    f.finish();
     let mut bus = Bus::new();
     let mut n = 0;
     let mut out = vec![];
-    while let Some(it) = f.next_item() {
+    for it in run_ell(input, &[]) {
         n += 1;
-        if let Item::Frame {
-            offset,
-            bytes,
-            truncated,
-        } = it
-        {
-            let fr = EllFrame::decode(offset, bytes, truncated).expect("frame");
+        if let Item::Frame(offset, bytes, truncated) = it {
+            let fr = EllFrame::decode(offset, &bytes, truncated).expect("frame");
             let o = bus.observe(n, &fr, None);
             let phys = fr
                 .fields()
@@ -268,21 +249,13 @@ fn positions_convert_with_the_module_type_and_follow_address_changes() {
 
 #[test]
 fn unanswered_and_unsolicited_are_flagged() {
-    let mut f = EllFramer::new();
-    f.push(b"0gs1GS00\r\n2gp");
-    f.finish();
     let mut bus = Bus::new();
     let mut n = 0;
     let mut unsolicited = vec![];
-    while let Some(it) = f.next_item() {
+    for it in run_ell(b"0gs1GS00\r\n2gp", &[]) {
         n += 1;
-        if let Item::Frame {
-            offset,
-            bytes,
-            truncated,
-        } = it
-        {
-            let fr = EllFrame::decode(offset, bytes, truncated).expect("frame");
+        if let Item::Frame(offset, bytes, truncated) = it {
+            let fr = EllFrame::decode(offset, &bytes, truncated).expect("frame");
             if bus.observe(n, &fr, None).unsolicited {
                 unsolicited.push(n);
             }
@@ -321,33 +294,7 @@ fn any_chunking_gives_the_same_frames() {
     let whole = frames(input);
     for cut in 0..input.len() {
         for cut2 in cut..input.len().min(cut + 7) {
-            let mut f = EllFramer::new();
-            let mut got = vec![];
-            let mut garbage = 0;
-            for part in [&input[..cut], &input[cut..cut2], &input[cut2..]] {
-                f.push(part);
-                while let Some(it) = f.next_item() {
-                    match it {
-                        Item::Frame {
-                            offset,
-                            bytes,
-                            truncated,
-                        } => got.push((offset, bytes.to_vec(), truncated)),
-                        Item::Garbage { bytes, .. } => garbage += bytes.len(),
-                    }
-                }
-            }
-            f.finish();
-            while let Some(it) = f.next_item() {
-                match it {
-                    Item::Frame {
-                        offset,
-                        bytes,
-                        truncated,
-                    } => got.push((offset, bytes.to_vec(), truncated)),
-                    Item::Garbage { bytes, .. } => garbage += bytes.len(),
-                }
-            }
+            let (got, garbage) = frames_and_garbage(&run_ell(input, &[cut, cut2]));
             assert_eq!((got, garbage), whole, "cuts at {cut}, {cut2}");
         }
     }
@@ -853,7 +800,7 @@ fn a_command_without_its_data_is_that_command_with_a_diagnostic() {
         for part in [&input[..cut], &input[cut..]] {
             fr.push(part);
             while let Some(it) = fr.next_item() {
-                assert!(matches!(it, Item::Frame { .. }), "cut {cut}: {it:?}");
+                assert!(matches!(it, EllItem::Frame { .. }), "cut {cut}: {it:?}");
                 n += 1;
             }
         }
@@ -1119,31 +1066,15 @@ fn a_group_move_pairs_the_answer_of_every_module() {
 // ------------------------------------------------------------------------------------------
 // Chunking, on streams of commands with and without data, replies, curves and noise.
 
+/// (offset, bytes, truncated, is a frame) of each item.
 fn records(input: &[u8], cuts: &[usize]) -> Vec<(u64, Vec<u8>, bool, bool)> {
-    let mut f = EllFramer::new();
-    let mut out = vec![];
-    let mut at = 0;
-    let drain = |f: &mut EllFramer, out: &mut Vec<_>| {
-        while let Some(it) = f.next_item() {
-            out.push(match it {
-                Item::Frame {
-                    offset,
-                    bytes,
-                    truncated,
-                } => (offset, bytes.to_vec(), truncated, true),
-                Item::Garbage { offset, bytes, .. } => (offset, bytes.to_vec(), false, false),
-            });
-        }
-    };
-    for &c in cuts.iter().chain(std::iter::once(&input.len())) {
-        let c = c.clamp(at, input.len());
-        f.push(&input[at..c]);
-        drain(&mut f, &mut out);
-        at = c;
-    }
-    f.finish();
-    drain(&mut f, &mut out);
-    out
+    run_ell(input, cuts)
+        .into_iter()
+        .map(|it| match it {
+            Item::Frame(o, b, t) => (o, b, t, true),
+            Item::Garbage(o, b, _) => (o, b, false, false),
+        })
+        .collect()
 }
 
 proptest::proptest! {

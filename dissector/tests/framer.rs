@@ -1,45 +1,12 @@
 //! The streaming framer: chunking invariance, byte accounting, and every kind of bad input.
 
-use aptscope_dissector::apt::{AptFrame, AptFramer, GarbageKind, Item};
+mod common;
+
+use aptscope_dissector::apt::{AptFrame, GarbageKind};
 use aptscope_dissector::{DiagKind, Table};
 use proptest::prelude::*;
 
-#[derive(Debug, Clone, PartialEq)]
-enum Rec {
-    Frame(u64, Vec<u8>, bool),
-    Garbage(u64, Vec<u8>, GarbageKind),
-}
-
-fn run(input: &[u8], cuts: &[usize]) -> Vec<Rec> {
-    let mut f = AptFramer::new(Table::global());
-    let mut out = vec![];
-    let mut drain = |f: &mut AptFramer| {
-        while let Some(it) = f.next_item() {
-            out.push(match it {
-                Item::Frame {
-                    offset,
-                    bytes,
-                    truncated,
-                } => Rec::Frame(offset, bytes.to_vec(), truncated),
-                Item::Garbage {
-                    offset,
-                    bytes,
-                    kind,
-                } => Rec::Garbage(offset, bytes.to_vec(), kind),
-            });
-        }
-    };
-    let mut at = 0;
-    for &c in cuts.iter().chain(std::iter::once(&input.len())) {
-        let c = c.clamp(at, input.len());
-        f.push(&input[at..c]);
-        drain(&mut f);
-        at = c;
-    }
-    f.finish();
-    drain(&mut f);
-    out
-}
+use common::{run_apt as run, Item as Rec};
 
 fn stream(seed: u64, frames: usize, garbage: bool) -> Vec<u8> {
     aptscope_dissector::synth::stream(Table::global(), seed, frames, garbage)
@@ -115,7 +82,8 @@ fn diags_of(recs: &[Rec]) -> Vec<(u64, &'static str)> {
                 v.extend(f.diags().map(|d| (d.offset, d.kind.name())));
             }
             Rec::Garbage(o, b, k) => {
-                let d = aptscope_dissector::json::garbage_diag(*o, b.len(), *k);
+                let k = k.expect("the APT framer says what it saw");
+                let d = aptscope_dissector::json::garbage_diag(*o, b.len(), k);
                 v.push((d.offset, d.kind.name()));
             }
         }
@@ -188,10 +156,10 @@ fn absurd_length_is_skipped_with_a_diagnostic_and_decoding_carries_on() {
         Rec::Garbage(
             0,
             input[..6].to_vec(),
-            GarbageKind::AbsurdLength {
+            Some(GarbageKind::AbsurdLength {
                 msg_id: 0x0453,
                 len: 0xFFFF
-            }
+            })
         )
     );
     assert!(matches!(&recs[1], Rec::Frame(6, _, false)));
@@ -235,7 +203,7 @@ fn long_garbage_runs_are_cut_into_bounded_records() {
         .all(|r| matches!(r, Rec::Garbage(_, b, _) if b.len() <= 4096)));
     assert!(matches!(
         recs[3],
-        Rec::Garbage(9995, _, GarbageKind::TrailingBytes)
+        Rec::Garbage(9995, _, Some(GarbageKind::TrailingBytes))
     ));
     accounted(&recs, input.len());
 }

@@ -6,8 +6,8 @@
 //! sample looped against the simulator with `--wait-replies` (replies and status updates
 //! arriving while waiting). The error is measured when the write has returned.
 
+use aptscope_capture::live::serial::LineSettings;
 use aptscope_capture::live::sim::{serve_pty, stop_pair, AptModel, AptSim, Pty};
-use aptscope_capture::live::tap::LineSettings;
 use aptscope_capture::open::{create, Format, OpenOptions};
 use aptscope_capture::{Chunk, Direction, StreamInfo};
 use aptscope_dissector::detect::Proto;

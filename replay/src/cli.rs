@@ -5,8 +5,8 @@ use crate::host::{run_host, HostOptions};
 use crate::port::Link;
 use crate::safety::{is_motion, is_pseudo_terminal};
 use crate::script::{host_schedule, Bound, Script, Selection, Side, Timing};
+use aptscope_capture::live::serial::{Flow, LineSettings};
 use aptscope_capture::live::sim::termination_signals;
-use aptscope_capture::live::tap::{Flow, LineSettings};
 use aptscope_capture::open::{create, Format, OpenOptions};
 use aptscope_capture::Writer;
 use aptscope_dissector::detect::Proto;
@@ -17,7 +17,7 @@ use std::io::{self, BufRead, IsTerminal, Write};
 use std::path::Path;
 
 /// Which side of the capture to play.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Role {
     /// Send the host's messages to a device.
     #[default]
@@ -26,66 +26,123 @@ pub enum Role {
     Device,
 }
 
-/// Everything `aptscope replay` takes.
+/// The options of `aptscope replay` that are taken as given (the command line flattens them in,
+/// `#[command(flatten)]`).
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct ReplayArgs {
+    /// The capture (any readable format).
+    pub file: String,
+    /// Serial port to talk on (a simulator's or a tap's pseudo-terminal works too).
+    #[arg(long)]
+    pub port: Option<String>,
+    /// As device: create a pseudo-terminal for the host program, symlinked here.
+    #[arg(long)]
+    pub pty: Option<String>,
+    /// Which side of the capture to play.
+    #[arg(long = "as", value_enum, default_value_t = Role::Host)]
+    pub role: Role,
+    /// Baud rate (default 115200 for APT, 9600 for Elliptec).
+    #[arg(long)]
+    pub baud: Option<u32>,
+    /// Time factor: 2.0 replays twice as fast.
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Ignore the captured gaps.
+    #[arg(long)]
+    pub asap: bool,
+    /// Send each message only after the replies its captured request got (or a timeout).
+    #[arg(long)]
+    pub wait_replies: bool,
+    /// How much longer than captured a reply may take before it is missing (default: per
+    /// message, as pairing: 2 s, 120 s for moves and homing).
+    #[arg(long = "reply-timeout", value_name = "REPLY_TIMEOUT", value_parser = parse_duration)]
+    pub reply_timeout_ns: Option<u64>,
+    /// Replay only the messages this display filter accepts (host messages as host,
+    /// device messages as device).
+    #[arg(short = 'Y', long)]
+    pub filter: Option<String>,
+    /// From this record number or time (`12`, `2.5s`).
+    #[arg(long)]
+    pub from: Option<String>,
+    /// Up to this record number or time.
+    #[arg(long)]
+    pub to: Option<String>,
+    /// Replay the selection this many times.
+    #[arg(long = "loop", default_value_t = 1)]
+    pub loops: u32,
+    /// Stream to replay, when the capture has several.
+    #[arg(long)]
+    pub stream: Option<u32>,
+    /// Record the session (both directions) here; format from the extension, else pcapng.
+    #[arg(short = 'w', long)]
+    pub write: Option<String>,
+    /// Overwrite the recording if it exists.
+    #[arg(long)]
+    pub force: bool,
+    /// NDJSON timeline and a JSON report.
+    #[arg(long)]
+    pub json: bool,
+    /// Exit with 1 when replies differ from the capture.
+    #[arg(long)]
+    pub check: bool,
+    /// Do not compare this field (repeatable): `serial_number`, `src`.
+    #[arg(long)]
+    pub ignore: Vec<String>,
+    /// Count latency changes beyond this as differences.
+    #[arg(long = "latency-tolerance", value_name = "LATENCY_TOLERANCE", value_parser = parse_duration)]
+    pub latency_tolerance_ns: Option<u64>,
+    /// Print what would be sent and when; send nothing.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Do not ask before motion commands go to a real port.
+    #[arg(long)]
+    pub yes: bool,
+    /// On Ctrl-C, send MOT_MOVE_STOP to channels the replay left moving.
+    #[arg(long)]
+    pub stop_on_abort: bool,
+    /// Do not print the live timeline.
+    #[arg(long)]
+    pub quiet: bool,
+    /// As device: stop after this long.
+    #[arg(long = "duration", value_name = "DURATION", value_parser = parse_duration)]
+    pub duration_ns: Option<u64>,
+}
+
+/// Everything `aptscope replay` takes: the arguments as given, and those the command line
+/// interprets (they are shared with other commands).
 #[derive(Debug, Clone, Default)]
 pub struct ReplayOptions {
-    /// The capture.
-    pub file: String,
-    /// How to open it.
+    /// The options taken as given.
+    pub args: ReplayArgs,
+    /// How to open the capture.
     pub open: OpenOptions,
     /// Force the protocol.
     pub proto: Option<Proto>,
-    /// The serial port to talk on.
-    pub port: Option<String>,
-    /// As device: a new pseudo-terminal linked here, for the host program.
-    pub pty: Option<String>,
-    /// Host or device.
-    pub role: Role,
-    /// Baud rate override.
-    pub baud: Option<u32>,
     /// Flow control override.
     pub flow: Option<Flow>,
-    /// Speed factor (0 or less: 1).
-    pub speed: f64,
-    /// Ignore the captured gaps.
-    pub asap: bool,
-    /// Send each message after the previous one's replies.
-    pub wait_replies: bool,
-    /// Extra time a reply may take before it is missing, ns (`None`: per message, as
-    /// pairing times requests out).
-    pub reply_timeout_ns: Option<u64>,
-    /// Display filter selecting the messages to send.
-    pub filter: Option<String>,
-    /// Range start (record or time).
-    pub from: Option<String>,
-    /// Range end.
-    pub to: Option<String>,
-    /// Passes.
-    pub loops: u32,
-    /// Stream to replay.
-    pub stream: Option<u32>,
-    /// Record the session here.
-    pub write: Option<String>,
-    /// Overwrite it.
-    pub force: bool,
-    /// NDJSON timeline and a JSON report.
-    pub json: bool,
-    /// Fail (exit 1) on differences.
-    pub check: bool,
-    /// Fields not compared.
-    pub ignore: Vec<String>,
-    /// Latency changes beyond this are differences, ns.
-    pub latency_tolerance_ns: Option<u64>,
-    /// Only print what would be sent.
-    pub dry_run: bool,
-    /// Do not ask before motion commands go to a real port.
-    pub yes: bool,
-    /// On abort, stop channels left moving.
-    pub stop_on_abort: bool,
-    /// No live timeline.
-    pub quiet: bool,
-    /// As device: stop after this long, ns.
-    pub duration_ns: Option<u64>,
+}
+
+/// A duration (`500ms`, `2s`, `1.5s`, `200us`, `2min`, or plain seconds) in ns.
+pub fn parse_duration(s: &str) -> Result<u64, String> {
+    let s = s.trim();
+    let split = s.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(s.len());
+    let (num, unit) = s.split_at(split);
+    let v: f64 = num
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a duration (500ms, 2s)"))?;
+    let scale = match unit {
+        "" | "s" => 1e9,
+        "ms" => 1e6,
+        "us" => 1e3,
+        "ns" => 1.0,
+        "min" => 60e9,
+        u => return Err(format!("unknown unit `{u}` (ns, us, ms, s, min)")),
+    };
+    if !(v.is_finite() && v >= 0.0) {
+        return Err(format!("`{s}` is not a duration"));
+    }
+    Ok((v * scale) as u64)
 }
 
 fn bad(msg: String) -> io::Error {
@@ -93,7 +150,7 @@ fn bad(msg: String) -> io::Error {
 }
 
 fn selection(o: &ReplayOptions, script: &Script) -> io::Result<Selection> {
-    let filter = match &o.filter {
+    let filter = match &o.args.filter {
         Some(f) => {
             Some(Filter::parse(f).map_err(|e| bad(format!("bad filter: {e}\n{}", e.caret(f))))?)
         }
@@ -104,16 +161,16 @@ fn selection(o: &ReplayOptions, script: &Script) -> io::Result<Selection> {
     };
     let sel = Selection {
         filter,
-        from: bound(&o.from)?,
-        to: bound(&o.to)?,
-        stream: o.stream,
+        from: bound(&o.args.from)?,
+        to: bound(&o.args.to)?,
+        stream: o.args.stream,
     };
     sel.check_streams(script).map_err(bad)?;
     sel.check_range(script).map_err(bad)?;
-    if !(o.speed.is_finite() && o.speed > 0.0) {
+    if !(o.args.speed.is_finite() && o.args.speed > 0.0) {
         return Err(bad(format!(
             "--speed {}: give a factor above 0 (2 = twice as fast, 0.5 = half; --asap for no waits)",
-            o.speed
+            o.args.speed
         )));
     }
     Ok(sel)
@@ -137,9 +194,9 @@ fn dry_run(
     sel: &Selection,
     out: &mut dyn Write,
 ) -> io::Result<()> {
-    match o.role {
+    match o.args.role {
         Role::Host => {
-            let plan = host_schedule(script, sel, timing(o, script), o.loops);
+            let plan = host_schedule(script, sel, timing(o, script), o.args.loops);
             for s in &plan {
                 let m = &script.msgs[s.idx];
                 let replies: Vec<String> = script
@@ -147,13 +204,13 @@ fn dry_run(
                     .iter()
                     .map(|&r| script.msgs[r].label())
                     .collect();
-                if o.json {
+                if o.args.json {
                     let v = json!({"type": "send", "at_s": s.at_ns as f64 / 1e9, "pass": s.lap + 1,
                         "n": m.n, "name": m.name, "label": m.label(), "raw": hex(&m.raw).replace(' ', ""),
                         "motion": is_motion(m), "expect": replies});
                     writeln!(out, "{v}")?;
                 } else {
-                    let pass = if o.loops > 1 {
+                    let pass = if o.args.loops > 1 {
                         format!(" [pass {}]", s.lap + 1)
                     } else {
                         String::new()
@@ -179,7 +236,7 @@ fn dry_run(
                 .iter()
                 .filter(|s| is_motion(&script.msgs[s.idx]))
                 .count();
-            if !o.json {
+            if !o.args.json {
                 writeln!(
                     out,
                     "# dry run: {} messages to send ({motion} of them motion commands), nothing sent",
@@ -188,7 +245,7 @@ fn dry_run(
             }
         }
         Role::Device => {
-            let mut r = Responder::new(script, sel, o.speed);
+            let mut r = Responder::new(script, sel, o.args.speed);
             for (d, i) in r.prelude() {
                 let m = &script.msgs[i];
                 writeln!(out, "at start +{} s: {}", secs(d), m.label())?;
@@ -202,7 +259,7 @@ fn dry_run(
                         format!("{} (+{:.1} ms)", script.msgs[i].label(), d as f64 / 1e6)
                     })
                     .collect();
-                if o.json {
+                if o.args.json {
                     let v = json!({"type": "answer", "n": m.n, "request": m.label(), "answers": answers});
                     writeln!(out, "{v}")?;
                 } else {
@@ -226,8 +283,12 @@ fn dry_run(
 
 fn timing(o: &ReplayOptions, script: &Script) -> Timing {
     Timing {
-        speed: if o.speed > 0.0 { o.speed } else { 1.0 },
-        asap: o.asap || !script.has_times(),
+        speed: if o.args.speed > 0.0 {
+            o.args.speed
+        } else {
+            1.0
+        },
+        asap: o.args.asap || !script.has_times(),
     }
 }
 
@@ -252,7 +313,7 @@ fn confirm(port: &str, motion: &BTreeMap<String, usize>) -> io::Result<bool> {
 
 /// Run `aptscope replay`. `Ok(false)` when `--check` found differences (or the user declined).
 pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
-    let script = Script::load(&o.file, o.open, o.proto)?;
+    let script = Script::load(&o.args.file, o.open, o.proto)?;
     let sel = selection(&o, &script)?;
     let (hosts, devs) = script.msgs.iter().fold((0, 0), |(h, d), m| match m.side {
         Side::Host => (h + 1, d),
@@ -260,7 +321,7 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
     });
     aptscope_capture::note!(
         "# {} ({}, {}): {} messages, {hosts} from the host, {devs} from the device{}",
-        o.file,
+        o.args.file,
         script.format,
         script.proto.name(),
         script.msgs.len(),
@@ -281,20 +342,21 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
     }
     let stdout = io::stdout();
     let mut out = stdout.lock();
-    if o.dry_run {
+    if o.args.dry_run {
         dry_run(&o, &script, &sel, &mut out)?;
         return Ok(true);
     }
-    let line = LineSettings::for_proto(script.proto, o.baud, o.flow);
-    let plan = host_schedule(&script, &sel, timing(&o, &script), o.loops);
-    if o.role == Role::Host {
+    let line = LineSettings::for_proto(script.proto, o.args.baud, o.flow);
+    let plan = host_schedule(&script, &sel, timing(&o, &script), o.args.loops);
+    if o.args.role == Role::Host {
         let port = o
+            .args
             .port
             .as_deref()
             .ok_or_else(|| bad("--as host needs --port DEV".into()))?;
         // What is wrong with the port comes before any question about sending to it.
         aptscope_capture::live::serial::check_port(port)?;
-        if !o.yes && !is_pseudo_terminal(Path::new(port)) {
+        if !o.args.yes && !is_pseudo_terminal(Path::new(port)) {
             let mut motion: BTreeMap<String, usize> = BTreeMap::new();
             for s in &plan {
                 let m = &script.msgs[s.idx];
@@ -320,7 +382,7 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
             _ => None,
         }
     };
-    let mut link = match (o.role, &o.port, &o.pty) {
+    let mut link = match (o.args.role, &o.args.port, &o.args.pty) {
         (_, Some(p), None) => Link::open_port(Path::new(p), line)?,
         (Role::Device, None, pty) => {
             let (l, path) = Link::open_pty(pty.as_deref().map(Path::new))?;
@@ -333,22 +395,22 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
         (Role::Host, None, _) => return Err(bad("--as host needs --port DEV".into())),
         (_, Some(_), Some(_)) => return Err(bad("give --port or --pty, not both".into())),
     };
-    let mut writer: Option<Box<dyn Writer>> = match &o.write {
-        Some(w) => Some(create(w, Format::for_writing(w, None)?, o.force)?),
+    let mut writer: Option<Box<dyn Writer>> = match &o.args.write {
+        Some(w) => Some(create(w, Format::for_writing(w, None)?, o.args.force)?),
         None => None,
     };
     let rec = writer.as_mut().map(|w| &mut **w as &mut dyn Writer);
-    let display = !o.quiet;
+    let display = !o.args.quiet;
     let mut show = |l: &str| {
         let _ = writeln!(out, "{l}");
     };
-    match o.role {
+    match o.args.role {
         Role::Host => {
-            let port = o.port.clone().unwrap_or_default();
+            let port = o.args.port.clone().unwrap_or_default();
             aptscope_capture::note!(
                 "# replaying {} messages to {port} as the host ({line}{})",
                 plan.len(),
-                if o.wait_replies {
+                if o.args.wait_replies {
                     ", waiting for replies"
                 } else {
                     ""
@@ -356,20 +418,20 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
             );
             let opts = HostOptions {
                 timing: timing(&o, &script),
-                loops: o.loops,
-                wait_replies: o.wait_replies || !script.has_times(),
-                reply_timeout_ns: o.reply_timeout_ns,
-                stop_on_abort: o.stop_on_abort,
-                ignore: o.ignore.clone(),
+                loops: o.args.loops,
+                wait_replies: o.args.wait_replies || !script.has_times(),
+                reply_timeout_ns: o.args.reply_timeout_ns,
+                stop_on_abort: o.args.stop_on_abort,
+                ignore: o.args.ignore.clone(),
                 display,
-                json: o.json,
+                json: o.args.json,
             };
             let r = run_host(&script, &sel, &opts, &mut link, rec, &mut show, &mut abort)?;
             drop(link);
-            let fails = r.report.failures(o.latency_tolerance_ns);
+            let fails = r.report.failures(o.args.latency_tolerance_ns);
             let mut out = io::stdout().lock();
-            if o.json {
-                let mut v = r.report.json(o.latency_tolerance_ns);
+            if o.args.json {
+                let mut v = r.report.json(o.args.latency_tolerance_ns);
                 v["type"] = json!("replay");
                 v["mode"] = json!("host");
                 v["planned"] = json!(r.planned);
@@ -383,7 +445,7 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
                 v["record_error"] = json!(r.record_error);
                 writeln!(out, "{v}")?;
             } else {
-                write!(out, "{}", r.report.text(o.latency_tolerance_ns))?;
+                write!(out, "{}", r.report.text(o.args.latency_tolerance_ns))?;
                 writeln!(
                     out,
                     "# sent {} of {} messages in {:.3} s; {}",
@@ -420,20 +482,24 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
                     "the device went away during the replay: {g}"
                 )));
             }
-            Ok(!(o.check && fails > 0))
+            Ok(!(o.args.check && fails > 0))
         }
         Role::Device => {
             aptscope_capture::note!("# answering as the captured device ({line}); Ctrl-C to stop");
             let opts = DeviceOptions {
-                speed: if o.speed > 0.0 { o.speed } else { 1.0 },
-                duration_ns: o.duration_ns,
+                speed: if o.args.speed > 0.0 {
+                    o.args.speed
+                } else {
+                    1.0
+                },
+                duration_ns: o.args.duration_ns,
                 display,
-                json: o.json,
+                json: o.args.json,
             };
             let r = run_device(&script, &sel, &opts, &mut link, rec, &mut show, &mut abort)?;
             drop(link);
             let mut out = io::stdout().lock();
-            if o.json {
+            if o.args.json {
                 let mut v = r.json();
                 v["type"] = json!("replay");
                 v["mode"] = json!("device");
@@ -450,7 +516,7 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
                     writeln!(out, "# recording failed: {e}")?;
                 }
             }
-            Ok(!o.check || r.unmatched.is_empty())
+            Ok(!o.args.check || r.unmatched.is_empty())
         }
     }
 }

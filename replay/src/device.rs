@@ -26,7 +26,7 @@ pub struct Answer {
     pub out: Vec<(u64, usize)>,
 }
 
-type Key = (String, Option<i64>, Option<String>);
+type Key = (String, Option<i64>, Option<u8>);
 
 /// The matching of host requests to captured ones (pure: no I/O, no clock).
 #[derive(Debug)]
@@ -43,17 +43,9 @@ pub struct Responder {
     speed: f64,
 }
 
-/// Where a message goes: APT destination address, or Elliptec module address.
-fn target(m: &Msg) -> Option<String> {
-    m.rec
-        .get("dst")
-        .and_then(|d| d.get("addr"))
-        .map(Value::to_string)
-        .or_else(|| m.rec.get("addr").map(Value::to_string))
-}
-
+/// A message's kind: its name, channel and address (APT destination, Elliptec module).
 fn kind(m: &Msg) -> Key {
-    (m.name.clone(), m.channel(), target(m))
+    (m.name.clone(), m.channel(), m.addr)
 }
 
 fn take(list: Option<&Vec<usize>>, used: &[bool]) -> Option<usize> {
@@ -375,15 +367,15 @@ pub fn run_device<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::script::Collector;
     use aptscope_dissector::detect::Proto;
 
     fn script(lines: &[String]) -> Script {
-        let mut c = Collector::default();
-        for l in lines {
-            c.line(l);
-        }
-        Script::new(Proto::Apt, c.msgs, c.notes, "t".into())
+        let msgs = lines.iter().map(|l| fixture(l)).collect();
+        Script::new(Proto::Apt, msgs, vec![], "t".into())
+    }
+
+    fn fixture(l: &str) -> Msg {
+        Msg::fixture(serde_json::from_str(l).unwrap_or(Value::Null))
     }
 
     fn rec(n: u64, name: &str, raw: &str, dir: &str, ts: u64, pair: Option<u64>) -> String {
@@ -406,10 +398,8 @@ mod tests {
     }
 
     fn req(s: &Script, raw: &str, name: &str) -> Msg {
-        let mut c = Collector::default();
-        c.line(&rec(99, name, raw, "h2d", 0, None));
         let _ = s;
-        c.msgs.remove(0)
+        fixture(&rec(99, name, raw, "h2d", 0, None))
     }
 
     #[test]

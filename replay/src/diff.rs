@@ -451,15 +451,13 @@ impl Report {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::script::Collector;
     use aptscope_dissector::detect::Proto;
 
     fn msgs(lines: &[&str]) -> Vec<Msg> {
-        let mut c = Collector::default();
-        for l in lines {
-            c.line(l);
-        }
-        c.msgs
+        lines
+            .iter()
+            .map(|l| Msg::fixture(serde_json::from_str(l).unwrap_or(Value::Null)))
+            .collect()
     }
 
     fn rec(n: u64, name: &str, dir: &str, ts: u64, pair: Option<u64>, fields: &str) -> String {

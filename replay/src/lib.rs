@@ -21,7 +21,7 @@ pub mod safety;
 pub mod sched;
 pub mod script;
 
-pub use cli::{replay_main, ReplayOptions, Role};
+pub use cli::{parse_duration, replay_main, ReplayArgs, ReplayOptions, Role};
 pub use device::{run_device, DeviceOptions, DeviceOutcome, Responder};
 pub use diff::Report;
 pub use host::{run_host, HostOptions, Outcome};

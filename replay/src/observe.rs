@@ -1,4 +1,4 @@
-//! Decoding the live conversation of a replay with the same pipeline `aptscope decode` uses, so
+//! Decoding the live conversation of a replay with the decode chain `aptscope decode` uses, so
 //! observed replies are paired to the requests sent by the same rules as in the capture; and the
 //! session around it that records and displays what crosses (shared by both engines).
 
@@ -6,29 +6,30 @@ use crate::port::{Clock, RxEvent};
 use crate::script::{Collector, Msg, Side};
 use aptscope_capture::{Chunk, Direction, StreamInfo, Writer};
 use aptscope_dissector::detect::Proto;
-use aptscope_dissector::pipeline::{Ctx, Format, Pipeline};
+use aptscope_dissector::pipeline::{Format, Renderer};
+use aptscope_dissector::record::{Ctx, Decoder, Record};
 use aptscope_dissector::table::Dir;
 use std::collections::HashMap;
 
 /// The decoded live conversation.
 pub struct Observer {
-    json: Pipeline,
-    text: Option<Pipeline>,
+    dec: Decoder,
     coll: Collector,
+    /// Renders the live display (text or NDJSON), when there is one.
+    show: Option<Renderer>,
     /// Rendered lines for the live display (text or NDJSON), taken by the caller.
     pub lines: Vec<String>,
-    show_json: bool,
 }
 
 impl Observer {
     /// An observer for `proto`; `display` renders the live timeline (`json`: as NDJSON).
     pub fn new(proto: Proto, display: bool, json: bool) -> Observer {
+        let fmt = if json { Format::Json } else { Format::Text };
         Observer {
-            json: Pipeline::new(Some(proto), Format::Json),
-            text: (display && !json).then(|| Pipeline::new(Some(proto), Format::Text)),
+            dec: Decoder::new(Some(proto)),
             coll: Collector::default(),
+            show: display.then(|| Renderer::new(fmt)),
             lines: vec![],
-            show_json: display && json,
         }
     }
 
@@ -44,49 +45,33 @@ impl Observer {
             }),
             ts_ns: Some(ts_ns),
         };
-        let (coll, lines, show) = (&mut self.coll, &mut self.lines, self.show_json);
-        let mut emit_json = |l: &str| -> Result<(), ()> {
-            coll.line(l);
-            if show {
-                lines.push(l.to_string());
+        let (coll, show, lines) = (&mut self.coll, &mut self.show, &mut self.lines);
+        let mut emit = |r: &Record<'_>| -> Result<(), ()> {
+            coll.record(r);
+            if let Some(s) = show.as_mut() {
+                lines.push(s.line(r).to_string());
             }
             Ok(())
         };
-        let _ = self.json.push_chunk(ctx, bytes, &mut emit_json);
+        let _ = self.dec.push(ctx, bytes, &mut emit);
         // A host's write is one command: frame it now, terminator or not (an impersonated
         // device must answer an Elliptec command that has none).
         if side == Side::Host {
-            let _ = self.json.cut(0, Dir::HostToDevice, &mut emit_json);
-        }
-        if let Some(t) = &mut self.text {
-            let mut emit_text = |l: &str| -> Result<(), ()> {
-                lines.push(l.to_string());
-                Ok(())
-            };
-            let _ = t.push_chunk(ctx, bytes, &mut emit_text);
-            if side == Side::Host {
-                let _ = t.cut(0, Dir::HostToDevice, &mut emit_text);
-            }
+            let _ = self.dec.cut(0, Dir::HostToDevice, &mut emit);
         }
         first
     }
 
     /// End of the conversation: flush partial frames and unanswered requests.
     pub fn finish(&mut self) {
-        let (coll, lines, show) = (&mut self.coll, &mut self.lines, self.show_json);
-        let _ = self.json.finish(&mut |l: &str| -> Result<(), ()> {
-            coll.line(l);
-            if show {
-                lines.push(l.to_string());
+        let (coll, show, lines) = (&mut self.coll, &mut self.show, &mut self.lines);
+        let _ = self.dec.finish(&mut |r: &Record<'_>| -> Result<(), ()> {
+            coll.record(r);
+            if let Some(s) = show.as_mut() {
+                lines.push(s.line(r).to_string());
             }
             Ok(())
         });
-        if let Some(t) = &mut self.text {
-            let _ = t.finish(&mut |l: &str| -> Result<(), ()> {
-                lines.push(l.to_string());
-                Ok(())
-            });
-        }
     }
 
     /// Every message observed so far, in order.

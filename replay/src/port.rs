@@ -3,9 +3,8 @@
 //! thread timestamps what arrives and hands it over a channel, so the sender's clock is never
 //! held up by a read.
 
-use aptscope_capture::live::serial::{open_serial, SerialFd};
+use aptscope_capture::live::serial::{open_serial, LineSettings, SerialFd};
 use aptscope_capture::live::sim::Pty;
-use aptscope_capture::live::tap::LineSettings;
 use nix::errno::Errno;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use serialport::SerialPort;

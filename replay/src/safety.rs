@@ -3,45 +3,36 @@
 
 use crate::script::Msg;
 use aptscope_dissector::apt::{encode_named, Named};
-use aptscope_dissector::table::Class;
+use aptscope_dissector::table::{Class, MsgDef};
 use aptscope_dissector::Table;
-use serde_json::Value;
 use std::path::Path;
 
-/// Whether the APT message `name` starts a move (from the table: it is completed by an
+/// Whether the APT message `m` starts a move (from the table: it is completed by an
 /// end-of-move message, and is not a stop).
+pub fn starts_move(m: &MsgDef) -> bool {
+    !m.class.has(Class::STOP)
+        && Table::global()
+            .replies_of(m)
+            .iter()
+            .any(|r| r.class.has(Class::END_OF_MOVE))
+}
+
+/// [`starts_move`] for the message named `name`.
 pub fn apt_starts_move(name: &str) -> bool {
-    let t = Table::global();
-    t.msg_by_name(name).is_some_and(|m| {
-        !m.class.has(Class::STOP)
-            && t.replies_of(m)
-                .iter()
-                .any(|r| r.class.has(Class::END_OF_MOVE))
-    })
+    Table::global().msg_by_name(name).is_some_and(starts_move)
 }
 
 /// Whether a host message makes hardware move or changes an output (asked for confirmation
 /// before a real port): APT messages of `class=motion` (or `stop`) in the table and those that
 /// start a move; Elliptec commands whose class in the command table may move the stage
-/// (motions, frequency searches and current-curve scans, energising a motor).
+/// (motions, frequency searches and current-curve scans, energising a motor). A message the
+/// tables do not know is not replayed (it has no name), so none is guessed at.
 pub fn is_motion(m: &Msg) -> bool {
-    let n = m.name.as_str();
-    if m.rec.get("proto").and_then(Value::as_str) == Some("ell") {
-        if let Some(c) = aptscope_dissector::ell::table::by_name(n) {
-            return c.class.moves();
-        }
-        // Not in the manual: judge by the name.
-        return n.contains("MOVE")
-            || n.contains("HOME")
-            || n.contains("FORWARD")
-            || n.contains("BACKWARD")
-            || n.contains("OPTIMIZE")
-            || n.contains("CLEAN");
+    match (m.def, m.cmd) {
+        (Some(d), _) => starts_move(d) || d.class.has(Class::MOTION) || d.class.has(Class::STOP),
+        (None, Some(c)) => c.class.moves(),
+        (None, None) => false,
     }
-    apt_starts_move(n)
-        || Table::global()
-            .msg_by_name(n)
-            .is_some_and(|d| d.class.has(Class::MOTION) || d.class.has(Class::STOP))
 }
 
 /// Whether `path` is a pseudo-terminal (a simulator or a tap), where no confirmation is needed.
@@ -68,12 +59,11 @@ pub struct Moving {
 impl Moving {
     /// The channel an APT move command `m` sets moving, if it is one.
     pub fn of(m: &Msg) -> Option<Moving> {
-        if !apt_starts_move(&m.name) {
+        if !starts_move(m.def?) {
             return None;
         }
-        let dst = m.rec.get("dst")?.get("addr")?.as_u64()? as u8;
         Some(Moving {
-            dst,
+            dst: m.addr?,
             chan: m.channel().unwrap_or(1),
         })
     }

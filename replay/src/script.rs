@@ -1,12 +1,20 @@
 //! A capture as a replay script: its messages in order, who sent each, when, and which request
 //! each reply answers (the dissector's pairing rules), plus the selection (`--filter`,
 //! `--from/--to`, `--loop`) and the schedule built from it.
+//!
+//! Messages are taken from the typed records of the one decode chain
+//! ([`aptscope_dissector::record::Decoder`]): bytes, sender, pairing and the table's definition
+//! come straight from the record.
 
 use aptscope_capture::open::{open, OpenOptions};
 use aptscope_capture::Event;
 use aptscope_dissector::detect::Proto;
+use aptscope_dissector::ell::table::Cmd;
 use aptscope_dissector::filter::Filter;
-use aptscope_dissector::pipeline::{Format, Pipeline};
+use aptscope_dissector::pipeline::{Format, Renderer};
+use aptscope_dissector::record::{Decoder, Record};
+use aptscope_dissector::table::{Dir, MsgDef};
+use aptscope_dissector::Diag;
 use serde_json::Value;
 use std::collections::{BTreeMap, HashMap};
 use std::io;
@@ -18,6 +26,16 @@ pub enum Side {
     Host,
     /// The controller.
     Device,
+}
+
+impl Side {
+    fn of(d: Dir) -> Option<Side> {
+        match d {
+            Dir::HostToDevice => Some(Side::Host),
+            Dir::DeviceToHost => Some(Side::Device),
+            _ => None,
+        }
+    }
 }
 
 /// One decoded message of the capture.
@@ -37,43 +55,45 @@ pub struct Msg {
     pub name: String,
     /// Record number of the request this message answers.
     pub pair: Option<u64>,
-    /// The decoded record (the NDJSON object of `aptscope decode --json`).
+    /// Its protocol.
+    pub proto: Proto,
+    /// The APT table's definition (what it does: `class=`, replies, timeout).
+    pub def: Option<&'static MsgDef>,
+    /// The Elliptec command table's row.
+    pub cmd: Option<&'static Cmd>,
+    /// Channel the message names (APT `chan_ident`, 1-based).
+    pub chan: Option<i64>,
+    /// Where it goes or comes from: APT destination address, Elliptec module address.
+    pub addr: Option<u8>,
+    /// `NAME`, `NAME SUB`, `NAME chN` or `NAME @A`.
+    label: String,
+    /// The decoded record as `aptscope decode --json` writes it: what display filters and the
+    /// field-by-field comparison read.
     pub rec: Value,
 }
 
 impl Msg {
-    /// The channel the record names, if any.
+    /// The channel the message names, if any.
     pub fn channel(&self) -> Option<i64> {
-        self.rec.get("channel").and_then(Value::as_i64)
+        self.chan
     }
 
     /// `NAME`, or `NAME chN` when it names a channel, or `NAME @addr` for Elliptec modules.
     pub fn label(&self) -> String {
-        label_of(&self.rec)
+        self.label.clone()
     }
 }
 
-/// `NAME`, `NAME chN`, `NAME @A` (Elliptec address), `NAME SUB` (sub-message) for a decoded
-/// record.
-pub fn label_of(rec: &Value) -> String {
-    let mut name = rec
-        .get("name")
-        .and_then(Value::as_str)
-        .unwrap_or("?")
-        .to_string();
-    if let Some(sub) = rec
-        .get("sub")
-        .and_then(|s| s.get("name"))
-        .and_then(Value::as_str)
-    {
-        name = format!("{name} {sub}");
+/// `NAME`, `NAME SUB` (sub-message), then ` chN` (channel) or ` @A` (Elliptec address).
+fn label(name: &str, sub: Option<&str>, chan: Option<i64>, ell_addr: Option<char>) -> String {
+    let mut s = name.to_string();
+    if let Some(sub) = sub {
+        s = format!("{s} {sub}");
     }
-    if let Some(c) = rec.get("channel").and_then(Value::as_i64) {
-        format!("{name} ch{c}")
-    } else if let Some(a) = rec.get("addr").and_then(Value::as_str) {
-        format!("{name} @{a}")
-    } else {
-        name.to_string()
+    match (chan, ell_addr) {
+        (Some(c), _) => format!("{s} ch{c}"),
+        (None, Some(a)) => format!("{s} @{a}"),
+        _ => s,
     }
 }
 
@@ -94,30 +114,7 @@ pub struct Script {
     replies: HashMap<u64, Vec<usize>>,
 }
 
-/// Which side a decoded record came from: the capture's direction when it has one, else the
-/// message's own (the APT table gives each message a direction; Elliptec commands from the host
-/// are lower case).
-fn side_of(rec: &Value) -> Option<Side> {
-    let pick = |k: &str| match rec.get(k).and_then(Value::as_str) {
-        Some("h2d") => Some(Side::Host),
-        Some("d2h") => Some(Side::Device),
-        _ => None,
-    };
-    pick("dir").or_else(|| pick("msg_dir"))
-}
-
-fn unhex(s: &str) -> Option<Vec<u8>> {
-    if !s.len().is_multiple_of(2) {
-        return None;
-    }
-    (0..s.len())
-        .step_by(2)
-        .map(|i| u8::from_str_radix(s.get(i..i + 2)?, 16).ok())
-        .collect()
-}
-
-/// Turns the records of a pipeline into messages and notes.
-#[derive(Debug, Default)]
+/// Turns the records of a decoder into messages and notes.
 pub struct Collector {
     /// Messages so far.
     pub msgs: Vec<Msg>,
@@ -125,116 +122,243 @@ pub struct Collector {
     pub notes: Vec<String>,
     /// The protocol, once detected.
     pub proto: Option<Proto>,
+    /// Renders a frame's record for [`Msg::rec`].
+    json: Renderer,
+}
+
+impl Default for Collector {
+    fn default() -> Self {
+        Collector {
+            msgs: vec![],
+            notes: vec![],
+            proto: None,
+            json: Renderer::new(Format::Json),
+        }
+    }
+}
+
+impl std::fmt::Debug for Collector {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Collector")
+            .field("msgs", &self.msgs.len())
+            .field("notes", &self.notes)
+            .field("proto", &self.proto)
+            .finish()
+    }
+}
+
+/// `kind: text` of each diagnostic, joined.
+fn diag_text(ds: impl Iterator<Item = Diag>) -> String {
+    ds.map(|d| format!("{}: {}", d.kind.name(), d.kind))
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 impl Collector {
-    /// Take one NDJSON record.
-    pub fn line(&mut self, line: &str) {
-        let rec: Value = match serde_json::from_str(line) {
-            Ok(v) => v,
-            Err(e) => {
-                self.notes.push(format!("unreadable record ({e}): {line}"));
-                return;
+    /// Take one record of the decoder.
+    pub fn record(&mut self, rec: &Record<'_>) {
+        match rec {
+            Record::Detect { proto, .. } => self.proto = Some(*proto),
+            Record::Apt(a) => {
+                let f = a.frame;
+                let diags: Vec<Diag> = f.diags().chain(a.pair.diags(f.offset)).collect();
+                let name = f.msg.map(|m| m.name);
+                let sub = f.sub.map(|s| s.name);
+                let chan = f.channel();
+                self.frame(
+                    rec,
+                    Parts {
+                        n: a.meta.n,
+                        offset: f.offset,
+                        ts_ns: a.meta.ts_ns,
+                        stream: a.meta.stream,
+                        side: a.dir().and_then(Side::of),
+                        raw: f.bytes,
+                        name,
+                        label: name.map(|n| label(n, sub, chan, None)),
+                        pair: a.pair.pair,
+                        proto: Proto::Apt,
+                        def: f.msg,
+                        cmd: None,
+                        chan,
+                        addr: Some(f.header().dst_byte()),
+                        diags,
+                    },
+                );
             }
-        };
-        match rec.get("type").and_then(Value::as_str) {
-            Some("frame") => self.frame(rec),
-            Some("detect") => {
-                self.proto = match rec.get("proto").and_then(Value::as_str) {
-                    Some("apt") => Some(Proto::Apt),
-                    Some("ell" | "elliptec") => Some(Proto::Elliptec),
-                    _ => self.proto,
-                }
+            Record::Ell(e) => {
+                let f = e.frame;
+                let name = f.cmd.map(|c| c.name);
+                self.frame(
+                    rec,
+                    Parts {
+                        n: e.meta.n,
+                        offset: f.offset,
+                        ts_ns: e.meta.ts_ns,
+                        stream: e.meta.stream,
+                        // The frame's own direction: host commands are lower case.
+                        side: Side::of(f.dir()),
+                        raw: f.bytes,
+                        name,
+                        label: name.map(|n| label(n, None, None, Some(f.addr_char()))),
+                        pair: e.obs.pair,
+                        proto: Proto::Elliptec,
+                        def: None,
+                        cmd: f.cmd,
+                        chan: None,
+                        addr: Some(f.addr),
+                        diags: f.diags().to_vec(),
+                    },
+                );
             }
-            // Garbage, damaged frames, file problems, unanswered requests: said, not replayed.
-            _ => self.notes.push(note(&rec)),
+            // Garbage, file problems, unanswered requests: said, not replayed.
+            Record::Garbage(g) => {
+                let d = match g.kind {
+                    Some(k) => aptscope_dissector::json::garbage_diag(g.offset, g.bytes.len(), k),
+                    None => Diag {
+                        offset: g.offset,
+                        kind: aptscope_dissector::DiagKind::Garbage {
+                            len: g.bytes.len() as u32,
+                        },
+                    },
+                };
+                self.notes.push(format!(
+                    "garbage @{}: {}",
+                    g.offset,
+                    diag_text(std::iter::once(d))
+                ));
+            }
+            Record::NoReply(r) => self
+                .notes
+                .push(format!("diag: {}", diag_text(std::iter::once(r.diag())))),
+            Record::Input(d) => self
+                .notes
+                .push(format!("input: {}", diag_text(std::iter::once(*d)))),
+            Record::FileDiag { offset, kind, msg } => {
+                self.notes.push(format!("input @{offset}: {kind}: {msg}"))
+            }
+            // What converts values and which ports exist: not problems.
+            Record::Units(_) | Record::Stream { .. } => {}
         }
     }
 
-    fn frame(&mut self, rec: Value) {
-        let n = rec.get("n").and_then(Value::as_u64).unwrap_or(0);
-        let raw = rec.get("raw").and_then(Value::as_str).and_then(unhex);
-        let name = rec.get("name").and_then(Value::as_str).map(str::to_string);
-        let (Some(side), Some(raw), Some(name)) = (side_of(&rec), raw, name) else {
+    fn frame(&mut self, rec: &Record<'_>, p: Parts<'_>) {
+        let what = |p: &Parts<'_>| {
+            format!(
+                "frame @{}{}: {}",
+                p.offset,
+                p.name.map(|n| format!(" {n}")).unwrap_or_default(),
+                diag_text(p.diags.iter().copied())
+            )
+        };
+        let (Some(side), Some(name), Some(label)) = (p.side, p.name, p.label.clone()) else {
             self.notes.push(format!(
-                "record {n}: no known sender or name, not replayed: {}",
-                note(&rec)
+                "record {}: no known sender or name, not replayed: {}",
+                p.n,
+                what(&p)
             ));
             return;
         };
-        let has_diag = rec
-            .get("diag")
-            .and_then(Value::as_array)
-            .is_some_and(|d| !d.is_empty());
-        if has_diag {
-            self.notes.push(note(&rec));
+        if !p.diags.is_empty() {
+            self.notes.push(what(&p));
         }
+        // The decoded fields for display filters and the field comparison, as `decode --json`
+        // has them: the one JSON parse left, until filters read records (issue 14, item 3).
+        let rec = serde_json::from_str(self.json.line(rec)).unwrap_or(Value::Null);
         self.msgs.push(Msg {
-            n,
-            ts_ns: rec.get("ts_ns").and_then(Value::as_u64),
+            n: p.n,
+            ts_ns: p.ts_ns,
             side,
-            stream: rec.get("stream").and_then(Value::as_u64).unwrap_or(0) as u32,
-            raw,
-            name,
-            pair: rec.get("pair").and_then(Value::as_u64),
+            stream: p.stream,
+            raw: p.raw.to_vec(),
+            name: name.to_string(),
+            pair: p.pair,
+            proto: p.proto,
+            def: p.def,
+            cmd: p.cmd,
+            chan: p.chan,
+            addr: p.addr,
+            label,
             rec,
         });
     }
 }
 
-/// A one-line description of a record that is not a plain message.
-fn note(rec: &Value) -> String {
-    let ty = rec.get("type").and_then(Value::as_str).unwrap_or("record");
-    let at = rec
-        .get("offset")
-        .and_then(Value::as_u64)
-        .map(|o| format!(" @{o}"))
-        .unwrap_or_default();
-    let diags: Vec<String> = rec
-        .get("diag")
-        .and_then(Value::as_array)
-        .map(|a| {
-            a.iter()
-                .map(|d| {
-                    let k = d.get("kind").and_then(Value::as_str).unwrap_or("?");
-                    match d.get("msg").and_then(Value::as_str) {
-                        Some(m) => format!("{k}: {m}"),
-                        None => k.to_string(),
-                    }
-                })
-                .collect()
-        })
-        .unwrap_or_default();
-    let name = rec
-        .get("name")
-        .and_then(Value::as_str)
-        .map(|s| format!(" {s}"))
-        .unwrap_or_default();
-    format!("{ty}{at}{name}: {}", diags.join("; "))
+/// What a frame record gives a message.
+struct Parts<'a> {
+    n: u64,
+    offset: u64,
+    ts_ns: Option<u64>,
+    stream: u32,
+    side: Option<Side>,
+    raw: &'a [u8],
+    name: Option<&'static str>,
+    label: Option<String>,
+    pair: Option<u64>,
+    proto: Proto,
+    def: Option<&'static MsgDef>,
+    cmd: Option<&'static Cmd>,
+    chan: Option<i64>,
+    addr: Option<u8>,
+    diags: Vec<Diag>,
+}
+
+#[cfg(test)]
+impl Msg {
+    /// A message from a hand-written record (test fixtures: `n`, `name`, `dir`, `raw` hex,
+    /// `ts_ns`, `pair`, `channel`, `dst.addr`, `fields`).
+    pub(crate) fn fixture(rec: Value) -> Msg {
+        let raw = rec["raw"].as_str().unwrap_or("");
+        let raw = (0..raw.len() / 2)
+            .filter_map(|i| u8::from_str_radix(&raw[2 * i..2 * i + 2], 16).ok())
+            .collect();
+        let name = rec["name"].as_str().unwrap_or("?").to_string();
+        let chan = rec["channel"].as_i64();
+        Msg {
+            n: rec["n"].as_u64().unwrap_or(0),
+            ts_ns: rec["ts_ns"].as_u64(),
+            side: if rec["dir"] == "h2d" {
+                Side::Host
+            } else {
+                Side::Device
+            },
+            stream: 0,
+            raw,
+            label: label(&name, None, chan, None),
+            def: aptscope_dissector::Table::global().msg_by_name(&name),
+            name,
+            pair: rec["pair"].as_u64(),
+            proto: Proto::Apt,
+            cmd: None,
+            chan,
+            addr: rec["dst"]["addr"].as_u64().map(|a| a as u8),
+            rec,
+        }
+    }
 }
 
 impl Script {
     /// Read and decode a capture file (`proto` forces the protocol; `None` detects it).
     pub fn load(path: &str, opts: OpenOptions, proto: Option<Proto>) -> io::Result<Script> {
         let (mut reader, format) = open(path, opts)?;
-        let mut p = Pipeline::new(proto, Format::Json);
+        let mut dec = Decoder::new(proto);
         let mut c = Collector {
             proto,
             ..Collector::default()
         };
-        let mut emit = |l: &str| -> Result<(), ()> {
-            c.line(l);
+        let mut emit = |r: &Record<'_>| -> Result<(), ()> {
+            c.record(r);
             Ok(())
         };
         while let Some(ev) = reader.next_event() {
             let _ = match ev {
-                Event::Chunk(ch) => p.push_chunk(ch.ctx(), ch.bytes, &mut emit),
-                Event::Diag(d) => p.file_diag(d.offset, d.kind, &d.msg, &mut emit),
+                Event::Chunk(ch) => dec.push(ch.ctx(), ch.bytes, &mut emit),
+                Event::Diag(d) => dec.file_diag(d.offset, d.kind, &d.msg, &mut emit),
                 Event::Stream(_) => Ok(()),
             };
         }
-        let _ = p.finish(&mut emit);
-        let proto = c.proto.or(p.proto()).unwrap_or(Proto::Apt);
+        let _ = dec.finish(&mut emit);
+        let proto = c.proto.or(dec.proto()).unwrap_or(Proto::Apt);
         Ok(Script::new(
             proto,
             c.msgs,
@@ -527,25 +651,48 @@ pub fn host_schedule(script: &Script, sel: &Selection, timing: Timing, loops: u3
 #[cfg(test)]
 mod tests {
     use super::*;
+    use aptscope_dissector::record::Ctx;
 
-    fn script(lines: &[&str]) -> Script {
+    /// Decode chunks (direction, time in ms, bytes) of one APT stream into a script.
+    fn decode(chunks: &[(Option<Dir>, u64, Vec<u8>)]) -> Script {
+        let mut dec = Decoder::new(Some(Proto::Apt));
         let mut c = Collector::default();
-        for l in lines {
-            c.line(l);
+        let mut emit = |r: &Record<'_>| -> Result<(), ()> {
+            c.record(r);
+            Ok(())
+        };
+        for (dir, ms, b) in chunks {
+            let ctx = Ctx {
+                stream: 0,
+                dir: *dir,
+                ts_ns: Some(ms * 1_000_000),
+            };
+            let _ = dec.push(ctx, b, &mut emit);
         }
+        let _ = dec.finish(&mut emit);
         Script::new(Proto::Apt, c.msgs, c.notes, "test".into())
     }
 
-    const S: &[&str] = &[
-        r#"{"n":1,"type":"frame","raw":"050000005001","name":"HW_REQ_INFO","dir":"h2d","ts_ns":1000000000,"stream":0,"diag":[]}"#,
-        r#"{"n":2,"type":"frame","raw":"0600","name":"HW_GET_INFO","dir":"d2h","ts_ns":1002000000,"pair":1,"stream":0,"diag":[]}"#,
-        r#"{"type":"garbage","offset":8,"diag":[{"kind":"garbage","msg":"3 bytes"}]}"#,
-        r#"{"n":4,"proto":"apt","type":"frame","raw":"230201005001","name":"MOD_IDENTIFY","msg_dir":"h2d","ts_ns":1500000000,"stream":0,"diag":[]}"#,
-    ];
+    fn script() -> Script {
+        // HW_GET_INFO: 84 data bytes from 0x50 to the host, then 3 bytes of garbage.
+        let mut info = vec![0x06, 0x00, 0x54, 0x00, 0x81, 0x50];
+        info.extend([0u8; 84]);
+        info.extend([0xFF, 0xFF, 0xFF]);
+        decode(&[
+            (
+                Some(Dir::HostToDevice),
+                1000,
+                vec![0x05, 0x00, 0x00, 0x00, 0x50, 0x01],
+            ),
+            (Some(Dir::DeviceToHost), 1002, info),
+            // No direction captured: the table's (MOD_IDENTIFY goes to the device).
+            (None, 1500, vec![0x23, 0x02, 0x01, 0x00, 0x50, 0x01]),
+        ])
+    }
 
     #[test]
     fn records_become_messages_and_notes() {
-        let s = script(S);
+        let s = script();
         assert_eq!(s.msgs.len(), 3);
         assert_eq!(s.msgs[1].side, Side::Device);
         assert_eq!(
@@ -554,14 +701,19 @@ mod tests {
             "side from the table's direction"
         );
         assert_eq!(s.msgs[0].raw, vec![5, 0, 0, 0, 0x50, 1]);
+        assert_eq!(s.msgs[1].raw.len(), 90, "the bytes come from the record");
+        assert_eq!(s.msgs[2].label(), "MOD_IDENTIFY ch1");
+        assert_eq!(s.msgs[2].addr, Some(0x50));
+        assert!(s.msgs[2].def.is_some_and(|d| d.name == "MOD_IDENTIFY"));
+        assert_eq!(s.msgs[1].rec["name"], "HW_GET_INFO");
         assert_eq!(s.replies_to(0), [1]);
-        assert_eq!(s.notes.len(), 1);
-        assert!(s.notes[0].contains("@8"), "{:?}", s.notes);
+        assert_eq!(s.notes.len(), 1, "{:?}", s.notes);
+        assert!(s.notes[0].starts_with("garbage @90"), "{:?}", s.notes);
     }
 
     #[test]
     fn schedule_keeps_gaps_scales_and_loops() {
-        let s = script(S);
+        let s = script();
         let sel = Selection::default();
         let plan = host_schedule(&s, &sel, Timing::default(), 1);
         assert_eq!(
@@ -588,7 +740,7 @@ mod tests {
 
     #[test]
     fn ranges_by_record_and_time() {
-        let s = script(S);
+        let s = script();
         let sel = Selection {
             from: Some(Bound::parse("2").unwrap()),
             ..Selection::default()
@@ -609,7 +761,7 @@ mod tests {
 
     #[test]
     fn filter_selects_host_messages() {
-        let s = script(S);
+        let s = script();
         let sel = Selection {
             filter: Some(Filter::parse("apt.name == \"MOD_IDENTIFY\"").unwrap()),
             ..Selection::default()

@@ -1,8 +1,11 @@
 //! Replays on a bench made of real pseudo-terminals: the simulator on one end, the replay on the
 //! other; and the replay impersonating a device towards a scripted host.
 
+#[path = "../../tests/common/scratch.rs"]
+mod scratch;
+
+use aptscope_capture::live::serial::LineSettings;
 use aptscope_capture::live::sim::{serve_pty, stop_pair, AptModel, AptSim, Pty, Simulator};
-use aptscope_capture::live::tap::LineSettings;
 use aptscope_capture::open::{create, Format, OpenOptions};
 use aptscope_capture::{Chunk, Direction, StreamInfo};
 use aptscope_dissector::apt::{encode, FieldValue};
@@ -12,27 +15,15 @@ use aptscope_replay::diff::Kind;
 use aptscope_replay::{
     run_device, run_host, DeviceOptions, DeviceOutcome, HostOptions, Link, Script, Selection, Side,
 };
+use scratch::scratch;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::thread;
 use std::time::{Duration, Instant};
 
 const MS: u64 = 1_000_000;
 /// 2026-11-02T10:00:00Z: the virtual capture's start.
 const EPOCH: u64 = 1_793_613_600_000_000_000;
-
-fn scratch(name: &str) -> PathBuf {
-    static N: AtomicUsize = AtomicUsize::new(0);
-    let d = std::env::temp_dir().join(format!(
-        "aptscope-replay-{}-{}-{name}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::SeqCst)
-    ));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 /// An APT message from the host to the USB unit, built from the table.
 fn enc(name: &str, vals: &[(&str, i64)]) -> Vec<u8> {

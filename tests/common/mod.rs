@@ -1,6 +1,10 @@
 //! What the end-to-end tests share: running the `aptscope` binary.
 #![allow(dead_code)]
 
+mod scratch;
+
+#[allow(unused_imports)] // Not every test file makes directories.
+pub use scratch::scratch;
 use std::io::Write;
 use std::process::{Command, Stdio};
 

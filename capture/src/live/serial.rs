@@ -7,11 +7,77 @@
 //! I/O goes through a second, non-blocking descriptor of the same port, waited on with `poll`,
 //! which leaves the signal mask alone.
 
-use super::tap::LineSettings;
+use aptscope_dissector::detect::Proto;
 use nix::fcntl::OFlag;
+use std::fmt;
 use std::fs::File;
 use std::io;
 use std::os::unix::fs::OpenOptionsExt;
+
+/// Flow control on the real port.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Flow {
+    /// None.
+    None,
+    /// Hardware, RTS/CTS (APT controllers).
+    RtsCts,
+    /// Software, XON/XOFF.
+    XonXoff,
+}
+
+impl Flow {
+    /// Parse `none`, `rtscts` (`hw`, `rts/cts`), `xonxoff` (`sw`).
+    pub fn parse(s: &str) -> Option<Flow> {
+        Some(match s.to_ascii_lowercase().as_str() {
+            "none" | "off" => Flow::None,
+            "rtscts" | "rts/cts" | "hw" | "hardware" => Flow::RtsCts,
+            "xonxoff" | "xon/xoff" | "sw" | "software" => Flow::XonXoff,
+            _ => return None,
+        })
+    }
+
+    pub(crate) fn to_serialport(self) -> serialport::FlowControl {
+        match self {
+            Flow::None => serialport::FlowControl::None,
+            Flow::RtsCts => serialport::FlowControl::Hardware,
+            Flow::XonXoff => serialport::FlowControl::Software,
+        }
+    }
+}
+
+/// Line settings of the real port: always 8 data bits, no parity, one stop bit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LineSettings {
+    /// Baud rate.
+    pub baud: u32,
+    /// Flow control.
+    pub flow: Flow,
+}
+
+impl LineSettings {
+    /// The protocol's settings (APT: 115200 8N1 RTS/CTS; Elliptec: 9600 8N1), with overrides.
+    pub fn for_proto(proto: Proto, baud: Option<u32>, flow: Option<Flow>) -> LineSettings {
+        let (b, f) = match proto {
+            Proto::Apt => (115_200, Flow::RtsCts),
+            Proto::Elliptec => (9_600, Flow::None),
+        };
+        LineSettings {
+            baud: baud.unwrap_or(b),
+            flow: flow.unwrap_or(f),
+        }
+    }
+}
+
+impl fmt::Display for LineSettings {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} 8N1", self.baud)?;
+        match self.flow {
+            Flow::None => Ok(()),
+            Flow::RtsCts => f.write_str(" RTS/CTS"),
+            Flow::XonXoff => f.write_str(" XON/XOFF"),
+        }
+    }
+}
 
 /// A serial port open for polled I/O.
 #[derive(Debug)]

@@ -14,14 +14,19 @@
 //! pty, and the host script writing to the tap's link. The tests compare the tap's capture with
 //! what the script sent and read, and with the virtual recording.
 
-use super::sim::{parse_modules, serve_pty, stop_pair, AptModel, AptSim, EllSim, Pty, Simulator};
+use super::sim::{
+    parse_modules, serve_pty, stop_pair, AptModel, AptSim, EllSim, Pty, SimError, Simulator,
+};
 use super::tap::{tap_main, TapOptions, TapStats};
 use crate::model::{Direction, Event, OwnedChunk, StreamInfo};
 use crate::open::{create, open, Format, OpenOptions};
-use aptscope_dissector::apt::{encode_named, AptFrame, AptFramer, Item as AptItem, Named};
+use aptscope_dissector::apt::{encode_named, EncodeError, Named};
 use aptscope_dissector::detect::Proto;
-use aptscope_dissector::ell::{EllFrame, EllFramer, Item as EllItem};
+use aptscope_dissector::record::{Ctx, Decoder, Record};
+use aptscope_dissector::table::Dir;
+use aptscope_dissector::DiagKind;
 use aptscope_dissector::Table;
+use std::convert::Infallible;
 use std::io::{self, Read, Write};
 use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
@@ -101,6 +106,87 @@ pub enum Device {
     Elliptec(String),
 }
 
+/// Why a scripted session could not be built, recorded or run.
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError {
+    /// A script argument that is not `name=value`.
+    #[error("`{0}` is not name=value")]
+    NotNameValue(String),
+    /// A message the table cannot encode.
+    #[error("{name}: {source}")]
+    Encode {
+        /// The message asked for.
+        name: String,
+        /// Why.
+        source: EncodeError,
+    },
+    /// No session of this name.
+    #[error("no session named {0}")]
+    Unknown(String),
+    /// The device could not be simulated.
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    /// The simulator keeps a deadline it never meets.
+    #[error("the simulator does not advance")]
+    Stuck,
+    /// An expected reply did not come (virtual clock).
+    #[error("step {step}: no {name} within {ms} ms")]
+    NoReply {
+        /// Index of the step.
+        step: usize,
+        /// The reply expected.
+        name: String,
+        /// The time it had.
+        ms: u64,
+    },
+    /// An expected reply did not come (real time).
+    #[error("step {step}: no {name} in time")]
+    Late {
+        /// Index of the step.
+        step: usize,
+        /// The reply expected.
+        name: String,
+    },
+    /// The tap's link did not appear.
+    #[error("the tap did not start")]
+    TapNotStarted,
+    /// The tap's link could not be opened.
+    #[error("{path}: {source}")]
+    Link {
+        /// The link.
+        path: String,
+        /// What the system said.
+        source: io::Error,
+    },
+    /// Input or output failed.
+    #[error("{0}")]
+    Io(#[from] io::Error),
+    /// A thread of the run panicked.
+    #[error("the {0} panicked")]
+    Panicked(&'static str),
+    /// The run failed, and so did the tap.
+    #[error("{run} (tap: {tap})")]
+    AndTap {
+        /// What failed in the run.
+        run: Box<SessionError>,
+        /// The tap's error.
+        tap: io::Error,
+    },
+    /// A part of a session failed.
+    #[error("{session} ({port}): {error}")]
+    In {
+        /// The session.
+        session: String,
+        /// The part's port.
+        port: String,
+        /// What failed.
+        error: Box<SessionError>,
+    },
+    /// The simulator's thread failed.
+    #[error("simulator: {0}")]
+    Simulator(io::Error),
+}
+
 impl Device {
     /// The protocol it speaks.
     pub fn proto(&self) -> Proto {
@@ -111,7 +197,7 @@ impl Device {
     }
 
     /// A fresh simulator of it.
-    pub fn simulator(&self) -> Result<Box<dyn Simulator + Send>, String> {
+    pub fn simulator(&self) -> Result<Box<dyn Simulator + Send>, SessionError> {
         Ok(match self {
             Device::Apt(m) => Box::new(AptSim::new(*m)),
             Device::Elliptec(mods) => Box::new(EllSim::new(&parse_modules(mods)?)?),
@@ -166,7 +252,7 @@ pub struct Recording {
 /// name, or `NAME:SUB` for a sub-message of a PARAMS group (`LA_SET_PARAMS:SETPOINT`); `args`
 /// are `field=value` pairs separated by spaces (values as `encode` reads them: numbers, enum
 /// labels, flags joined by `|`); the frame goes from the host to `dst`.
-pub fn apt_frame(name: &str, args: &str, dst: u8) -> Result<Vec<u8>, String> {
+pub fn apt_frame(name: &str, args: &str, dst: u8) -> Result<Vec<u8>, SessionError> {
     let (mname, sub) = match name.split_once(':') {
         Some((m, s)) => (m, Some(s)),
         None => (name, None),
@@ -175,7 +261,7 @@ pub fn apt_frame(name: &str, args: &str, dst: u8) -> Result<Vec<u8>, String> {
         .split_whitespace()
         .map(|a| {
             a.split_once('=')
-                .ok_or_else(|| format!("`{a}` is not name=value"))
+                .ok_or_else(|| SessionError::NotNameValue(a.to_string()))
         })
         .collect::<Result<_, _>>()?;
     encode_named(
@@ -189,7 +275,10 @@ pub fn apt_frame(name: &str, args: &str, dst: u8) -> Result<Vec<u8>, String> {
             src: HOST,
         },
     )
-    .map_err(|e| format!("{name}: {e}"))
+    .map_err(|source| SessionError::Encode {
+        name: name.to_string(),
+        source,
+    })
 }
 
 /// A host script being written; the first error (a message the table cannot encode) is kept
@@ -197,7 +286,7 @@ pub fn apt_frame(name: &str, args: &str, dst: u8) -> Result<Vec<u8>, String> {
 #[derive(Debug, Default)]
 pub struct Script {
     steps: Vec<Step>,
-    err: Option<String>,
+    err: Option<SessionError>,
 }
 
 impl Script {
@@ -264,7 +353,7 @@ impl Script {
     }
 
     /// The steps, or the first error.
-    pub fn finish(&mut self) -> Result<Vec<Step>, String> {
+    pub fn finish(&mut self) -> Result<Vec<Step>, SessionError> {
         match self.err.take() {
             Some(e) => Err(e),
             None => Ok(std::mem::take(&mut self.steps)),
@@ -277,7 +366,7 @@ impl Script {
 const USB: u8 = 0x50;
 const RACK: u8 = 0x11;
 
-fn part(device: Device, port: &str, s: &mut Script) -> Result<Part, String> {
+fn part(device: Device, port: &str, s: &mut Script) -> Result<Part, SessionError> {
     Ok(Part {
         device,
         port: port.to_string(),
@@ -287,7 +376,7 @@ fn part(device: Device, port: &str, s: &mut Script) -> Result<Part, String> {
 
 /// KDC101: identify, enable, velocity parameters, status updates, home, an absolute and a
 /// relative move, the position, updates off.
-fn kdc101() -> Result<Vec<Part>, String> {
+fn kdc101() -> Result<Vec<Part>, SessionError> {
     let mut s = Script::new();
     s.ask("HW_REQ_INFO", USB, "", "HW_GET_INFO")
         .apt(
@@ -351,7 +440,7 @@ fn kdc101() -> Result<Vec<Part>, String> {
 
 /// BSC203: bay discovery on the rack, each bay identified and enabled, three moves at once,
 /// their completions as they come, a status request per bay.
-fn bsc203() -> Result<Vec<Part>, String> {
+fn bsc203() -> Result<Vec<Part>, SessionError> {
     let mut s = Script::new();
     s.ask("HW_REQ_INFO", RACK, "", "HW_GET_INFO");
     for bay in 0..4 {
@@ -400,7 +489,7 @@ fn bsc203() -> Result<Vec<Part>, String> {
 
 /// KPZ101: identify, enable, open loop, the maximum output, two output voltages with status
 /// updates in between, the status bits.
-fn kpz101() -> Result<Vec<Part>, String> {
+fn kpz101() -> Result<Vec<Part>, SessionError> {
     let mut s = Script::new();
     s.ask("HW_REQ_INFO", USB, "", "HW_GET_INFO")
         .apt(
@@ -454,7 +543,7 @@ fn kpz101() -> Result<Vec<Part>, String> {
 
 /// A TLS001 laser source, a TTC001 TEC controller and a KPA101 position aligner on three ports:
 /// LA_, TEC_ and QUAD_ PARAMS sub-messages set and requested, one status update each.
-fn laser_tec_quad() -> Result<Vec<Part>, String> {
+fn laser_tec_quad() -> Result<Vec<Part>, SessionError> {
     let la = "LA_GET_PARAMS";
     let mut s = Script::new();
     s.ask("HW_REQ_INFO", USB, "", "HW_GET_INFO")
@@ -512,7 +601,7 @@ fn laser_tec_quad() -> Result<Vec<Part>, String> {
 
 /// An Elliptec bus of an ELL14 rotation mount (0), an ELL9 slider (1) and an ELL17 linear stage
 /// (2): identify, home, moves, positions, the ELL17 readdressed to 5 and used there.
-fn elliptec() -> Result<Vec<Part>, String> {
+fn elliptec() -> Result<Vec<Part>, SessionError> {
     let t = REPLY_TIMEOUT_NS;
     let mv = MOVE_TIMEOUT_NS;
     let mut s = Script::new();
@@ -539,14 +628,14 @@ fn elliptec() -> Result<Vec<Part>, String> {
 }
 
 /// The scripted session `name` (any of [`NAMES`] but `damaged`, which is made from `kdc101`).
-pub fn session(name: &str) -> Result<Session, String> {
+pub fn session(name: &str) -> Result<Session, SessionError> {
     let parts = match name {
         "kdc101" => kdc101()?,
         "bsc203" => bsc203()?,
         "kpz101" => kpz101()?,
         "laser-tec-quad" => laser_tec_quad()?,
         "elliptec" => elliptec()?,
-        _ => return Err(format!("no session named {name}")),
+        _ => return Err(SessionError::Unknown(name.to_string())),
     };
     Ok(Session {
         name: name.to_string(),
@@ -556,11 +645,9 @@ pub fn session(name: &str) -> Result<Session, String> {
 
 // ------------------------------------------------------------------------------- the host's ear
 
-/// What the host reads, and the names of the replies in it.
+/// What the host reads, and the names of the replies in it (decoded by the decode chain).
 struct HostRx {
-    proto: Proto,
-    apt: AptFramer<'static>,
-    line: Vec<u8>,
+    dec: Decoder,
     names: Vec<String>,
     cursor: usize,
 }
@@ -568,45 +655,21 @@ struct HostRx {
 impl HostRx {
     fn new(proto: Proto) -> HostRx {
         HostRx {
-            proto,
-            apt: AptFramer::new(Table::global()),
-            line: vec![],
+            dec: Decoder::new(Some(proto)),
             names: vec![],
             cursor: 0,
         }
     }
 
     fn push(&mut self, b: &[u8]) {
-        match self.proto {
-            Proto::Apt => {
-                self.apt.push(b);
-                while let Some(item) = self.apt.next_item() {
-                    if let AptItem::Frame {
-                        bytes,
-                        truncated: false,
-                        ..
-                    } = item
-                    {
-                        if let Some(f) = AptFrame::decode(Table::global(), 0, bytes, false) {
-                            self.names.push(f.name().unwrap_or("?").to_string());
-                        }
-                    }
-                }
-            }
-            Proto::Elliptec => {
-                for &c in b {
-                    if c == b'\n' {
-                        let l: Vec<u8> = self.line.drain(..).filter(|c| *c != b'\r').collect();
-                        if l.len() >= 3 {
-                            self.names
-                                .push(String::from_utf8_lossy(&l[..3]).to_ascii_uppercase());
-                        }
-                    } else {
-                        self.line.push(c);
-                    }
-                }
-            }
-        }
+        let ctx = Ctx {
+            stream: 0,
+            dir: Some(Dir::DeviceToHost),
+            ts_ns: None,
+        };
+        let mut got = vec![];
+        let Ok(()) = self.dec.push(ctx, b, &mut |r| name_of(r, &mut got));
+        self.names.extend(got.into_iter().map(|(_, n)| n));
     }
 
     /// Take the next reply named `name` (skipping others before it).
@@ -651,7 +714,7 @@ impl Virtual<'_> {
     }
 
     /// Run the simulator up to `to`, recording what it sends when it sends it.
-    fn advance(&mut self, to: u64) -> Result<(), String> {
+    fn advance(&mut self, to: u64) -> Result<(), SessionError> {
         for _ in 0..MAX_ITER {
             let Some(d) = self.sim.next_deadline() else {
                 break;
@@ -677,7 +740,7 @@ impl Virtual<'_> {
             .next_deadline()
             .is_some_and(|d| d.max(self.now) <= to)
         {
-            return Err("the simulator does not advance".into());
+            return Err(SessionError::Stuck);
         }
         self.now = self.now.max(to);
         Ok(())
@@ -695,7 +758,7 @@ pub fn record_virtual(
     steps: &[Step],
     stream: u32,
     start_ns: u64,
-) -> Result<Vec<OwnedChunk>, String> {
+) -> Result<Vec<OwnedChunk>, SessionError> {
     let per_byte = byte_ns(proto);
     let mut v = Virtual {
         sim,
@@ -725,10 +788,11 @@ pub fn record_virtual(
                             v.advance(d.max(v.now))?
                         }
                         _ => {
-                            return Err(format!(
-                                "step {i}: no {name} within {} ms",
-                                timeout_ns / MS
-                            ))
+                            return Err(SessionError::NoReply {
+                                step: i,
+                                name: name.clone(),
+                                ms: timeout_ns / MS,
+                            })
                         }
                     }
                 }
@@ -742,7 +806,7 @@ pub fn record_virtual(
 
 /// Record a session on the virtual clock from [`EPOCH_NS`]: `damaged` is the `kdc101` session
 /// damaged by [`damage`]; the others come from [`session`].
-pub fn record(name: &str) -> Result<Recording, String> {
+pub fn record(name: &str) -> Result<Recording, SessionError> {
     if name == "damaged" {
         let mut r = record("kdc101")?;
         r.name = name.to_string();
@@ -762,8 +826,13 @@ pub fn record(name: &str) -> Result<Recording, String> {
             settings: Some(p.device.settings().to_string()),
         });
         let mut sim = p.device.simulator()?;
-        let c = record_virtual(&mut *sim, p.device.proto(), &p.steps, id, start)
-            .map_err(|e| format!("{name} ({}): {e}", p.port))?;
+        let c = record_virtual(&mut *sim, p.device.proto(), &p.steps, id, start).map_err(|e| {
+            SessionError::In {
+                session: name.to_string(),
+                port: p.port.clone(),
+                error: Box::new(e),
+            }
+        })?;
         let end = c.last().and_then(|c| c.ts_ns).unwrap_or(start);
         start = end + END_DRAIN_NS + PART_GAP_NS;
         chunks.extend(c);
@@ -822,115 +891,63 @@ pub fn damage(chunks: &[OwnedChunk]) -> Vec<OwnedChunk> {
 }
 
 /// For each chunk, the names of the frames that end in it (APT message names; Elliptec address
-/// and command as sent: `0in`, `0PO`), one framer per stream and direction.
+/// and command as sent: `0in`, `0PO`), from the decode chain (one lane per stream and
+/// direction).
 pub fn chunk_names(proto: Proto, chunks: &[OwnedChunk]) -> Vec<Vec<String>> {
-    Lanes::new(proto).names(chunks)
+    names(proto, chunks)
+        .0
+        .into_iter()
+        .map(|c| c.into_iter().map(|(_, n)| n).collect())
+        .collect()
 }
 
 /// The frame names of a capture in order, with directions: [`chunk_names`] flattened, then
-/// the frames the framers only complete at the end of the capture.
+/// the frames only completed at the end of the capture.
 pub fn frame_names(proto: Proto, chunks: &[OwnedChunk]) -> Vec<(Direction, String)> {
-    let mut lanes = Lanes::new(proto);
-    let names = lanes.names(chunks);
+    let (per_chunk, end) = names(proto, chunks);
     let mut out = vec![];
-    for (c, n) in chunks.iter().zip(names) {
-        out.extend(n.into_iter().map(|n| (c.dir, n)));
+    for n in per_chunk {
+        out.extend(n);
     }
-    for ((_, dir), lane) in &mut lanes.lanes {
-        out.extend(lane.finish().into_iter().map(|n| (*dir, n)));
-    }
+    out.extend(end);
     out
 }
 
-/// One framer per (stream, direction).
-struct Lanes {
+/// The names of the whole frames completed while each chunk is fed, and at the end, with the
+/// direction each frame was captured in.
+#[allow(clippy::type_complexity)]
+fn names(
     proto: Proto,
-    lanes: Vec<((u32, Direction), Lane)>,
+    chunks: &[OwnedChunk],
+) -> (Vec<Vec<(Direction, String)>>, Vec<(Direction, String)>) {
+    let mut dec = Decoder::new(Some(proto));
+    let mut per_chunk = vec![];
+    for c in chunks {
+        let mut got = vec![];
+        let Ok(()) = dec.push(c.as_chunk().ctx(), &c.bytes, &mut |r| name_of(r, &mut got));
+        per_chunk.push(got);
+    }
+    let mut end = vec![];
+    let Ok(()) = dec.finish(&mut |r| name_of(r, &mut end));
+    (per_chunk, end)
 }
 
-impl Lanes {
-    fn new(proto: Proto) -> Lanes {
-        Lanes {
-            proto,
-            lanes: vec![],
-        }
+/// A whole frame's name (APT message name; Elliptec address and command as sent) and the
+/// direction it was captured in.
+fn name_of(r: &Record<'_>, out: &mut Vec<(Direction, String)>) -> Result<(), Infallible> {
+    let truncated = |d: aptscope_dissector::Diag| matches!(d.kind, DiagKind::Truncated { .. });
+    match r {
+        Record::Apt(a) if !a.frame.diags().any(truncated) => out.push((
+            Direction::from_dir(a.meta.cap_dir),
+            a.frame.name().unwrap_or("?").to_string(),
+        )),
+        Record::Ell(e) if !e.frame.diags().iter().copied().any(truncated) => out.push((
+            Direction::from_dir(e.meta.cap_dir),
+            format!("{}{}", e.frame.addr_char(), e.frame.code_str()),
+        )),
+        _ => {}
     }
-
-    fn names(&mut self, chunks: &[OwnedChunk]) -> Vec<Vec<String>> {
-        let mut out = vec![];
-        for c in chunks {
-            let key = (c.stream, c.dir);
-            let i = match self.lanes.iter().position(|(k, _)| *k == key) {
-                Some(i) => i,
-                None => {
-                    self.lanes.push((key, Lane::new(self.proto)));
-                    self.lanes.len() - 1
-                }
-            };
-            out.push(self.lanes[i].1.push(&c.bytes));
-        }
-        out
-    }
-}
-
-struct Lane {
-    proto: Proto,
-    apt: AptFramer<'static>,
-    ell: EllFramer,
-}
-
-impl Lane {
-    fn new(proto: Proto) -> Lane {
-        Lane {
-            proto,
-            apt: AptFramer::new(Table::global()),
-            ell: EllFramer::new(),
-        }
-    }
-
-    /// The frames completed at the end of the stream.
-    fn finish(&mut self) -> Vec<String> {
-        self.apt.finish();
-        self.ell.finish();
-        self.push(&[])
-    }
-
-    fn push(&mut self, b: &[u8]) -> Vec<String> {
-        let mut out = vec![];
-        match self.proto {
-            Proto::Apt => {
-                self.apt.push(b);
-                while let Some(item) = self.apt.next_item() {
-                    if let AptItem::Frame {
-                        bytes,
-                        truncated: false,
-                        ..
-                    } = item
-                    {
-                        if let Some(f) = AptFrame::decode(Table::global(), 0, bytes, false) {
-                            out.push(f.name().unwrap_or("?").to_string());
-                        }
-                    }
-                }
-            }
-            Proto::Elliptec => {
-                self.ell.push(b);
-                while let Some(item) = self.ell.next_item() {
-                    if let EllItem::Frame {
-                        bytes,
-                        truncated: false,
-                        ..
-                    } = item
-                    {
-                        if let Some(f) = EllFrame::decode(0, bytes, false) {
-                            out.push(format!("{}{}", f.addr_char(), f.code_str()));
-                        }
-                    }
-                }
-            }
-        }
-        out
-    }
+    Ok(())
 }
 
 // ------------------------------------------------------------------------------------ writing
@@ -1036,20 +1053,16 @@ impl HostPort {
     }
 }
 
-fn other(e: impl std::fmt::Display) -> String {
-    e.to_string()
-}
-
 /// Run `steps` in real time: `device` simulated on a pseudo-terminal, the tap between it and a
 /// new pseudo-terminal linked at `dir/tty`, writing `dir/tap.pcapng`, and the script as the
 /// host program on the link. Every wait of the script gets 20 s on top (it only matters when
 /// something is broken). The tap is stopped once the script is done, then the
 /// simulator.
-pub fn run_real(device: &Device, steps: &[Step], dir: &Path) -> Result<RealRun, String> {
+pub fn run_real(device: &Device, steps: &[Step], dir: &Path) -> Result<RealRun, SessionError> {
     let proto = device.proto();
-    let pty = Pty::open().map_err(other)?;
+    let pty = Pty::open()?;
     let dev_path = pty.path().to_string_lossy().into_owned();
-    let (sim_stop, sim_signal) = stop_pair().map_err(other)?;
+    let (sim_stop, sim_signal) = stop_pair()?;
     let mut sim = device.simulator()?;
     let sim_thread = std::thread::spawn(move || serve_pty(&mut *sim, pty, Some(&sim_signal), &[]));
 
@@ -1064,12 +1077,12 @@ pub fn run_real(device: &Device, steps: &[Step], dir: &Path) -> Result<RealRun, 
     let tap_stop = opts.stop.clone();
     let tap_thread = std::thread::spawn(move || tap_main(opts));
 
-    let result = (|| -> Result<(Vec<u8>, Vec<u8>), String> {
+    let result = (|| -> Result<(Vec<u8>, Vec<u8>), SessionError> {
         // The link appears once the tap has opened the device and made its pseudo-terminal.
         let t0 = Instant::now();
         while std::fs::read_link(&link).is_err() {
             if t0.elapsed() > REAL_SLACK || tap_thread.is_finished() {
-                return Err("the tap did not start".into());
+                return Err(SessionError::TapNotStarted);
             }
             std::thread::sleep(Duration::from_millis(5));
         }
@@ -1078,7 +1091,10 @@ pub fn run_real(device: &Device, steps: &[Step], dir: &Path) -> Result<RealRun, 
             .write(true)
             .custom_flags(nix::fcntl::OFlag::O_NOCTTY.bits())
             .open(&link)
-            .map_err(|e| format!("{}: {e}", link.display()))?;
+            .map_err(|source| SessionError::Link {
+                path: link.display().to_string(),
+                source,
+            })?;
         let mut host = HostPort {
             f,
             rx: HostRx::new(proto),
@@ -1088,22 +1104,25 @@ pub fn run_real(device: &Device, steps: &[Step], dir: &Path) -> Result<RealRun, 
         for (i, step) in steps.iter().enumerate() {
             match step {
                 Step::Send { bytes, .. } => {
-                    host.f.write_all(bytes).map_err(other)?;
+                    host.f.write_all(bytes)?;
                     sent.extend_from_slice(bytes);
                 }
                 Step::Expect { name, timeout_ns } => {
                     let until = Instant::now() + Duration::from_nanos(*timeout_ns) + REAL_SLACK;
                     while !host.rx.take(name) {
                         if Instant::now() >= until {
-                            return Err(format!("step {i}: no {name} in time"));
+                            return Err(SessionError::Late {
+                                step: i,
+                                name: name.clone(),
+                            });
                         }
-                        host.read_some(until).map_err(other)?;
+                        host.read_some(until)?;
                     }
                 }
                 Step::Wait(d) => {
                     let until = Instant::now() + Duration::from_nanos(*d);
                     while Instant::now() < until {
-                        host.read_some(until).map_err(other)?;
+                        host.read_some(until)?;
                     }
                 }
             }
@@ -1113,19 +1132,24 @@ pub fn run_real(device: &Device, steps: &[Step], dir: &Path) -> Result<RealRun, 
     tap_stop.stop();
     let stats = tap_thread
         .join()
-        .map_err(|_| "the tap panicked".to_string())?
-        .map_err(other);
+        .map_err(|_| SessionError::Panicked("tap"))?;
     sim_stop.stop();
     let sim_result = sim_thread
         .join()
-        .map_err(|_| "the simulator panicked".to_string())?;
+        .map_err(|_| SessionError::Panicked("simulator"))?;
     let (sent, read) = match (result, &stats) {
         (Ok(r), _) => r,
         (Err(e), Ok(_)) => return Err(e),
-        (Err(e), Err(t)) => return Err(format!("{e} (tap: {t})")),
+        (Err(e), Err(_)) => {
+            let tap = stats.err().unwrap_or_else(|| io::Error::other("?"));
+            return Err(SessionError::AndTap {
+                run: Box::new(e),
+                tap,
+            });
+        }
     };
     let stats = stats?;
-    sim_result.map_err(|e| format!("simulator: {e}"))?;
+    sim_result.map_err(SessionError::Simulator)?;
     Ok(RealRun {
         capture,
         sent,

@@ -35,7 +35,7 @@
 //!   device late) and counted in [`TapStats::discarded_h2d`].
 #![forbid(unsafe_code)]
 
-use crate::live::serial::{self, SerialFd};
+use crate::live::serial::{self, Flow, LineSettings, SerialFd};
 use crate::model::{Chunk, Direction, StreamInfo, Writer};
 use crate::open::Format;
 use crate::pcap::{PcapNgOut, PcapOut};
@@ -47,7 +47,6 @@ use nix::errno::Errno;
 use nix::fcntl::{fcntl, FcntlArg, OFlag};
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use std::collections::VecDeque;
-use std::fmt;
 use std::fs::File;
 use std::io::{self, BufWriter, Read, Write};
 use std::os::fd::{AsFd, BorrowedFd, OwnedFd};
@@ -74,71 +73,6 @@ const FLUSH_EVERY: Duration = Duration::from_secs(1);
 const RETRY_EVERY: Duration = Duration::from_millis(500);
 /// Bytes read at once.
 const READ_BUF: usize = 4096;
-
-/// Flow control on the real port.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Flow {
-    /// None.
-    None,
-    /// Hardware, RTS/CTS (APT controllers).
-    RtsCts,
-    /// Software, XON/XOFF.
-    XonXoff,
-}
-
-impl Flow {
-    /// Parse `none`, `rtscts` (`hw`, `rts/cts`), `xonxoff` (`sw`).
-    pub fn parse(s: &str) -> Option<Flow> {
-        Some(match s.to_ascii_lowercase().as_str() {
-            "none" | "off" => Flow::None,
-            "rtscts" | "rts/cts" | "hw" | "hardware" => Flow::RtsCts,
-            "xonxoff" | "xon/xoff" | "sw" | "software" => Flow::XonXoff,
-            _ => return None,
-        })
-    }
-
-    pub(crate) fn to_serialport(self) -> serialport::FlowControl {
-        match self {
-            Flow::None => serialport::FlowControl::None,
-            Flow::RtsCts => serialport::FlowControl::Hardware,
-            Flow::XonXoff => serialport::FlowControl::Software,
-        }
-    }
-}
-
-/// Line settings of the real port: always 8 data bits, no parity, one stop bit.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct LineSettings {
-    /// Baud rate.
-    pub baud: u32,
-    /// Flow control.
-    pub flow: Flow,
-}
-
-impl LineSettings {
-    /// The protocol's settings (APT: 115200 8N1 RTS/CTS; Elliptec: 9600 8N1), with overrides.
-    pub fn for_proto(proto: Proto, baud: Option<u32>, flow: Option<Flow>) -> LineSettings {
-        let (b, f) = match proto {
-            Proto::Apt => (115_200, Flow::RtsCts),
-            Proto::Elliptec => (9_600, Flow::None),
-        };
-        LineSettings {
-            baud: baud.unwrap_or(b),
-            flow: flow.unwrap_or(f),
-        }
-    }
-}
-
-impl fmt::Display for LineSettings {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{} 8N1", self.baud)?;
-        match self.flow {
-            Flow::None => Ok(()),
-            Flow::RtsCts => f.write_str(" RTS/CTS"),
-            Flow::XonXoff => f.write_str(" XON/XOFF"),
-        }
-    }
-}
 
 #[derive(Debug, Default)]
 struct StopInner {
@@ -1787,24 +1721,12 @@ mod tests {
     use super::*;
     use crate::model::Event;
     use crate::open::{open, OpenOptions};
+    use crate::scratch::scratch;
     use std::os::unix::fs::OpenOptionsExt;
     use std::path::Path;
-    use std::sync::atomic::AtomicUsize;
 
     /// Generous: only reached when something is broken.
     const DEADLINE: Duration = Duration::from_secs(60);
-
-    fn scratch(name: &str) -> PathBuf {
-        static N: AtomicUsize = AtomicUsize::new(0);
-        let d = std::env::temp_dir().join(format!(
-            "aptscope-tap-{}-{}-{name}",
-            std::process::id(),
-            N.fetch_add(1, Ordering::SeqCst)
-        ));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
-    }
 
     /// A pseudo-terminal standing in for a device: the test holds the master, the tap opens
     /// the slave path like a serial port.

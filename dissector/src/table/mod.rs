@@ -6,7 +6,7 @@ mod model;
 mod parse;
 
 pub use model::*;
-pub use parse::{example_bytes, parse_int};
+pub use parse::{example_bytes, parse_int, TableError, TableErrors};
 
 use std::sync::OnceLock;
 
@@ -44,7 +44,7 @@ impl Table {
         static T: OnceLock<Table> = OnceLock::new();
         T.get_or_init(|| match Table::from_sources(sources::SOURCES) {
             Ok(t) => t,
-            Err(e) => panic!("the embedded message table has errors:\n{}", e.join("\n")),
+            Err(e) => panic!("the embedded message table has errors:\n{e}"),
         })
     }
 
@@ -125,7 +125,7 @@ impl Table {
     }
 
     /// Parse table files (`(file name, text)`, in order).
-    pub fn from_sources(src: &[(&'static str, &'static str)]) -> Result<Table, Vec<String>> {
+    pub fn from_sources(src: &[(&'static str, &'static str)]) -> Result<Table, TableErrors> {
         let data = parse::parse_sources(src)?;
         let mut by_id = vec![u16::MAX; 65536].into_boxed_slice();
         for (i, m) in data.msgs.iter().enumerate() {
@@ -274,24 +274,62 @@ impl Table {
     pub fn replies_of<'a>(&'a self, m: &'a MsgDef) -> Vec<&'a MsgDef> {
         let mut out: Vec<&MsgDef> = m.reply.iter().filter_map(|r| self.msg_by_name(r)).collect();
         if out.is_empty() {
-            if let Some(i) = m.name.find("_REQ_") {
-                let get = format!("{}_GET_{}", &m.name[..i], &m.name[i + 5..]);
-                out.extend(self.msg_by_name(&get));
+            if let Some((get, Access::Req)) = self.readback_of(m) {
+                out.push(get);
             }
         }
         out
     }
+
+    /// For a SET_x or REQ_x message, the GET_x that carries its values, and which of the two
+    /// `m` is. The spec's naming rule (SET_x / REQ_x / GET_x), applied here only.
+    pub fn readback_of(&self, m: &MsgDef) -> Option<(&MsgDef, Access)> {
+        let (i, access) = match (m.name.find("_SET_"), m.name.find("_REQ_")) {
+            (Some(i), _) => (i, Access::Set),
+            (None, Some(i)) => (i, Access::Req),
+            (None, None) => return None,
+        };
+        let get = format!("{}_GET_{}", &m.name[..i], &m.name[i + 5..]);
+        Some((self.msg_by_name(&get)?, access))
+    }
+}
+
+/// What a SET_x or REQ_x message does with the values of its GET_x ([`Table::readback_of`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Access {
+    /// SET_x: sets them.
+    Set,
+    /// REQ_x: asks for them.
+    Req,
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn one_field(field: &'static str) -> Result<Table, Vec<String>> {
+    fn one_field(field: &'static str) -> Result<Table, TableErrors> {
         let text: &'static str = Box::leak(
             format!("msg 0x0413 MOT_SET_VELPARAMS h2d\n  form 4\n    {field}\n").into_boxed_str(),
         );
         Table::from_sources(&[("t.apt", text)])
+    }
+
+    /// SET_x and REQ_x find their GET_x; other messages have none.
+    #[test]
+    fn readback_follows_the_naming_rule() {
+        let t = Table::global();
+        let m = |n: &str| t.msg_by_name(n).expect(n);
+        let rb = |n: &str| t.readback_of(m(n)).map(|(g, a)| (g.name, a));
+        assert_eq!(
+            rb("MOT_SET_VELPARAMS"),
+            Some(("MOT_GET_VELPARAMS", Access::Set))
+        );
+        assert_eq!(
+            rb("MOT_REQ_VELPARAMS"),
+            Some(("MOT_GET_VELPARAMS", Access::Req))
+        );
+        assert_eq!(rb("MOT_MOVE_HOME"), None);
+        assert_eq!(rb("MOT_GET_VELPARAMS"), None);
     }
 
     /// `q=` marks a motion value and must come with the raw unit that names it honestly.
@@ -319,7 +357,7 @@ mod tests {
             ("bytes[4] position unit=counts q=pos", "not one number"),
             ("i32[2] position unit=counts q=pos", "not one number"),
         ] {
-            let e = one_field(field).expect_err(field).join("\n");
+            let e = one_field(field).expect_err(field).to_string();
             assert!(e.contains(says), "{field}: {e}");
         }
         // Positions without `q=` (encoder readbacks) stay plain counts.

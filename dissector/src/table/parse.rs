@@ -5,9 +5,79 @@
 
 use super::model::*;
 
-/// Parse table sources (`(file name, text)`, in order) into [`TableData`], or every error found
-/// as `file:line: message`.
-pub fn parse_sources(sources: &[(&'static str, &'static str)]) -> Result<TableData, Vec<String>> {
+/// One error in the table files: where, and what.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TableError {
+    /// The file.
+    pub file: String,
+    /// Its line (from 1).
+    pub line: usize,
+    /// What is wrong.
+    pub msg: String,
+}
+
+impl std::fmt::Display for TableError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:{}: {}", self.file, self.line, self.msg)
+    }
+}
+
+impl std::error::Error for TableError {}
+
+/// Every error found in the table files, in file order (a table with errors is not built).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TableErrors(pub Vec<TableError>);
+
+impl TableErrors {
+    /// The errors.
+    pub fn iter(&self) -> std::slice::Iter<'_, TableError> {
+        self.0.iter()
+    }
+
+    /// How many.
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    /// Whether there are none (never, for a returned error).
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+}
+
+impl std::fmt::Display for TableErrors {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for (i, e) in self.0.iter().enumerate() {
+            if i > 0 {
+                f.write_str("\n")?;
+            }
+            write!(f, "{e}")?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for TableErrors {}
+
+/// Where a definition is, for the errors found about it once every file is read.
+struct At<'a> {
+    file: &'a str,
+    line: usize,
+    what: String,
+}
+
+impl At<'_> {
+    fn err(&self, msg: impl std::fmt::Display) -> TableError {
+        TableError {
+            file: self.file.to_string(),
+            line: self.line,
+            msg: format!("{}: {msg}", self.what),
+        }
+    }
+}
+
+/// Parse table sources (`(file name, text)`, in order) into [`TableData`], or every error found.
+pub fn parse_sources(sources: &[(&'static str, &'static str)]) -> Result<TableData, TableErrors> {
     let mut p = Parser::default();
     for (file, text) in sources {
         p.file(file, text);
@@ -18,7 +88,7 @@ pub fn parse_sources(sources: &[(&'static str, &'static str)]) -> Result<TableDa
 #[derive(Default)]
 struct Parser {
     data: TableData,
-    errors: Vec<String>,
+    errors: Vec<TableError>,
     /// Unresolved `enum=`/`flags=` references: (is_enum, name, file, line, msg?, sub?, form, field).
     refs: Vec<Ref>,
     cur: Cur,
@@ -139,7 +209,11 @@ pub fn example_bytes(hex: &str) -> Result<Vec<u8>, String> {
 
 impl Parser {
     fn err(&mut self, file: &str, line: usize, msg: impl AsRef<str>) {
-        self.errors.push(format!("{file}:{line}: {}", msg.as_ref()));
+        self.errors.push(TableError {
+            file: file.to_string(),
+            line,
+            msg: msg.as_ref().to_string(),
+        });
     }
 
     fn file(&mut self, file: &'static str, text: &'static str) {
@@ -683,7 +757,7 @@ impl Parser {
         }
     }
 
-    fn finish(mut self) -> Result<TableData, Vec<String>> {
+    fn finish(mut self) -> Result<TableData, TableErrors> {
         for r in std::mem::take(&mut self.refs) {
             let idx = if r.is_enum {
                 self.data.enums.iter().position(|e| e.name == r.name)
@@ -709,60 +783,69 @@ impl Parser {
         let mut errs = vec![];
         let names: Vec<&str> = self.data.msgs.iter().map(|m| m.name).collect();
         for m in &self.data.msgs {
-            let at = format!("{}:{}: {}", m.file, m.line, m.name);
+            let at = At {
+                file: m.file,
+                line: m.line,
+                what: m.name.to_string(),
+            };
             if m.forms.is_empty() {
-                errs.push(format!("{at}: no forms"));
+                errs.push(at.err("no forms"));
             }
             check_forms(&at, &m.forms, &mut errs);
             for r in &m.reply {
                 if !names.contains(r) {
-                    errs.push(format!("{at}: reply `{r}` is not a message"));
+                    errs.push(at.err(format!("reply `{r}` is not a message")));
                 }
             }
             if let Some(g) = m.subs {
                 if !self.data.subs.iter().any(|s| s.group == g) {
-                    errs.push(format!("{at}: no `sub {g} …` definitions"));
+                    errs.push(at.err(format!("no `sub {g} …` definitions")));
                 }
             }
         }
         for d in &self.data.devices {
             for m in &d.msgs {
                 if !names.contains(m) {
-                    errs.push(format!(
-                        "{}:{}: devices: `{m}` is not a message",
-                        d.file, d.line
-                    ));
+                    errs.push(TableError {
+                        file: d.file.to_string(),
+                        line: d.line,
+                        msg: format!("devices: `{m}` is not a message"),
+                    });
                 }
             }
         }
         for s in &self.data.subs {
-            let at = format!("{}:{}: sub {} {}", s.file, s.line, s.group, s.name);
+            let at = At {
+                file: s.file,
+                line: s.line,
+                what: format!("sub {} {}", s.group, s.name),
+            };
             if s.forms.is_empty() {
-                errs.push(format!("{at}: no forms"));
+                errs.push(at.err("no forms"));
             }
             check_forms(&at, &s.forms, &mut errs);
             for f in &s.forms {
                 if let FormKind::Data(_) = f.kind {
                     match f.fields.first() {
                         Some(x) if x.name == "sub_id" && x.ty == Ty::Prim(Prim::U16) => {}
-                        _ => errs.push(format!("{at}: a sub's data form starts with `u16 sub_id`")),
+                        _ => errs.push(at.err("a sub's data form starts with `u16 sub_id`")),
                     }
                 }
             }
             if !self.data.msgs.iter().any(|m| m.subs == Some(s.group)) {
-                errs.push(format!("{at}: no msg has subs={}", s.group));
+                errs.push(at.err(format!("no msg has subs={}", s.group)));
             }
         }
         self.errors.extend(errs);
         if self.errors.is_empty() {
             Ok(self.data)
         } else {
-            Err(self.errors)
+            Err(TableErrors(self.errors))
         }
     }
 }
 
-fn check_forms(at: &str, forms: &[Form], errs: &mut Vec<String>) {
+fn check_forms(at: &At<'_>, forms: &[Form], errs: &mut Vec<TableError>) {
     for f in forms {
         let open = f
             .fields
@@ -770,21 +853,21 @@ fn check_forms(at: &str, forms: &[Form], errs: &mut Vec<String>) {
             .position(|x| matches!(x.ty, Ty::Array(_, 0)));
         match (f.kind, open) {
             (FormKind::Open(_), Some(i)) if i + 1 == f.fields.len() => {}
-            (FormKind::Open(n), _) => errs.push(format!(
-                "{at}: form {n}+: its last field (and only that one) is an open array `TYPE[*]`"
-            )),
-            (_, Some(_)) => errs.push(format!(
-                "{at}: form {}: an open array `TYPE[*]` needs an open form `LEN+`",
+            (FormKind::Open(n), _) => errs.push(at.err(format!(
+                "form {n}+: its last field (and only that one) is an open array `TYPE[*]`"
+            ))),
+            (_, Some(_)) => errs.push(at.err(format!(
+                "form {}: an open array `TYPE[*]` needs an open form `LEN+`",
                 f.label()
-            )),
+            ))),
             _ => {}
         }
         if let FormKind::Data(len) | FormKind::Open(len) = f.kind {
             let sum: usize = f.fields.iter().map(|x| x.ty.width()).sum();
             if sum != len as usize {
-                errs.push(format!(
-                    "{at}: form {len}: fields add up to {sum} bytes, not {len}"
-                ));
+                errs.push(at.err(format!(
+                    "form {len}: fields add up to {sum} bytes, not {len}"
+                )));
             }
         }
     }

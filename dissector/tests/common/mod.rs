@@ -60,3 +60,93 @@ pub fn kinds(v: &serde_json::Value) -> Vec<&str> {
         .map(|a| a.iter().filter_map(|d| d["kind"].as_str()).collect())
         .unwrap_or_default()
 }
+
+/// A framer's item, owned: a frame (offset, bytes, truncated) or a garbage run (offset, bytes,
+/// and what the APT framer saw; `None` for Elliptec).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Item {
+    /// A frame.
+    Frame(u64, Vec<u8>, bool),
+    /// Bytes outside frames.
+    Garbage(u64, Vec<u8>, Option<aptscope_dissector::apt::GarbageKind>),
+}
+
+/// `input` in the chunks that cutting it at `cuts` (clamped, in order) gives.
+fn chunks<'a>(input: &'a [u8], cuts: &[usize]) -> Vec<&'a [u8]> {
+    let mut out = vec![];
+    let mut at = 0;
+    for &c in cuts.iter().chain(std::iter::once(&input.len())) {
+        let c = c.clamp(at, input.len());
+        out.push(&input[at..c]);
+        at = c;
+    }
+    out
+}
+
+/// The APT framer's items for `input` pushed in the chunks cut at `cuts`, then finished.
+pub fn run_apt(input: &[u8], cuts: &[usize]) -> Vec<Item> {
+    use aptscope_dissector::apt::{AptFramer, Item as A};
+    let mut f = AptFramer::new(Table::global());
+    let mut out = vec![];
+    let drain = |f: &mut AptFramer, out: &mut Vec<Item>| {
+        while let Some(it) = f.next_item() {
+            out.push(match it {
+                A::Frame {
+                    offset,
+                    bytes,
+                    truncated,
+                } => Item::Frame(offset, bytes.to_vec(), truncated),
+                A::Garbage {
+                    offset,
+                    bytes,
+                    kind,
+                } => Item::Garbage(offset, bytes.to_vec(), Some(kind)),
+            });
+        }
+    };
+    for c in chunks(input, cuts) {
+        f.push(c);
+        drain(&mut f, &mut out);
+    }
+    f.finish();
+    drain(&mut f, &mut out);
+    out
+}
+
+/// The Elliptec framer's items for `input` pushed in the chunks cut at `cuts`, then finished.
+pub fn run_ell(input: &[u8], cuts: &[usize]) -> Vec<Item> {
+    use aptscope_dissector::ell::{EllFramer, Item as E};
+    let mut f = EllFramer::new();
+    let mut out = vec![];
+    let drain = |f: &mut EllFramer, out: &mut Vec<Item>| {
+        while let Some(it) = f.next_item() {
+            out.push(match it {
+                E::Frame {
+                    offset,
+                    bytes,
+                    truncated,
+                } => Item::Frame(offset, bytes.to_vec(), truncated),
+                E::Garbage { offset, bytes, .. } => Item::Garbage(offset, bytes.to_vec(), None),
+            });
+        }
+    };
+    for c in chunks(input, cuts) {
+        f.push(c);
+        drain(&mut f, &mut out);
+    }
+    f.finish();
+    drain(&mut f, &mut out);
+    out
+}
+
+/// The frames (offset, bytes, truncated) of `items`, and how many garbage bytes they hold.
+pub fn frames_and_garbage(items: &[Item]) -> (Vec<(u64, Vec<u8>, bool)>, usize) {
+    let (mut fs, mut garbage) = (vec![], 0);
+    for it in items {
+        match it {
+            Item::Frame(o, b, t) => fs.push((*o, b.clone(), *t)),
+            Item::Garbage(_, b, _) => garbage += b.len(),
+        }
+    }
+    (fs, garbage)
+}

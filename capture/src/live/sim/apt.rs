@@ -2,7 +2,7 @@
 
 use super::{earliest, Line, Simulator, MS, SEC};
 use aptscope_dissector::apt::{encode, AptFrame, AptFramer, FieldValue, Item, Value};
-use aptscope_dissector::table::{FormKind, Table, Ty};
+use aptscope_dissector::table::{Access, FormKind, Table, Ty};
 
 /// Host address.
 const HOST: u8 = 0x01;
@@ -385,6 +385,17 @@ fn int(v: i64) -> FieldValue {
     FieldValue::Int(v)
 }
 
+/// A message to one unit, as the family handlers of [`AptSim`] take it.
+#[derive(Clone, Copy)]
+struct Req<'r, 'a> {
+    f: &'r AptFrame<'a, 'static>,
+    name: &'static str,
+    /// Index of the unit addressed.
+    ui: usize,
+    chan: i64,
+    now: u64,
+}
+
 impl AptSim {
     /// A controller of this model with a default serial number (prefix + `000123`).
     pub fn new(model: AptModel) -> AptSim {
@@ -528,59 +539,89 @@ impl AptSim {
         };
         // Rack-level (and broadcast-ish) messages of the BSC203 motherboard.
         if to_rack {
-            match m.name {
-                "HW_REQ_INFO" => {
-                    let b = self.info(RACK, self.serial, BSC203_BAYS as i64, 45);
-                    self.line.send(now, b);
-                }
-                "RACK_REQ_BAYUSED" => {
-                    let bay = f.field("bay_ident").and_then(|(_, v)| v.as_i64());
-                    let bay = bay.unwrap_or(0);
-                    let state = if (0..BSC203_BAYS as i64).contains(&bay) {
-                        1
-                    } else {
-                        2
-                    };
-                    let b = build(
-                        "RACK_GET_BAYUSED",
-                        None,
-                        HOST,
-                        RACK,
-                        &[("bay_ident", int(bay)), ("bay_state", int(state))],
-                    );
-                    self.send(now, b);
-                }
-                "RACK_REQ_STATUSBITS" => {
-                    let b = build(
-                        "RACK_GET_STATUSBITS",
-                        None,
-                        HOST,
-                        RACK,
-                        &[("status_bits", int(0))],
-                    );
-                    self.send(now, b);
-                }
-                "MOD_IDENTIFY" => self.identified += 1,
-                "HW_START_UPDATEMSGS" => {
-                    for u in &mut self.units {
-                        u.next_update.get_or_insert(now + UPDATE_NS);
-                    }
-                }
-                "HW_STOP_UPDATEMSGS" => {
-                    for u in &mut self.units {
-                        u.next_update = None;
-                    }
-                }
-                _ => {}
-            }
+            self.rack_msg(&f, m.name, now);
             return;
         }
         let Some(ui) = self.units.iter().position(|u| u.addr == dst) else {
             return;
         };
+        let r = Req {
+            f: &f,
+            name: m.name,
+            ui,
+            chan,
+            now,
+        };
+        let handled = self.module_msg(&r)
+            || self.readback_msg(&r)
+            || self.motion_msg(&r)
+            || self.output_msg(&r);
+        if !handled {
+            self.generic(ui, &f, now);
+        }
+    }
+
+    /// Messages to the BSC203's rack (the motherboard) rather than a bay.
+    fn rack_msg(&mut self, f: &AptFrame<'_, '_>, name: &str, now: u64) {
+        match name {
+            "HW_REQ_INFO" => {
+                let b = self.info(RACK, self.serial, BSC203_BAYS as i64, 45);
+                self.line.send(now, b);
+            }
+            "RACK_REQ_BAYUSED" => {
+                let bay = f.field("bay_ident").and_then(|(_, v)| v.as_i64());
+                let bay = bay.unwrap_or(0);
+                let state = if (0..BSC203_BAYS as i64).contains(&bay) {
+                    1
+                } else {
+                    2
+                };
+                let b = build(
+                    "RACK_GET_BAYUSED",
+                    None,
+                    HOST,
+                    RACK,
+                    &[("bay_ident", int(bay)), ("bay_state", int(state))],
+                );
+                self.send(now, b);
+            }
+            "RACK_REQ_STATUSBITS" => {
+                let b = build(
+                    "RACK_GET_STATUSBITS",
+                    None,
+                    HOST,
+                    RACK,
+                    &[("status_bits", int(0))],
+                );
+                self.send(now, b);
+            }
+            "MOD_IDENTIFY" => self.identified += 1,
+            "HW_START_UPDATEMSGS" => {
+                for u in &mut self.units {
+                    u.next_update.get_or_insert(now + UPDATE_NS);
+                }
+            }
+            "HW_STOP_UPDATEMSGS" => {
+                for u in &mut self.units {
+                    u.next_update = None;
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// Module-level messages: information, identify, status update switches, channel enable. False
+    /// when `r` is not of this family.
+    fn module_msg(&mut self, r: &Req<'_, '_>) -> bool {
+        let Req {
+            f,
+            name,
+            ui,
+            chan,
+            now,
+        } = *r;
         let addr = self.units[ui].addr;
-        let sc = self.scaling;
-        let name = m.name;
+        let bsc = self.model == AptModel::Bsc203;
         match name {
             "HW_REQ_INFO" => {
                 let (serial, nchs, hw) = (self.units[ui].serial, 1, if bsc { 45 } else { 44 });
@@ -618,6 +659,23 @@ impl AptSim {
                 );
                 self.send(now, b);
             }
+            _ => return false,
+        }
+        true
+    }
+
+    /// Requests for counters and status: answered from the unit's state. False when `r` is not of
+    /// this family.
+    fn readback_msg(&mut self, r: &Req<'_, '_>) -> bool {
+        let Req {
+            f,
+            name,
+            ui,
+            chan,
+            now,
+        } = *r;
+        let addr = self.units[ui].addr;
+        match name {
             "MOT_REQ_POSCOUNTER" | "MOT_REQ_ENCCOUNTER" => {
                 let p = self.position(addr, now).unwrap_or(0);
                 let (get, field) = if name == "MOT_REQ_POSCOUNTER" {
@@ -667,9 +725,6 @@ impl AptSim {
                 let b = self.status_update(ui, now);
                 self.send(now, b);
             }
-            "LA_ENABLEOUTPUT" | "LA_DISABLEOUTPUT" if self.model == AptModel::Tls001 => {
-                self.units[ui].output = name == "LA_ENABLEOUTPUT";
-            }
             "PZ_REQ_PZSTATUSBITS" => {
                 let b = build(
                     "PZ_GET_PZSTATUSBITS",
@@ -683,10 +738,28 @@ impl AptSim {
                 );
                 self.send(now, b);
             }
+            _ => return false,
+        }
+        true
+    }
+
+    /// Moves, homing and stops: start or end the unit's motion. False when `r` is not of this
+    /// family.
+    fn motion_msg(&mut self, r: &Req<'_, '_>) -> bool {
+        let Req {
+            f,
+            name,
+            ui,
+            chan,
+            now,
+        } = *r;
+        let addr = self.units[ui].addr;
+        let sc = self.scaling;
+        match name {
             "MOT_MOVE_HOME" => {
                 let u = &self.units[ui];
                 if !u.motor || !u.enabled {
-                    return;
+                    return true;
                 }
                 let from = self.position(addr, now).unwrap_or(0);
                 let hv = sc.counts_s(u.param("MOT_GET_HOMEPARAMS", "home_velocity").unwrap_or(1));
@@ -702,7 +775,7 @@ impl AptSim {
             "MOT_MOVE_ABSOLUTE" | "MOT_MOVE_RELATIVE" | "MOT_MOVE_JOG" | "MOT_MOVE_VELOCITY" => {
                 let u = &self.units[ui];
                 if !u.motor || !u.enabled {
-                    return;
+                    return true;
                 }
                 let from = self.position(addr, now).unwrap_or(0);
                 let fv = |n: &str| f.field(n).and_then(|(_, v)| v.as_i64());
@@ -757,7 +830,7 @@ impl AptSim {
                     // Not moving: a stop is still acknowledged.
                     let b = self.dc_status(ui, now, "MOT_MOVE_STOPPED", chan);
                     self.send(now, b);
-                    return;
+                    return true;
                 };
                 let (p, speed) = mo.pos(now);
                 if profiled && speed > 0.0 && mo.a > 0.0 {
@@ -784,6 +857,19 @@ impl AptSim {
                     self.send(now, b);
                 }
             }
+            _ => return false,
+        }
+        true
+    }
+
+    /// Outputs: the laser source's enable, the piezo's output voltage. False when `r` is not of
+    /// this family.
+    fn output_msg(&mut self, r: &Req<'_, '_>) -> bool {
+        let Req { f, name, ui, .. } = *r;
+        match name {
+            "LA_ENABLEOUTPUT" | "LA_DISABLEOUTPUT" if self.model == AptModel::Tls001 => {
+                self.units[ui].output = name == "LA_ENABLEOUTPUT";
+            }
             "PZ_SET_OUTPUTVOLTS" => {
                 // Outputs within ±100 % only.
                 if let Some(v) = f.field("voltage").and_then(|(_, v)| v.as_i64()) {
@@ -796,8 +882,9 @@ impl AptSim {
                     }
                 }
             }
-            _ => self.generic(ui, &f, now),
+            _ => return false,
         }
+        true
     }
 
     /// SET_x stores its fields for GET_x; REQ_x answers with GET_x when it is modelled.
@@ -809,11 +896,10 @@ impl AptSim {
         }
         let chan = f.channel().filter(|c| *c > 0).unwrap_or(1);
         let addr = self.units[ui].addr;
-        if m.name.contains("_SET_") {
-            let get = m.name.replacen("_SET_", "_GET_", 1);
-            let Some(gm) = Table::global().msg_by_name(&get) else {
-                return;
-            };
+        let Some((gm, access)) = Table::global().readback_of(m) else {
+            return;
+        };
+        if access == Access::Set {
             let Some(slot) = self.units[ui]
                 .params
                 .iter_mut()
@@ -839,9 +925,8 @@ impl AptSim {
                     slot.1.push((field.name, fv));
                 }
             }
-        } else if m.name.contains("_REQ_") {
-            let get = m.name.replacen("_REQ_", "_GET_", 1);
-            let Some((gname, p)) = self.units[ui].params.iter().find(|(n, _)| *n == get) else {
+        } else {
+            let Some((gname, p)) = self.units[ui].params.iter().find(|(n, _)| *n == gm.name) else {
                 return;
             };
             let mut vals: Params = vec![("chan_ident", int(chan))];
@@ -856,16 +941,10 @@ impl AptSim {
     /// readings where the block has them.
     fn sub_message(&mut self, ui: usize, f: &AptFrame<'_, '_>, now: u64) {
         let Some(m) = f.msg else { return };
-        let (get, set) = if m.name.contains("_SET_") {
-            (m.name.replacen("_SET_", "_GET_", 1), true)
-        } else if m.name.contains("_REQ_") {
-            (m.name.replacen("_REQ_", "_GET_", 1), false)
-        } else {
+        let Some((gm, access)) = Table::global().readback_of(m) else {
             return;
         };
-        let Some(gm) = Table::global().msg_by_name(&get) else {
-            return;
-        };
+        let set = access == Access::Set;
         let id = f
             .field("sub_id")
             .and_then(|(_, v)| v.as_i64())

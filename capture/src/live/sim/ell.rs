@@ -163,24 +163,48 @@ pub struct EllSim {
     line: Line,
 }
 
+/// Why a simulator could not be made.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SimError {
+    /// An APT model that is not simulated.
+    #[error("unknown model `{0}` ({names})", names = super::AptModel::NAMES.join(", "))]
+    UnknownApt(String),
+    /// A part of the module list that is not `ADDRESS:MODEL`.
+    #[error("`{0}`: expected ADDRESS:MODEL, e.g. 0:ELL14")]
+    NotAddrModel(String),
+    /// An address that is not one hex digit.
+    #[error("`{0}`: an address is 0-F")]
+    BadAddress(String),
+    /// A model that is not simulated.
+    #[error("`{0}`: unknown module (ELL6, ELL9, ELL12, ELL14, ELL17, ELL18, ELL20)")]
+    UnknownModel(String),
+    /// An empty module list.
+    #[error("no modules given (e.g. 0:ELL14,1:ELL9)")]
+    NoModules,
+    /// An address beyond the bus's 16.
+    #[error("address {0} is beyond F")]
+    BeyondF(u8),
+    /// Two modules given the same address.
+    #[error("two modules at address {0:X}")]
+    TwoAt(u8),
+}
+
 /// Parse a module list: `0:ELL14,1:ELL9,A:ELL20` (address `0`–`F`, model).
-pub fn parse_modules(s: &str) -> Result<Vec<(u8, EllModel)>, String> {
+pub fn parse_modules(s: &str) -> Result<Vec<(u8, EllModel)>, SimError> {
     let mut out = vec![];
     for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
         let (a, m) = part
             .split_once(':')
-            .ok_or_else(|| format!("`{part}`: expected ADDRESS:MODEL, e.g. 0:ELL14"))?;
+            .ok_or_else(|| SimError::NotAddrModel(part.to_string()))?;
         let addr = u8::from_str_radix(a.trim(), 16)
             .ok()
             .filter(|a| *a < 16)
-            .ok_or_else(|| format!("`{a}`: an address is 0-F"))?;
-        let model = EllModel::parse(m).ok_or_else(|| {
-            format!("`{m}`: unknown module (ELL6, ELL9, ELL12, ELL14, ELL17, ELL18, ELL20)")
-        })?;
+            .ok_or_else(|| SimError::BadAddress(a.to_string()))?;
+        let model = EllModel::parse(m).ok_or_else(|| SimError::UnknownModel(m.to_string()))?;
         out.push((addr, model));
     }
     if out.is_empty() {
-        return Err("no modules given (e.g. 0:ELL14,1:ELL9)".into());
+        return Err(SimError::NoModules);
     }
     Ok(out)
 }
@@ -243,14 +267,14 @@ fn hex8(v: i64) -> String {
 
 impl EllSim {
     /// A bus with these modules (address, model); addresses must be distinct.
-    pub fn new(modules: &[(u8, EllModel)]) -> Result<EllSim, String> {
+    pub fn new(modules: &[(u8, EllModel)]) -> Result<EllSim, SimError> {
         let mut ms: Vec<Module> = vec![];
         for &(addr, model) in modules {
             if addr > 15 {
-                return Err(format!("address {addr} is beyond F"));
+                return Err(SimError::BeyondF(addr));
             }
             if ms.iter().any(|m| m.addr == addr) {
-                return Err(format!("two modules at address {addr:X}"));
+                return Err(SimError::TwoAt(addr));
             }
             ms.push(Module {
                 addr,

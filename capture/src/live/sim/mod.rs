@@ -15,7 +15,7 @@ mod ell;
 mod run;
 
 pub use apt::{AptModel, AptSim};
-pub use ell::{parse_modules, EllModel, EllSim};
+pub use ell::{parse_modules, EllModel, EllSim, SimError};
 pub use run::{
     run_on_port, run_on_pty, serve_pty, stop_pair, termination_signals, Pty, StopHandle, StopSignal,
 };
@@ -101,8 +101,8 @@ pub(crate) fn earliest(a: Option<u64>, b: Option<u64>) -> Option<u64> {
     }
 }
 
-fn invalid(msg: String) -> io::Error {
-    io::Error::new(io::ErrorKind::InvalidInput, msg)
+fn invalid(e: impl std::error::Error + Send + Sync + 'static) -> io::Error {
+    io::Error::new(io::ErrorKind::InvalidInput, e)
 }
 
 /// Where a simulator serves.
@@ -130,12 +130,7 @@ fn serve<S: Simulator>(sim: S, line: SimLine<'_>) -> io::Result<()> {
 /// pseudo-terminal (its path printed, and linked at `LINK`) or a serial port, until
 /// SIGINT/SIGTERM or until the program using the pseudo-terminal hangs up.
 pub fn sim_apt_main(model: &str, line: SimLine<'_>) -> io::Result<()> {
-    let m = AptModel::parse(model).ok_or_else(|| {
-        invalid(format!(
-            "unknown model `{model}` ({})",
-            AptModel::NAMES.join(", ")
-        ))
-    })?;
+    let m = AptModel::parse(model).ok_or_else(|| invalid(SimError::UnknownApt(model.into())))?;
     serve(AptSim::new(m), line)
 }
 

@@ -2,7 +2,7 @@
 
 use super::Simulator;
 use crate::live::serial::open_serial;
-use crate::live::tap::{Flow, LineSettings};
+use crate::live::serial::{Flow, LineSettings};
 use nix::errno::Errno;
 use nix::fcntl::{fcntl, FcntlArg, OFlag};
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
