@@ -2,53 +2,100 @@
 //! details): the display filter that selects the records sharing the selected detail-tree
 //! line's value, in the language of [`aptscope_dissector::filter`].
 //!
-//! Values come from the record's NDJSON object (as `decode --json` writes it), not from the
+//! Values are read as filters read them ([`View`], the record's fields by name), not from the
 //! tree's text, so every filter built here matches the record it was built from
 //! (`tui/tests/as_filter.rs` checks it on every line of every sample).
 
-use crate::decode::{json_value, tree, Node, NodeKind};
+use crate::decode::{tree, Node, NodeKind};
+use crate::fields::View;
 use crate::index::Index;
+use aptscope_dissector::fields::{self as keys, Fields, Key, Num, Role, Val};
 use aptscope_dissector::filter::Filter;
-use serde_json::Value;
+use std::borrow::Cow;
+
+/// A value found in a record, owned.
+type Owned = Val<'static>;
+
+fn own(v: Val<'_>) -> Owned {
+    match v {
+        Val::Num(n) => Val::Num(n),
+        Val::Bool(b) => Val::Bool(b),
+        Val::Str(s) => Val::Str(Cow::Owned(s.into_owned())),
+        Val::Obj(o) => Val::Obj(keys::Obj {
+            num: o.num,
+            text: o.text.map(|t| Cow::Owned(t.into_owned())),
+            nonempty: o.nonempty,
+        }),
+    }
+}
+
+/// Every value at `key`/`rest` with how it was found (codes left out).
+fn values(v: &View<'_>, key: Key, rest: &[String]) -> Vec<(Owned, Role)> {
+    let mut out = vec![];
+    v.visit(key, rest, &mut |x, r| {
+        if r != Role::Code {
+            out.push((own(x), r));
+        }
+    });
+    out
+}
+
+/// The value at `key`/`rest`.
+fn first(v: &View<'_>, key: Key, rest: &[String]) -> Option<Owned> {
+    values(v, key, rest)
+        .into_iter()
+        .find(|(_, r)| *r == Role::Plain)
+        .map(|(x, _)| x)
+}
+
+/// The whole number at `key`.
+fn number(v: &View<'_>, key: Key) -> Option<u64> {
+    match first(v, key, &[])? {
+        Val::Num(n) => n.u64(),
+        _ => None,
+    }
+}
 
 /// The filter for detail line `node` of record `n`; `None` for a line without a value to
 /// filter on (a section heading, the terminator …).
 pub fn for_node(ix: &Index, n: u64, node: &Node) -> Option<String> {
-    let rec = json_value(ix, n)?;
-    let proto = rec.get("proto").and_then(Value::as_str).unwrap_or("apt");
+    let v = View {
+        ix,
+        n,
+        r: ix.rec(n)?,
+    };
+    let proto = v.proto().unwrap_or("apt");
+    let name = ["name".to_string()];
     let id = node.id.as_str();
     let s = match id {
         "rec" => format!("n == {n}"),
         "garbage" => "type == garbage".to_string(),
         "hdr" => "apt".to_string(),
-        "hdr.id" => format!("apt.msgid == 0x{:04X}", rec.get("msgid")?.as_u64()?),
-        "hdr.len" => format!("apt.data_len == {}", rec.get("data_len")?.as_u64()?),
+        "hdr.id" => format!("apt.msgid == 0x{:04X}", number(&v, Key::Msgid)?),
+        "hdr.len" => format!("apt.data_len == {}", number(&v, Key::DataLen)?),
         "hdr.p" => "apt.data_flag == false".to_string(),
-        "hdr.src" => addr("apt.src", rec.get("src")?)?,
-        "hdr.dst" => addr("apt.dst", rec.get("dst")?)?,
+        "hdr.src" => addr("apt.src", &first(&v, Key::Src, &[])?)?,
+        "hdr.dst" => addr("apt.dst", &first(&v, Key::Dst, &[])?)?,
         "hdr.route" => format!(
             "{} && {}",
-            addr("apt.src", rec.get("src")?)?,
-            addr("apt.dst", rec.get("dst")?)?
+            addr("apt.src", &first(&v, Key::Src, &[])?)?,
+            addr("apt.dst", &first(&v, Key::Dst, &[])?)?
         ),
-        "msg" => format!("apt.name == {}", lit(rec.get("name")?)?),
-        "sub" => format!("apt.sub == {}", lit(rec.get("sub")?.get("name")?)?),
-        "text" => format!("ell.text == {}", lit(rec.get("text")?)?),
-        "addr" => format!("ell.addr == {}", lit(rec.get("addr")?)?),
-        "cmd" => format!("ell.cmd == {}", lit(rec.get("cmd")?)?),
+        "msg" => format!("apt.name == {}", lit(&first(&v, Key::Name, &[])?)?),
+        "sub" => format!("apt.sub == {}", lit(&first(&v, Key::Sub, &name)?)?),
+        "text" => format!("ell.text == {}", lit(&first(&v, Key::Text, &[])?)?),
+        "addr" => format!("ell.addr == {}", lit(&first(&v, Key::Addr, &[])?)?),
+        "cmd" => format!("ell.cmd == {}", lit(&first(&v, Key::Cmd, &[])?)?),
         "diag" => "diag".to_string(),
         // The exchange: the request and every reply to it.
         "pair" => {
-            let req = match rec.get("pair").and_then(Value::as_u64) {
-                Some(req) => req,
-                None => n,
-            };
+            let req = number(&v, Key::Pair).unwrap_or(n);
             format!("n == {req} || pair == {req}")
         }
         _ if id.starts_with("diag.") || id.starts_with("pdiag") => {
             format!("diag.kind == {}", diag_kind(&node.text)?)
         }
-        _ => field(&rec, proto, id.strip_prefix("f.")?, node.kind)?,
+        _ => field(&v, proto, id.strip_prefix("f.")?, node)?,
     };
     // Only what the filter language accepts leaves here.
     Filter::parse(&s).ok().map(|_| s)
@@ -73,11 +120,12 @@ pub fn and(old: &str, new: &str) -> String {
     }
 }
 
-/// An address object compared by its name (by its number when the name is not a word).
-fn addr(key: &str, a: &Value) -> Option<String> {
-    match a.get("name").and_then(Value::as_str) {
+/// An address compared by its name (by its number when the name is not a word).
+fn addr(key: &str, a: &Owned) -> Option<String> {
+    let Val::Obj(o) = a else { return None };
+    match o.text.as_deref() {
         Some(name) if word(name) => Some(format!("{key} == {name}")),
-        _ => Some(format!("{key} == 0x{:02X}", a.get("addr")?.as_u64()?)),
+        _ => Some(format!("{key} == 0x{:02X}", o.num?.u64()?)),
     }
 }
 
@@ -88,13 +136,15 @@ fn diag_kind(text: &str) -> Option<&str> {
 }
 
 /// A field line (`NAME`) or one of its flags (`NAME.LABEL`).
-fn field(rec: &Value, proto: &str, path: &str, kind: NodeKind) -> Option<String> {
+fn field(v: &View<'_>, proto: &str, path: &str, node: &Node) -> Option<String> {
     let (name, label) = match path.split_once('.') {
         Some((name, label)) => (name, Some(label)),
         None => (path, None),
     };
     // `apt.NAME` reads a record-level key of that name first: go through `fields` then.
-    let key = if rec.get(name).is_some() || matches!(name, "chan" | "ts" | "latency") {
+    let top = keys::Key::lookup(name, keys::TOP | keys::APT | keys::ELL)
+        .is_some_and(|d| v.visit(d.key, &[], &mut |_, _| {}));
+    let key = if top || matches!(name, "chan" | "ts" | "latency") {
         format!("{proto}.fields.{name}")
     } else {
         format!("{proto}.{name}")
@@ -102,26 +152,35 @@ fn field(rec: &Value, proto: &str, path: &str, kind: NodeKind) -> Option<String>
     let message = || -> Option<String> {
         Some(format!(
             "{proto}.name == {}",
-            lit(rec.get("name").filter(|v| !v.is_null())?)?
+            lit(&first(v, Key::Name, &[])?)?
         ))
     };
     if let Some(label) = label {
-        let l = lit(&Value::from(label))?;
-        return match kind {
+        let l = lit(&Val::Str(Cow::Owned(label.to_string())))?;
+        return match node.kind {
             NodeKind::FlagOn => Some(format!("{key} contains {l}")),
             // A clear flag: among the records of this message (others have no such flag).
             _ => Some(format!("{} && !({key} contains {l})", message()?)),
         };
     }
-    match rec.get("fields")?.get(name)? {
-        Value::Array(items) if items.is_empty() => Some(format!("{} && !{key}", message()?)),
-        Value::Array(items) => items
+    let vals = values(v, Key::Fields, &[name.to_string()]);
+    let members: Vec<&Owned> = vals
+        .iter()
+        .filter(|(_, r)| *r == Role::Member)
+        .map(|(x, _)| x)
+        .collect();
+    match vals.first() {
+        // A list (flags, an array): each element it holds; an empty one (a flags field with
+        // its flags below it in the tree): none.
+        Some((_, Role::Member)) => members
             .iter()
             .map(|x| Some(format!("{key} contains {}", lit(x)?)))
             .collect::<Option<Vec<_>>>()
             .map(|v| v.join(" && ")),
-        Value::Object(o) => Some(format!("{key} == {}", lit(o.get("name")?)?)),
-        v => Some(format!("{key} == {}", lit(v)?)),
+        None if node.children => Some(format!("{} && !{key}", message()?)),
+        Some((Val::Obj(o), _)) => Some(format!("{key} == {}", lit(&Val::Str(o.text.clone()?))?)),
+        Some((x, _)) => Some(format!("{key} == {}", lit(x)?)),
+        None => None,
     }
 }
 
@@ -137,26 +196,23 @@ fn word(s: &str) -> bool {
         )
 }
 
-/// A JSON scalar as a literal of the filter language.
-fn lit(v: &Value) -> Option<String> {
+/// A value as a literal of the filter language.
+fn lit(v: &Owned) -> Option<String> {
     match v {
-        Value::Bool(b) => Some(b.to_string()),
-        Value::Number(x) => match (x.as_i64(), x.as_u64()) {
-            (Some(i), _) => Some(i.to_string()),
-            (_, Some(u)) => Some(u.to_string()),
-            // Rust prints floats without an exponent, which the filter language reads back.
-            _ => Some(format!("{}", x.as_f64()?)),
-        },
-        Value::String(s) if word(s) => Some(s.clone()),
+        Val::Bool(b) => Some(b.to_string()),
+        Val::Num(Num::I(i)) => Some(i.to_string()),
+        // Rust prints floats without an exponent, which the filter language reads back.
+        Val::Num(Num::F(x)) => Some(format!("{x}")),
+        Val::Str(s) if word(s) => Some(s.to_string()),
         // A number written as text (an Elliptec address, a serial number) compares as written.
-        Value::String(s)
+        Val::Str(s)
             if (1..=18).contains(&s.len())
                 && s.bytes().all(|c| c.is_ascii_digit())
                 && (s == "0" || !s.starts_with('0')) =>
         {
-            Some(s.clone())
+            Some(s.to_string())
         }
-        Value::String(s) => {
+        Val::Str(s) => {
             let mut out = String::from('"');
             for c in s.chars() {
                 match c {
@@ -171,6 +227,6 @@ fn lit(v: &Value) -> Option<String> {
             out.push('"');
             Some(out)
         }
-        _ => None,
+        Val::Obj(_) => None,
     }
 }

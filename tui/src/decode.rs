@@ -735,8 +735,3 @@ pub fn json_of(ix: &Index, n: u64) -> Option<String> {
         Renderer::new(Format::Json).line(rec).to_string()
     })
 }
-
-/// [`json_of`] as a JSON value (for building filters from a record's values).
-pub fn json_value(ix: &Index, n: u64) -> Option<serde_json::Value> {
-    serde_json::from_str(&json_of(ix, n)?).ok()
-}

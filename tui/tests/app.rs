@@ -5,6 +5,11 @@ use aptscope_tui::app::{App, Input, Pane, TimeMode, View};
 use aptscope_tui::index::{load, F_IS_REPLY};
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
 
+/// Record `n` as `decode --json` writes it, parsed.
+fn json_value(ix: &aptscope_tui::index::Index, n: u64) -> Option<serde_json::Value> {
+    serde_json::from_str(&aptscope_tui::decode::json_of(ix, n)?).ok()
+}
+
 fn sample(name: &str) -> String {
     format!("{}/../samples/{name}", env!("CARGO_MANIFEST_DIR"))
 }
@@ -101,7 +106,7 @@ fn filter_goto_pair_search() {
     key(&mut a, KeyCode::Enter);
     let hit = a.selected().expect("a hit");
     let ix = a.shared.index.read().expect("lock");
-    let v = aptscope_tui::decode::json_value(&ix, hit).expect("json");
+    let v = json_value(&ix, hit).expect("json");
     drop(ix);
     assert_eq!(v["name"], "MOT_MOVE_HOMED");
     key(&mut a, KeyCode::Char('n'));
@@ -160,7 +165,7 @@ fn indexes_like_decode() {
         let ix = a.shared.index.read().expect("lock");
         assert!(ix.done);
         for n in 1..=ix.recs.len() as u64 {
-            let v = aptscope_tui::decode::json_value(&ix, n).expect("json");
+            let v = json_value(&ix, n).expect("json");
             assert_eq!(v["n"], n, "{name} #{n}");
             assert!(aptscope_tui::decode::row(&ix, n).is_some());
             assert!(!aptscope_tui::decode::tree(&ix, n).is_empty());
@@ -224,7 +229,7 @@ fn records_equal_the_pipeline_ndjson() {
         let mut count = 0;
         for want in out.iter().filter(|v| v.get("n").is_some()) {
             let n = want["n"].as_u64().expect("n");
-            let mut got = aptscope_tui::decode::json_value(&ix, n).expect("record");
+            let mut got = json_value(&ix, n).expect("record");
             if let Some(d) = got["diag"].as_array_mut() {
                 d.retain(|x| x["kind"] != "no_reply");
             }
@@ -374,7 +379,7 @@ fn a_stage_shows_motion_values_in_mm_everywhere() {
     let mut with_phys = 0;
     for want in out.iter().filter(|v| v.get("n").is_some()) {
         let n = want["n"].as_u64().expect("n");
-        let mut got = aptscope_tui::decode::json_value(&ix, n).expect("record");
+        let mut got = json_value(&ix, n).expect("record");
         if let Some(d) = got["diag"].as_array_mut() {
             d.retain(|x| x["kind"] != "no_reply");
         }
