@@ -5,7 +5,7 @@
 //! direction, stream, length, time, pairing, flags), decoding the frame's bytes only for the
 //! keys that need them (fields, addresses, diagnostics of damaged frames …).
 //!
-//! [`matches`] is the one place the terminal UI calls the display filter.
+//! [`matches()`] is the one place the terminal UI calls the display filter.
 
 use crate::index::*;
 use aptscope_dissector::apt::{AptFrame, GarbageKind};

@@ -98,8 +98,13 @@ where
     run_app(app)
 }
 
-/// The terminal loop: draw, handle events, until the user quits.
-fn run_app(mut app: app::App) -> io::Result<()> {
+/// The terminal loop on `app`: draw, handle keys and the mouse, until the user quits; then the
+/// index's stop flag ([`index::Shared::cancel`]) is set. For a source fed another way than by a
+/// [`aptscope_capture::model::Reader`] (a simulator's own traffic): make an
+/// [`index::Shared`], feed an [`index::Indexer`] from a thread of your own (it publishes with
+/// [`index::Indexer::flush`], [`index::Indexer::finish`] at the end), and run
+/// `App::new(shared, title, true)` with [`app::App::set_live`] here.
+pub fn run_app(mut app: app::App) -> io::Result<()> {
     let shared = app.shared.clone();
     let hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
