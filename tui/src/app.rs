@@ -362,6 +362,8 @@ impl App {
                     .start(self.shared.clone(), filter, self.background);
                 self.top = 0;
                 self.sel = 0;
+                // Another list: what was seen of the old one says nothing of it.
+                self.seen = 0;
                 if let Some(n) = keep {
                     if let Some(p) = self.position_of(n) {
                         self.select(p);
