@@ -446,14 +446,20 @@ fn close_json(line: &mut String, m: &crate::record::Meta, dir: Option<&str>) {
     let (ts, stream) = (m.ts_ns, m.stream);
     if line.ends_with('}') {
         line.pop();
-        let _ = write!(line, ",\"cap_offset\":{}", m.cap_offset);
+        line.push_str(",\"cap_offset\":");
+        json::uint(line, m.cap_offset);
         if let Some(d) = dir {
-            let _ = write!(line, ",\"dir\":\"{d}\"");
+            line.push_str(",\"dir\":\"");
+            line.push_str(d);
+            line.push('"');
         }
         if let Some(t) = ts {
-            let _ = write!(line, ",\"ts_ns\":{t}");
+            line.push_str(",\"ts_ns\":");
+            json::uint(line, t);
         }
-        let _ = write!(line, ",\"stream\":{stream}}}");
+        line.push_str(",\"stream\":");
+        json::uint(line, u64::from(stream));
+        line.push('}');
     }
 }
 
