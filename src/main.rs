@@ -770,7 +770,11 @@ fn open_opts(format: Option<&str>, hex: bool, usb: Option<&str>) -> io::Result<O
             ))
         }
     };
-    Ok(OpenOptions { format, usb_device })
+    Ok(OpenOptions {
+        format,
+        usb_device,
+        follow: None,
+    })
 }
 
 /// A reader's diagnostic that makes the command fail: the input has nothing of what was asked
