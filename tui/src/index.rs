@@ -194,7 +194,11 @@ pub fn spawn_with(
         .spawn(move || match opened(&path, opts) {
             Ok((shared, reader)) => {
                 let _ = tx.send(Ok(shared.clone()));
-                Indexer::new(shared, proto, units).run(reader);
+                let mut ix = Indexer::new(shared, proto, units);
+                // A followed file: the reader may wait long for the next event, so what has
+                // been read is published at once.
+                ix.live = opts.follow.is_some();
+                ix.run(reader);
             }
             Err(e) => {
                 let _ = tx.send(Err(e));
@@ -274,6 +278,8 @@ struct Indexer {
     streams: Vec<String>,
     file_diags: Vec<(u64, String)>,
     last_flush: Instant,
+    /// Publish after every event (a growing file).
+    live: bool,
 }
 
 impl Indexer {
@@ -308,6 +314,7 @@ impl Indexer {
             streams: vec![],
             file_diags: vec![],
             last_flush: Instant::now(),
+            live: false,
         }
     }
 
@@ -336,7 +343,7 @@ impl Indexer {
                     self.push(c.stream, dir, c.ts_ns, c.bytes);
                 }
             }
-            if self.last_flush.elapsed() > Duration::from_millis(50) {
+            if self.live || self.last_flush.elapsed() > Duration::from_millis(50) {
                 self.flush(false);
             }
         }
