@@ -1919,6 +1919,28 @@ pub fn sim_with_view(
     r
 }
 
+/// How long a view asked to close may take before it is given up (see [`abandon_view`]).
+const VIEW_GRACE: Duration = Duration::from_secs(2);
+
+/// The view did not close when asked: its terminal has gone (SIGHUP after the terminal
+/// closed; the terminal library then never returns from waiting for input). The capture is
+/// complete: say so where standard error still goes, and end the process.
+fn abandon_view(r: &io::Result<TapStats>, path: &str, what: &str) -> ! {
+    crate::set_notes(true);
+    let ok = match r {
+        Ok(stats) => {
+            crate::note!("{}", stats.summary(what));
+            stats.file_matches()
+        }
+        Err(e) => {
+            crate::note!("{what}: {e}");
+            false
+        }
+    };
+    crate::note!("{what}: capture in {path} (the view's terminal has gone)");
+    std::process::exit(if ok { 0 } else { 1 })
+}
+
 fn viewed_path(write: &Option<String>) -> io::Result<String> {
     write.clone().ok_or_else(|| {
         io::Error::new(
@@ -1959,6 +1981,7 @@ fn with_view(
                 quit.store(true, Ordering::SeqCst);
             }
             // The view may stay open on the finished file: signals still close it.
+            let mut asked: Option<Instant> = None;
             while !view_done.load(Ordering::SeqCst) {
                 match sig {
                     Some(sg) => {
@@ -1967,6 +1990,12 @@ fn with_view(
                         }
                     }
                     None => thread::sleep(TICK),
+                }
+                if quit.load(Ordering::SeqCst) {
+                    let t = *asked.get_or_insert_with(Instant::now);
+                    if t.elapsed() >= VIEW_GRACE {
+                        abandon_view(&r, path, what);
+                    }
                 }
             }
             r
