@@ -10,6 +10,7 @@ use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::sys::signal::{kill, Signal};
 use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
 use nix::unistd::Pid;
+use std::cell::RefCell;
 use std::fs::File;
 use std::io::{self, Read, Write};
 use std::os::fd::AsFd;
@@ -976,4 +977,313 @@ fn the_tap_stops_on_signals_when_its_output_pipes_are_gone() {
         assert_eq!(c.d2h.len(), 90, "{sig}");
         let _ = std::fs::remove_dir_all(&dir);
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The live view, in a terminal (tmux)
+
+/// A terminal running `aptscope ARGS`: a tmux session on a server of its own (never the
+/// user's), the program's standard error in a file and its exit status written when it ends.
+/// The server is killed on drop (a failing test leaves nothing running).
+struct Term {
+    sock: String,
+    err: PathBuf,
+    status: PathBuf,
+}
+
+fn tmux(sock: &str, args: &[&str]) -> String {
+    let o = Command::new("tmux")
+        .args(["-L", sock])
+        .args(args)
+        .stdin(Stdio::null())
+        .output()
+        .expect("run tmux");
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Quoted for the shell tmux runs the command with.
+fn sh_quote(s: &str) -> String {
+    format!("'{}'", s.replace('\'', r"'\''"))
+}
+
+impl Term {
+    /// `aptscope ARGS` in a 120×40 terminal; `None` when tmux is missing and the rule of
+    /// [`aptscope_capture::tools::require`] says skip (in CI it fails instead).
+    fn start(dir: &Path, args: &[&str]) -> Option<Term> {
+        if !aptscope_capture::tools::require("tmux", "-V", "tmux") {
+            return None;
+        }
+        static N: AtomicUsize = AtomicUsize::new(0);
+        let sock = format!(
+            "aptscope-live-{}-{}",
+            std::process::id(),
+            N.fetch_add(1, Ordering::SeqCst)
+        );
+        let (err, status) = (dir.join("term.err"), dir.join("term.status"));
+        let mut line = sh_quote(env!("CARGO_BIN_EXE_aptscope"));
+        for a in args {
+            line.push(' ');
+            line.push_str(&sh_quote(a));
+        }
+        let cmd = format!(
+            "{line} 2>{}; echo $? >{}",
+            sh_quote(err.to_str().unwrap()),
+            sh_quote(status.to_str().unwrap())
+        );
+        tmux(
+            &sock,
+            &[
+                "new-session",
+                "-d",
+                "-s",
+                "t",
+                "-x",
+                "120",
+                "-y",
+                "40",
+                &cmd,
+            ],
+        );
+        Some(Term { sock, err, status })
+    }
+
+    fn screen(&self) -> String {
+        tmux(&self.sock, &["capture-pane", "-p", "-t", "t"])
+    }
+
+    fn keys(&self, keys: &[&str]) {
+        let mut a = vec!["send-keys", "-t", "t"];
+        a.extend_from_slice(keys);
+        tmux(&self.sock, &a);
+    }
+
+    fn stderr(&self) -> String {
+        std::fs::read_to_string(&self.err).unwrap_or_default()
+    }
+
+    /// The screen once `cond` holds of it (panics at the deadline, showing it).
+    fn wait(&self, what: &str, cond: impl Fn(&str) -> bool) -> String {
+        let last = RefCell::new(String::new());
+        wait_for(
+            what,
+            || format!("{}\n{}", last.borrow(), self.stderr()),
+            || {
+                *last.borrow_mut() = self.screen();
+                cond(&last.borrow())
+            },
+        );
+        last.into_inner()
+    }
+
+    /// Wait for `aptscope` to end: its exit code and standard error.
+    fn exit(&self) -> (i32, String) {
+        wait_for(
+            "the program in the terminal to end",
+            || format!("{}\n{}", self.screen(), self.stderr()),
+            || std::fs::read_to_string(&self.status).is_ok_and(|s| s.ends_with('\n')),
+        );
+        let code = std::fs::read_to_string(&self.status).unwrap_or_default();
+        (code.trim().parse().unwrap_or(-1), self.stderr())
+    }
+
+    /// The `aptscope` process (the child of the pane's shell).
+    fn pid(&self) -> Pid {
+        let shell = tmux(&self.sock, &["display", "-p", "-t", "t", "#{pane_pid}"]);
+        let shell = shell.trim();
+        let children = std::fs::read_to_string(format!("/proc/{shell}/task/{shell}/children"))
+            .unwrap_or_default();
+        let pid = children
+            .split_whitespace()
+            .next()
+            .and_then(|p| p.parse().ok())
+            .expect("the program in the terminal");
+        Pid::from_raw(pid)
+    }
+}
+
+impl Drop for Term {
+    fn drop(&mut self) {
+        tmux(&self.sock, &["kill-server"]);
+    }
+}
+
+/// The record count the view's title bar shows (`… · 4 records`).
+fn shown_records(screen: &str) -> Option<u64> {
+    let first = screen.lines().next()?;
+    let at = first.find(" records")?;
+    first[..at].rsplit(' ').next()?.parse().ok()
+}
+
+/// One host session on `link`: HW_REQ_INFO, its 90-byte reply; returns when and what was sent.
+fn ask_info(link: &Path) -> Instant {
+    let host = open_host(link);
+    let rx = Receiver::start(host.try_clone().unwrap());
+    let t0 = Instant::now();
+    assert_eq!(send(host, req(HW_REQ_INFO).to_vec()).join().unwrap(), 6);
+    wait_for(
+        "HW_GET_INFO at the host",
+        || format!("{:02x?}", rx.got()),
+        || rx.len() >= 90,
+    );
+    assert_eq!(rx.finish().len(), 90);
+    t0
+}
+
+/// `decode --json` of a capture: frames only, whole, no diagnostics but pairing's; returns the
+/// message names in order.
+fn decoded_names(path: &Path) -> Vec<String> {
+    let recs = decode_json(path);
+    let bad: Vec<_> = recs
+        .iter()
+        .filter(|r| r["type"] == "garbage" || r["diag"].as_array().is_some_and(|d| !d.is_empty()))
+        .collect();
+    assert!(bad.is_empty(), "{bad:?}");
+    recs.iter()
+        .filter(|r| r["type"] == "frame")
+        .map(|r| r["name"].as_str().unwrap_or("?").to_string())
+        .collect()
+}
+
+#[test]
+fn tap_view_shows_the_traffic_live_and_q_leaves_a_complete_capture() {
+    let dir = scratch("tap-view");
+    let mut sim = start_sim(&dir.join("dev"));
+    let (dev, host, cap) = (dir.join("dev"), dir.join("host"), dir.join("cap.pcapng"));
+    let Some(term) = Term::start(
+        &dir,
+        &[
+            "tap",
+            "--device",
+            dev.to_str().unwrap(),
+            "--link",
+            host.to_str().unwrap(),
+            "-w",
+            cap.to_str().unwrap(),
+            "--view",
+        ],
+    ) else {
+        return;
+    };
+    wait_for(
+        "the tap's link",
+        || term.stderr(),
+        || std::fs::read_link(&host).is_ok(),
+    );
+    term.wait("the view", |s| s.contains("Timeline"));
+
+    // The reply is on the screen within a second of the request.
+    let t0 = ask_info(&host);
+    let screen = term.wait("HW_GET_INFO on the screen", |s| s.contains("HW_GET_INFO"));
+    let lag = t0.elapsed();
+    assert!(
+        lag < Duration::from_secs(1),
+        "shown after {lag:?}\n{screen}"
+    );
+
+    // The selected frame's detail and hex.
+    term.keys(&[":2", "Enter"]);
+    let screen = term.wait("record 2's detail and hex", |s| {
+        s.contains("Record 2") && s.contains("06 00 54 00 81 50")
+    });
+    assert!(screen.contains("serial_number"), "{screen}");
+
+    // A filter applied live: a second host session shows up in it.
+    term.keys(&["/apt.name == HW_GET_INFO", "Enter"]);
+    term.wait("the filter", |s| s.contains("1 shown"));
+    ask_info(&host);
+    let screen = term.wait("the new reply in the filter", |s| s.contains("2 shown"));
+    assert!(!screen.contains("HW_REQ_INFO"), "{screen}");
+
+    // q stops the tap: a valid capture, the byte check, where the file is.
+    term.keys(&["q"]);
+    let (code, err) = term.exit();
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("matches what was forwarded"), "{err}");
+    assert!(
+        err.contains(&format!("capture in {}", cap.display())),
+        "{err}"
+    );
+    assert!(
+        err.contains("host → device 12 bytes, device → host 180 bytes"),
+        "{err}"
+    );
+    assert_eq!(
+        decoded_names(&cap),
+        ["HW_REQ_INFO", "HW_GET_INFO", "HW_REQ_INFO", "HW_GET_INFO"]
+    );
+    assert!(std::fs::symlink_metadata(&host).is_err(), "the link stays");
+    sim.signal(Signal::SIGINT);
+    assert!(sim.wait_exit().success());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn view_follow_shows_a_file_a_running_tap_writes() {
+    let dir = scratch("follow");
+    let mut sim = start_sim(&dir.join("dev"));
+    let mut tap = start_tap(&dir, &[]);
+    let cap = dir.join("cap.pcapng");
+    let Some(term) = Term::start(
+        &dir,
+        &["view", "--follow", "--proto", "apt", cap.to_str().unwrap()],
+    ) else {
+        return;
+    };
+    term.wait("the view", |s| s.contains("Timeline"));
+    ask_info(&dir.join("host"));
+    term.wait("the reply", |s| {
+        s.contains("HW_GET_INFO") && shown_records(s) == Some(2)
+    });
+    ask_info(&dir.join("host"));
+    let screen = term.wait("the second session", |s| shown_records(s) == Some(4));
+    assert!(!screen.contains("truncated"), "{screen}");
+    // The tap ends; the view stays on the complete file until q.
+    tap.signal(Signal::SIGINT);
+    assert!(tap.wait_exit().success(), "{}", tap.stderr());
+    term.keys(&[":4", "Enter"]);
+    term.wait("record 4", |s| s.contains("Record 4"));
+    term.keys(&["q"]);
+    let (code, err) = term.exit();
+    assert_eq!(code, 0, "{err}");
+    sim.signal(Signal::SIGINT);
+    assert!(sim.wait_exit().success());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn sim_view_shows_the_simulators_traffic_across_sessions_and_ends_on_sigterm() {
+    let dir = scratch("sim-view");
+    let (link, cap) = (dir.join("dev"), dir.join("sim.pcapng"));
+    let Some(term) = Term::start(
+        &dir,
+        &[
+            "sim",
+            "apt",
+            "--pty",
+            link.to_str().unwrap(),
+            "--view",
+            "-w",
+            cap.to_str().unwrap(),
+        ],
+    ) else {
+        return;
+    };
+    wait_for(
+        "the simulator's link",
+        || term.stderr(),
+        || std::fs::read_link(&link).is_ok(),
+    );
+    term.wait("the view", |s| s.contains("Timeline"));
+    // Two host programs one after the other: the simulator stays up.
+    for n in [2, 4] {
+        ask_info(&link);
+        term.wait("the session", |s| shown_records(s) == Some(n));
+    }
+    kill(term.pid(), Signal::SIGTERM).expect("signal");
+    let (code, err) = term.exit();
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("matches what was forwarded"), "{err}");
+    assert_eq!(decoded_names(&cap).len(), 4);
+    assert!(std::fs::symlink_metadata(&link).is_err(), "the link stays");
+    let _ = std::fs::remove_dir_all(&dir);
 }

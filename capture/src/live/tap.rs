@@ -17,9 +17,10 @@
 //!   file stays complete, and [`TapStats::backpressure_waits`] counts it) rather than drop bytes
 //!   from the file. Only when writing the file fails (disk full …) are chunks no longer queued;
 //!   they are counted in [`TapStats::file_lost`] and the error is reported.
-//! - The **writer** merges the two directions by time (a 100 ms window), writes pcapng (or pcap) blocks
-//!   and flushes them to the kernel every 256 chunks or every second, so a `kill -9` leaves a
-//!   file readable up to its last complete block.
+//! - The **writer** merges the two directions by time (a 100 ms window), writes pcapng (or pcap)
+//!   blocks and flushes them to the kernel every 256 chunks or every 200 ms (so a follower,
+//!   `view --follow`, sees them soon; with a live view, whenever written), so a `kill -9`
+//!   leaves a file readable up to its last complete block.
 //! - **Display** (lossy): chunks go through a channel of [`DISPLAY_QUEUE`] chunks that the
 //!   forwarder only ever `try_send`s into; when a slow terminal lets it fill, chunks are skipped
 //!   for display, counted, and a `# display skipped …` line says so (the file still has them).
@@ -70,7 +71,7 @@ const MERGE_WINDOW_NS: u64 = 100_000_000;
 /// Flush the file after this many chunks …
 const FLUSH_CHUNKS: u64 = 256;
 /// … or this long after the last flush.
-const FLUSH_EVERY: Duration = Duration::from_secs(1);
+const FLUSH_EVERY: Duration = Duration::from_millis(200);
 /// How often a missing device is looked for (with `reconnect`).
 const RETRY_EVERY: Duration = Duration::from_millis(500);
 /// Bytes read at once.
@@ -231,7 +232,7 @@ pub struct TapOptions {
     /// Stage or scale for the live timeline's APT motion values (physical units beside raw).
     pub units: UnitsOpts,
     /// A live view follows the `write` file: it is flushed whenever something was written
-    /// (every [`TICK`] at most) instead of every second (set by [`tap_with_view`]).
+    /// (every [`TICK`] at most) instead of every 200 ms (set by [`tap_with_view`]).
     pub followed: bool,
 }
 
