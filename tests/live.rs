@@ -1287,3 +1287,196 @@ fn sim_view_shows_the_simulators_traffic_across_sessions_and_ends_on_sigterm() {
     assert!(std::fs::symlink_metadata(&link).is_err(), "the link stays");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Resident memory of a process, in KiB.
+fn rss_kib(pid: Pid) -> Option<u64> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let l = s.lines().find(|l| l.starts_with("VmRSS:"))?;
+    l.split_whitespace().nth(1)?.parse().ok()
+}
+
+fn now_ns() -> u64 {
+    let d = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap_or_default();
+    u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)
+}
+
+/// A soak of the live view: simulator ⇄ `tap --view` (in a terminal) ⇄ a scripted host
+/// sending ten minutes' worth of status requests at the controller's rate (10 per second:
+/// 6000), compressed into `APTSCOPE_SOAK_SECS` (default 20) seconds, plus two 1 MB bursts.
+/// Checked: not a byte lost in the file; the view never more than 1 s behind the file (the
+/// record count on screen, sampled every 100 ms, against the records' capture times); the
+/// tap's memory flat but for the view's index of the records. Prints its figures
+/// (`bench/live-view.sh` runs it in release for the README).
+#[test]
+fn soak_of_the_live_view_loses_nothing_lags_under_a_second_and_keeps_memory_flat() {
+    let secs: f64 = std::env::var("APTSCOPE_SOAK_SECS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(20.0);
+    let dir = scratch("soak");
+    let mut sim = start_sim(&dir.join("dev"));
+    let (dev, host, cap) = (dir.join("dev"), dir.join("host"), dir.join("cap.pcapng"));
+    let Some(term) = Term::start(
+        &dir,
+        &[
+            "tap",
+            "--device",
+            dev.to_str().unwrap(),
+            "--link",
+            host.to_str().unwrap(),
+            "-w",
+            cap.to_str().unwrap(),
+            "--view",
+        ],
+    ) else {
+        return;
+    };
+    wait_for(
+        "the tap's link",
+        || term.stderr(),
+        || std::fs::read_link(&host).is_ok(),
+    );
+    term.wait("the view", |s| s.contains("Timeline"));
+    let pid = term.pid();
+    let rss0 = rss_kib(pid).expect("the tap's memory");
+
+    // The host's script, in one thread writing whole frames in order: a status request every
+    // slot, a megabyte burst at a quarter and at 60 % of the run.
+    const UPDATES: u32 = 6000;
+    let slot = Duration::from_secs_f64(secs / f64::from(UPDATES));
+    let (burst, burst_replies) = traffic(1 << 20, &ALL_REQS);
+    let expected = 2 * burst_replies.len() + UPDATES as usize;
+    let h = open_host(&host);
+    let rx = Receiver::start(h.try_clone().unwrap());
+    let script = thread::spawn(move || {
+        let mut h = h;
+        let mut sent = Vec::with_capacity(3 << 20);
+        let mut write = |b: &[u8], sent: &mut Vec<u8>| {
+            let mut done = 0;
+            while done < b.len() {
+                if !ready(&h, PollFlags::POLLOUT) {
+                    continue;
+                }
+                match h.write(&b[done..]) {
+                    Ok(n) => done += n,
+                    Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
+                    Err(e) => panic!("host write: {e}"),
+                }
+            }
+            sent.extend_from_slice(b);
+        };
+        let t0 = Instant::now();
+        for i in 0..UPDATES {
+            if i == UPDATES / 4 || i == UPDATES * 3 / 5 {
+                write(&burst, &mut sent);
+            }
+            write(&req(MOT_REQ_DCSTATUSUPDATE), &mut sent);
+            // Paced like the controller's updates (the traffic's rate, not a wait for a
+            // condition): the next request goes out when its slot comes.
+            if let Some(d) = (slot * (i + 1)).checked_sub(t0.elapsed()) {
+                thread::sleep(d);
+            }
+        }
+        sent
+    });
+
+    // Sample the screen (records shown) and the tap's memory until every reply is in.
+    let mut samples: Vec<(u64, u64)> = vec![];
+    let mut rss: Vec<u64> = vec![rss0];
+    let t0 = Instant::now();
+    while !script.is_finished() || frames(&rx.got()).len() < expected {
+        assert!(
+            t0.elapsed() < DEADLINE + Duration::from_secs_f64(secs),
+            "the soak did not finish: {} of {expected} replies\n{}",
+            frames(&rx.got()).len(),
+            term.stderr()
+        );
+        let screen = term.screen();
+        let t = now_ns();
+        if let Some(n) = shown_records(&screen) {
+            samples.push((t, n));
+        }
+        rss.extend(rss_kib(pid));
+        thread::sleep(Duration::from_millis(100));
+    }
+    let sent = script.join().unwrap();
+    let run = t0.elapsed();
+
+    // Every record ends up on the screen.
+    let recs = decode_json(&cap);
+    let ts: Vec<u64> = recs
+        .iter()
+        .filter(|r| r["n"].is_u64())
+        .map(|r| r["ts_ns"].as_u64().expect("a time"))
+        .collect();
+    let total = ts.len() as u64;
+    let catch_up = Instant::now();
+    term.wait("every record on the screen", |s| {
+        shown_records(s) == Some(total)
+    });
+    let catch_up = catch_up.elapsed();
+    rss.extend(rss_kib(pid));
+
+    term.keys(&["q"]);
+    let (code, err) = term.exit();
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("matches what was forwarded"), "{err}");
+
+    // Not a byte lost: the file holds what the host sent and what it received, in order.
+    let got = rx.finish();
+    let c = read_capture(&cap);
+    assert!(c.diags.is_empty(), "{:?}", c.diags);
+    assert!(c.h2d == sent, "h2d: {}", first_difference(&c.h2d, &sent));
+    assert!(c.d2h == got, "d2h: {}", first_difference(&c.d2h, &got));
+
+    // The view's lag: at each sample, how long ago the first record not yet shown was captured.
+    let lag_ns = samples
+        .iter()
+        .filter_map(|&(t, n)| ts.get(n as usize).map(|&first| t.saturating_sub(first)))
+        .max()
+        .unwrap_or(0);
+    if std::env::var("APTSCOPE_SOAK_DEBUG").is_ok() {
+        let t_first = ts.first().copied().unwrap_or(0);
+        for &(t, n) in &samples {
+            if let Some(&first) = ts.get(n as usize) {
+                let l = t.saturating_sub(first) / 1_000_000;
+                if l > 200 {
+                    eprintln!("t={:.2}s shown={n} lag={l}ms", (t - t_first) as f64 / 1e9);
+                }
+            }
+        }
+    }
+    // Memory: what the tap process holds beyond the view's index of the records (a record
+    // costs about 40 bytes plus its bytes; 4× that is allowed for the UI's caches).
+    let bytes = (sent.len() + got.len()) as u64;
+    let index_kib = (40 * total + bytes) * 4 / 1024;
+    let (rss_max, rss_end) = (
+        rss.iter().copied().max().unwrap_or(0),
+        rss.last().copied().unwrap_or(0),
+    );
+    eprintln!(
+        "soak: {:.1} s, {total} records, {} bytes; view lag max {} ms over {} samples, catch-up \
+         {} ms after the last reply; tap RSS {rss0} KiB at start, {rss_max} KiB max, {rss_end} \
+         KiB at end",
+        run.as_secs_f64(),
+        bytes,
+        lag_ns / 1_000_000,
+        samples.len(),
+        catch_up.as_millis()
+    );
+    assert!(samples.len() >= 10, "{} samples", samples.len());
+    assert!(
+        lag_ns < 1_000_000_000,
+        "the view lagged {} ms",
+        lag_ns / 1_000_000
+    );
+    assert!(
+        rss_max.saturating_sub(rss0) <= index_kib + 16 * 1024,
+        "memory grew from {rss0} to {rss_max} KiB for {total} records"
+    );
+    sim.signal(Signal::SIGINT);
+    assert!(sim.wait_exit().success());
+    let _ = std::fs::remove_dir_all(&dir);
+}

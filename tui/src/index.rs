@@ -195,9 +195,7 @@ pub fn spawn_with(
             Ok((shared, reader)) => {
                 let _ = tx.send(Ok(shared.clone()));
                 let mut ix = Indexer::new(shared, proto, units);
-                // A followed file: the reader may wait long for the next event, so what has
-                // been read is published at once.
-                ix.live = opts.follow.is_some();
+                ix.follow = opts.follow.and_then(|_| std::fs::File::open(&path).ok());
                 ix.run(reader);
             }
             Err(e) => {
@@ -278,8 +276,8 @@ struct Indexer {
     streams: Vec<String>,
     file_diags: Vec<(u64, String)>,
     last_flush: Instant,
-    /// Publish after every event (a growing file).
-    live: bool,
+    /// A followed (growing) file, to see when reading has caught up with it.
+    follow: Option<std::fs::File>,
 }
 
 impl Indexer {
@@ -314,7 +312,7 @@ impl Indexer {
             streams: vec![],
             file_diags: vec![],
             last_flush: Instant::now(),
-            live: false,
+            follow: None,
         }
     }
 
@@ -343,12 +341,21 @@ impl Indexer {
                     self.push(c.stream, dir, c.ts_ns, c.bytes);
                 }
             }
-            if self.live || self.last_flush.elapsed() > Duration::from_millis(50) {
+            if self.caught_up() || self.last_flush.elapsed() > Duration::from_millis(50) {
                 self.flush(false);
             }
         }
         self.finish();
         self.flush(true);
+    }
+
+    /// A followed file read to its current end: the reader may now wait long for the next
+    /// event, so what has been read is published at once (not at the next event).
+    fn caught_up(&self) -> bool {
+        self.follow.as_ref().is_some_and(|f| {
+            f.metadata()
+                .is_ok_and(|m| self.shared.read.load(Ordering::Relaxed) >= m.len())
+        })
     }
 
     fn push(&mut self, stream: u32, dir: u8, ts: Option<u64>, bytes: &[u8]) {
