@@ -2004,7 +2004,7 @@ fn with_view(
         let shown = view(LiveView {
             path,
             written,
-            quit: &quit,
+            quit,
         });
         view_done.store(true, Ordering::SeqCst);
         stop.stop();
