@@ -3,9 +3,7 @@
 
 use aptscope_capture::follow::FollowStop;
 use aptscope_capture::info::summarize;
-use aptscope_capture::live::sim::{
-    parse_modules, sim_apt_main, sim_elliptec_main, AptModel, AptSim, EllSim, SimLine,
-};
+use aptscope_capture::live::sim::{apt_sim, ell_sim, sim_apt_main, sim_elliptec_main, SimLine};
 use aptscope_capture::live::tap::{
     sim_with_view, sniff_main, sniff_with_view, tap_main, tap_with_view, Flow, LiveView,
     SniffOptions, TapOptions, TapStats,
@@ -552,19 +550,12 @@ fn main() -> ExitCode {
         Cmd::Sim { what } => match what {
             SimCmd::Apt {
                 model, pty, view, ..
-            } if view.view => AptModel::parse(&model)
-                .ok_or_else(|| {
-                    bad(format!(
-                        "unknown model `{model}` ({})",
-                        AptModel::NAMES.join(", ")
-                    ))
-                })
-                .and_then(|m| sim_view(Box::new(AptSim::new(m)), Proto::Apt, pty, view)),
+            } if view.view => {
+                apt_sim(&model).and_then(|sim| sim_view(Box::new(sim), Proto::Apt, pty, view))
+            }
             SimCmd::Elliptec {
                 modules, pty, view, ..
-            } if view.view => parse_modules(&modules)
-                .and_then(|m| EllSim::new(&m))
-                .map_err(bad)
+            } if view.view => ell_sim(&modules)
                 .and_then(|sim| sim_view(Box::new(sim), Proto::Elliptec, pty, view)),
             SimCmd::Apt {
                 model,
