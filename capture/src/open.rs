@@ -292,7 +292,7 @@ pub fn open_with_progress(
             total,
             ..progress.clone()
         };
-        let (input, head): (Box<dyn Read>, _) = match opts.follow {
+        let (inner, head): (Box<dyn Read>, _) = match opts.follow {
             Some(stop) => {
                 let mut f = Follow::new(f, stop);
                 let head = f.head(SNIFF_LEN, |h| {
@@ -301,20 +301,14 @@ pub fn open_with_progress(
                 progress
                     .read
                     .fetch_add(head.len() as u64, Ordering::Relaxed);
-                let counted = Counted {
-                    inner: f,
-                    read: progress.read.clone(),
-                };
-                (Box::new(counted), Some(head))
+                (Box::new(f), Some(head))
             }
-            None => {
-                let counted = Counted {
-                    inner: f,
-                    read: progress.read.clone(),
-                };
-                (Box::new(counted), None)
-            }
+            None => (Box::new(f), None),
         };
+        let input = Box::new(Counted {
+            inner,
+            read: progress.read.clone(),
+        });
         let (reader, format, p) = finish_open(input, head, opts, p)?;
         // A name that promises a container the content is not: say so, rather than silently
         // decoding the container's headers as garbage.
