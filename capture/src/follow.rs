@@ -171,11 +171,12 @@ mod tests {
         let _ = std::fs::remove_file(&p);
     }
 
-    /// What a reader of a followed file reports, as text, sent as it comes.
-    fn events(path: std::path::PathBuf, stop: FollowStop, tx: mpsc::Sender<String>) {
+    /// What a reader of a file (followed when `follow` is given) reports, as text, sent as it
+    /// comes.
+    fn events(path: std::path::PathBuf, follow: Option<FollowStop>, tx: mpsc::Sender<String>) {
         use crate::model::Event;
         let opts = crate::open::OpenOptions {
-            follow: Some(stop),
+            follow,
             ..Default::default()
         };
         let (mut r, _) = match crate::open::open(&path.to_string_lossy(), opts) {
@@ -227,7 +228,7 @@ mod tests {
         let stop = FollowStop::new();
         let (tx, rx) = mpsc::channel();
         let path = p.clone();
-        let t = std::thread::spawn(move || events(path, stop, tx));
+        let t = std::thread::spawn(move || events(path, Some(stop), tx));
         let wait = Duration::from_secs(30);
         // Nothing yet, not even an error: the file is empty.
         assert!(rx.recv_timeout(POLL * 5).is_err());
@@ -249,6 +250,40 @@ mod tests {
             "a cut block after the stop is reported: {rest:?}"
         );
         t.join().unwrap();
+        let _ = std::fs::remove_file(&p);
+    }
+
+    #[test]
+    fn a_socat_log_written_in_pieces_reads_as_the_whole_file_does() {
+        let sample = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../samples/kdc101-session.socat.log"
+        );
+        let whole = std::fs::read(sample).unwrap();
+        let (tx, rx) = mpsc::channel();
+        events(sample.into(), None, tx);
+        let expected: Vec<String> = rx.iter().collect();
+        assert!(expected.iter().filter(|l| l.starts_with("chunk")).count() > 10);
+
+        let p = scratch("socat");
+        let mut w = File::create(&p).unwrap();
+        let stop = FollowStop::new();
+        let (tx, rx) = mpsc::channel();
+        let path = p.clone();
+        let t = std::thread::spawn(move || events(path, Some(stop), tx));
+        // Pieces cut inside lines: each is waited for, nothing reported as damage.
+        let mut got = vec![];
+        for piece in whole.chunks(700) {
+            w.write_all(piece).unwrap();
+            while let Ok(l) = rx.recv_timeout(POLL * 5) {
+                assert!(!l.starts_with("diag"), "{l} after {} bytes", got.len());
+                got.push(l);
+            }
+        }
+        stop.stop();
+        got.extend(rx.iter());
+        t.join().unwrap();
+        assert_eq!(got, expected);
         let _ = std::fs::remove_file(&p);
     }
 }
