@@ -1309,7 +1309,7 @@ fn live_view(v: LiveView<'_>, proto: Proto, units: UnitsOpts) -> io::Result<()> 
         follow: Some(v.written),
         ..OpenOptions::default()
     };
-    aptscope_tui::run_live(v.path, o, Some(proto), units, v.quit)
+    aptscope_tui::run_live(v.path, v.host, o, Some(proto), units, v.quit)
 }
 
 /// After a live view: say where the capture is, and check it holds every forwarded byte.

@@ -1169,7 +1169,9 @@ fn tap_view_shows_the_traffic_live_and_q_leaves_a_complete_capture() {
         || term.stderr(),
         || std::fs::read_link(&host).is_ok(),
     );
-    term.wait("the view", |s| s.contains("Timeline"));
+    // The title says where host programs connect.
+    let title = format!("cap.pcapng · host {} ·", host.display());
+    term.wait("the view", |s| s.contains("Timeline") && s.contains(&title));
 
     // The reply is on the screen within a second of the request.
     let t0 = ask_info(&host);
@@ -1242,7 +1244,8 @@ fn view_follow_shows_a_file_a_running_tap_writes() {
     assert!(tap.wait_exit().success(), "{}", tap.stderr());
     term.keys(&[":4", "Enter"]);
     term.wait("record 4", |s| s.contains("Record 4"));
-    term.keys(&["q"]);
+    // Ctrl-C is a key in the view: it closes.
+    term.keys(&["C-c"]);
     let (code, err) = term.exit();
     assert_eq!(code, 0, "{err}");
     sim.signal(Signal::SIGINT);

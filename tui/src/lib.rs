@@ -69,15 +69,17 @@ pub fn run_with(
 }
 
 /// [`run_with`] on a capture another thread or process is still writing (`opts.follow` set:
-/// the index grows with the file), closing also when `quit` is set (the tap stopped).
+/// the index grows with the file), closing also when `quit` is set (the tap stopped); `note`
+/// is shown after the file's name in the title (where the host program connects).
 pub fn run_live(
     path: &str,
+    note: Option<&str>,
     opts: OpenOptions,
     proto: Option<aptscope_dissector::detect::Proto>,
     units: aptscope_dissector::units::UnitsOpts,
     quit: &AtomicBool,
 ) -> io::Result<()> {
-    run_until(path, opts, proto, units, Some(quit))
+    run_until(path, opts, proto, units, Some((note, quit)))
 }
 
 fn run_until(
@@ -85,12 +87,16 @@ fn run_until(
     opts: OpenOptions,
     proto: Option<aptscope_dissector::detect::Proto>,
     units: aptscope_dissector::units::UnitsOpts,
-    quit: Option<&AtomicBool>,
+    live: Option<(Option<&str>, &AtomicBool)>,
 ) -> io::Result<()> {
     let shared = index::spawn_with(path, opts, proto, units)?;
-    let title = std::path::Path::new(path)
+    let mut title = std::path::Path::new(path)
         .file_name()
         .map_or_else(|| path.to_string(), |n| n.to_string_lossy().into_owned());
+    if let Some((Some(note), _)) = live {
+        title = format!("{title} · {note}");
+    }
+    let quit = live.map(|(_, q)| q);
     let mut app = app::App::new(shared.clone(), &title, true);
 
     let hook = std::panic::take_hook();

@@ -1845,6 +1845,9 @@ fn receive(
 pub struct LiveView<'a> {
     /// The capture file (pcapng) the tap writes, flushed as it is written.
     pub path: &'a str,
+    /// Where host programs connect (the tap's link, else its pseudo-terminal); `None` for a
+    /// sniff.
+    pub host: Option<&'a str>,
     /// Set once the file is complete (the tap has ended): a follower reads to its end.
     pub written: FollowStop,
     /// Set when the view should close: the tap was stopped (signal, duration) or failed.
@@ -1865,8 +1868,16 @@ pub fn tap_with_view(
     opts.quiet = true;
     let tap = Tap::new(opts)?;
     let (signals, stop) = (tap.opts.signals, tap.opts.stop.clone());
+    let host = tap.host.link.as_ref().unwrap_or(&tap.host.slave_path);
+    let host = format!("host {}", host.display());
     let run = move |sig: Option<&Signals>| tap.run_with(None, sig);
-    with_view(&path, (signals, stop), "aptscope tap", run, view)
+    with_view(
+        (&path, Some(&host)),
+        (signals, stop),
+        "aptscope tap",
+        run,
+        view,
+    )
 }
 
 /// [`tap_with_view`] for a sniff.
@@ -1880,7 +1891,7 @@ pub fn sniff_with_view(
     let sniff = Sniff::new(opts)?;
     let (signals, stop) = (sniff.opts.signals, sniff.opts.stop.clone());
     let run = move |sig: Option<&Signals>| sniff.run_with(None, sig);
-    with_view(&path, (signals, stop), "aptscope sniff", run, view)
+    with_view((&path, None), (signals, stop), "aptscope sniff", run, view)
 }
 
 /// A simulator's own traffic in a live view: `sim` served on a private pseudo-terminal with a
@@ -1954,7 +1965,7 @@ fn viewed_path(write: &Option<String>) -> io::Result<String> {
 /// Run `run` (a tap or sniff, given the signals) in a thread and `view` in this one; see
 /// [`tap_with_view`].
 fn with_view(
-    path: &str,
+    (path, host): (&str, Option<&str>),
     (signals, stop): (bool, StopHandle),
     what: &str,
     run: impl FnOnce(Option<&Signals>) -> io::Result<TapStats> + Send,
@@ -2003,6 +2014,7 @@ fn with_view(
         });
         let shown = view(LiveView {
             path,
+            host,
             written,
             quit,
         });
