@@ -1483,3 +1483,55 @@ fn soak_of_the_live_view_loses_nothing_lags_under_a_second_and_keeps_memory_flat
     assert!(sim.wait_exit().success());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn sim_elliptec_view_shows_host_commands_sent_without_terminator_at_once() {
+    let dir = scratch("ell-view");
+    let link = dir.join("ell");
+    let Some(term) = Term::start(
+        &dir,
+        &[
+            "sim",
+            "elliptec",
+            "--modules",
+            "0:ELL14,1:ELL9",
+            "--pty",
+            link.to_str().unwrap(),
+            "--view",
+        ],
+    ) else {
+        return;
+    };
+    wait_for(
+        "the simulator's link",
+        || term.stderr(),
+        || std::fs::read_link(&link).is_ok(),
+    );
+    term.wait("the view", |s| s.contains("Timeline"));
+    let host = open_host(&link);
+    let rx = Receiver::start(host.try_clone().unwrap());
+    // Commands as hosts send them, without CR LF: each shown as soon as it is sent.
+    for (cmd, reply_end, records) in [("0in", 1, 2), ("1gp", 2, 4)] {
+        let h = host.try_clone().unwrap();
+        assert_eq!(send(h, cmd.as_bytes().to_vec()).join().unwrap(), 3);
+        wait_for(
+            "the module's reply",
+            || format!("{:?}", String::from_utf8_lossy(&rx.got())),
+            || count(&rx.got(), b"\r\n") >= reply_end,
+        );
+        term.wait("the command and its reply", |s| {
+            shown_records(s) == Some(records)
+        });
+    }
+    let screen = term.screen();
+    assert!(screen.contains("in REQ_INFORMATION"), "{screen}");
+    assert!(screen.contains("gp GET_POSITION"), "{screen}");
+    drop(rx.finish());
+    drop(host);
+    term.keys(&["q"]);
+    let (code, err) = term.exit();
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("host → device 6 bytes"), "{err}");
+    assert!(err.contains("capture in "), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

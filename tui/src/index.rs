@@ -429,7 +429,15 @@ impl Indexer {
         }
         match self.proto {
             Some(Proto::Apt) => lane.apt.push(bytes),
-            _ => lane.ell.push(bytes),
+            _ => {
+                lane.ell.push(bytes);
+                // Following a live capture, a host chunk is a host write (as the tap's own
+                // timeline assumes): a command sent without terminator is framed now, not at
+                // the host's next write.
+                if self.follow.is_some() && dir == 1 {
+                    lane.ell.cut();
+                }
+            }
         }
         self.drain(i);
     }
