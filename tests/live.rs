@@ -1007,8 +1007,9 @@ fn sh_quote(s: &str) -> String {
 }
 
 impl Term {
-    /// `aptscope ARGS` in a 120×40 terminal; `None` when tmux is missing and the rule of
-    /// [`aptscope_capture::tools::require`] says skip (in CI it fails instead).
+    /// `aptscope ARGS` in a 160×40 terminal (room for the scratch paths in the title); `None`
+    /// when tmux is missing and the rule of [`aptscope_capture::tools::require`] says skip (in
+    /// CI it fails instead).
     fn start(dir: &Path, args: &[&str]) -> Option<Term> {
         if !aptscope_capture::tools::require("tmux", "-V", "tmux") {
             return None;
@@ -1038,7 +1039,7 @@ impl Term {
                 "-s",
                 "t",
                 "-x",
-                "120",
+                "160",
                 "-y",
                 "40",
                 &cmd,
@@ -1225,13 +1226,11 @@ fn view_follow_shows_a_file_a_running_tap_writes() {
     let mut sim = start_sim(&dir.join("dev"));
     let mut tap = start_tap(&dir, &[]);
     let cap = dir.join("cap.pcapng");
-    let Some(term) = Term::start(
-        &dir,
-        &["view", "--follow", "--proto", "apt", cap.to_str().unwrap()],
-    ) else {
+    let Some(term) = Term::start(&dir, &["view", "--follow", cap.to_str().unwrap()]) else {
         return;
     };
     term.wait("the view", |s| s.contains("Timeline"));
+    // Shown at once, not after 4 KiB of traffic: the protocol is detected from what there is.
     ask_info(&dir.join("host"));
     term.wait("the reply", |s| {
         s.contains("HW_GET_INFO") && shown_records(s) == Some(2)

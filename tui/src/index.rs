@@ -341,7 +341,13 @@ impl Indexer {
                     self.push(c.stream, dir, c.ts_ns, c.bytes);
                 }
             }
-            if self.caught_up() || self.last_flush.elapsed() > Duration::from_millis(50) {
+            let caught_up = self.caught_up();
+            // A followed file may stay short of the 4 KiB sample for long: a certain detection
+            // on what there is shows its traffic now.
+            if caught_up && self.proto.is_none() && !self.sample.is_empty() {
+                self.choose(true);
+            }
+            if caught_up || self.last_flush.elapsed() > Duration::from_millis(50) {
                 self.flush(false);
             }
         }
@@ -363,14 +369,16 @@ impl Indexer {
             self.sample.push((stream, dir, ts, bytes.to_vec()));
             self.sample_len += bytes.len();
             if self.sample_len >= SAMPLE {
-                self.choose();
+                self.choose(false);
             }
             return;
         }
         self.feed(stream, dir, ts, bytes);
     }
 
-    fn choose(&mut self) {
+    /// Decide the protocol from the sample and index it; `only_certain`: only when detection
+    /// is certain (else keep sampling). Returns whether it decided.
+    fn choose(&mut self, only_certain: bool) -> bool {
         // Judge the busiest lane of the sample.
         let mut totals: BTreeMap<(u32, u8), usize> = BTreeMap::new();
         for (s, d, _, b) in &self.sample {
@@ -384,6 +392,9 @@ impl Indexer {
             }
         }
         let det = detect(&bytes);
+        if only_certain && det.proto.is_none() {
+            return false;
+        }
         let proto = det.proto.unwrap_or(if det.elliptec > det.apt {
             Proto::Elliptec
         } else {
@@ -398,6 +409,7 @@ impl Indexer {
             self.feed(s, d, ts, &b);
         }
         self.sample_len = 0;
+        true
     }
 
     fn lane(&mut self, stream: u32, dir: u8) -> usize {
@@ -447,7 +459,7 @@ impl Indexer {
             if self.sample.is_empty() {
                 return;
             }
-            self.choose();
+            self.choose(false);
         }
         for i in 0..self.lanes.len() {
             self.lanes[i].apt.finish();
