@@ -1486,7 +1486,7 @@ fn soak_of_the_live_view_loses_nothing_lags_under_a_second_and_keeps_memory_flat
 #[test]
 fn sim_elliptec_view_shows_host_commands_sent_without_terminator_at_once() {
     let dir = scratch("ell-view");
-    let link = dir.join("ell");
+    let (link, cap) = (dir.join("ell"), dir.join("ell.pcapng"));
     let Some(term) = Term::start(
         &dir,
         &[
@@ -1497,6 +1497,8 @@ fn sim_elliptec_view_shows_host_commands_sent_without_terminator_at_once() {
             "--pty",
             link.to_str().unwrap(),
             "--view",
+            "-w",
+            cap.to_str().unwrap(),
         ],
     ) else {
         return;
@@ -1531,6 +1533,9 @@ fn sim_elliptec_view_shows_host_commands_sent_without_terminator_at_once() {
     let (code, err) = term.exit();
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("host → device 6 bytes"), "{err}");
-    assert!(err.contains("capture in "), "{err}");
+    assert!(
+        err.contains(&format!("capture in {}", cap.display())),
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
