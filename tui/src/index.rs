@@ -194,7 +194,9 @@ pub fn spawn_with(
         .spawn(move || match opened(&path, opts) {
             Ok((shared, reader)) => {
                 let _ = tx.send(Ok(shared.clone()));
-                Indexer::new(shared, proto, units).run(reader);
+                let mut ix = Indexer::new(shared, proto, units);
+                ix.follow = opts.follow.and_then(|_| std::fs::File::open(&path).ok());
+                ix.run(reader);
             }
             Err(e) => {
                 let _ = tx.send(Err(e));
@@ -274,6 +276,8 @@ struct Indexer {
     streams: Vec<String>,
     file_diags: Vec<(u64, String)>,
     last_flush: Instant,
+    /// A followed (growing) file, to see when reading has caught up with it.
+    follow: Option<std::fs::File>,
 }
 
 impl Indexer {
@@ -308,6 +312,7 @@ impl Indexer {
             streams: vec![],
             file_diags: vec![],
             last_flush: Instant::now(),
+            follow: None,
         }
     }
 
@@ -336,7 +341,13 @@ impl Indexer {
                     self.push(c.stream, dir, c.ts_ns, c.bytes);
                 }
             }
-            if self.last_flush.elapsed() > Duration::from_millis(50) {
+            let caught_up = self.caught_up();
+            // A followed file may stay short of the 4 KiB sample for long: a certain detection
+            // on what there is shows its traffic now.
+            if caught_up && self.proto.is_none() && !self.sample.is_empty() {
+                self.choose(true);
+            }
+            if caught_up || self.last_flush.elapsed() > Duration::from_millis(50) {
                 self.flush(false);
             }
         }
@@ -344,19 +355,30 @@ impl Indexer {
         self.flush(true);
     }
 
+    /// A followed file read to its current end: the reader may now wait long for the next
+    /// event, so what has been read is published at once (not at the next event).
+    fn caught_up(&self) -> bool {
+        self.follow.as_ref().is_some_and(|f| {
+            f.metadata()
+                .is_ok_and(|m| self.shared.read.load(Ordering::Relaxed) >= m.len())
+        })
+    }
+
     fn push(&mut self, stream: u32, dir: u8, ts: Option<u64>, bytes: &[u8]) {
         if self.proto.is_none() {
             self.sample.push((stream, dir, ts, bytes.to_vec()));
             self.sample_len += bytes.len();
             if self.sample_len >= SAMPLE {
-                self.choose();
+                self.choose(false);
             }
             return;
         }
         self.feed(stream, dir, ts, bytes);
     }
 
-    fn choose(&mut self) {
+    /// Decide the protocol from the sample and index it; `only_certain`: only when detection
+    /// is certain (else keep sampling). Returns whether it decided.
+    fn choose(&mut self, only_certain: bool) -> bool {
         // Judge the busiest lane of the sample.
         let mut totals: BTreeMap<(u32, u8), usize> = BTreeMap::new();
         for (s, d, _, b) in &self.sample {
@@ -370,6 +392,9 @@ impl Indexer {
             }
         }
         let det = detect(&bytes);
+        if only_certain && det.proto.is_none() {
+            return false;
+        }
         let proto = det.proto.unwrap_or(if det.elliptec > det.apt {
             Proto::Elliptec
         } else {
@@ -384,6 +409,7 @@ impl Indexer {
             self.feed(s, d, ts, &b);
         }
         self.sample_len = 0;
+        true
     }
 
     fn lane(&mut self, stream: u32, dir: u8) -> usize {
@@ -415,7 +441,15 @@ impl Indexer {
         }
         match self.proto {
             Some(Proto::Apt) => lane.apt.push(bytes),
-            _ => lane.ell.push(bytes),
+            _ => {
+                lane.ell.push(bytes);
+                // Following a live capture, a host chunk is a host write (as the tap's own
+                // timeline assumes): a command sent without terminator is framed now, not at
+                // the host's next write.
+                if self.follow.is_some() && dir == 1 {
+                    lane.ell.cut();
+                }
+            }
         }
         self.drain(i);
     }
@@ -425,7 +459,7 @@ impl Indexer {
             if self.sample.is_empty() {
                 return;
             }
-            self.choose();
+            self.choose(false);
         }
         for i in 0..self.lanes.len() {
             self.lanes[i].apt.finish();

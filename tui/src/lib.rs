@@ -24,7 +24,7 @@ use ratatui::crossterm::terminal::{
 use ratatui::prelude::CrosstermBackend;
 use ratatui::Terminal;
 use std::io;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 fn restore_terminal() {
@@ -65,10 +65,38 @@ pub fn run_with(
     proto: Option<aptscope_dissector::detect::Proto>,
     units: aptscope_dissector::units::UnitsOpts,
 ) -> io::Result<()> {
+    run_until(path, opts, proto, units, None)
+}
+
+/// [`run_with`] on a capture another thread or process is still writing (`opts.follow` set:
+/// the index grows with the file), closing also when `quit` is set (the tap stopped); `note`
+/// is shown after the file's name in the title (where the host program connects).
+pub fn run_live(
+    path: &str,
+    note: Option<&str>,
+    opts: OpenOptions,
+    proto: Option<aptscope_dissector::detect::Proto>,
+    units: aptscope_dissector::units::UnitsOpts,
+    quit: &AtomicBool,
+) -> io::Result<()> {
+    run_until(path, opts, proto, units, Some((note, quit)))
+}
+
+fn run_until(
+    path: &str,
+    opts: OpenOptions,
+    proto: Option<aptscope_dissector::detect::Proto>,
+    units: aptscope_dissector::units::UnitsOpts,
+    live: Option<(Option<&str>, &AtomicBool)>,
+) -> io::Result<()> {
     let shared = index::spawn_with(path, opts, proto, units)?;
-    let title = std::path::Path::new(path)
+    let mut title = std::path::Path::new(path)
         .file_name()
         .map_or_else(|| path.to_string(), |n| n.to_string_lossy().into_owned());
+    if let Some((Some(note), _)) = live {
+        title = format!("{title} · {note}");
+    }
+    let quit = live.map(|(_, q)| q);
     let mut app = app::App::new(shared.clone(), &title, true);
 
     let hook = std::panic::take_hook();
@@ -82,7 +110,7 @@ pub fn run_with(
     let mut term = Terminal::new(CrosstermBackend::new(io::stdout()))?;
     term.clear()?;
     let result = (|| -> io::Result<()> {
-        while !app.quit {
+        while !app.quit && !quit.is_some_and(|q| q.load(Ordering::Relaxed)) {
             term.draw(|f| ui::draw(f, &mut app))?;
             if event::poll(Duration::from_millis(100))? {
                 // Handle everything queued before drawing again (fast key repeat stays smooth).
