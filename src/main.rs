@@ -1,10 +1,14 @@
 //! `aptscope`: the command line. Parses arguments and calls the libraries.
 #![forbid(unsafe_code)]
 
+use aptscope_capture::follow::FollowStop;
 use aptscope_capture::info::summarize;
 use aptscope_capture::live::serial::Flow;
-use aptscope_capture::live::sim::{sim_apt_main, sim_elliptec_main, SimLine};
-use aptscope_capture::live::tap::{sniff_main, tap_main, SniffOptions, TapOptions, TapStats};
+use aptscope_capture::live::sim::{apt_sim, ell_sim, sim_apt_main, sim_elliptec_main, SimLine};
+use aptscope_capture::live::tap::{
+    sim_with_view, sniff_main, sniff_with_view, tap_main, tap_with_view, LiveView, SniffOptions,
+    TapOptions, TapStats,
+};
 use aptscope_capture::open::{create, open, open_with_progress, Format, OpenOptions, Progress};
 use aptscope_capture::Event;
 use aptscope_dissector::apt::{encode_named_report, Addr, Named};
@@ -55,6 +59,8 @@ enum SimCmd {
         /// one program after another until stopped, as a controller stays on).
         #[arg(long, conflicts_with = "port")]
         once: bool,
+        #[command(flatten)]
+        view: SimView,
     },
     /// An Elliptec bus.
     Elliptec {
@@ -73,7 +79,24 @@ enum SimCmd {
         /// End when the first host program closes the port.
         #[arg(long, conflicts_with = "port")]
         once: bool,
+        #[command(flatten)]
+        view: SimView,
     },
+}
+
+/// `sim … --view`: the simulator's own traffic in the terminal UI.
+#[derive(clap::Args)]
+struct SimView {
+    /// Show the simulator's traffic live in the terminal UI (recorded by a tap in front of
+    /// it, to -w or a temporary pcapng whose path is printed on exit); `q` ends both.
+    #[arg(long, conflicts_with_all = ["port", "once"])]
+    view: bool,
+    /// With --view: write the capture here (pcapng, or pcap by the .pcap extension).
+    #[arg(short = 'w', long, requires = "view")]
+    write: Option<String>,
+    /// With --view: overwrite the -w file if it exists.
+    #[arg(long, requires = "write")]
+    force: bool,
 }
 
 /// Physical units of APT motion values (spec section 8), for the commands that decode.
@@ -135,6 +158,11 @@ struct LiveArgs {
     /// Stop after this long (`30s`).
     #[arg(long, value_parser = parse_duration)]
     duration: Option<u64>,
+    /// Show the traffic live in the terminal UI instead of the text timeline; the capture (-w,
+    /// else a temporary pcapng whose path is printed on exit) is recorded as without it, and
+    /// `q` or Ctrl-C in the UI stops the tap.
+    #[arg(long, conflicts_with = "quiet")]
+    view: bool,
     #[command(flatten)]
     units: UnitsArgs,
 }
@@ -226,6 +254,10 @@ enum Cmd {
         /// USB captures: only the device at BUS:ADDR.
         #[arg(long)]
         usb_device: Option<String>,
+        /// Follow a capture another program (a tap) is still writing, like `tail -f`: new
+        /// records appear as the file grows; a cut last block is waited for.
+        #[arg(long)]
+        follow: bool,
         #[command(flatten)]
         units: UnitsArgs,
     },
@@ -424,16 +456,35 @@ fn main() -> ExitCode {
             format,
             proto,
             usb_device,
+            follow,
             units,
-        } => open_opts(format.as_deref(), false, usb_device.as_deref())
-            .and_then(|o| aptscope_tui::run_with(&file, o, proto_of(proto), units.opts()?)),
+        } => open_opts(format.as_deref(), false, usb_device.as_deref()).and_then(|mut o| {
+            if follow {
+                if file == "-" {
+                    return Err(bad("--follow follows a file, not standard input".into()));
+                }
+                // Nothing says when another program's writing ends: followed until `q`.
+                o.follow = Some(FollowStop::new());
+            }
+            aptscope_tui::run_with(&file, o, proto_of(proto), units.opts()?)
+        }),
         Cmd::Sim { what } => match what {
+            SimCmd::Apt {
+                model, pty, view, ..
+            } if view.view => {
+                apt_sim(&model).and_then(|sim| sim_view(Box::new(sim), Proto::Apt, pty, view))
+            }
+            SimCmd::Elliptec {
+                modules, pty, view, ..
+            } if view.view => ell_sim(&modules)
+                .and_then(|sim| sim_view(Box::new(sim), Proto::Elliptec, pty, view)),
             SimCmd::Apt {
                 model,
                 pty,
                 port,
                 baud,
                 once,
+                ..
             } => sim_apt_main(
                 &model,
                 sim_line(pty.as_deref(), port.as_deref(), baud, once),
@@ -444,6 +495,7 @@ fn main() -> ExitCode {
                 port,
                 baud,
                 once,
+                ..
             } => sim_elliptec_main(
                 &modules,
                 sim_line(pty.as_deref(), port.as_deref(), baud, once),
@@ -453,7 +505,13 @@ fn main() -> ExitCode {
         Cmd::Tap { device, link, live } => live_opts(&live).and_then(|(proto, flow)| {
             let mut o = TapOptions::new(device, link);
             live_fields!(o, live, proto, flow);
-            tap_main(o).and_then(check_stats)
+            if live.view {
+                let (path, units) = (viewed_file(&mut o.write, "tap"), o.units.clone());
+                let r = tap_with_view(o, |v| live_view(v, proto, units));
+                return_view(r, &path, "aptscope tap")
+            } else {
+                tap_main(o).and_then(check_stats)
+            }
         }),
         Cmd::Replay {
             args,
@@ -486,7 +544,13 @@ fn main() -> ExitCode {
         } => live_opts(&live).and_then(|(proto, flow)| {
             let mut o = SniffOptions::new(host_tx, device_tx);
             live_fields!(o, live, proto, flow);
-            sniff_main(o).and_then(check_stats)
+            if live.view {
+                let (path, units) = (viewed_file(&mut o.write, "sniff"), o.units.clone());
+                let r = sniff_with_view(o, |v| live_view(v, proto, units));
+                return_view(r, &path, "aptscope sniff")
+            } else {
+                sniff_main(o).and_then(check_stats)
+            }
         }),
         Cmd::Stats {
             file,
@@ -640,7 +704,11 @@ fn open_opts(format: Option<&str>, hex: bool, usb: Option<&str>) -> io::Result<O
             ))
         }
     };
-    Ok(OpenOptions { format, usb_device })
+    Ok(OpenOptions {
+        format,
+        usb_device,
+        follow: None,
+    })
 }
 
 /// A reader's diagnostic that makes the command fail: the input has nothing of what was asked
@@ -1078,6 +1146,57 @@ fn live_opts(l: &LiveArgs) -> io::Result<(Proto, Option<Flow>)> {
         ),
     };
     Ok((proto, flow))
+}
+
+/// The file a live view follows: `write` (-w), else a new temporary pcapng (set into `write`).
+fn viewed_file(write: &mut Option<String>, what: &str) -> String {
+    write
+        .get_or_insert_with(|| {
+            let t = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs());
+            let name = format!("aptscope-{what}-{t}-{}.pcapng", std::process::id());
+            std::env::temp_dir()
+                .join(name)
+                .to_string_lossy()
+                .into_owned()
+        })
+        .clone()
+}
+
+/// The terminal UI on the file a tap is writing (`v`), closing when the tap stops.
+fn live_view(v: LiveView<'_>, proto: Proto, units: UnitsOpts) -> io::Result<()> {
+    let o = OpenOptions {
+        follow: Some(v.written),
+        ..OpenOptions::default()
+    };
+    aptscope_tui::run_live(v.path, v.host, o, Some(proto), units, v.quit)
+}
+
+/// After a live view: say where the capture is, and check it holds every forwarded byte.
+fn return_view(r: io::Result<TapStats>, path: &str, what: &str) -> io::Result<()> {
+    if std::path::Path::new(path).exists() {
+        aptscope_capture::note!("{what}: capture in {path}");
+    }
+    r.and_then(check_stats)
+}
+
+/// `sim … --view`: the simulator behind a tap whose host side is `pty` (or the printed
+/// pseudo-terminal), the tap's file in the terminal UI.
+fn sim_view(
+    sim: Box<dyn aptscope_capture::live::sim::Simulator + Send>,
+    proto: Proto,
+    pty: Option<std::path::PathBuf>,
+    view: SimView,
+) -> io::Result<()> {
+    let link = pty.map(|p| p.to_string_lossy().into_owned());
+    let mut o = TapOptions::new(String::new(), link);
+    o.proto = proto;
+    o.write = view.write;
+    o.force = view.force;
+    let path = viewed_file(&mut o.write, "sim");
+    let r = sim_with_view(sim, o, |v| live_view(v, proto, UnitsOpts::default()));
+    return_view(r, &path, "aptscope sim")
 }
 
 /// A capture that does not hold every forwarded byte is a failure.

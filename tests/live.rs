@@ -13,6 +13,7 @@ use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::sys::signal::{kill, Signal};
 use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
 use nix::unistd::Pid;
+use std::cell::RefCell;
 use std::fs::File;
 use std::io::{self, Read, Write};
 use std::os::fd::AsFd;
@@ -966,4 +967,565 @@ fn the_tap_stops_on_signals_when_its_output_pipes_are_gone() {
         assert_eq!(c.d2h.len(), 90, "{sig}");
         let _ = std::fs::remove_dir_all(&dir);
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The live view, in a terminal (tmux)
+
+/// A terminal running `aptscope ARGS`: a tmux session on a server of its own (never the
+/// user's), the program's standard error in a file and its exit status written when it ends.
+/// The server is killed on drop (a failing test leaves nothing running).
+struct Term {
+    sock: String,
+    err: PathBuf,
+    status: PathBuf,
+}
+
+fn tmux(sock: &str, args: &[&str]) -> String {
+    let o = Command::new("tmux")
+        .args(["-L", sock])
+        .args(args)
+        .stdin(Stdio::null())
+        .output()
+        .expect("run tmux");
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Quoted for the shell tmux runs the command with.
+fn sh_quote(s: &str) -> String {
+    format!("'{}'", s.replace('\'', r"'\''"))
+}
+
+impl Term {
+    /// `aptscope ARGS` in a 160×40 terminal (room for the scratch paths in the title); `None`
+    /// when tmux is missing and the rule of [`aptscope_capture::tools::require`] says skip (in
+    /// CI it fails instead).
+    fn start(dir: &Path, args: &[&str]) -> Option<Term> {
+        if !aptscope_capture::tools::require("tmux", "-V", "tmux") {
+            return None;
+        }
+        static N: AtomicUsize = AtomicUsize::new(0);
+        let sock = format!(
+            "aptscope-live-{}-{}",
+            std::process::id(),
+            N.fetch_add(1, Ordering::SeqCst)
+        );
+        let (err, status) = (dir.join("term.err"), dir.join("term.status"));
+        let mut line = sh_quote(env!("CARGO_BIN_EXE_aptscope"));
+        for a in args {
+            line.push(' ');
+            line.push_str(&sh_quote(a));
+        }
+        let cmd = format!(
+            "{line} 2>{}; echo $? >{}",
+            sh_quote(err.to_str().unwrap()),
+            sh_quote(status.to_str().unwrap())
+        );
+        tmux(
+            &sock,
+            &[
+                "new-session",
+                "-d",
+                "-s",
+                "t",
+                "-x",
+                "160",
+                "-y",
+                "40",
+                &cmd,
+            ],
+        );
+        Some(Term { sock, err, status })
+    }
+
+    fn screen(&self) -> String {
+        tmux(&self.sock, &["capture-pane", "-p", "-t", "t"])
+    }
+
+    fn keys(&self, keys: &[&str]) {
+        let mut a = vec!["send-keys", "-t", "t"];
+        a.extend_from_slice(keys);
+        tmux(&self.sock, &a);
+    }
+
+    fn stderr(&self) -> String {
+        std::fs::read_to_string(&self.err).unwrap_or_default()
+    }
+
+    /// The screen once `cond` holds of it (panics at the deadline, showing it).
+    fn wait(&self, what: &str, cond: impl Fn(&str) -> bool) -> String {
+        let last = RefCell::new(String::new());
+        wait_for(
+            what,
+            || format!("{}\n{}", last.borrow(), self.stderr()),
+            || {
+                *last.borrow_mut() = self.screen();
+                cond(&last.borrow())
+            },
+        );
+        last.into_inner()
+    }
+
+    /// Wait for `aptscope` to end: its exit code and standard error.
+    fn exit(&self) -> (i32, String) {
+        wait_for(
+            "the program in the terminal to end",
+            || format!("{}\n{}", self.screen(), self.stderr()),
+            || std::fs::read_to_string(&self.status).is_ok_and(|s| s.ends_with('\n')),
+        );
+        let code = std::fs::read_to_string(&self.status).unwrap_or_default();
+        (code.trim().parse().unwrap_or(-1), self.stderr())
+    }
+
+    /// The `aptscope` process (the child of the pane's shell).
+    fn pid(&self) -> Pid {
+        let shell = tmux(&self.sock, &["display", "-p", "-t", "t", "#{pane_pid}"]);
+        let shell = shell.trim();
+        let children = std::fs::read_to_string(format!("/proc/{shell}/task/{shell}/children"))
+            .unwrap_or_default();
+        let pid = children
+            .split_whitespace()
+            .next()
+            .and_then(|p| p.parse().ok())
+            .expect("the program in the terminal");
+        Pid::from_raw(pid)
+    }
+}
+
+impl Drop for Term {
+    fn drop(&mut self) {
+        tmux(&self.sock, &["kill-server"]);
+    }
+}
+
+/// The record count the view's title bar shows (`… · 4 records`).
+fn shown_records(screen: &str) -> Option<u64> {
+    let first = screen.lines().next()?;
+    let at = first.find(" records")?;
+    first[..at].rsplit(' ').next()?.parse().ok()
+}
+
+/// One host session on `link`: HW_REQ_INFO, its 90-byte reply; returns when and what was sent.
+fn ask_info(link: &Path) -> Instant {
+    let host = open_host(link);
+    let rx = Receiver::start(host.try_clone().unwrap());
+    let t0 = Instant::now();
+    assert_eq!(send(host, req(HW_REQ_INFO).to_vec()).join().unwrap(), 6);
+    wait_for(
+        "HW_GET_INFO at the host",
+        || format!("{:02x?}", rx.got()),
+        || rx.len() >= 90,
+    );
+    assert_eq!(rx.finish().len(), 90);
+    t0
+}
+
+/// `decode --json` of a capture: frames only, whole, no diagnostics but pairing's; returns the
+/// message names in order.
+fn decoded_names(path: &Path) -> Vec<String> {
+    let recs = decode_json(path);
+    let bad: Vec<_> = recs
+        .iter()
+        .filter(|r| r["type"] == "garbage" || r["diag"].as_array().is_some_and(|d| !d.is_empty()))
+        .collect();
+    assert!(bad.is_empty(), "{bad:?}");
+    recs.iter()
+        .filter(|r| r["type"] == "frame")
+        .map(|r| r["name"].as_str().unwrap_or("?").to_string())
+        .collect()
+}
+
+#[test]
+fn tap_view_shows_the_traffic_live_and_q_leaves_a_complete_capture() {
+    let dir = scratch("tap-view");
+    let mut sim = start_sim(&dir.join("dev"));
+    let (dev, host, cap) = (dir.join("dev"), dir.join("host"), dir.join("cap.pcapng"));
+    let Some(term) = Term::start(
+        &dir,
+        &[
+            "tap",
+            "--device",
+            dev.to_str().unwrap(),
+            "--link",
+            host.to_str().unwrap(),
+            "-w",
+            cap.to_str().unwrap(),
+            "--view",
+        ],
+    ) else {
+        return;
+    };
+    wait_for(
+        "the tap's link",
+        || term.stderr(),
+        || std::fs::read_link(&host).is_ok(),
+    );
+    // The title says where host programs connect.
+    let title = format!("cap.pcapng · host {} ·", host.display());
+    term.wait("the view", |s| s.contains("Timeline") && s.contains(&title));
+
+    // The reply is on the screen within a second of the request.
+    let t0 = ask_info(&host);
+    let screen = term.wait("HW_GET_INFO on the screen", |s| s.contains("HW_GET_INFO"));
+    let lag = t0.elapsed();
+    assert!(
+        lag < Duration::from_secs(1),
+        "shown after {lag:?}\n{screen}"
+    );
+
+    // The selected frame's detail and hex.
+    term.keys(&[":2", "Enter"]);
+    let screen = term.wait("record 2's detail and hex", |s| {
+        s.contains("Record 2") && s.contains("06 00 54 00 81 50")
+    });
+    assert!(screen.contains("serial_number"), "{screen}");
+
+    // A filter applied live: a second host session shows up in it.
+    term.keys(&["/apt.name == HW_GET_INFO", "Enter"]);
+    term.wait("the filter", |s| s.contains("1 shown"));
+    ask_info(&host);
+    let screen = term.wait("the new reply in the filter", |s| s.contains("2 shown"));
+    assert!(!screen.contains("HW_REQ_INFO"), "{screen}");
+
+    // q stops the tap: a valid capture, the byte check, where the file is.
+    term.keys(&["q"]);
+    let (code, err) = term.exit();
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("matches what was forwarded"), "{err}");
+    assert!(
+        err.contains(&format!("capture in {}", cap.display())),
+        "{err}"
+    );
+    assert!(
+        err.contains("host → device 12 bytes, device → host 180 bytes"),
+        "{err}"
+    );
+    assert_eq!(
+        decoded_names(&cap),
+        ["HW_REQ_INFO", "HW_GET_INFO", "HW_REQ_INFO", "HW_GET_INFO"]
+    );
+    assert!(std::fs::symlink_metadata(&host).is_err(), "the link stays");
+    sim.signal(Signal::SIGINT);
+    assert!(sim.wait_exit().success());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn view_follow_shows_a_file_a_running_tap_writes() {
+    let dir = scratch("follow");
+    let mut sim = start_sim(&dir.join("dev"));
+    let mut tap = start_tap(&dir, &[]);
+    let cap = dir.join("cap.pcapng");
+    let Some(term) = Term::start(&dir, &["view", "--follow", cap.to_str().unwrap()]) else {
+        return;
+    };
+    term.wait("the view", |s| s.contains("Timeline"));
+    // Shown at once, not after 4 KiB of traffic: the protocol is detected from what there is.
+    ask_info(&dir.join("host"));
+    term.wait("the reply", |s| {
+        s.contains("HW_GET_INFO") && shown_records(s) == Some(2)
+    });
+    ask_info(&dir.join("host"));
+    let screen = term.wait("the second session", |s| shown_records(s) == Some(4));
+    assert!(!screen.contains("truncated"), "{screen}");
+    // The tap ends; the view stays on the complete file until q.
+    tap.signal(Signal::SIGINT);
+    assert!(tap.wait_exit().success(), "{}", tap.stderr());
+    term.keys(&[":4", "Enter"]);
+    term.wait("record 4", |s| s.contains("Record 4"));
+    // Ctrl-C is a key in the view: it closes.
+    term.keys(&["C-c"]);
+    let (code, err) = term.exit();
+    assert_eq!(code, 0, "{err}");
+    sim.signal(Signal::SIGINT);
+    assert!(sim.wait_exit().success());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn sim_view_shows_the_simulators_traffic_across_sessions_and_ends_on_sigterm() {
+    let dir = scratch("sim-view");
+    let (link, cap) = (dir.join("dev"), dir.join("sim.pcapng"));
+    let Some(term) = Term::start(
+        &dir,
+        &[
+            "sim",
+            "apt",
+            "--pty",
+            link.to_str().unwrap(),
+            "--view",
+            "-w",
+            cap.to_str().unwrap(),
+        ],
+    ) else {
+        return;
+    };
+    wait_for(
+        "the simulator's link",
+        || term.stderr(),
+        || std::fs::read_link(&link).is_ok(),
+    );
+    term.wait("the view", |s| s.contains("Timeline"));
+    // Two host programs one after the other: the simulator stays up.
+    for n in [2, 4] {
+        ask_info(&link);
+        term.wait("the session", |s| shown_records(s) == Some(n));
+    }
+    kill(term.pid(), Signal::SIGTERM).expect("signal");
+    let (code, err) = term.exit();
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("matches what was forwarded"), "{err}");
+    assert_eq!(decoded_names(&cap).len(), 4);
+    assert!(std::fs::symlink_metadata(&link).is_err(), "the link stays");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Resident memory of a process, in KiB.
+fn rss_kib(pid: Pid) -> Option<u64> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let l = s.lines().find(|l| l.starts_with("VmRSS:"))?;
+    l.split_whitespace().nth(1)?.parse().ok()
+}
+
+fn now_ns() -> u64 {
+    let d = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap_or_default();
+    u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)
+}
+
+/// A soak of the live view: simulator ⇄ `tap --view` (in a terminal) ⇄ a scripted host
+/// sending ten minutes' worth of status requests at the controller's rate (10 per second:
+/// 6000), compressed into `APTSCOPE_SOAK_SECS` (default 20) seconds, plus two 1 MB bursts.
+/// Checked: not a byte lost in the file; the view never more than 1 s behind the file (the
+/// record count on screen, sampled every 100 ms, against the records' capture times); the
+/// tap's memory flat but for the view's index of the records. Prints its figures
+/// (`bench/live-view.sh` runs it in release for the README).
+#[test]
+fn soak_of_the_live_view_loses_nothing_lags_under_a_second_and_keeps_memory_flat() {
+    let secs: f64 = std::env::var("APTSCOPE_SOAK_SECS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(20.0);
+    let dir = scratch("soak");
+    let mut sim = start_sim(&dir.join("dev"));
+    let (dev, host, cap) = (dir.join("dev"), dir.join("host"), dir.join("cap.pcapng"));
+    let Some(term) = Term::start(
+        &dir,
+        &[
+            "tap",
+            "--device",
+            dev.to_str().unwrap(),
+            "--link",
+            host.to_str().unwrap(),
+            "-w",
+            cap.to_str().unwrap(),
+            "--view",
+        ],
+    ) else {
+        return;
+    };
+    wait_for(
+        "the tap's link",
+        || term.stderr(),
+        || std::fs::read_link(&host).is_ok(),
+    );
+    term.wait("the view", |s| s.contains("Timeline"));
+    let pid = term.pid();
+    let rss0 = rss_kib(pid).expect("the tap's memory");
+
+    // The host's script, in one thread writing whole frames in order: a status request every
+    // slot, a megabyte burst at a quarter and at 60 % of the run.
+    const UPDATES: u32 = 6000;
+    let slot = Duration::from_secs_f64(secs / f64::from(UPDATES));
+    let (burst, burst_replies) = traffic(1 << 20, &ALL_REQS);
+    let expected = 2 * burst_replies.len() + UPDATES as usize;
+    let h = open_host(&host);
+    let rx = Receiver::start(h.try_clone().unwrap());
+    let script = thread::spawn(move || {
+        let mut h = h;
+        let mut sent = Vec::with_capacity(3 << 20);
+        let mut write = |b: &[u8], sent: &mut Vec<u8>| {
+            let mut done = 0;
+            while done < b.len() {
+                if !ready(&h, PollFlags::POLLOUT) {
+                    continue;
+                }
+                match h.write(&b[done..]) {
+                    Ok(n) => done += n,
+                    Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
+                    Err(e) => panic!("host write: {e}"),
+                }
+            }
+            sent.extend_from_slice(b);
+        };
+        let t0 = Instant::now();
+        for i in 0..UPDATES {
+            if i == UPDATES / 4 || i == UPDATES * 3 / 5 {
+                write(&burst, &mut sent);
+            }
+            write(&req(MOT_REQ_DCSTATUSUPDATE), &mut sent);
+            // Paced like the controller's updates (the traffic's rate, not a wait for a
+            // condition): the next request goes out when its slot comes.
+            if let Some(d) = (slot * (i + 1)).checked_sub(t0.elapsed()) {
+                thread::sleep(d);
+            }
+        }
+        sent
+    });
+
+    // Sample the screen (records shown) and the tap's memory until every reply is in.
+    let mut samples: Vec<(u64, u64)> = vec![];
+    let mut rss: Vec<u64> = vec![rss0];
+    let t0 = Instant::now();
+    while !script.is_finished() || frames(&rx.got()).len() < expected {
+        assert!(
+            t0.elapsed() < DEADLINE + Duration::from_secs_f64(secs),
+            "the soak did not finish: {} of {expected} replies\n{}",
+            frames(&rx.got()).len(),
+            term.stderr()
+        );
+        let screen = term.screen();
+        let t = now_ns();
+        if let Some(n) = shown_records(&screen) {
+            samples.push((t, n));
+        }
+        rss.extend(rss_kib(pid));
+        thread::sleep(Duration::from_millis(100));
+    }
+    let sent = script.join().unwrap();
+    let run = t0.elapsed();
+
+    // Every record ends up on the screen.
+    let recs = decode_json(&cap);
+    let ts: Vec<u64> = recs
+        .iter()
+        .filter(|r| r["n"].is_u64())
+        .map(|r| r["ts_ns"].as_u64().expect("a time"))
+        .collect();
+    let total = ts.len() as u64;
+    let catch_up = Instant::now();
+    term.wait("every record on the screen", |s| {
+        shown_records(s) == Some(total)
+    });
+    let catch_up = catch_up.elapsed();
+    rss.extend(rss_kib(pid));
+
+    term.keys(&["q"]);
+    let (code, err) = term.exit();
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("matches what was forwarded"), "{err}");
+
+    // Not a byte lost: the file holds what the host sent and what it received, in order.
+    let got = rx.finish();
+    let c = read_capture(&cap);
+    assert!(c.diags.is_empty(), "{:?}", c.diags);
+    assert!(c.h2d == sent, "h2d: {}", first_difference(&c.h2d, &sent));
+    assert!(c.d2h == got, "d2h: {}", first_difference(&c.d2h, &got));
+
+    // The view's lag: at each sample, how long ago the first record not yet shown was captured.
+    let lag_ns = samples
+        .iter()
+        .filter_map(|&(t, n)| ts.get(n as usize).map(|&first| t.saturating_sub(first)))
+        .max()
+        .unwrap_or(0);
+    if std::env::var("APTSCOPE_SOAK_DEBUG").is_ok() {
+        let t_first = ts.first().copied().unwrap_or(0);
+        for &(t, n) in &samples {
+            if let Some(&first) = ts.get(n as usize) {
+                let l = t.saturating_sub(first) / 1_000_000;
+                if l > 200 {
+                    eprintln!("t={:.2}s shown={n} lag={l}ms", (t - t_first) as f64 / 1e9);
+                }
+            }
+        }
+    }
+    // Memory: what the tap process holds beyond the view's index of the records (a record
+    // costs about 40 bytes plus its bytes; 4× that is allowed for the UI's caches).
+    let bytes = (sent.len() + got.len()) as u64;
+    let index_kib = (40 * total + bytes) * 4 / 1024;
+    let (rss_max, rss_end) = (
+        rss.iter().copied().max().unwrap_or(0),
+        rss.last().copied().unwrap_or(0),
+    );
+    eprintln!(
+        "soak: {:.1} s, {total} records, {} bytes; view lag max {} ms over {} samples, catch-up \
+         {} ms after the last reply; tap RSS {rss0} KiB at start, {rss_max} KiB max, {rss_end} \
+         KiB at end",
+        run.as_secs_f64(),
+        bytes,
+        lag_ns / 1_000_000,
+        samples.len(),
+        catch_up.as_millis()
+    );
+    assert!(samples.len() >= 10, "{} samples", samples.len());
+    assert!(
+        lag_ns < 1_000_000_000,
+        "the view lagged {} ms",
+        lag_ns / 1_000_000
+    );
+    assert!(
+        rss_max.saturating_sub(rss0) <= index_kib + 16 * 1024,
+        "memory grew from {rss0} to {rss_max} KiB for {total} records"
+    );
+    sim.signal(Signal::SIGINT);
+    assert!(sim.wait_exit().success());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn sim_elliptec_view_shows_host_commands_sent_without_terminator_at_once() {
+    let dir = scratch("ell-view");
+    let (link, cap) = (dir.join("ell"), dir.join("ell.pcapng"));
+    let Some(term) = Term::start(
+        &dir,
+        &[
+            "sim",
+            "elliptec",
+            "--modules",
+            "0:ELL14,1:ELL9",
+            "--pty",
+            link.to_str().unwrap(),
+            "--view",
+            "-w",
+            cap.to_str().unwrap(),
+        ],
+    ) else {
+        return;
+    };
+    wait_for(
+        "the simulator's link",
+        || term.stderr(),
+        || std::fs::read_link(&link).is_ok(),
+    );
+    term.wait("the view", |s| s.contains("Timeline"));
+    let host = open_host(&link);
+    let rx = Receiver::start(host.try_clone().unwrap());
+    // Commands as hosts send them, without CR LF: each shown as soon as it is sent.
+    for (cmd, reply_end, records) in [("0in", 1, 2), ("1gp", 2, 4)] {
+        let h = host.try_clone().unwrap();
+        assert_eq!(send(h, cmd.as_bytes().to_vec()).join().unwrap(), 3);
+        wait_for(
+            "the module's reply",
+            || format!("{:?}", String::from_utf8_lossy(&rx.got())),
+            || count(&rx.got(), b"\r\n") >= reply_end,
+        );
+        term.wait("the command and its reply", |s| {
+            shown_records(s) == Some(records)
+        });
+    }
+    let screen = term.screen();
+    assert!(screen.contains("in REQ_INFORMATION"), "{screen}");
+    assert!(screen.contains("gp GET_POSITION"), "{screen}");
+    drop(rx.finish());
+    drop(host);
+    term.keys(&["q"]);
+    let (code, err) = term.exit();
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("host → device 6 bytes"), "{err}");
+    assert!(
+        err.contains(&format!("capture in {}", cap.display())),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

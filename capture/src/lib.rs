@@ -4,6 +4,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod follow;
 pub mod info;
 pub mod live;
 pub mod mcap;

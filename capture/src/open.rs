@@ -1,5 +1,6 @@
 //! Opening any capture: format detection from content, readers and writers by format.
 
+use crate::follow::{Follow, FollowStop};
 use crate::model::{Chunk, Direction, Event, ReadDiag, Reader, Writer};
 use crate::raw::{ByteSource, InputFormat};
 use crate::{mcap, pcap, textlog};
@@ -326,6 +327,9 @@ pub struct OpenOptions {
     pub format: Option<Format>,
     /// For USB captures: only this BUS:ADDR.
     pub usb_device: Option<(u16, u8)>,
+    /// Follow a file another process is still writing (see [`crate::follow`]): at its end,
+    /// wait for more until this says the writer stopped. Not for standard input.
+    pub follow: Option<FollowStop>,
 }
 
 /// How far reading has got: bytes read from the file so far, and the file's size when known.
@@ -387,16 +391,30 @@ pub fn open_with_progress(
                 path: path.to_string(),
             });
         }
-        let total = meta.map(|m| m.len());
+        // A followed file has no size yet.
+        let total = meta.map(|m| m.len()).filter(|_| opts.follow.is_none());
         let p = Progress {
             total,
             ..progress.clone()
         };
+        let (inner, head): (Box<dyn Read>, _) = match opts.follow {
+            Some(stop) => {
+                let mut f = Follow::new(f, stop);
+                let head = f.head(SNIFF_LEN, |h| {
+                    matches!(sniff(h), Format::Pcap | Format::PcapNg | Format::Mcap)
+                })?;
+                progress
+                    .read
+                    .fetch_add(head.len() as u64, Ordering::Relaxed);
+                (Box::new(f), Some(head))
+            }
+            None => (Box::new(f), None),
+        };
         let input = Box::new(Counted {
-            inner: f,
+            inner,
             read: progress.read.clone(),
         });
-        let (reader, format, p) = finish_open(input, opts, p)?;
+        let (reader, format, p) = finish_open(input, head, opts, p)?;
         // A name that promises a container the content is not: say so, rather than silently
         // decoding the container's headers as garbage.
         let named = Format::from_extension(path).filter(|f| {
@@ -427,7 +445,7 @@ pub fn open_with_progress(
         return Ok((reader, format, p));
     };
     let head_input = std::mem::replace(&mut input, Box::new(io::empty()));
-    finish_open(head_input, opts, progress)
+    finish_open(head_input, None, opts, progress)
 }
 
 /// A reader that reports one diagnostic before the events of another.
@@ -448,13 +466,22 @@ impl Reader for Prefixed {
     }
 }
 
+/// Detect the format from `head` (the first bytes, already read; read from `input` when
+/// `None`) and build its reader over the rest.
 fn finish_open(
     mut input: Box<dyn Read>,
+    head: Option<Vec<u8>>,
     opts: OpenOptions,
     progress: Progress,
 ) -> Result<(Box<dyn Reader>, Format, Progress), OpenError> {
-    let mut head = Vec::with_capacity(SNIFF_LEN);
-    (&mut input).take(SNIFF_LEN as u64).read_to_end(&mut head)?;
+    let head = match head {
+        Some(h) => h,
+        None => {
+            let mut head = Vec::with_capacity(SNIFF_LEN);
+            (&mut input).take(SNIFF_LEN as u64).read_to_end(&mut head)?;
+            head
+        }
+    };
     let sniffed = sniff(&head);
     let format = opts.format.unwrap_or(sniffed);
     let container = |f: Format| matches!(f, Format::Pcap | Format::PcapNg | Format::Mcap);

@@ -252,7 +252,7 @@ pub fn apt_frame_in(
         out.push('}');
     }
     out.push_str(",\"fields\":{");
-    let (mut phys, mut codes) = (String::new(), String::new());
+    let mut phys = String::new();
     for (i, (fd, v)) in f.fields().enumerate() {
         if i > 0 {
             out.push(',');
@@ -260,13 +260,6 @@ pub fn apt_frame_in(
         string(out, fd.name);
         out.push(':');
         value(out, f.table(), fd, &v);
-        if let Some(c) = crate::fields::apt_code(fd, &v) {
-            if !codes.is_empty() {
-                codes.push(',');
-            }
-            string(&mut codes, fd.name);
-            let _ = write!(codes, ":{c}");
-        }
         if let Some((x, unit)) = apt_phys(fd, &v, scale) {
             if !phys.is_empty() {
                 phys.push(',');
@@ -281,7 +274,12 @@ pub fn apt_frame_in(
     }
     out.push('}');
     close_map(out, "phys", &phys);
-    close_map(out, "codes", &codes);
+    // A second pass rather than a buffer: no allocation per frame.
+    codes(
+        out,
+        f.fields()
+            .filter_map(|(fd, v)| Some((fd.name, crate::fields::apt_code(fd, &v)?))),
+    );
     if let Some(x) = p.pair {
         out.push_str(",\"pair\":");
         uint(out, x);
@@ -296,6 +294,24 @@ pub fn apt_frame_in(
     out.push_str(",\"diag\":");
     diags(out, apt_diags(f, p));
     out.push('}');
+}
+
+/// `,"codes":{name:number,…}` when there are any.
+fn codes(out: &mut String, items: impl Iterator<Item = (&'static str, i128)>) {
+    let mut first = true;
+    for (name, c) in items {
+        out.push_str(if first { ",\"codes\":{" } else { "," });
+        first = false;
+        string(out, name);
+        out.push(':');
+        match u64::try_from(c) {
+            Ok(u) => uint(out, u),
+            Err(_) => int(out, c as i64),
+        }
+    }
+    if !first {
+        out.push('}');
+    }
 }
 
 /// `,"key":{members}` when there are members.
@@ -572,7 +588,7 @@ pub fn ell_frame(
     }
     let scale = o.module.as_ref().and_then(|m| m.scale());
     out.push_str(",\"fields\":{");
-    let (mut phys, mut codes) = (String::new(), String::new());
+    let mut phys = String::new();
     for (i, (fd, v)) in f.fields().enumerate() {
         if i > 0 {
             out.push(',');
@@ -618,13 +634,6 @@ pub fn ell_frame(
             let thread = if x & 0x80 != 0 { "imperial" } else { "metric" };
             let _ = write!(out, ",\"thread\":\"{thread}\",\"hw_release\":{}", x & 0x7F);
         }
-        if let Some(c) = crate::fields::ell_code(fd, &v) {
-            if !codes.is_empty() {
-                codes.push(',');
-            }
-            string(&mut codes, fd.name);
-            let _ = write!(codes, ":{c}");
-        }
         if let (Kind::Position, EllValue::I(p), Some((ppu, unit))) = (fd.kind, v, scale) {
             if ppu > 0.0 {
                 if !phys.is_empty() {
@@ -639,7 +648,11 @@ pub fn ell_frame(
     }
     out.push('}');
     close_map(out, "phys", &phys);
-    close_map(out, "codes", &codes);
+    codes(
+        out,
+        f.fields()
+            .filter_map(|(fd, v)| Some((fd.name, i128::from(crate::fields::ell_code(fd, &v)?)))),
+    );
     if let Some(m) = &o.module {
         out.push_str(",\"module\":{\"first_addr\":");
         uint(out, m.first_addr as u64);

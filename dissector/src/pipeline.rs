@@ -459,7 +459,7 @@ fn close_json(line: &mut String, m: &crate::record::Meta, dir: Option<&str>) {
             json::uint(line, t);
         }
         line.push_str(",\"stream\":");
-        json::uint(line, stream.into());
+        json::uint(line, u64::from(stream));
         line.push('}');
     }
 }

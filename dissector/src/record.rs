@@ -441,9 +441,28 @@ impl Decoder {
         Ok(())
     }
 
-    fn choose<E>(&mut self, emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>) -> Result<(), E> {
+    /// Decide the protocol now, from the bytes held so far, when detection is certain on them
+    /// (a live source may stay short of the 4 KiB sample for long: its traffic shows at once);
+    /// the held records follow. Returns whether the protocol is known.
+    pub fn detect_if_certain<E>(
+        &mut self,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<bool, E> {
+        if self.proto.is_some() {
+            return Ok(true);
+        }
+        if self.sample.is_empty() || self.judge().0.proto.is_none() {
+            return Ok(false);
+        }
+        self.choose(emit)?;
+        self.replay_sample(emit)?;
+        Ok(true)
+    }
+
+    /// Detection on the busiest lane of the sample (interleaved lanes would confuse both
+    /// framers), and the bytes judged.
+    fn judge(&self) -> (Detection, usize) {
         let mut bytes = Vec::with_capacity(SAMPLE);
-        // Judge the busiest lane of the sample: interleaved lanes would confuse both framers.
         let lane_of = |c: &Ctx| (c.stream, c.dir.map(|d| d.as_str()));
         let mut best: Option<((u32, Option<&str>), usize)> = None;
         for (c, _) in &self.sample {
@@ -465,7 +484,11 @@ impl Decoder {
                 }
             }
         }
-        let d: Detection = detect(&bytes);
+        (detect(&bytes), bytes.len().min(SAMPLE))
+    }
+
+    fn choose<E>(&mut self, emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>) -> Result<(), E> {
+        let (d, sample) = self.judge();
         let proto = d.proto.unwrap_or(if d.elliptec > d.apt {
             Proto::Elliptec
         } else {
@@ -475,7 +498,7 @@ impl Decoder {
         emit(&Record::Detect {
             proto,
             detection: d,
-            sample: bytes.len().min(SAMPLE),
+            sample,
         })
     }
 

@@ -215,6 +215,11 @@ pub struct IndexOpts {
     /// A stop flag to share with the source (its reader returns when it is set): the viewer
     /// sets it when the user quits. A new one when `None`.
     pub cancel: Option<Arc<AtomicBool>>,
+    /// The source is this file, still being written: when reading has caught up with its
+    /// end, what was read is published at once and the protocol decided as soon as detection
+    /// is certain; Elliptec host chunks are host writes (a command is framed without waiting
+    /// for its terminator).
+    pub follow: Option<String>,
 }
 
 /// Open a capture and index it in a background thread. The returned [`Shared`] fills as the
@@ -243,6 +248,9 @@ pub fn spawn_with(
     let iopts = IndexOpts {
         proto,
         units,
+        // A file another process is still writing (`view --follow`, a tap's live view).
+        live: opts.follow.is_some(),
+        follow: opts.follow.is_some().then(|| path.clone()),
         ..IndexOpts::default()
     };
     spawn_source(
@@ -271,7 +279,9 @@ where
             Ok((reader, progress)) => {
                 let shared = shared_for(reader.as_ref(), progress, &opts);
                 let _ = tx.send(Ok(shared.clone()));
-                Indexer::new(shared, opts.proto, opts.units).run(reader);
+                let mut ix = Indexer::new(shared, opts.proto, opts.units);
+                ix.follow = opts.follow.and_then(|p| std::fs::File::open(p).ok());
+                ix.run(reader);
             }
             Err(e) => {
                 let _ = tx.send(Err(e));
@@ -328,6 +338,8 @@ pub struct Indexer {
     dec: Decoder,
     sink: Sink,
     last_flush: Instant,
+    /// A followed (growing) file, to see when reading has caught up with it.
+    follow: Option<std::fs::File>,
 }
 
 impl Indexer {
@@ -344,6 +356,7 @@ impl Indexer {
             dec,
             sink: Sink::default(),
             last_flush: Instant::now(),
+            follow: None,
         }
     }
 
@@ -354,13 +367,29 @@ impl Indexer {
                 break;
             }
             self.event(ev);
+            let caught_up = self.caught_up();
+            if caught_up {
+                // A followed file may stay short of the 4 KiB detection sample for long: a
+                // certain detection on what there is shows its traffic now.
+                let sink = &mut self.sink;
+                let _ = self.dec.detect_if_certain(&mut |r| sink.on(r));
+            }
             // A live source's reader blocks until more comes: publish what it gave now.
-            let live = self.shared.live.load(Ordering::Relaxed);
-            if live || self.last_flush.elapsed() > Duration::from_millis(50) {
+            let live = self.follow.is_none() && self.shared.live.load(Ordering::Relaxed);
+            if caught_up || live || self.last_flush.elapsed() > Duration::from_millis(50) {
                 self.flush();
             }
         }
         self.finish();
+    }
+
+    /// A followed file read to its current end: the reader may now wait long for the next
+    /// event, so what has been read is published at once (not at the next event).
+    fn caught_up(&self) -> bool {
+        self.follow.as_ref().is_some_and(|f| {
+            f.metadata()
+                .is_ok_and(|m| self.shared.read.load(Ordering::Relaxed) >= m.len())
+        })
     }
 
     /// Index one event of a capture reader.
@@ -374,7 +403,19 @@ impl Indexer {
             Event::Diag(d) => self
                 .dec
                 .file_diag(d.offset, d.kind, &d.msg, &mut |r| sink.on(r)),
-            Event::Chunk(c) => self.dec.push(c.ctx(), c.bytes, &mut |r| sink.on(r)),
+            Event::Chunk(c) => {
+                let ctx = c.ctx();
+                let r = self.dec.push(ctx, c.bytes, &mut |r| sink.on(r));
+                // Following a live capture, a host chunk is a host write (as the tap's own
+                // timeline assumes): an Elliptec command sent without terminator is framed
+                // now, not at the host's next write.
+                if let (Some(_), Some(Dir::HostToDevice)) = (&self.follow, ctx.dir) {
+                    let _ = self
+                        .dec
+                        .cut(ctx.stream, Dir::HostToDevice, &mut |r| sink.on(r));
+                }
+                r
+            }
         };
     }
 

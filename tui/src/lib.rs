@@ -31,7 +31,7 @@ use ratatui::crossterm::terminal::{
 use ratatui::prelude::CrosstermBackend;
 use ratatui::Terminal;
 use std::io;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 fn restore_terminal() {
@@ -65,19 +65,50 @@ pub fn run_as(
 }
 
 /// [`run_as`], showing APT motion values also in physical units with the stage or scale of
-/// `units` (devices with a built-in stage convert without it).
+/// `units` (devices with a built-in stage convert without it). With `opts.follow` set (a file
+/// another process is still writing) the view is live: see [`run_live`].
 pub fn run_with(
     path: &str,
     opts: OpenOptions,
     proto: Option<aptscope_dissector::detect::Proto>,
     units: aptscope_dissector::units::UnitsOpts,
 ) -> io::Result<()> {
+    run_until(path, opts, proto, units, None)
+}
+
+/// [`run_with`] on a capture another thread or process is still writing (`opts.follow` set:
+/// the index grows with the file), closing also when `quit` is set (the tap stopped); `note`
+/// is shown after the file's name in the title (where the host program connects). The
+/// timeline follows new records (LIVE / PAUSED in the status bar, `f` toggles, `G` resumes).
+pub fn run_live(
+    path: &str,
+    note: Option<&str>,
+    opts: OpenOptions,
+    proto: Option<aptscope_dissector::detect::Proto>,
+    units: aptscope_dissector::units::UnitsOpts,
+    quit: &AtomicBool,
+) -> io::Result<()> {
+    run_until(path, opts, proto, units, Some((note, quit)))
+}
+
+fn run_until(
+    path: &str,
+    opts: OpenOptions,
+    proto: Option<aptscope_dissector::detect::Proto>,
+    units: aptscope_dissector::units::UnitsOpts,
+    live: Option<(Option<&str>, &AtomicBool)>,
+) -> io::Result<()> {
+    let follow = opts.follow.is_some();
     let shared = index::spawn_with(path, opts, proto, units)?;
-    let title = std::path::Path::new(path)
+    let mut title = std::path::Path::new(path)
         .file_name()
         .map_or_else(|| path.to_string(), |n| n.to_string_lossy().into_owned());
-    let app = app::App::new(shared, &title, true);
-    run_app(app)
+    if let Some((Some(note), _)) = live {
+        title = format!("{title} · {note}");
+    }
+    let mut app = app::App::new(shared, &title, true);
+    app.set_live(follow || live.is_some());
+    run_loop(app, live.map(|(_, q)| q))
 }
 
 /// Run the viewer on the records of the reader `open` returns (opened in the indexing thread:
@@ -104,7 +135,12 @@ where
 /// [`index::Shared`], feed an [`index::Indexer`] from a thread of your own (it publishes with
 /// [`index::Indexer::flush`], [`index::Indexer::finish`] at the end), and run
 /// `App::new(shared, title, true)` with [`app::App::set_live`] here.
-pub fn run_app(mut app: app::App) -> io::Result<()> {
+pub fn run_app(app: app::App) -> io::Result<()> {
+    run_loop(app, None)
+}
+
+/// [`run_app`], closing also when `quit` is set.
+fn run_loop(mut app: app::App, quit: Option<&AtomicBool>) -> io::Result<()> {
     let shared = app.shared.clone();
     let hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
@@ -117,7 +153,7 @@ pub fn run_app(mut app: app::App) -> io::Result<()> {
     let mut term = Terminal::new(CrosstermBackend::new(io::stdout()))?;
     term.clear()?;
     let result = (|| -> io::Result<()> {
-        while !app.quit {
+        while !app.quit && !quit.is_some_and(|q| q.load(Ordering::Relaxed)) {
             term.draw(|f| ui::draw(f, &mut app))?;
             if event::poll(Duration::from_millis(100))? {
                 // Handle everything queued before drawing again (fast key repeat stays smooth).

@@ -17,9 +17,10 @@
 //!   file stays complete, and [`TapStats::backpressure_waits`] counts it) rather than drop bytes
 //!   from the file. Only when writing the file fails (disk full …) are chunks no longer queued;
 //!   they are counted in [`TapStats::file_lost`] and the error is reported.
-//! - The **writer** merges the two directions by time (a 100 ms window), writes pcapng (or pcap) blocks
-//!   and flushes them to the kernel every 256 chunks or every second, so a `kill -9` leaves a
-//!   file readable up to its last complete block.
+//! - The **writer** merges the two directions by time (a 100 ms window), writes pcapng (or pcap)
+//!   blocks and flushes them to the kernel every 256 chunks or every 200 ms (so a follower,
+//!   `view --follow`, sees them soon; with a live view, whenever written), so a `kill -9`
+//!   leaves a file readable up to its last complete block.
 //! - **Display** (lossy): chunks go through a channel of [`DISPLAY_QUEUE`] chunks that the
 //!   forwarder only ever `try_send`s into; when a slow terminal lets it fill, chunks are skipped
 //!   for display, counted, and a `# display skipped …` line says so (the file still has them).
@@ -35,6 +36,7 @@
 //!   device late) and counted in [`TapStats::discarded_h2d`].
 #![forbid(unsafe_code)]
 
+use crate::follow::FollowStop;
 use crate::live::serial::{self, Flow, LineSettings, SerialFd};
 use crate::model::{Chunk, Direction, StreamInfo, Writer};
 use crate::open::Format;
@@ -68,7 +70,7 @@ const MERGE_WINDOW_NS: u64 = 100_000_000;
 /// Flush the file after this many chunks …
 const FLUSH_CHUNKS: u64 = 256;
 /// … or this long after the last flush.
-const FLUSH_EVERY: Duration = Duration::from_secs(1);
+const FLUSH_EVERY: Duration = Duration::from_millis(200);
 /// How often a missing device is looked for (with `reconnect`).
 const RETRY_EVERY: Duration = Duration::from_millis(500);
 /// Bytes read at once.
@@ -163,6 +165,9 @@ pub struct TapOptions {
     pub stop: StopHandle,
     /// Stage or scale for the live timeline's APT motion values (physical units beside raw).
     pub units: UnitsOpts,
+    /// A live view follows the `write` file: it is flushed whenever something was written
+    /// (every [`TICK`] at most) instead of every 200 ms (set by [`tap_with_view`]).
+    pub followed: bool,
 }
 
 impl TapOptions {
@@ -184,6 +189,7 @@ impl TapOptions {
             signals: true,
             stop: StopHandle::new(),
             units: UnitsOpts::default(),
+            followed: false,
         }
     }
 }
@@ -220,6 +226,8 @@ pub struct SniffOptions {
     pub stop: StopHandle,
     /// Stage or scale for the live timeline's APT motion values (physical units beside raw).
     pub units: UnitsOpts,
+    /// A live view follows the `write` file (see [`TapOptions::followed`]).
+    pub followed: bool,
 }
 
 impl SniffOptions {
@@ -240,6 +248,7 @@ impl SniffOptions {
             signals: true,
             stop: StopHandle::new(),
             units: UnitsOpts::default(),
+            followed: false,
         }
     }
 }
@@ -771,6 +780,8 @@ struct FileSink {
     file: SharedFile,
     /// A stream ([`TapOptions::stream`]): the pipe, to see its reader go away.
     stream: Option<File>,
+    /// Flushed whenever something was written (a stream, or a file a live view follows).
+    eager: bool,
 }
 
 impl FileSink {
@@ -818,6 +829,23 @@ impl FileSink {
         FileSink::over(f, format, stream, false)
     }
 
+    /// The sink `opts` ask for: the pipe of a stream, else a file created, flushed as it is
+    /// written when a live view follows it.
+    fn for_opts(
+        path: &str,
+        format: Format,
+        (stream, force, followed): (bool, bool, bool),
+        info: &StreamInfo,
+    ) -> io::Result<FileSink> {
+        let mut sink = if stream {
+            FileSink::open_stream(path, format, info)?
+        } else {
+            FileSink::create(path, format, force, info)?
+        };
+        sink.eager |= followed;
+        Ok(sink)
+    }
+
     /// Open the existing pipe `path` (waiting for its reader, as opening a FIFO does) and
     /// declare `stream` in `format`.
     fn open_stream(path: &str, format: Format, stream: &StreamInfo) -> io::Result<FileSink> {
@@ -851,6 +879,7 @@ impl FileSink {
             out,
             file,
             stream: pipe,
+            eager: live,
         };
         sink.flush()?;
         Ok(sink)
@@ -949,8 +978,7 @@ fn writer_loop(q: &FileQueue, mut sink: FileSink, clock: Clock, stop: &StopHandl
             }
             if sync
                 || since_flush >= FLUSH_CHUNKS
-                || (since_flush > 0
-                    && (sink.stream.is_some() || last_flush.elapsed() >= FLUSH_EVERY))
+                || (since_flush > 0 && (sink.eager || last_flush.elapsed() >= FLUSH_EVERY))
             {
                 sink.flush()?;
                 since_flush = 0;
@@ -1381,8 +1409,12 @@ impl Tap {
         };
         let format = format.unwrap_or(Format::PcapNg);
         let sink = match &opts.write {
-            Some(p) if opts.stream => Some(FileSink::open_stream(p, format, &info)?),
-            Some(p) => Some(FileSink::create(p, format, opts.force, &info)?),
+            Some(p) => Some(FileSink::for_opts(
+                p,
+                format,
+                (opts.stream, opts.force, opts.followed),
+                &info,
+            )?),
             None => None,
         };
         crate::note!(
@@ -1410,6 +1442,24 @@ impl Tap {
 
     /// Run until stopped, with the timeline going to `display` (standard output when `None`).
     fn run(self, display: Option<Box<dyn Write + Send>>) -> io::Result<TapStats> {
+        let signals = if self.opts.signals {
+            Some(Signals::install()?)
+        } else {
+            None
+        };
+        let stats = self.run_with(display, signals.as_ref())?;
+        drop(signals);
+        crate::note!("{}", stats.summary("aptscope tap"));
+        Ok(stats)
+    }
+
+    /// [`Tap::run`] with the signals (when handled) already installed by the caller; the
+    /// statistics are not printed.
+    fn run_with(
+        self,
+        display: Option<Box<dyn Write + Send>>,
+        signals: Option<&Signals>,
+    ) -> io::Result<TapStats> {
         let Tap {
             opts,
             settings,
@@ -1417,11 +1467,6 @@ impl Tap {
             host,
             rec,
         } = self;
-        let signals = if opts.signals {
-            Some(Signals::install()?)
-        } else {
-            None
-        };
         let Recording { sh, sink, disp_rx } = rec;
         let sh = &*sh;
         let disp = Recording::display(disp_rx, display);
@@ -1443,7 +1488,7 @@ impl Tap {
                             &settings,
                             &mut host_r,
                             sh,
-                            signals.as_ref(),
+                            signals,
                             deadline,
                         ) {
                             Some(d) => d,
@@ -1469,7 +1514,7 @@ impl Tap {
                             let to: Option<&mut dyn Port> = Some(host_w);
                             finish(forward(dev_r, to, Direction::DeviceToHost, sh, end))
                         });
-                        supervise(sh, signals.as_ref(), deadline, end);
+                        supervise(sh, signals, deadline, end);
                         end.store(true, Ordering::SeqCst);
                         (
                             h.join().unwrap_or(FwdEnd::Stopped),
@@ -1499,9 +1544,7 @@ impl Tap {
                 },
             )
         })?;
-        drop(signals);
         drop(host);
-        crate::note!("{}", stats.summary("aptscope tap"));
         Ok(stats)
     }
 }
@@ -1589,10 +1632,10 @@ impl Sniff {
             });
         }
         let sink = match &opts.write {
-            Some(p) => Some(FileSink::create(
+            Some(p) => Some(FileSink::for_opts(
                 p,
                 format.unwrap_or(Format::PcapNg),
-                opts.force,
+                (false, opts.force, opts.followed),
                 &StreamInfo {
                     id: 0,
                     name: format!("{} + {}", opts.host_tx, opts.device_tx),
@@ -1621,17 +1664,30 @@ impl Sniff {
 
     /// Run until stopped, with the timeline going to `display` (standard output when `None`).
     fn run(self, display: Option<Box<dyn Write + Send>>) -> io::Result<TapStats> {
+        let signals = if self.opts.signals {
+            Some(Signals::install()?)
+        } else {
+            None
+        };
+        let stats = self.run_with(display, signals.as_ref())?;
+        drop(signals);
+        crate::note!("{}", stats.summary("aptscope sniff"));
+        Ok(stats)
+    }
+
+    /// [`Sniff::run`] with the signals already installed by the caller; the statistics are
+    /// not printed.
+    fn run_with(
+        self,
+        display: Option<Box<dyn Write + Send>>,
+        signals: Option<&Signals>,
+    ) -> io::Result<TapStats> {
         let Sniff {
             opts,
             settings,
             ports,
             rec,
         } = self;
-        let signals = if opts.signals {
-            Some(Signals::install()?)
-        } else {
-            None
-        };
         let Recording { sh, sink, disp_rx } = rec;
         let sh = &*sh;
         let disp = Recording::display(disp_rx, display);
@@ -1655,7 +1711,7 @@ impl Sniff {
                                 receive(path, port, dir, settings, reconnect, sh, never)
                             });
                         }
-                        supervise(sh, signals.as_ref(), deadline, &never);
+                        supervise(sh, signals, deadline, &never);
                         // The receivers see the stop within a tick.
                         sh.stop.stop();
                     });
@@ -1663,8 +1719,6 @@ impl Sniff {
                 },
             )
         })?;
-        drop(signals);
-        crate::note!("{}", stats.summary("aptscope sniff"));
         Ok(stats)
     }
 }
@@ -1714,6 +1768,202 @@ fn receive(
             }
         }
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// A live view of the file
+
+/// What the live view of a tap, sniff or simulator is given: the capture file being written
+/// and the flags that say it is complete and that the view should close.
+#[derive(Debug, Clone, Copy)]
+pub struct LiveView<'a> {
+    /// The capture file (pcapng) the tap writes, flushed as it is written.
+    pub path: &'a str,
+    /// Where host programs connect (the tap's link, else its pseudo-terminal); `None` for a
+    /// sniff.
+    pub host: Option<&'a str>,
+    /// Set once the file is complete (the tap has ended): a follower reads to its end.
+    pub written: FollowStop,
+    /// Set when the view should close: the tap was stopped (signal, duration) or failed.
+    pub quit: &'a AtomicBool,
+}
+
+/// Run a tap writing `opts.write` with `view` in the calling thread (the terminal UI, which
+/// follows the file): the recording never waits for the view. When the view returns (the user
+/// quit) the tap is stopped; when the tap stops first (signal, duration) the view is asked to
+/// close; when the device goes away the view stays on the complete file. Progress lines are
+/// held back while the view has the terminal; the statistics are printed after it.
+pub fn tap_with_view(
+    mut opts: TapOptions,
+    view: impl FnOnce(LiveView<'_>) -> io::Result<()>,
+) -> io::Result<TapStats> {
+    let path = viewed_path(&opts.write)?;
+    opts.followed = true;
+    opts.quiet = true;
+    let tap = Tap::new(opts)?;
+    let (signals, stop) = (tap.opts.signals, tap.opts.stop.clone());
+    let host = tap.host.link.as_ref().unwrap_or(&tap.host.slave_path);
+    let host = format!("host {}", host.display());
+    let run = move |sig: Option<&Signals>| tap.run_with(None, sig);
+    with_view(
+        (&path, Some(&host)),
+        (signals, stop),
+        "aptscope tap",
+        run,
+        view,
+    )
+}
+
+/// [`tap_with_view`] for a sniff.
+pub fn sniff_with_view(
+    mut opts: SniffOptions,
+    view: impl FnOnce(LiveView<'_>) -> io::Result<()>,
+) -> io::Result<TapStats> {
+    let path = viewed_path(&opts.write)?;
+    opts.followed = true;
+    opts.quiet = true;
+    let sniff = Sniff::new(opts)?;
+    let (signals, stop) = (sniff.opts.signals, sniff.opts.stop.clone());
+    let run = move |sig: Option<&Signals>| sniff.run_with(None, sig);
+    with_view((&path, None), (signals, stop), "aptscope sniff", run, view)
+}
+
+/// A simulator's own traffic in a live view: `sim` served on a private pseudo-terminal with a
+/// tap in front of it (`opts.device` is set to it) whose host side is what programs open
+/// (`opts.link`), recorded to `opts.write` and shown by `view` as [`tap_with_view`] does.
+pub fn sim_with_view(
+    sim: Box<dyn crate::live::sim::Simulator + Send>,
+    mut opts: TapOptions,
+    view: impl FnOnce(LiveView<'_>) -> io::Result<()>,
+) -> io::Result<TapStats> {
+    use crate::live::sim::{serve_pty, stop_pair, Pty};
+    use nix::sys::signal::{SigSet, SigmaskHow, Signal};
+    // Blocked before the simulator's thread starts, so that it inherits the mask and the
+    // signals reach the tap's signalfd rather than killing the process.
+    let mut set = SigSet::empty();
+    for sig in [Signal::SIGINT, Signal::SIGTERM, Signal::SIGHUP] {
+        set.add(sig);
+    }
+    let old = set.thread_swap_mask(SigmaskHow::SIG_BLOCK)?;
+    let pty = Pty::open()?;
+    opts.device = pty.path().to_string_lossy().into_owned();
+    let (stop, stopped) = stop_pair()?;
+    let r = thread::scope(|s| {
+        let server = s.spawn(move || {
+            let mut sim = sim;
+            serve_pty(&mut *sim, pty, Some(&stopped), &[])
+        });
+        let r = tap_with_view(opts, view);
+        stop.stop();
+        match server.join() {
+            Ok(Err(e)) if r.is_ok() => Err(io::Error::new(e.kind(), format!("simulator: {e}"))),
+            Err(_) => Err(io::Error::other("the simulator panicked")),
+            _ => r,
+        }
+    });
+    let _ = old.thread_set_mask();
+    r
+}
+
+/// How long a view asked to close may take before it is given up (see [`abandon_view`]).
+const VIEW_GRACE: Duration = Duration::from_secs(2);
+
+/// The view did not close when asked: its terminal has gone (SIGHUP after the terminal
+/// closed; the terminal library then never returns from waiting for input). The capture is
+/// complete: say so where standard error still goes, and end the process.
+fn abandon_view(r: &io::Result<TapStats>, path: &str, what: &str) -> ! {
+    crate::set_notes(true);
+    let ok = match r {
+        Ok(stats) => {
+            crate::note!("{}", stats.summary(what));
+            stats.file_matches()
+        }
+        Err(e) => {
+            crate::note!("{what}: {e}");
+            false
+        }
+    };
+    crate::note!("{what}: capture in {path} (the view's terminal has gone)");
+    std::process::exit(if ok { 0 } else { 1 })
+}
+
+fn viewed_path(write: &Option<String>) -> io::Result<String> {
+    write.clone().ok_or_else(|| {
+        io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "a live view follows the capture file: give one (-w)",
+        )
+    })
+}
+
+/// Run `run` (a tap or sniff, given the signals) in a thread and `view` in this one; see
+/// [`tap_with_view`].
+fn with_view(
+    (path, host): (&str, Option<&str>),
+    (signals, stop): (bool, StopHandle),
+    what: &str,
+    run: impl FnOnce(Option<&Signals>) -> io::Result<TapStats> + Send,
+    view: impl FnOnce(LiveView<'_>) -> io::Result<()>,
+) -> io::Result<TapStats> {
+    // Installed here, before any thread starts: the view's threads inherit the mask too.
+    let signals = if signals {
+        Some(Signals::install()?)
+    } else {
+        None
+    };
+    let written = FollowStop::new();
+    let quit = AtomicBool::new(false);
+    let view_done = AtomicBool::new(false);
+    // The view has the terminal: a line on standard error would scribble over it.
+    let notes = crate::notes_on();
+    crate::set_notes(false);
+    let (stats, shown) = thread::scope(|s| {
+        let sig = signals.as_ref();
+        let (quit, view_done, tap_stop) = (&quit, &view_done, stop.clone());
+        let tap = s.spawn(move || {
+            let r = run(sig);
+            written.stop();
+            if r.is_err() || tap_stop.is_stopped() {
+                quit.store(true, Ordering::SeqCst);
+            }
+            // The view may stay open on the finished file: signals still close it.
+            let mut asked: Option<Instant> = None;
+            while !view_done.load(Ordering::SeqCst) {
+                match sig {
+                    Some(sg) => {
+                        if sg.wait(TICK).is_some() {
+                            quit.store(true, Ordering::SeqCst);
+                        }
+                    }
+                    None => thread::sleep(TICK),
+                }
+                if quit.load(Ordering::SeqCst) {
+                    let t = *asked.get_or_insert_with(Instant::now);
+                    if t.elapsed() >= VIEW_GRACE {
+                        abandon_view(&r, path, what);
+                    }
+                }
+            }
+            r
+        });
+        let shown = view(LiveView {
+            path,
+            host,
+            written,
+            quit,
+        });
+        view_done.store(true, Ordering::SeqCst);
+        stop.stop();
+        let stats = tap
+            .join()
+            .unwrap_or_else(|_| Err(io::Error::other("the tap panicked")));
+        (stats, shown)
+    });
+    crate::set_notes(notes);
+    drop(signals);
+    let stats = stats?;
+    crate::note!("{}", stats.summary(what));
+    shown.map(|()| stats)
 }
 
 #[cfg(test)]

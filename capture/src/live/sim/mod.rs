@@ -130,15 +130,25 @@ fn serve<S: Simulator>(sim: S, line: SimLine<'_>) -> io::Result<()> {
 /// pseudo-terminal (its path printed, and linked at `LINK`) or a serial port, until
 /// SIGINT/SIGTERM or until the program using the pseudo-terminal hangs up.
 pub fn sim_apt_main(model: &str, line: SimLine<'_>) -> io::Result<()> {
+    serve(apt_sim(model)?, line)
+}
+
+/// The APT controller `model` names (`kdc101` …), or an error listing the models.
+pub fn apt_sim(model: &str) -> io::Result<AptSim> {
     let m = AptModel::parse(model).ok_or_else(|| invalid(SimError::UnknownApt(model.into())))?;
-    serve(AptSim::new(m), line)
+    Ok(AptSim::new(m))
+}
+
+/// The Elliptec bus `modules` describes (`0:ELL14,1:ELL9`), or why it cannot be.
+pub fn ell_sim(modules: &str) -> io::Result<EllSim> {
+    let mods = parse_modules(modules).map_err(invalid)?;
+    EllSim::new(&mods).map_err(invalid)
 }
 
 /// `aptscope sim elliptec --modules 0:ELL14,1:ELL9 [--pty LINK | --port DEV]`: simulate an
 /// Elliptec bus with these modules, as [`sim_apt_main`] does.
 pub fn sim_elliptec_main(modules: &str, line: SimLine<'_>) -> io::Result<()> {
-    let mods = parse_modules(modules).map_err(invalid)?;
-    serve(EllSim::new(&mods).map_err(invalid)?, line)
+    serve(ell_sim(modules)?, line)
 }
 
 #[cfg(test)]
