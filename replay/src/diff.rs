@@ -135,8 +135,8 @@ fn same_kind(a: &Msg, b: &Msg) -> bool {
 
 /// Compare the captured replies of every exchange with the observed ones, and the unsolicited
 /// messages of the replayed range (`in_range` of each captured message, `laps` passes) with the
-/// observed unsolicited ones. Fields named in `ignore` (`serial_number`, `status_bits`, a path
-/// such as `sub.id`) are not compared.
+/// observed unsolicited ones. Fields named in `ignore` (`serial_number`, `status_bits`, or
+/// `src`, `addr`, `sub` as a whole) are not compared.
 pub fn compare(
     script: &Script,
     exchanges: &[Exchange],

@@ -788,4 +788,34 @@ mod tests {
             "times count from the first selected message"
         );
     }
+
+    #[test]
+    fn a_loaded_capture_is_filtered_on_its_records() {
+        let sample = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../samples/sessions/kdc101.pcapng"
+        );
+        let f = Filter::parse("apt.fields.enable_state == 1").ok();
+        let s = Script::load(sample, OpenOptions::default(), None, f).expect("sample");
+        let wanted: Vec<(u64, &str)> = s
+            .msgs
+            .iter()
+            .filter(|m| m.wanted)
+            .map(|m| (m.n, m.name.as_str()))
+            .collect();
+        assert_eq!(
+            wanted,
+            [
+                (3, "MOD_SET_CHANENABLESTATE"),
+                (5, "MOD_GET_CHANENABLESTATE"),
+                (64, "MOD_GET_CHANENABLESTATE"),
+            ],
+            "the enum field read by its code, as `decode --filter` selects"
+        );
+        let plan = host_schedule(&s, &Selection::default(), Timing::default(), 1);
+        assert_eq!(
+            plan.iter().map(|p| s.msgs[p.idx].n).collect::<Vec<_>>(),
+            [3]
+        );
+    }
 }
