@@ -1001,6 +1001,7 @@ fn convert(
                 fatal(&d)?;
                 diags += 1;
                 eprintln!("aptscope: {input}: {d}");
+                w.diag(&d)?;
             }
         }
     }

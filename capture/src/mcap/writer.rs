@@ -3,7 +3,7 @@
 
 use super::schema::{self, Schema};
 use super::{failed_err, finished_err, mcap_err, RAW_ENCODING};
-use crate::model::{Chunk, Direction, StreamInfo, Writer};
+use crate::model::{Chunk, Direction, ReadDiag, StreamInfo, Writer};
 use ::mcap::records::{MessageHeader, Metadata};
 use ::mcap::{McapError, WriteOptions};
 use aptscope_dissector::detect::Proto;
@@ -212,6 +212,10 @@ impl<W: Write + Seek + Send + 'static> Writer for McapWriter<W> {
             self.untimed += 1;
         }
         Ok(())
+    }
+
+    fn diag(&mut self, d: &ReadDiag) -> io::Result<()> {
+        self.file_diag(d.offset, d.kind, &d.msg)
     }
 
     fn finish(&mut self) -> io::Result<()> {
