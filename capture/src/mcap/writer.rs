@@ -39,7 +39,7 @@ pub struct McapWriter<W: Write + Seek + Send + 'static> {
 
 impl<W: Write + Seek + Send + 'static> McapWriter<W> {
     /// A writer with zstd-compressed chunks. `proto` chooses the decoder of the decoded
-    /// channels; `None` detects it from the first 4 KiB of the first lane with data.
+    /// channels; `None` detects it as `decode` does (the busiest lane of the first 4 KiB).
     ///
     /// zstd runs single-threaded: a chunk (1 MiB) is smaller than one job of zstd's
     /// multi-threaded mode, so its worker threads never overlapped with anything and only
