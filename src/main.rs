@@ -953,6 +953,7 @@ fn convert(
                 fatal(&d)?;
                 diags += 1;
                 eprintln!("aptscope: {input}: {d}");
+                w.diag(&d)?;
             }
         }
     }
