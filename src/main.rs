@@ -808,10 +808,10 @@ fn stats(
         ticker.tick();
         match rec {
             Record::Stream { .. } => st.add(rec),
-            Record::Apt(_) | Record::Ell(_) | Record::Garbage(_) | Record::NoReply(_) => {
-                if f.as_ref().is_none_or(|f| f.matches(rec)) {
-                    st.add(rec);
-                }
+            Record::Apt(_) | Record::Ell(_) | Record::Garbage(_) | Record::NoReply(_)
+                if f.as_ref().is_none_or(|f| f.matches(rec)) =>
+            {
+                st.add(rec)
             }
             _ => {}
         }
