@@ -808,10 +808,10 @@ fn stats(
         ticker.tick();
         match rec {
             Record::Stream { .. } => st.add(rec),
-            Record::Apt(_) | Record::Ell(_) | Record::Garbage(_) | Record::NoReply(_) => {
-                if f.as_ref().is_none_or(|f| f.matches(rec)) {
-                    st.add(rec);
-                }
+            Record::Apt(_) | Record::Ell(_) | Record::Garbage(_) | Record::NoReply(_)
+                if f.as_ref().is_none_or(|f| f.matches(rec)) =>
+            {
+                st.add(rec)
             }
             _ => {}
         }
@@ -953,6 +953,7 @@ fn convert(
                 fatal(&d)?;
                 diags += 1;
                 eprintln!("aptscope: {input}: {d}");
+                w.diag(&d)?;
             }
         }
     }

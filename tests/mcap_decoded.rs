@@ -1,11 +1,9 @@
-//! MCAP's decoded channels carry exactly what `decode --json` writes: for every sample, the
+//! MCAP's decoded channels carry exactly what `decode --json` writes: for every sample (and
+//! every damaged input of `tests/bad-input`, and a K10CR1 session for the units records), the
 //! messages of the json channels of `aptscope convert SAMPLE out.mcap`, in file order, are the
 //! lines of `aptscope decode --json SAMPLE`, byte for byte and in the same order; each on the
-//! channel of its message.
-//!
-//! The one exception: `{"type":"input"}` records (damage of the input file, e.g. a truncated
-//! pcap record) are not in the MCAP, because `convert` reads the input and writes a sound file;
-//! they name no record and take no record number, so nothing else shifts.
+//! channel of its message. That includes the input file's own problems (`{"type":"input"}`,
+//! a truncated pcap record …), which `convert` hands to the writer in their place.
 
 mod common;
 
@@ -49,26 +47,59 @@ fn topic_of(v: &serde_json::Value) -> Option<String> {
     }
 }
 
+/// A K10CR1 (built-in stage): its HW_GET_INFO gives a units record, its motion values `phys`.
+fn k10cr1(dir: &Path) -> PathBuf {
+    let mut hex = String::new();
+    for args in [
+        &[
+            "HW_GET_INFO",
+            "model_number=K10CR1",
+            "serial_number=55000123",
+        ][..],
+        &[
+            "MOT_GET_VELPARAMS",
+            "chan_ident=CH1",
+            "min_vel=0",
+            "acceleration=1502",
+            "max_vel=73291093",
+        ],
+    ] {
+        let mut a = vec!["encode"];
+        a.extend_from_slice(args);
+        a.extend_from_slice(&["--source", "usb", "--dest", "host"]);
+        let (out, err, ok) = aptscope(&a, None);
+        assert!(ok, "encode {args:?}: {err}");
+        hex.push_str(&out);
+    }
+    let p = dir.join("k10cr1.hex");
+    std::fs::write(&p, hex).expect("write the K10CR1 session");
+    p
+}
+
 #[test]
 fn mcap_decoded_channels_equal_decode_json_on_every_sample() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut all = vec![];
-    files(&root.join("samples"), &mut all);
     let scratch =
         std::env::temp_dir().join(format!("aptscope-mcap-decoded-{}", std::process::id()));
     std::fs::create_dir_all(&scratch).expect("scratch dir");
-    let (mut compared, mut records, mut not_captures) = (0, 0, vec![]);
+    let mut all = vec![];
+    files(&root.join("samples"), &mut all);
+    files(&root.join("tests/bad-input"), &mut all);
+    all.push(k10cr1(&scratch));
+    let (mut compared, mut not_captures) = (0, vec![]);
+    let mut types = std::collections::BTreeMap::<String, usize>::new();
     for path in &all {
         let name = path
             .strip_prefix(root)
             .unwrap_or(path)
             .display()
             .to_string();
-        // The generators beside the samples.
+        // The generators and notes beside the samples.
         if matches!(
             path.extension().and_then(|e| e.to_str()),
             Some("sh" | "py" | "md")
-        ) {
+        ) || name.ends_with("expected.txt")
+        {
             not_captures.push(name);
             continue;
         }
@@ -80,13 +111,7 @@ fn mcap_decoded_channels_equal_decode_json_on_every_sample() {
         assert!(ok, "convert {name}: {err}");
         let bytes = std::fs::read(&out).expect("read the MCAP");
         let got = aptscope_capture::mcap::read_decoded(&bytes).expect("decoded channels");
-        let want: Vec<&str> = json
-            .lines()
-            .filter(|l| {
-                let v: serde_json::Value = serde_json::from_str(l).expect("decode --json is JSON");
-                v["type"] != "input"
-            })
-            .collect();
+        let want: Vec<&str> = json.lines().collect();
         for (i, (g, w)) in got.iter().zip(&want).enumerate() {
             assert_eq!(
                 g.json, *w,
@@ -100,6 +125,9 @@ fn mcap_decoded_channels_equal_decode_json_on_every_sample() {
             if v["type"] == "frame" || v["type"] == "garbage" {
                 assert_eq!(Some(u64::from(g.sequence)), v["n"].as_u64(), "{name}: {w}");
             }
+            *types
+                .entry(v["type"].as_str().unwrap_or("?").to_string())
+                .or_default() += 1;
         }
         assert_eq!(
             got.len(),
@@ -113,11 +141,22 @@ fn mcap_decoded_channels_equal_decode_json_on_every_sample() {
                 .or(want.get(got.len()).copied())
         );
         compared += 1;
-        records += want.len();
     }
     let _ = std::fs::remove_dir_all(&scratch);
-    // Every capture sample (samples/ and samples/sessions/): none was left out.
-    assert!(compared >= 30, "{compared} samples compared");
-    assert!(records > 1000, "{records} records compared");
-    assert!(not_captures.len() <= 3, "{not_captures:?}");
+    // Every capture sample (samples/, samples/sessions/, tests/bad-input/): none left out, and
+    // every kind of record met.
+    assert!(compared >= 50, "{compared} inputs compared");
+    assert!(not_captures.len() <= 6, "{not_captures:?}");
+    for (t, min) in [
+        ("frame", 1000),
+        ("garbage", 20),
+        ("diag", 10),
+        ("detect", 30),
+        ("stream", 20),
+        ("input", 5),
+        ("units", 1),
+    ] {
+        let n = types.get(t).copied().unwrap_or(0);
+        assert!(n >= min, "{n} {t} records compared ({types:?})");
+    }
 }

@@ -168,6 +168,12 @@ pub trait Writer {
     fn stream(&mut self, s: &StreamInfo) -> std::io::Result<()>;
     /// Write one chunk.
     fn chunk(&mut self, c: &Chunk<'_>) -> std::io::Result<()>;
+    /// A problem of the input being converted (a damaged record), in its place among the
+    /// chunks: a format that carries decoded records keeps it (MCAP's `/aptscope/input`, as
+    /// `decode --json` writes it); the others drop it.
+    fn diag(&mut self, _d: &ReadDiag) -> std::io::Result<()> {
+        Ok(())
+    }
     /// Flush and close (writes summaries/footers).
     fn finish(&mut self) -> std::io::Result<()>;
     /// What of the chunks and streams written so far the format could not carry, one line

@@ -85,6 +85,7 @@ fn main() {
         cap.to_str().unwrap_or_default(),
         OpenOptions::default(),
         Some(Proto::Apt),
+        None,
     )
     .expect("load");
     let pty = Pty::open().expect("pty");
@@ -119,7 +120,8 @@ fn main() {
         env!("CARGO_MANIFEST_DIR"),
         "/../samples/sessions/kdc101.pcapng"
     );
-    let script = Script::load(sample, OpenOptions::default(), Some(Proto::Apt)).expect("sample");
+    let script =
+        Script::load(sample, OpenOptions::default(), Some(Proto::Apt), None).expect("sample");
     let pty = Pty::open().expect("pty");
     let path = pty.path().to_path_buf();
     let (stop, sig) = stop_pair().expect("pipe");

@@ -149,18 +149,20 @@ fn bad(msg: String) -> io::Error {
     io::Error::new(io::ErrorKind::InvalidInput, msg)
 }
 
+/// `--filter`, compiled (it is read on each record as the capture loads).
+fn filter(o: &ReplayOptions) -> io::Result<Option<Filter>> {
+    o.args
+        .filter
+        .as_deref()
+        .map(|f| Filter::parse(f).map_err(|e| bad(format!("bad filter: {e}\n{}", e.caret(f)))))
+        .transpose()
+}
+
 fn selection(o: &ReplayOptions, script: &Script) -> io::Result<Selection> {
-    let filter = match &o.args.filter {
-        Some(f) => {
-            Some(Filter::parse(f).map_err(|e| bad(format!("bad filter: {e}\n{}", e.caret(f))))?)
-        }
-        None => None,
-    };
     let bound = |s: &Option<String>| -> io::Result<Option<Bound>> {
         s.as_deref().map(Bound::parse).transpose().map_err(bad)
     };
     let sel = Selection {
-        filter,
         from: bound(&o.args.from)?,
         to: bound(&o.args.to)?,
         stream: o.args.stream,
@@ -313,7 +315,7 @@ fn confirm(port: &str, motion: &BTreeMap<String, usize>) -> io::Result<bool> {
 
 /// Run `aptscope replay`. `Ok(false)` when `--check` found differences (or the user declined).
 pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
-    let script = Script::load(&o.args.file, o.open, o.proto)?;
+    let script = Script::load(&o.args.file, o.open, o.proto, filter(&o)?)?;
     let sel = selection(&o, &script)?;
     let (hosts, devs) = script.msgs.iter().fold((0, 0), |(h, d), m| match m.side {
         Side::Host => (h + 1, d),

@@ -369,37 +369,49 @@ mod tests {
     use super::*;
     use aptscope_dissector::detect::Proto;
 
-    fn script(lines: &[String]) -> Script {
-        let msgs = lines.iter().map(|l| fixture(l)).collect();
+    fn script(msgs: Vec<Msg>) -> Script {
         Script::new(Proto::Apt, msgs, vec![], "t".into())
     }
 
-    fn fixture(l: &str) -> Msg {
-        Msg::fixture(serde_json::from_str(l).unwrap_or(Value::Null))
-    }
-
-    fn rec(n: u64, name: &str, raw: &str, dir: &str, ts: u64, pair: Option<u64>) -> String {
-        let pair = pair.map(|p| format!(",\"pair\":{p}")).unwrap_or_default();
-        format!(
-            r#"{{"n":{n},"type":"frame","raw":"{raw}","name":"{name}","dir":"{dir}","ts_ns":{ts},"channel":1,"dst":{{"addr":80}},"fields":{{}}{pair},"diag":[]}}"#
-        )
+    /// A message to address 0x50 on channel 1, with these bytes (hex).
+    fn rec(n: u64, name: &str, raw: &str, side: Side, ts: u64, pair: Option<u64>) -> Msg {
+        let mut m = Msg::fixture(n, name, side, ts, pair);
+        m.raw = (0..raw.len() / 2)
+            .filter_map(|i| u8::from_str_radix(raw.get(2 * i..2 * i + 2)?, 16).ok())
+            .collect();
+        m.addr = Some(0x50);
+        m
     }
 
     fn session() -> Script {
-        script(&[
-            rec(1, "HW_REQ_INFO", "01", "h2d", 1_000, None),
-            rec(2, "HW_GET_INFO", "02", "d2h", 3_000, Some(1)),
-            rec(3, "MOT_MOVE_ABSOLUTE", "03aa", "h2d", 10_000, None),
-            rec(4, "MOT_GET_DCSTATUSUPDATE", "04", "d2h", 20_000, None),
-            rec(5, "MOT_MOVE_COMPLETED", "05", "d2h", 90_000, Some(3)),
-            rec(6, "MOT_MOVE_ABSOLUTE", "03bb", "h2d", 100_000, None),
-            rec(7, "MOT_MOVE_COMPLETED", "06", "d2h", 150_000, Some(6)),
+        script(vec![
+            rec(1, "HW_REQ_INFO", "01", Side::Host, 1_000, None),
+            rec(2, "HW_GET_INFO", "02", Side::Device, 3_000, Some(1)),
+            rec(3, "MOT_MOVE_ABSOLUTE", "03aa", Side::Host, 10_000, None),
+            rec(
+                4,
+                "MOT_GET_DCSTATUSUPDATE",
+                "04",
+                Side::Device,
+                20_000,
+                None,
+            ),
+            rec(5, "MOT_MOVE_COMPLETED", "05", Side::Device, 90_000, Some(3)),
+            rec(6, "MOT_MOVE_ABSOLUTE", "03bb", Side::Host, 100_000, None),
+            rec(
+                7,
+                "MOT_MOVE_COMPLETED",
+                "06",
+                Side::Device,
+                150_000,
+                Some(6),
+            ),
         ])
     }
 
     fn req(s: &Script, raw: &str, name: &str) -> Msg {
         let _ = s;
-        fixture(&rec(99, name, raw, "h2d", 0, None))
+        rec(99, name, raw, Side::Host, 0, None)
     }
 
     #[test]

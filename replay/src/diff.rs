@@ -1,6 +1,7 @@
 //! Comparing captured replies with observed ones: field by field for replies to the same
 //! request, missing and extra replies, latency, and unsolicited messages by name.
 
+use crate::decoded::{Decoded, FieldVal};
 use crate::script::{Msg, Script, Side};
 use serde_json::{json, Map, Value};
 use std::collections::BTreeMap;
@@ -92,58 +93,39 @@ pub struct Report {
     pub unsolicited: BTreeMap<String, (usize, usize)>,
 }
 
-/// Where two records' meanings differ: `fields` compared leaf by leaf, and the sender's address.
-fn field_diffs(a: &Value, b: &Value, ignore: &[String], out: &mut Vec<(String, Value, Value)>) {
-    let empty = Value::Object(Map::new());
-    walk(
-        "",
-        a.get("fields").unwrap_or(&empty),
-        b.get("fields").unwrap_or(&empty),
-        ignore,
-        out,
-    );
-    for k in ["src", "addr", "sub"] {
-        let (x, y) = (a.get(k), b.get(k));
-        if x != y && !ignore.iter().any(|i| i == k) {
-            out.push((
-                k.to_string(),
-                x.cloned().unwrap_or(Value::Null),
-                y.cloned().unwrap_or(Value::Null),
-            ));
-        }
+/// Where two messages' meanings differ: their fields by name (a name on one side only reads as
+/// null on the other), then the sender's address, the Elliptec address and the sub-message,
+/// each as a whole. Names in `ignore` are skipped. The differing values come out as the JSON
+/// of `decode --json`, for the report.
+fn field_diffs(a: &Decoded, b: &Decoded, ignore: &[String], out: &mut Vec<(String, Value, Value)>) {
+    let ignored = |k: &str| ignore.iter().any(|i| i == k);
+    // By name, in name order; a repeated name keeps its last value (as in a JSON object).
+    fn by_name(d: &Decoded) -> BTreeMap<&str, &FieldVal> {
+        d.fields.iter().map(|(k, v)| (k.as_ref(), v)).collect()
     }
-}
-
-fn walk(
-    path: &str,
-    a: &Value,
-    b: &Value,
-    ignore: &[String],
-    out: &mut Vec<(String, Value, Value)>,
-) {
-    if ignore.iter().any(|i| i == path) {
-        return;
-    }
-    let join = |k: &str| {
-        if path.is_empty() {
-            k.to_string()
-        } else {
-            format!("{path}.{k}")
-        }
-    };
-    match (a, b) {
-        (Value::Object(x), Value::Object(y)) => {
-            for (k, va) in x {
-                walk(&join(k), va, y.get(k).unwrap_or(&Value::Null), ignore, out);
-            }
-            for (k, vb) in y {
-                if !x.contains_key(k) {
-                    walk(&join(k), &Value::Null, vb, ignore, out);
-                }
+    // The whole of `fields` is ignored by an empty name (the path of the `fields` object).
+    if !ignored("") {
+        let (x, y) = (by_name(a), by_name(b));
+        let only_b = y.iter().filter(|(k, _)| !x.contains_key(*k));
+        for (k, va, vb) in x
+            .iter()
+            .map(|(k, va)| (*k, *va, y.get(k).copied().unwrap_or(&FieldVal::Null)))
+            .chain(only_b.map(|(k, vb)| (*k, &FieldVal::Null, *vb)))
+        {
+            if va != vb && !ignored(k) {
+                out.push((k.to_string(), va.to_json(), vb.to_json()));
             }
         }
-        _ if a == b => {}
-        _ => out.push((path.to_string(), a.clone(), b.clone())),
+    }
+    for (k, x, y) in [
+        ("src", &a.src, &b.src),
+        ("addr", &a.addr, &b.addr),
+        ("sub", &a.sub, &b.sub),
+    ] {
+        if x != y && !ignored(k) {
+            let json = |v: &Option<FieldVal>| v.as_ref().map_or(Value::Null, FieldVal::to_json);
+            out.push((k.to_string(), json(x), json(y)));
+        }
     }
 }
 
@@ -153,8 +135,8 @@ fn same_kind(a: &Msg, b: &Msg) -> bool {
 
 /// Compare the captured replies of every exchange with the observed ones, and the unsolicited
 /// messages of the replayed range (`in_range` of each captured message, `laps` passes) with the
-/// observed unsolicited ones. Fields named in `ignore` (`serial_number`, `status_bits`, a path
-/// such as `sub.id`) are not compared.
+/// observed unsolicited ones. Fields named in `ignore` (`serial_number`, `status_bits`, or
+/// `src`, `addr`, `sub` as a whole) are not compared.
 pub fn compare(
     script: &Script,
     exchanges: &[Exchange],
@@ -213,7 +195,7 @@ pub fn compare(
             let o = obs.remove(pos);
             let om = &observed[o];
             let mut fd = vec![];
-            field_diffs(&cm.rec, &om.rec, ignore, &mut fd);
+            field_diffs(&cm.decoded, &om.decoded, ignore, &mut fd);
             if fd.is_empty() {
                 r.matched += 1;
             } else {
@@ -250,11 +232,7 @@ pub fn compare(
                 reply: observed[o].label(),
                 field: None,
                 captured: Value::Null,
-                observed: observed[o]
-                    .rec
-                    .get("fields")
-                    .cloned()
-                    .unwrap_or(Value::Null),
+                observed: observed[o].decoded.fields_json(),
             });
         }
     }
@@ -453,25 +431,26 @@ mod tests {
     use super::*;
     use aptscope_dissector::detect::Proto;
 
-    fn msgs(lines: &[&str]) -> Vec<Msg> {
-        lines
+    /// A message on channel 1 with these integer fields.
+    fn rec(
+        n: u64,
+        name: &str,
+        side: Side,
+        ts: u64,
+        pair: Option<u64>,
+        fields: &[(&'static str, i128)],
+    ) -> Msg {
+        let mut m = Msg::fixture(n, name, side, ts, pair);
+        m.decoded.fields = fields
             .iter()
-            .map(|l| Msg::fixture(serde_json::from_str(l).unwrap_or(Value::Null)))
-            .collect()
+            .map(|(k, v)| ((*k).into(), FieldVal::Int(*v)))
+            .collect();
+        m
     }
 
-    fn rec(n: u64, name: &str, dir: &str, ts: u64, pair: Option<u64>, fields: &str) -> String {
-        let pair = pair.map(|p| format!(",\"pair\":{p}")).unwrap_or_default();
-        format!(
-            r#"{{"n":{n},"type":"frame","raw":"00","name":"{name}","dir":"{dir}","ts_ns":{ts},"channel":1,"fields":{fields}{pair},"diag":[]}}"#
-        )
-    }
-
-    fn run(captured: &[String], observed: &[String], ignore: &[String]) -> Report {
-        let c: Vec<&str> = captured.iter().map(String::as_str).collect();
-        let o: Vec<&str> = observed.iter().map(String::as_str).collect();
-        let script = Script::new(Proto::Apt, msgs(&c), vec![], "t".into());
-        let obs = msgs(&o);
+    fn run(captured: &[Msg], observed: &[Msg], ignore: &[String]) -> Report {
+        let script = Script::new(Proto::Apt, captured.to_vec(), vec![], "t".into());
+        let obs = observed;
         let ex: Vec<Exchange> = script
             .msgs
             .iter()
@@ -485,20 +464,20 @@ mod tests {
                     .position(|x| x.name == m.name && x.side == Side::Host),
             })
             .collect();
-        compare(&script, &ex, &obs, &|_| true, 1, ignore)
+        compare(&script, &ex, obs, &|_| true, 1, ignore)
     }
 
     #[test]
     fn identical_replies_give_an_empty_diff() {
         let c = vec![
-            rec(1, "MOT_REQ_DCSTATUSUPDATE", "h2d", 0, None, "{}"),
+            rec(1, "MOT_REQ_DCSTATUSUPDATE", Side::Host, 0, None, &[]),
             rec(
                 2,
                 "MOT_GET_DCSTATUSUPDATE",
-                "d2h",
+                Side::Device,
                 2_000_000,
                 Some(1),
-                r#"{"position":20480}"#,
+                &[("position", 20480)],
             ),
         ];
         let r = run(&c, &c, &[]);
@@ -510,25 +489,25 @@ mod tests {
     #[test]
     fn a_changed_field_is_named_with_both_values() {
         let c = vec![
-            rec(1, "MOT_REQ_DCSTATUSUPDATE", "h2d", 0, None, "{}"),
+            rec(1, "MOT_REQ_DCSTATUSUPDATE", Side::Host, 0, None, &[]),
             rec(
                 2,
                 "MOT_GET_DCSTATUSUPDATE",
-                "d2h",
+                Side::Device,
                 2_000_000,
                 Some(1),
-                r#"{"position":20480,"velocity":0}"#,
+                &[("position", 20480), ("velocity", 0)],
             ),
         ];
         let o = vec![
-            rec(7, "MOT_REQ_DCSTATUSUPDATE", "h2d", 0, None, "{}"),
+            rec(7, "MOT_REQ_DCSTATUSUPDATE", Side::Host, 0, None, &[]),
             rec(
                 8,
                 "MOT_GET_DCSTATUSUPDATE",
-                "d2h",
+                Side::Device,
                 3_000_000,
                 Some(7),
-                r#"{"position":20512,"velocity":0}"#,
+                &[("position", 20512), ("velocity", 0)],
             ),
         ];
         let r = run(&c, &o, &[]);
@@ -546,14 +525,14 @@ mod tests {
     #[test]
     fn missing_extra_and_unsolicited() {
         let c = vec![
-            rec(1, "MOT_MOVE_HOME", "h2d", 0, None, "{}"),
-            rec(2, "MOT_GET_DCSTATUSUPDATE", "d2h", 100, None, "{}"),
-            rec(3, "MOT_MOVE_HOMED", "d2h", 200, Some(1), "{}"),
+            rec(1, "MOT_MOVE_HOME", Side::Host, 0, None, &[]),
+            rec(2, "MOT_GET_DCSTATUSUPDATE", Side::Device, 100, None, &[]),
+            rec(3, "MOT_MOVE_HOMED", Side::Device, 200, Some(1), &[]),
         ];
         let o = vec![
-            rec(1, "MOT_MOVE_HOME", "h2d", 0, None, "{}"),
-            rec(2, "HW_RESPONSE", "d2h", 100, None, "{}"),
-            rec(3, "MOT_MOVE_STOPPED", "d2h", 200, Some(1), "{}"),
+            rec(1, "MOT_MOVE_HOME", Side::Host, 0, None, &[]),
+            rec(2, "HW_RESPONSE", Side::Device, 100, None, &[]),
+            rec(3, "MOT_MOVE_STOPPED", Side::Device, 200, Some(1), &[]),
         ];
         let r = run(&c, &o, &[]);
         assert_eq!((r.missing, r.extra), (1, 1));

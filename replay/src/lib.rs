@@ -5,13 +5,15 @@
 //! - [`script`]: a capture decoded into messages with sender, time and pairing; selections and
 //!   the schedule.
 //! - [`sched`]: absolute-deadline waits (no drift) and send-time error statistics.
-//! - [`host`] / [`device`]: the two engines; [`diff`]: the field-level comparison.
+//! - [`host`] / [`device`]: the two engines; [`diff`]: the field-level comparison of the
+//!   messages' typed meanings ([`decoded`]).
 //! - [`port`]: serial ports and pseudo-terminals with a timestamping reader thread;
 //!   [`safety`]: motion commands and stop-on-abort.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod cli;
+pub mod decoded;
 pub mod device;
 pub mod diff;
 pub mod host;

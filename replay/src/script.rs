@@ -4,18 +4,18 @@
 //!
 //! Messages are taken from the typed records of the one decode chain
 //! ([`aptscope_dissector::record::Decoder`]): bytes, sender, pairing and the table's definition
-//! come straight from the record.
+//! come straight from the record, the decoded fields as a typed [`Decoded`], and `--filter` is
+//! evaluated on the record itself when the capture is loaded.
 
+use crate::decoded::Decoded;
 use aptscope_capture::open::{open, OpenOptions};
 use aptscope_capture::Event;
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::ell::table::Cmd;
 use aptscope_dissector::filter::Filter;
-use aptscope_dissector::pipeline::{Format, Renderer};
 use aptscope_dissector::record::{Decoder, Record};
 use aptscope_dissector::table::{Dir, MsgDef};
 use aptscope_dissector::Diag;
-use serde_json::Value;
 use std::collections::{BTreeMap, HashMap};
 use std::io;
 
@@ -67,9 +67,10 @@ pub struct Msg {
     pub addr: Option<u8>,
     /// `NAME`, `NAME SUB`, `NAME chN` or `NAME @A`.
     label: String,
-    /// The decoded record as `aptscope decode --json` writes it: what display filters and the
-    /// field-by-field comparison read.
-    pub rec: Value,
+    /// Its decoded fields and addressing: what the field-by-field comparison reads.
+    pub decoded: Decoded,
+    /// Whether the display filter the capture was loaded with accepts it (true without one).
+    pub wanted: bool,
 }
 
 impl Msg {
@@ -115,6 +116,7 @@ pub struct Script {
 }
 
 /// Turns the records of a decoder into messages and notes.
+#[derive(Default)]
 pub struct Collector {
     /// Messages so far.
     pub msgs: Vec<Msg>,
@@ -122,19 +124,8 @@ pub struct Collector {
     pub notes: Vec<String>,
     /// The protocol, once detected.
     pub proto: Option<Proto>,
-    /// Renders a frame's record for [`Msg::rec`].
-    json: Renderer,
-}
-
-impl Default for Collector {
-    fn default() -> Self {
-        Collector {
-            msgs: vec![],
-            notes: vec![],
-            proto: None,
-            json: Renderer::new(Format::Json),
-        }
-    }
+    /// The display filter that sets [`Msg::wanted`], read on each frame's record.
+    pub filter: Option<Filter>,
 }
 
 impl std::fmt::Debug for Collector {
@@ -143,6 +134,7 @@ impl std::fmt::Debug for Collector {
             .field("msgs", &self.msgs.len())
             .field("notes", &self.notes)
             .field("proto", &self.proto)
+            .field("filter", &self.filter.as_ref().map(Filter::as_str))
             .finish()
     }
 }
@@ -183,6 +175,7 @@ impl Collector {
                         chan,
                         addr: Some(f.header().dst_byte()),
                         diags,
+                        decoded: Decoded::apt(f),
                     },
                 );
             }
@@ -208,6 +201,7 @@ impl Collector {
                         chan: None,
                         addr: Some(f.addr),
                         diags: f.diags().to_vec(),
+                        decoded: Decoded::ell(f),
                     },
                 );
             }
@@ -262,9 +256,7 @@ impl Collector {
         if !p.diags.is_empty() {
             self.notes.push(what(&p));
         }
-        // The decoded fields for display filters and the field comparison, as `decode --json`
-        // has them: the one JSON parse left, until filters read records (issue 14, item 3).
-        let rec = serde_json::from_str(self.json.line(rec)).unwrap_or(Value::Null);
+        let wanted = self.filter.as_ref().is_none_or(|f| f.matches(rec));
         self.msgs.push(Msg {
             n: p.n,
             ts_ns: p.ts_ns,
@@ -279,7 +271,8 @@ impl Collector {
             chan: p.chan,
             addr: p.addr,
             label,
-            rec,
+            decoded: p.decoded,
+            wanted,
         });
     }
 }
@@ -301,49 +294,48 @@ struct Parts<'a> {
     chan: Option<i64>,
     addr: Option<u8>,
     diags: Vec<Diag>,
+    decoded: Decoded,
 }
 
 #[cfg(test)]
 impl Msg {
-    /// A message from a hand-written record (test fixtures: `n`, `name`, `dir`, `raw` hex,
-    /// `ts_ns`, `pair`, `channel`, `dst.addr`, `fields`).
-    pub(crate) fn fixture(rec: Value) -> Msg {
-        let raw = rec["raw"].as_str().unwrap_or("");
-        let raw = (0..raw.len() / 2)
-            .filter_map(|i| u8::from_str_radix(&raw[2 * i..2 * i + 2], 16).ok())
-            .collect();
-        let name = rec["name"].as_str().unwrap_or("?").to_string();
-        let chan = rec["channel"].as_i64();
+    /// A hand-made APT message on channel 1 (test fixtures): no bytes, no fields, no address;
+    /// the table's definition found by name.
+    pub(crate) fn fixture(n: u64, name: &str, side: Side, ts_ns: u64, pair: Option<u64>) -> Msg {
         Msg {
-            n: rec["n"].as_u64().unwrap_or(0),
-            ts_ns: rec["ts_ns"].as_u64(),
-            side: if rec["dir"] == "h2d" {
-                Side::Host
-            } else {
-                Side::Device
-            },
+            n,
+            ts_ns: Some(ts_ns),
+            side,
             stream: 0,
-            raw,
-            label: label(&name, None, chan, None),
-            def: aptscope_dissector::Table::global().msg_by_name(&name),
-            name,
-            pair: rec["pair"].as_u64(),
+            raw: vec![],
+            label: label(name, None, Some(1), None),
+            def: aptscope_dissector::Table::global().msg_by_name(name),
+            name: name.to_string(),
+            pair,
             proto: Proto::Apt,
             cmd: None,
-            chan,
-            addr: rec["dst"]["addr"].as_u64().map(|a| a as u8),
-            rec,
+            chan: Some(1),
+            addr: None,
+            decoded: Decoded::default(),
+            wanted: true,
         }
     }
 }
 
 impl Script {
-    /// Read and decode a capture file (`proto` forces the protocol; `None` detects it).
-    pub fn load(path: &str, opts: OpenOptions, proto: Option<Proto>) -> io::Result<Script> {
+    /// Read and decode a capture file (`proto` forces the protocol; `None` detects it);
+    /// `filter` decides each message's [`Msg::wanted`] on its record.
+    pub fn load(
+        path: &str,
+        opts: OpenOptions,
+        proto: Option<Proto>,
+        filter: Option<Filter>,
+    ) -> io::Result<Script> {
         let (mut reader, format) = open(path, opts)?;
         let mut dec = Decoder::new(proto);
         let mut c = Collector {
             proto,
+            filter,
             ..Collector::default()
         };
         let mut emit = |r: &Record<'_>| -> Result<(), ()> {
@@ -464,12 +456,10 @@ impl Bound {
     }
 }
 
-/// What part of a capture to replay.
+/// What part of a capture to replay. Only messages the display filter accepted when the
+/// capture was loaded ([`Msg::wanted`]) are selected.
 #[derive(Debug, Default)]
 pub struct Selection {
-    /// Only messages this display filter accepts (host messages when acting as host, device
-    /// messages when acting as device).
-    pub filter: Option<Filter>,
     /// From this record or time on.
     pub from: Option<Bound>,
     /// Up to and including this record or time.
@@ -501,9 +491,7 @@ impl Selection {
 
     /// Whether `m` is selected for sending by the side that sends `side` messages.
     pub fn selects(&self, script: &Script, m: &Msg, side: Side) -> bool {
-        m.side == side
-            && self.in_range(script, m)
-            && self.filter.as_ref().is_none_or(|f| f.matches(&m.rec))
+        m.side == side && m.wanted && self.in_range(script, m)
     }
 
     /// Check `from`/`to` against the capture: `from` after `to` (of the same kind) and a `from`
@@ -651,12 +639,17 @@ pub fn host_schedule(script: &Script, sel: &Selection, timing: Timing, loops: u3
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::decoded::FieldVal;
     use aptscope_dissector::record::Ctx;
 
-    /// Decode chunks (direction, time in ms, bytes) of one APT stream into a script.
-    fn decode(chunks: &[(Option<Dir>, u64, Vec<u8>)]) -> Script {
+    /// Decode chunks (direction, time in ms, bytes) of one APT stream into a script, with a
+    /// display filter.
+    fn decode_with(chunks: &[(Option<Dir>, u64, Vec<u8>)], filter: Option<Filter>) -> Script {
         let mut dec = Decoder::new(Some(Proto::Apt));
-        let mut c = Collector::default();
+        let mut c = Collector {
+            filter,
+            ..Collector::default()
+        };
         let mut emit = |r: &Record<'_>| -> Result<(), ()> {
             c.record(r);
             Ok(())
@@ -674,20 +667,27 @@ mod tests {
     }
 
     fn script() -> Script {
+        script_with(None)
+    }
+
+    fn script_with(filter: Option<Filter>) -> Script {
         // HW_GET_INFO: 84 data bytes from 0x50 to the host, then 3 bytes of garbage.
         let mut info = vec![0x06, 0x00, 0x54, 0x00, 0x81, 0x50];
         info.extend([0u8; 84]);
         info.extend([0xFF, 0xFF, 0xFF]);
-        decode(&[
-            (
-                Some(Dir::HostToDevice),
-                1000,
-                vec![0x05, 0x00, 0x00, 0x00, 0x50, 0x01],
-            ),
-            (Some(Dir::DeviceToHost), 1002, info),
-            // No direction captured: the table's (MOD_IDENTIFY goes to the device).
-            (None, 1500, vec![0x23, 0x02, 0x01, 0x00, 0x50, 0x01]),
-        ])
+        decode_with(
+            &[
+                (
+                    Some(Dir::HostToDevice),
+                    1000,
+                    vec![0x05, 0x00, 0x00, 0x00, 0x50, 0x01],
+                ),
+                (Some(Dir::DeviceToHost), 1002, info),
+                // No direction captured: the table's (MOD_IDENTIFY goes to the device).
+                (None, 1500, vec![0x23, 0x02, 0x01, 0x00, 0x50, 0x01]),
+            ],
+            filter,
+        )
     }
 
     #[test]
@@ -705,7 +705,19 @@ mod tests {
         assert_eq!(s.msgs[2].label(), "MOD_IDENTIFY ch1");
         assert_eq!(s.msgs[2].addr, Some(0x50));
         assert!(s.msgs[2].def.is_some_and(|d| d.name == "MOD_IDENTIFY"));
-        assert_eq!(s.msgs[1].rec["name"], "HW_GET_INFO");
+        assert_eq!(s.msgs[1].name, "HW_GET_INFO");
+        let d = &s.msgs[1].decoded;
+        assert!(
+            d.fields
+                .iter()
+                .any(|(k, v)| k == "serial_number" && *v == FieldVal::Int(0)),
+            "{d:?}"
+        );
+        assert_eq!(
+            d.src.as_ref().map(FieldVal::to_json),
+            Some(serde_json::json!({"addr": 0x50, "name": "usb"}))
+        );
+        assert!(s.msgs.iter().all(|m| m.wanted), "no filter: all wanted");
         assert_eq!(s.replies_to(0), [1]);
         assert_eq!(s.notes.len(), 1, "{:?}", s.notes);
         assert!(s.notes[0].starts_with("garbage @90"), "{:?}", s.notes);
@@ -761,16 +773,49 @@ mod tests {
 
     #[test]
     fn filter_selects_host_messages() {
-        let s = script();
-        let sel = Selection {
-            filter: Some(Filter::parse("apt.name == \"MOD_IDENTIFY\"").unwrap()),
-            ..Selection::default()
-        };
+        let f = Filter::parse("apt.name == \"MOD_IDENTIFY\" && apt.dst.addr == 0x50");
+        let s = script_with(Some(f.unwrap()));
+        assert_eq!(
+            s.msgs.iter().map(|m| m.wanted).collect::<Vec<_>>(),
+            [false, false, true],
+            "the filter read each record"
+        );
+        let sel = Selection::default();
         let plan = host_schedule(&s, &sel, Timing::default(), 1);
         assert_eq!(plan.len(), 1);
         assert_eq!(
             plan[0].at_ns, 0,
             "times count from the first selected message"
+        );
+    }
+
+    #[test]
+    fn a_loaded_capture_is_filtered_on_its_records() {
+        let sample = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../samples/sessions/kdc101.pcapng"
+        );
+        let f = Filter::parse("apt.fields.enable_state == 1").ok();
+        let s = Script::load(sample, OpenOptions::default(), None, f).expect("sample");
+        let wanted: Vec<(u64, &str)> = s
+            .msgs
+            .iter()
+            .filter(|m| m.wanted)
+            .map(|m| (m.n, m.name.as_str()))
+            .collect();
+        assert_eq!(
+            wanted,
+            [
+                (3, "MOD_SET_CHANENABLESTATE"),
+                (5, "MOD_GET_CHANENABLESTATE"),
+                (64, "MOD_GET_CHANENABLESTATE"),
+            ],
+            "the enum field read by its code, as `decode --filter` selects"
+        );
+        let plan = host_schedule(&s, &Selection::default(), Timing::default(), 1);
+        assert_eq!(
+            plan.iter().map(|p| s.msgs[p.idx].n).collect::<Vec<_>>(),
+            [3]
         );
     }
 }

@@ -153,6 +153,7 @@ fn load(path: &Path) -> Script {
         path.to_str().unwrap(),
         OpenOptions::default(),
         Some(Proto::Apt),
+        None,
     )
     .unwrap()
 }
@@ -352,7 +353,7 @@ fn an_elliptec_bus_is_impersonated_for_a_host_that_sends_no_terminators() {
         env!("CARGO_MANIFEST_DIR"),
         "/../samples/sessions/elliptec.pcapng"
     );
-    let script = Script::load(sample, OpenOptions::default(), None).unwrap();
+    let script = Script::load(sample, OpenOptions::default(), None, None).unwrap();
     assert_eq!(script.proto, Proto::Elliptec);
     let (requests, o) = impersonate(&script, &dir, |b| b.strip_suffix(b"\r\n").unwrap_or(b));
     assert!(requests >= 10);

@@ -3,7 +3,7 @@
 
 use super::schema::{self, Schema};
 use super::{failed_err, finished_err, mcap_err, RAW_ENCODING};
-use crate::model::{Chunk, Direction, StreamInfo, Writer};
+use crate::model::{Chunk, Direction, ReadDiag, StreamInfo, Writer};
 use ::mcap::records::{MessageHeader, Metadata};
 use ::mcap::{McapError, WriteOptions};
 use aptscope_dissector::detect::Proto;
@@ -39,7 +39,7 @@ pub struct McapWriter<W: Write + Seek + Send + 'static> {
 
 impl<W: Write + Seek + Send + 'static> McapWriter<W> {
     /// A writer with zstd-compressed chunks. `proto` chooses the decoder of the decoded
-    /// channels; `None` detects it from the first 4 KiB of the first lane with data.
+    /// channels; `None` detects it as `decode` does (the busiest lane of the first 4 KiB).
     ///
     /// zstd runs single-threaded: a chunk (1 MiB) is smaller than one job of zstd's
     /// multi-threaded mode, so its worker threads never overlapped with anything and only
@@ -212,6 +212,10 @@ impl<W: Write + Seek + Send + 'static> Writer for McapWriter<W> {
             self.untimed += 1;
         }
         Ok(())
+    }
+
+    fn diag(&mut self, d: &ReadDiag) -> io::Result<()> {
+        self.file_diag(d.offset, d.kind, &d.msg)
     }
 
     fn finish(&mut self) -> io::Result<()> {
