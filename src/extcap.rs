@@ -271,6 +271,30 @@ fn config(iface: &str) -> String {
 
 /// `--capture`: the tap, writing into the FIFO until Wireshark stops it (SIGTERM) or closes
 /// the FIFO.
+/// The tap failed before opening the FIFO (no such device …): Wireshark's dumpcap may be
+/// blocked opening it for reading, waiting for a writer that never comes. Open it and close it
+/// so dumpcap sees the end at once (the error itself goes to standard error, which Wireshark
+/// shows); give up after a few seconds if nobody is reading.
+fn release_reader(fifo: &str) {
+    use std::os::unix::fs::OpenOptionsExt;
+    const O_NONBLOCK: i32 = 0o4000;
+    const ENXIO: i32 = 6;
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(5);
+    loop {
+        let r = std::fs::OpenOptions::new()
+            .write(true)
+            .custom_flags(O_NONBLOCK)
+            .open(fifo);
+        match r {
+            // No reader yet (ENXIO): dumpcap opens the FIFO after starting us.
+            Err(e) if e.raw_os_error() == Some(ENXIO) && std::time::Instant::now() < deadline => {
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            _ => return,
+        }
+    }
+}
+
 fn capture(iface: &str, a: &ExtcapArgs) -> io::Result<()> {
     let fifo = a
         .fifo
@@ -312,7 +336,7 @@ fn capture(iface: &str, a: &ExtcapArgs) -> io::Result<()> {
     o.proto = proto;
     o.baud = baud;
     o.flow = flow;
-    o.write = Some(fifo);
+    o.write = Some(fifo.clone());
     o.stream = true;
     o.quiet = true;
     o.reconnect = a.reconnect;
@@ -320,7 +344,13 @@ fn capture(iface: &str, a: &ExtcapArgs) -> io::Result<()> {
     aptscope_capture::set_notes(false);
     let stats = tap_main(o);
     aptscope_capture::set_notes(true);
-    let stats = stats?;
+    let stats = match stats {
+        Ok(s) => s,
+        Err(e) => {
+            release_reader(&fifo);
+            return Err(e);
+        }
+    };
     if let Some(d) = stats.disconnects.last().filter(|_| !a.reconnect) {
         // The capture ended because of it: say why (Wireshark shows it).
         return Err(io::Error::other(format!("{} gone: {}", d.port, d.error)));

@@ -231,11 +231,11 @@ impl<W: Write + Seek + Send + 'static> Writer for McapWriter<W> {
             dec.finish(w)?;
             if let Some(p) = dec.dec.proto() {
                 let mut m = BTreeMap::new();
-                m.insert("proto".to_string(), p.name().to_string());
+                m.insert("proto".to_string(), p.code().to_string());
                 m.insert("how".to_string(), dec.out.how.to_string());
                 if let Some((a, e)) = dec.out.scores {
                     m.insert("apt".to_string(), format!("{a:.3}"));
-                    m.insert("elliptec".to_string(), format!("{e:.3}"));
+                    m.insert("ell".to_string(), format!("{e:.3}"));
                 }
                 w.metadata(Metadata {
                     name: "aptscope.decode".into(),
