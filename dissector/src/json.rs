@@ -262,17 +262,13 @@ pub fn apt_frame_in(
         value(out, f.table(), fd, &v);
         // The device's or stage's conversion when it applies (piezo % in V or µm, motion
         // values in mm), else the table's fixed scale.
-        let conv = crate::apt::phys(fd, &v, scale).or_else(|| {
-            let (s, x) = fd.scale.zip(v.as_f64())?;
-            Some((x * s, fd.unit.unwrap_or("")))
-        });
-        if let Some((x, unit)) = conv {
+        if let Some((x, unit)) = crate::apt::phys_or_scaled(fd, &v, scale) {
             if !phys.is_empty() {
                 phys.push(',');
             }
             string(&mut phys, fd.name);
             phys.push_str(":{\"value\":");
-            float(&mut phys, crate::apt::round_sig(x));
+            float(&mut phys, x);
             phys.push_str(",\"unit\":");
             string(&mut phys, unit);
             phys.push('}');
@@ -295,19 +291,8 @@ pub fn apt_frame_in(
     if p.other_address {
         out.push_str(",\"pair_other_address\":true");
     }
-    let extra = [
-        p.unsolicited.then_some(DiagKind::Unsolicited),
-        p.pair
-            .filter(|_| p.duplicate)
-            .map(|request| DiagKind::DuplicateReply { request }),
-        p.not_for_model.map(|model| DiagKind::NotForModel { model }),
-    ];
-    let extra = extra.into_iter().flatten().map(|kind| Diag {
-        offset: f.offset,
-        kind,
-    });
     out.push_str(",\"diag\":");
-    diags(out, f.diags().chain(extra));
+    diags(out, f.diags().chain(p.diags(f.offset)));
     out.push('}');
 }
 

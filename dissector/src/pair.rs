@@ -63,6 +63,26 @@ pub struct PairInfo {
     pub not_for_model: Option<[u8; 8]>,
 }
 
+impl PairInfo {
+    /// The diagnostics pairing adds to the frame at `offset` (`unsolicited`,
+    /// `duplicate_reply`, `not_for_model`): one list for every view.
+    pub fn diags(&self, offset: u64) -> impl Iterator<Item = crate::diag::Diag> {
+        use crate::diag::{Diag, DiagKind};
+        let extra = [
+            self.unsolicited.then_some(DiagKind::Unsolicited),
+            self.pair
+                .filter(|_| self.duplicate)
+                .map(|request| DiagKind::DuplicateReply { request }),
+            self.not_for_model
+                .map(|model| DiagKind::NotForModel { model }),
+        ];
+        extra
+            .into_iter()
+            .flatten()
+            .map(move |kind| Diag { offset, kind })
+    }
+}
+
 /// Bound on requests waiting (a device that never answers must not grow memory). High enough
 /// that a host flooding requests faster than the line answers keeps its pairing: past it, the
 /// oldest is given up and every later reply would pair one request too late.
