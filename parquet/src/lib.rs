@@ -20,9 +20,11 @@
 #![warn(missing_docs)]
 
 mod buf;
+mod file;
 pub mod schema;
 
 pub use buf::V;
+pub use file::{decode_file, not_a_capture, not_a_capture_error, DecodeOpts};
 
 use aptscope_dissector::apt::phys_or_scaled;
 use aptscope_dissector::diag::{Diag, DiagKind};
