@@ -14,7 +14,6 @@ use aptscope_capture::Event;
 use aptscope_dissector::apt::{encode_named_report, Addr, Named};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::filter::Filter;
-use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
 use aptscope_dissector::record::{Decoder, Record};
 use aptscope_dissector::stats::Stats;
 use aptscope_dissector::table::{Form, MsgDef};
@@ -25,6 +24,7 @@ use clap::{Parser, Subcommand};
 use std::io::{self, BufWriter, Write};
 use std::process::ExitCode;
 
+mod batch;
 mod extcap;
 
 #[derive(Parser)]
@@ -173,6 +173,17 @@ enum ExportArg {
     WiresharkLua,
 }
 
+/// Output of `decode`.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum ToArg {
+    /// One line per record.
+    Text,
+    /// NDJSON.
+    Json,
+    /// A Parquet dataset (-o DIR).
+    Parquet,
+}
+
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum ProtoArg {
     Auto,
@@ -194,9 +205,22 @@ enum Cmd {
         /// Shorthand for --format hex: hex text, any whitespace.
         #[arg(long)]
         hex: bool,
-        /// Write NDJSON, one object per frame or garbage record.
+        /// Write NDJSON, one object per frame or garbage record (same as --to json).
         #[arg(long)]
         json: bool,
+        /// Output: text (default), json (NDJSON), or parquet (a dataset directory, -o; see
+        /// the README's "Parquet output").
+        #[arg(long, value_enum)]
+        to: Option<ToArg>,
+        /// The Parquet dataset directory (--to parquet).
+        #[arg(short = 'o', long, value_name = "DIR")]
+        output: Option<std::path::PathBuf>,
+        /// Replace an existing dataset directory.
+        #[arg(long)]
+        force: bool,
+        /// Files decoded at once (default: the number of cores).
+        #[arg(short = 'j', long, value_name = "N")]
+        jobs: Option<usize>,
         /// Protocol of the stream (default: detected from the first 4 KiB).
         #[arg(long, value_enum, default_value_t = ProtoArg::Auto)]
         proto: ProtoArg,
@@ -428,6 +452,10 @@ fn main() -> ExitCode {
             format,
             hex,
             json,
+            to,
+            output,
+            force,
+            jobs,
             proto,
             usb_device,
             filter,
@@ -435,20 +463,43 @@ fn main() -> ExitCode {
             units,
         } => open_opts(format.as_deref(), hex, usb_device.as_deref()).and_then(|o| {
             let u = units.opts()?;
+            let out = match (to, json, output) {
+                (Some(ToArg::Parquet), _, Some(dir)) => {
+                    aptscope_parquet::prepare_dir(&dir, force)?;
+                    batch::Output::Parquet(dir)
+                }
+                (Some(ToArg::Parquet), _, None) => {
+                    return Err(bad("--to parquet writes a directory: name it with -o DIR".into()))
+                }
+                (_, _, Some(_)) => {
+                    return Err(bad(
+                        "-o is the Parquet dataset directory (--to parquet); text and NDJSON go                          to standard output"
+                            .into(),
+                    ))
+                }
+                (Some(ToArg::Json), _, None) | (None, true, None) => {
+                    batch::Output::Lines { json: true }
+                }
+                (Some(ToArg::Text), true, None) => {
+                    return Err(bad("--json and --to text contradict".into()))
+                }
+                (Some(ToArg::Text), false, None) | (None, false, None) => {
+                    batch::Output::Lines { json: false }
+                }
+            };
             let files = decode_inputs(files)?;
-            // Several inputs: every record names its file (numbers, offsets and pairs count
-            // within a file).
-            let named = files.len() > 1;
-            files.iter().enumerate().try_for_each(|(i, f)| {
-                let d = DecodeOpts {
-                    json,
-                    proto,
-                    filter: filter.as_deref(),
-                    timeout,
-                    units: u.clone(),
-                    tag: named.then_some((i, f.as_str())),
-                };
-                decode(f, o, d)
+            let jobs = jobs.unwrap_or_else(|| {
+                std::thread::available_parallelism().map_or(1, |n| n.get())
+            });
+            batch::run(batch::Job {
+                files: &files,
+                open: o,
+                proto,
+                filter: filter.as_deref(),
+                timeout,
+                units: u,
+                out,
+                jobs,
             })
         }),
         Cmd::View {
@@ -763,25 +814,6 @@ fn compile_filter(src: &str) -> io::Result<Filter> {
     Filter::parse(src).map_err(|e| bad(format!("bad filter: {e}\n{}", e.caret(src))))
 }
 
-/// Feed every event of a capture through a pipeline.
-fn run_pipeline(
-    reader: &mut dyn aptscope_capture::Reader,
-    p: &mut Pipeline,
-    emit: &mut impl FnMut(&str) -> io::Result<()>,
-) -> io::Result<()> {
-    while let Some(ev) = reader.next_event() {
-        match ev {
-            Event::Chunk(c) => p.push_chunk(c.ctx(), c.bytes, emit)?,
-            Event::Diag(d) => {
-                fatal(&d)?;
-                p.file_diag(d.offset, d.kind, &d.msg, emit)?
-            }
-            Event::Stream(s) => p.stream_info(s.id, &s.name, s.settings.as_deref(), emit)?,
-        }
-    }
-    p.finish(emit)
-}
-
 #[allow(clippy::too_many_arguments)]
 fn stats(
     file: &str,
@@ -835,68 +867,6 @@ fn stats(
         print!("{}", st.to_text());
     }
     Ok(())
-}
-
-/// How `decode` decodes one input.
-struct DecodeOpts<'a> {
-    json: bool,
-    proto: ProtoArg,
-    filter: Option<&'a str>,
-    timeout: Option<u64>,
-    units: UnitsOpts,
-    /// One of several inputs: its index and name, which every record then carries.
-    tag: Option<(usize, &'a str)>,
-}
-
-fn decode(file: &str, opts: OpenOptions, d: DecodeOpts<'_>) -> io::Result<()> {
-    let DecodeOpts {
-        json: as_json,
-        proto,
-        filter,
-        timeout,
-        units,
-        tag,
-    } = d;
-    let filter = filter.map(compile_filter).transpose()?;
-    let (mut reader, _) = open(file, opts)?;
-    let mut out = BufWriter::with_capacity(1 << 16, io::stdout().lock());
-    // One of several inputs: a line that says which file follows, and the file in every
-    // NDJSON record.
-    let mut prefix = String::new();
-    if let Some((i, name)) = tag {
-        if as_json {
-            prefix.push_str("{\"file\":");
-            json::string(&mut prefix, name);
-            prefix.push(',');
-            writeln!(out, "{prefix}\"type\":\"file\",\"index\":{i}}}")?;
-        } else {
-            writeln!(out, "# file {}: {name}", i + 1)?;
-        }
-    }
-    let mut p = Pipeline::new(
-        proto_of(proto),
-        if as_json {
-            PFormat::Json
-        } else {
-            PFormat::Text
-        },
-    );
-    let mut emit = |line: &str| -> io::Result<()> {
-        out.write_all(line.as_bytes())?;
-        out.write_all(b"\n")
-    };
-    if let Some((_, name)) = tag {
-        p.set_file(name);
-    }
-    p.set_units(units);
-    if let Some(t) = timeout {
-        p.set_reply_timeout(t);
-    }
-    if let Some(f) = filter {
-        p.set_filter(f);
-    }
-    run_pipeline(reader.as_mut(), &mut p, &mut emit)?;
-    out.flush()
 }
 
 fn info(file: &str, opts: OpenOptions, as_json: bool, proto: ProtoArg) -> io::Result<()> {

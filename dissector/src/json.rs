@@ -266,7 +266,7 @@ pub fn apt_frame_in(
             }
             string(&mut phys, fd.name);
             phys.push_str(":{\"value\":");
-            float(&mut phys, crate::apt::round_sig(x));
+            float(&mut phys, x);
             phys.push_str(",\"unit\":");
             string(&mut phys, unit);
             phys.push('}');
@@ -331,18 +331,7 @@ pub fn apt_diags<'x>(
     f: &'x AptFrame<'_, '_>,
     p: &'x crate::pair::PairInfo,
 ) -> impl Iterator<Item = Diag> + 'x {
-    let extra = [
-        p.unsolicited.then_some(DiagKind::Unsolicited),
-        p.pair
-            .filter(|_| p.duplicate)
-            .map(|request| DiagKind::DuplicateReply { request }),
-        p.not_for_model.map(|model| DiagKind::NotForModel { model }),
-    ];
-    let extra = extra.into_iter().flatten().map(move |kind| Diag {
-        offset: f.offset,
-        kind,
-    });
-    f.diags().chain(extra)
+    f.diags().chain(p.diags(f.offset))
 }
 
 /// A field's physical value and unit (`phys`): the device's or stage's conversion when it

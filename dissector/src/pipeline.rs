@@ -90,6 +90,11 @@ impl Pipeline {
         self.dec.proto()
     }
 
+    /// The detector's verdict (see [`Decoder::detection`]).
+    pub fn detection(&self) -> Option<&crate::detect::Detection> {
+        self.dec.detection()
+    }
+
     /// Records numbered so far (frames and garbage runs).
     pub fn records(&self) -> u64 {
         self.dec.records()

@@ -250,6 +250,8 @@ pub struct Decoder {
     /// Models seen per device and the stage conversion of motion values.
     units: Tracker,
     expired: Vec<NoReply>,
+    /// The detector's verdict, once the protocol was detected.
+    detection: Option<Detection>,
 }
 
 impl Decoder {
@@ -269,6 +271,7 @@ impl Decoder {
             reply_timeout: None,
             units: Tracker::new(UnitsOpts::default()),
             expired: vec![],
+            detection: None,
         }
     }
 
@@ -286,6 +289,11 @@ impl Decoder {
     /// The protocol in use (after detection).
     pub fn proto(&self) -> Option<Proto> {
         self.proto
+    }
+
+    /// The detector's verdict (`None` before detection, or when the protocol was given).
+    pub fn detection(&self) -> Option<&Detection> {
+        self.detection.as_ref()
     }
 
     /// Frames and garbage runs numbered so far.
@@ -495,6 +503,7 @@ impl Decoder {
             Proto::Apt
         });
         self.proto = Some(proto);
+        self.detection = Some(d);
         emit(&Record::Detect {
             proto,
             detection: d,

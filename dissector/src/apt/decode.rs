@@ -509,6 +509,18 @@ pub fn phys<'s>(
     s.convert(f.q?, v.as_f64()?)
 }
 
+/// A field's physical value and unit as every view gives it: the device's or stage's conversion
+/// when it applies (piezo % in V or µm, motion values in mm), else the table's fixed scale;
+/// rounded to 6 significant digits.
+pub fn phys_or_scaled<'s>(
+    f: &Field,
+    v: &Value<'_>,
+    scale: Option<&'s crate::units::Scale>,
+) -> Option<(f64, &'s str)> {
+    let (x, unit) = crate::json::apt_phys(f, v, scale)?;
+    Some((round_sig(x), unit))
+}
+
 /// A one-line summary of the key fields (`name=value unit`, comma separated), for timelines.
 pub fn summary(frame: &AptFrame<'_, '_>, max_fields: usize, out: &mut String) {
     summary_in(frame, max_fields, None, out)

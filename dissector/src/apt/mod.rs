@@ -6,8 +6,8 @@ mod frame;
 mod header;
 
 pub use decode::{
-    fmt_value, fmt_value_in, phys, read_prim, round_sig, summary, summary_in, text_of, AptFrame,
-    Value,
+    fmt_value, fmt_value_in, phys, phys_or_scaled, read_prim, round_sig, summary, summary_in,
+    text_of, AptFrame, Value,
 };
 pub use encode::{encode, encode_named, encode_named_report, EncodeError, FieldValue, Named};
 pub use frame::{AptFramer, GarbageKind, Item, MAX_GARBAGE_RUN};

@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# `aptscope decode` over many files on 1 and 2 threads: throughput and peak RSS, for NDJSON and
+# Parquet output. Usage: bench/batch.sh   (env: FILES=50 files of MB=4.2 MB each, ≥ 200 MB)
+#
+# The files are device→host streams of 27 common message forms with random field values
+# (dissector/examples/gen_d2h.rs, one seed per file): what a controller's status logs look
+# like, with a realistic number of message kinds per file (Parquet keeps one buffer per kind).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+FILES=${FILES:-50}
+MB=${MB:-4.2}
+cargo build -q --release --bin aptscope
+cargo build -q --release -p aptscope-dissector --example gen_d2h
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+mkdir "$tmp/in"
+for i in $(seq 1 "$FILES"); do
+  target/release/examples/gen_d2h "$MB" "$i" > "$tmp/in/$(printf 'cap%03d' "$i").bin" 2>/dev/null
+done
+total=$(du -cb "$tmp"/in/*.bin | tail -n1 | cut -f1)
+printf 'input: %d files, %.1f MB; %s, %d cores\n' "$FILES" "$(echo "$total / 1000000" | bc -l)" \
+  "$(lscpu | sed -n 's/^Model name: *//p' | head -n1)" "$(nproc)"
+run() { # label, jobs, command...
+  local label=$1 jobs=$2
+  shift 2
+  local start end rss
+  start=$(date +%s.%N)
+  rss=$( { /usr/bin/time -f %M "$@" > /dev/null; } 2>&1 | tail -n1 )
+  end=$(date +%s.%N)
+  printf '%-8s -j %s: %6.1f MB/s, peak RSS %6d KiB\n' "$label" "$jobs" \
+    "$(echo "$total / 1000000 / ($end - $start)" | bc -l)" "$rss"
+}
+for j in 1 2; do
+  run ndjson "$j" target/release/aptscope decode --json -j "$j" "$tmp"/in/*.bin
+  run parquet "$j" target/release/aptscope decode --to parquet --force -o "$tmp/out" -j "$j" "$tmp"/in/*.bin
+done
+printf 'dataset: %s in %d files\n' "$(du -sh "$tmp/out" | cut -f1)" "$(find "$tmp/out" -name '*.parquet' | wc -l)"

@@ -1,0 +1,91 @@
+//! One capture file into a [`CaptureWriter`]: the loop `aptscope decode --to parquet` and the
+//! Python package share.
+
+use crate::{CaptureWriter, Sink, Summary};
+use aptscope_capture::open::{open_with_progress, Format, OpenOptions, Progress};
+use aptscope_capture::Event;
+use aptscope_dissector::detect::{Detection, Proto};
+use aptscope_dissector::record::{Decoder, Record};
+use aptscope_dissector::units::UnitsOpts;
+use std::io;
+
+/// How a capture is decoded.
+#[derive(Debug, Clone, Default)]
+pub struct DecodeOpts {
+    /// How to open it (format, USB device).
+    pub open: OpenOptions,
+    /// Protocol; `None`: detected.
+    pub proto: Option<Proto>,
+    /// Stage or scale of APT motion values.
+    pub units: UnitsOpts,
+    /// One reply timeout for every request.
+    pub timeout_ns: Option<u64>,
+    /// Skip a file that is [`not_a_capture`] (an error instead of rows).
+    pub judge: bool,
+}
+
+/// A raw byte file (no known container or log format) whose first 4 KiB frame as neither
+/// protocol: not a capture (an image, a program), skipped rather than decoded as garbage.
+pub fn not_a_capture(format: Format, d: &Detection) -> bool {
+    matches!(format, Format::Raw) && d.proto.is_none() && d.apt.max(d.elliptec) < 0.1
+}
+
+/// The error that says so.
+pub fn not_a_capture_error(d: &Detection) -> io::Error {
+    io::Error::new(
+        io::ErrorKind::InvalidData,
+        format!(
+            "not a capture: no known file format, and {:.0}% of the first 4 KiB frame as APT, \
+             {:.0}% as Elliptec (--proto or --format decode it anyway)",
+            d.apt * 100.0,
+            d.elliptec * 100.0
+        ),
+    )
+}
+
+/// Decode capture `path` (`-`: standard input) into `w`. `tick` is called now and then with
+/// the reader's progress. A file that is not a capture (with `judge`) fails before any row
+/// group is written.
+pub fn decode_file<S: Sink>(
+    path: &str,
+    o: &DecodeOpts,
+    mut w: CaptureWriter<S>,
+    tick: &mut dyn FnMut(&Progress),
+) -> io::Result<(S, Summary)> {
+    let (mut reader, format, progress) = open_with_progress(path, o.open)?;
+    let mut dec = Decoder::new(o.proto);
+    dec.set_units(o.units.clone());
+    if let Some(t) = o.timeout_ns {
+        dec.set_reply_timeout(t);
+    }
+    let judge = o.judge;
+    let mut emit = |rec: &Record<'_>| -> io::Result<()> {
+        if let Record::Detect { detection, .. } = rec {
+            if judge && not_a_capture(format, detection) {
+                return Err(not_a_capture_error(detection));
+            }
+        }
+        w.record(rec)
+    };
+    let mut k = 0u32;
+    while let Some(ev) = reader.next_event() {
+        match ev {
+            Event::Chunk(c) => dec.push(c.ctx(), c.bytes, &mut emit)?,
+            Event::Diag(d) => {
+                // A USB capture without the device asked for has nothing to decode.
+                if d.kind == aptscope_capture::usb::NOT_FOUND {
+                    return Err(io::Error::new(io::ErrorKind::InvalidInput, d.msg));
+                }
+                dec.file_diag(d.offset, d.kind, &d.msg, &mut emit)?
+            }
+            Event::Stream(s) => dec.stream_info(s.id, &s.name, s.settings.as_deref(), &mut emit)?,
+        }
+        k = k.wrapping_add(1);
+        if k.is_multiple_of(256) {
+            tick(&progress);
+        }
+    }
+    dec.finish(&mut emit)?;
+    tick(&progress);
+    w.finish()
+}

@@ -1,0 +1,244 @@
+//! The dataset written from real decoder records, read back with the Parquet reader.
+
+use aptscope_dissector::detect::Proto;
+use aptscope_dissector::record::{Ctx, Decoder};
+use aptscope_dissector::synth;
+use aptscope_dissector::table::Dir;
+use aptscope_dissector::Table;
+use aptscope_parquet::{prepare_dir, CaptureWriter, DirSink, MemSink, Options};
+use arrow_array::cast::AsArray;
+use arrow_array::types::{Int32Type, UInt64Type};
+use arrow_array::{Array, RecordBatch};
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use std::io;
+
+fn read(bytes: Vec<u8>) -> Vec<RecordBatch> {
+    let r = ParquetRecordBatchReaderBuilder::try_new(bytes::Bytes::from(bytes))
+        .expect("parquet")
+        .build()
+        .expect("reader");
+    r.map(|b| b.expect("batch")).collect()
+}
+
+fn decode_mem(
+    chunks: &[(Ctx, Vec<u8>)],
+    proto: Option<Proto>,
+    opts: Options,
+) -> Vec<(String, Vec<u8>)> {
+    let mut w = CaptureWriter::new(MemSink::new(opts), "cap.bin", opts);
+    let mut d = Decoder::new(proto);
+    for (c, b) in chunks {
+        d.push(*c, b, &mut |r| w.record(r)).expect("push");
+    }
+    d.finish(&mut |r| w.record(r)).expect("finish");
+    let (sink, sum) = w.finish().expect("finish writer");
+    assert!(sum.records > 0);
+    sink.finish().expect("bytes")
+}
+
+fn hex(s: &str) -> Vec<u8> {
+    s.split_whitespace()
+        .map(|x| u8::from_str_radix(x, 16).expect("hex"))
+        .collect()
+}
+
+/// A move request, its completion (a status with position 0x1000) and 3 garbage bytes.
+fn apt_session() -> Vec<(Ctx, Vec<u8>)> {
+    let host = Ctx {
+        stream: 0,
+        dir: Some(Dir::HostToDevice),
+        ts_ns: Some(1_000_000_000),
+    };
+    let dev = Ctx {
+        stream: 0,
+        dir: Some(Dir::DeviceToHost),
+        ts_ns: Some(1_250_000_000),
+    };
+    // MOT_MOVE_ABSOLUTE (0x0453) chan 1, position 4096; MOT_MOVE_COMPLETED (0x0464) with a
+    // 14-byte status: chan 1, position 4096, encoder 0, status bits 0x00000400.
+    vec![
+        (host, hex("53 04 06 00 d0 01 01 00 00 10 00 00")),
+        (
+            dev,
+            hex("64 04 0e 00 81 50 01 00 00 10 00 00 00 00 00 00 00 04 00 00 aa bb cc"),
+        ),
+    ]
+}
+
+#[test]
+fn records_and_kind_tables_are_typed() {
+    let out = decode_mem(&apt_session(), Some(Proto::Apt), Options::default());
+    let names: Vec<&str> = out.iter().map(|(n, _)| n.as_str()).collect();
+    assert!(names.contains(&"records"), "{names:?}");
+    assert!(names.contains(&"MOT_MOVE_ABSOLUTE"), "{names:?}");
+    assert!(names.contains(&"MOT_MOVE_COMPLETED"), "{names:?}");
+    let rec = &read(
+        out.iter()
+            .find(|(n, _)| n == "records")
+            .expect("records")
+            .1
+            .clone(),
+    )[0];
+    let ty = rec.column_by_name("type").expect("type").as_string::<i32>();
+    let types: Vec<&str> = (0..rec.num_rows()).map(|i| ty.value(i)).collect();
+    assert_eq!(types, ["frame", "frame", "garbage"], "{types:?}");
+    let file = rec.column_by_name("file").expect("file").as_string::<i32>();
+    assert_eq!(file.value(0), "cap.bin");
+    let pair = rec
+        .column_by_name("pair")
+        .expect("pair")
+        .as_primitive::<UInt64Type>();
+    assert!(pair.is_null(0));
+    assert_eq!(pair.value(1), 1, "the completion pairs with the move");
+    let lat = rec
+        .column_by_name("latency_ms")
+        .expect("latency")
+        .as_primitive::<arrow_array::types::Float64Type>();
+    assert!((lat.value(1) - 250.0).abs() < 1e-9);
+    let diags = rec
+        .column_by_name("diagnostics")
+        .expect("diagnostics")
+        .as_list::<i32>();
+    assert_eq!(diags.value(0).len(), 0);
+    let g = diags.value(2);
+    let g = g.as_struct();
+    assert_eq!(g.column(0).as_string::<i32>().value(0), "trailing_bytes");
+    assert_eq!(
+        g.column(1).as_primitive::<UInt64Type>().value(0),
+        20,
+        "offset in its lane"
+    );
+
+    let mv = &read(
+        out.iter()
+            .find(|(n, _)| n == "MOT_MOVE_ABSOLUTE")
+            .expect("kind")
+            .1
+            .clone(),
+    )[0];
+    let pos = mv
+        .column_by_name("absolute_position")
+        .expect("absolute_position")
+        .as_primitive::<Int32Type>();
+    assert_eq!(pos.value(0), 4096);
+    let schema = mv.schema();
+    let meta = schema
+        .field_with_name("absolute_position")
+        .expect("field")
+        .metadata();
+    assert_eq!(meta.get("quantity").map(String::as_str), Some("pos"));
+    assert_eq!(meta.get("unit").map(String::as_str), Some("counts"));
+    let n = mv
+        .column_by_name("n")
+        .expect("n")
+        .as_primitive::<UInt64Type>();
+    assert_eq!(n.value(0), 1, "joins records on (file, n)");
+}
+
+#[test]
+fn elliptec_kind_tables_carry_status_names_and_codes() {
+    let host = Ctx {
+        stream: 0,
+        dir: None,
+        ts_ns: None,
+    };
+    let out = decode_mem(
+        &[(host, b"0gs\r\n0GS09\r\n0gp\r\n0PO00001000\r\n".to_vec())],
+        Some(Proto::Elliptec),
+        Options::default(),
+    );
+    let gs = &read(
+        out.iter()
+            .find(|(n, _)| n == "ELL_GET_STATUS")
+            .expect("ELL_GET_STATUS")
+            .1
+            .clone(),
+    )[0];
+    assert_eq!(
+        gs.column_by_name("status")
+            .expect("status")
+            .as_string::<i32>()
+            .value(0),
+        "BUSY"
+    );
+    assert_eq!(
+        gs.column_by_name("status_code")
+            .expect("code")
+            .as_primitive::<arrow_array::types::UInt8Type>()
+            .value(0),
+        9
+    );
+    let po = &read(
+        out.iter()
+            .find(|(n, _)| n == "ELL_POSITION")
+            .expect("ELL_POSITION")
+            .1
+            .clone(),
+    )[0];
+    assert_eq!(
+        po.column_by_name("position")
+            .expect("p")
+            .as_primitive::<arrow_array::types::Int64Type>()
+            .value(0),
+        4096
+    );
+}
+
+/// Many kinds and small row groups: every row still lands, once, in row groups no bigger than
+/// asked; and a directory dataset has one finished file per row group.
+#[test]
+fn bounded_buffers_keep_every_row() -> io::Result<()> {
+    let bytes = synth::stream(Table::global(), 7, 600, true);
+    let opts = Options {
+        rows_per_group: 100,
+        max_open_kinds: 4,
+    };
+    let tmp = std::env::temp_dir().join(format!("aptscope-pq-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&tmp);
+    prepare_dir(&tmp, false)?;
+    assert!(
+        prepare_dir(&tmp, false).is_err(),
+        "an existing dataset needs force"
+    );
+    let mut w = CaptureWriter::new(DirSink::new(&tmp, 3, opts), "synth", opts);
+    let mut d = Decoder::new(Some(Proto::Apt));
+    for c in bytes.chunks(4096) {
+        d.push(Ctx::default(), c, &mut |r| w.record(r))?;
+    }
+    d.finish(&mut |r| w.record(r))?;
+    let (_, sum) = w.finish()?;
+    let (mut rows, mut frames_in_kinds, mut files) = (0usize, 0usize, 0usize);
+    for e in std::fs::read_dir(&tmp)? {
+        let e = e?;
+        for p in std::fs::read_dir(e.path())? {
+            let p = p?.path();
+            let name = p
+                .file_name()
+                .and_then(|n| n.to_str())
+                .unwrap_or_default()
+                .to_string();
+            assert!(
+                name.starts_with("part-00003-") && name.ends_with(".parquet"),
+                "{name}"
+            );
+            files += 1;
+            let b = read(std::fs::read(&p)?);
+            let n: usize = b.iter().map(|x| x.num_rows()).sum();
+            assert!(n <= 100 && n > 0, "{name}: {n}");
+            if e.file_name() == "records" {
+                rows += n;
+            } else {
+                frames_in_kinds += n;
+            }
+        }
+    }
+    assert_eq!(rows as u64, sum.records);
+    assert_eq!(files as u64, sum.row_groups);
+    assert!(
+        frames_in_kinds as u64 <= sum.frames && frames_in_kinds > 400,
+        "{frames_in_kinds}"
+    );
+    prepare_dir(&tmp, true)?;
+    assert_eq!(std::fs::read_dir(&tmp)?.count(), 0, "force replaced it");
+    std::fs::remove_dir_all(&tmp)
+}

@@ -1,0 +1,103 @@
+"""The Python package against the command line: same records, same Parquet schema."""
+
+import json
+import subprocess
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+import aptscope
+
+
+def cli(bin_, *args):
+    r = subprocess.run([str(bin_), *args], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    return r.stdout
+
+
+def test_decode_yields_the_ndjson_records(aptscope_bin, samples):
+    path = samples / "kdc101-session.pcapng"
+    got = list(aptscope.decode(path))
+    want = [json.loads(l) for l in cli(aptscope_bin, "decode", "--json", str(path)).splitlines()]
+    assert got == want
+    names = [r.get("name") for r in got if r.get("type") == "frame"]
+    assert "MOT_MOVE_HOME" in names
+
+
+def test_decode_bytes_and_encode_round_trip():
+    frame = aptscope.encode("MOT_MOVE_ABSOLUTE", chan_ident="CH1", absolute_position=4096)
+    assert frame.hex() == "53040600d001" + "0100" + "00100000"
+    (rec,) = [r for r in aptscope.decode(frame, proto="apt") if r["type"] == "frame"]
+    assert rec["fields"] == {"chan_ident": "CH1", "absolute_position": 4096}
+    ell = aptscope.encode("ma", dst="2", position=4096)
+    assert ell == b"2ma00001000"
+    (r,) = [r for r in aptscope.decode(ell + b"\r\n", proto="elliptec") if r["type"] == "frame"]
+    assert r["name"] == "MOVE_ABSOLUTE" and r["fields"]["position"] == 4096
+
+
+def test_errors_carry_the_diagnostic(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nope.bin"):
+        list(aptscope.decode(tmp_path / "nope.bin"))
+    with pytest.raises(aptscope.AptscopeError, match="proto"):
+        list(aptscope.decode(b"", proto="canbus"))
+    with pytest.raises(aptscope.EncodeError, match="absolute_positon"):
+        aptscope.encode("MOT_MOVE_ABSOLUTE", absolute_positon=1)
+    with pytest.raises(aptscope.EncodeError, match="MOT_MOVE_ABSOLUTLY"):
+        aptscope.encode("MOT_MOVE_ABSOLUTLY")
+    assert issubclass(aptscope.AptscopeError, ValueError)
+    junk = tmp_path / "junk.bin"
+    junk.write_bytes(b"\x89PNG\r\n\x1a\n" + b"just an image, not a capture. " * 100)
+    out = tmp_path / "ds"
+    aptscope.prepare_dataset(out)
+    with pytest.raises(aptscope.AptscopeError, match="not a capture"):
+        aptscope.write_dataset(junk, out, 0)
+    with pytest.raises(aptscope.AptscopeError, match="--force"):
+        aptscope.prepare_dataset(out)
+
+
+def test_damaged_input_is_rows_with_diagnostics(samples):
+    recs = list(aptscope.decode(samples / "damaged.bin"))
+    assert any(r.get("diag") for r in recs)
+    t = aptscope.to_arrow(samples / "damaged.bin")["records"]
+    diags = t.column("diagnostics").to_pylist()
+    assert any(diags)
+    assert {"kind", "offset", "msg"} == set(next(d for d in diags if d)[0])
+
+
+def test_to_arrow_has_the_parquet_schema(aptscope_bin, samples, tmp_path):
+    path = str(samples / "kdc101-session.pcapng")
+    out = tmp_path / "ds"
+    cli(aptscope_bin, "decode", "--to", "parquet", "-o", str(out), path)
+    tables = aptscope.to_arrow(path)
+    on_disk = sorted(p.name for p in out.iterdir())
+    assert sorted(tables) == on_disk
+    for name, t in tables.items():
+        disk = pq.read_table(out / name)
+        assert t.schema.equals(disk.schema, check_metadata=True), name
+        assert t.equals(disk), name
+    st = tables["MOT_GET_DCSTATUSUPDATE"]
+    assert st.schema.field("position").type == pa.int32()
+    assert st.schema.field("position").metadata[b"quantity"] == b"pos"
+    flags = [f for f in st.schema if f.metadata and b"flags" in f.metadata]
+    assert flags and pa.types.is_list(flags[0].type)
+    assert st.schema.field(flags[0].name + "_bits").type == pa.uint32()
+    chan = st.column("chan_ident").to_pylist()
+    assert set(chan) == {"CH1"} and set(st.column("chan_ident_code").to_pylist()) == {1}
+    # Joins the records table on (file, n).
+    rec = tables["records"].to_pandas()
+    joined = st.to_pandas().merge(rec, on=["file", "n"])
+    assert (joined["name"] == "MOT_GET_DCSTATUSUPDATE").all() and len(joined) == st.num_rows
+
+
+def test_write_dataset_equals_the_command(aptscope_bin, samples, tmp_path):
+    files = [str(samples / "kdc101-session.bin"), str(samples / "elliptec-bus.txt")]
+    a, b = tmp_path / "cli", tmp_path / "py"
+    cli(aptscope_bin, "decode", "--to", "parquet", "-o", str(a), *files)
+    aptscope.prepare_dataset(b)
+    counts = [aptscope.write_dataset(f, b, i) for i, f in enumerate(files)]
+    assert all(c["records"] > 0 for c in counts)
+    parts = lambda d: sorted(str(p.relative_to(d)) for p in d.rglob("*.parquet"))
+    assert parts(a) == parts(b)
+    for p in parts(a):
+        assert pq.read_table(a / p).equals(pq.read_table(b / p)), p

@@ -1,0 +1,369 @@
+//! `decode` over many files: files decoded in parallel, text and NDJSON written per file in
+//! input order, or a Parquet dataset; a progress bar on a terminal.
+//!
+//! Text and NDJSON: each worker decodes whole files into a bounded channel of its own (a few
+//! 64 KiB blocks); the main thread copies file 0's channel to standard output, then file 1's,
+//! and so on. A worker ahead of the writer blocks on its full channel, so memory stays bounded
+//! whatever the files' sizes. Parquet: each worker writes its file's row groups as part files
+//! of their own (named by the file's index), so nothing is ordered or merged.
+
+use crate::{compile_filter, fatal, proto_of, ProtoArg};
+use aptscope_capture::open::{open_with_progress, OpenOptions, Progress};
+use aptscope_capture::Event;
+use aptscope_dissector::json;
+use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
+use aptscope_dissector::units::UnitsOpts;
+use aptscope_parquet::{decode_file, not_a_capture, not_a_capture_error, CaptureWriter, DirSink};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::cell::Cell;
+use std::io::{self, IsTerminal, Write};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
+use std::sync::Mutex;
+
+/// What `decode` writes.
+pub enum Output {
+    /// Text lines, or NDJSON.
+    Lines {
+        /// NDJSON rather than text.
+        json: bool,
+    },
+    /// A Parquet dataset in this directory (already prepared).
+    Parquet(PathBuf),
+}
+
+/// One `decode` run.
+pub struct Job<'a> {
+    pub files: &'a [String],
+    pub open: OpenOptions,
+    pub proto: ProtoArg,
+    pub filter: Option<&'a str>,
+    pub timeout: Option<u64>,
+    pub units: UnitsOpts,
+    pub out: Output,
+    /// Files decoded at once.
+    pub jobs: usize,
+}
+
+/// Progress shown on a terminal: bytes and files done, rate, ETA.
+struct Bar {
+    bar: Option<ProgressBar>,
+    files: usize,
+    done: AtomicUsize,
+}
+
+impl Bar {
+    fn new(job: &Job<'_>) -> Bar {
+        let stdout_free = matches!(job.out, Output::Parquet(_)) || !io::stdout().is_terminal();
+        let on = io::stderr().is_terminal() && stdout_free && job.files.iter().all(|f| f != "-");
+        let bar = on.then(|| {
+            let total: u64 = job
+                .files
+                .iter()
+                .filter_map(|f| std::fs::metadata(f).ok())
+                .map(|m| m.len())
+                .sum();
+            let b = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
+            if let Ok(s) = ProgressStyle::with_template(
+                "{bar:30} {bytes}/{total_bytes} {binary_bytes_per_sec} ETA {eta} {msg}",
+            ) {
+                b.set_style(s);
+            }
+            b.set_message(format!("0/{} files", job.files.len()));
+            b
+        });
+        Bar {
+            bar,
+            files: job.files.len(),
+            done: AtomicUsize::new(0),
+        }
+    }
+
+    /// Count what a file's reader has read since `seen`.
+    fn tick(&self, p: &Progress, seen: &mut u64) {
+        if let Some(b) = &self.bar {
+            let now = p.read.load(Ordering::Relaxed);
+            b.inc(now.saturating_sub(*seen));
+            *seen = now;
+        }
+    }
+
+    fn file_done(&self) {
+        let d = self.done.fetch_add(1, Ordering::Relaxed) + 1;
+        if let Some(b) = &self.bar {
+            b.set_message(format!("{d}/{} files", self.files));
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
+
+    /// Print above the bar.
+    fn note(&self, msg: &str) {
+        match &self.bar {
+            Some(b) => b.suspend(|| eprintln!("{msg}")),
+            None => eprintln!("{msg}"),
+        }
+    }
+}
+
+/// Output of one file's worker: blocks of bytes, then its result.
+enum Msg {
+    Data(Vec<u8>),
+    Done(io::Result<Stats>),
+}
+
+/// What one file gave (Parquet: for the summary line).
+#[derive(Default)]
+struct Stats {
+    records: u64,
+    row_groups: u64,
+}
+
+/// A writer into a file's channel, in 64 KiB blocks. Held back until released: what a file
+/// that turns out not to be a capture wrote is dropped.
+struct ChanWriter<'a> {
+    tx: &'a SyncSender<Msg>,
+    buf: Vec<u8>,
+    held: &'a Cell<bool>,
+}
+
+const BLOCK: usize = 1 << 16;
+
+impl ChanWriter<'_> {
+    fn send(&mut self) -> io::Result<()> {
+        if self.held.get() || self.buf.is_empty() {
+            return Ok(());
+        }
+        let b = std::mem::replace(&mut self.buf, Vec::with_capacity(BLOCK));
+        self.tx
+            .send(Msg::Data(b))
+            .map_err(|_| io::Error::from(io::ErrorKind::BrokenPipe))
+    }
+}
+
+impl Write for ChanWriter<'_> {
+    fn write(&mut self, b: &[u8]) -> io::Result<usize> {
+        self.buf.extend_from_slice(b);
+        if self.buf.len() >= BLOCK {
+            self.send()?;
+        }
+        Ok(b.len())
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        self.send()
+    }
+}
+
+/// Run the job. Several inputs: a file that cannot be read, or is not a capture, is reported
+/// by name and skipped, and the run fails at its end; one input: its error is the run's.
+pub fn run(job: Job<'_>) -> io::Result<()> {
+    if matches!(job.out, Output::Parquet(_)) && job.filter.is_some() {
+        return Err(crate::bad(
+            "--filter applies to text and NDJSON output; filter the Parquet dataset with a \
+             query (DuckDB, pandas) instead"
+                .into(),
+        ));
+    }
+    // A bad filter is one error, not one per file.
+    job.filter.map(compile_filter).transpose()?;
+    let n = job.files.len();
+    let bar = Bar::new(&job);
+    let stop = AtomicBool::new(false);
+    let next = AtomicUsize::new(0);
+    let mut txs = Vec::with_capacity(n);
+    let mut rxs: Vec<Receiver<Msg>> = Vec::with_capacity(n);
+    for _ in 0..n {
+        let (tx, rx) = sync_channel(4);
+        txs.push(Mutex::new(Some(tx)));
+        rxs.push(rx);
+    }
+    let jobs = job.jobs.clamp(1, n.max(1));
+    let job = &job;
+    let (bar, stop, next, txs) = (&bar, &stop, &next, &txs);
+    let result = std::thread::scope(|sc| {
+        for _ in 0..jobs {
+            sc.spawn(move || loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                if i >= n || stop.load(Ordering::Relaxed) {
+                    break;
+                }
+                let Some(tx) = txs[i].lock().ok().and_then(|mut t| t.take()) else {
+                    break;
+                };
+                let r = one(job, i, &tx, bar);
+                bar.file_done();
+                // The receiver is gone only when the writer stopped: nothing left to do.
+                if tx.send(Msg::Done(r)).is_err() {
+                    stop.store(true, Ordering::Relaxed);
+                }
+            });
+        }
+        collect(job, rxs, bar, stop)
+    });
+    bar.finish();
+    result
+}
+
+/// The writer side: every file's output in input order; errors reported by name.
+fn collect(job: &Job<'_>, rxs: Vec<Receiver<Msg>>, bar: &Bar, stop: &AtomicBool) -> io::Result<()> {
+    let n = job.files.len();
+    let mut out = io::stdout().lock();
+    let (mut failed, mut records, mut groups) = (0usize, 0u64, 0u64);
+    for (i, rx) in rxs.into_iter().enumerate() {
+        let file = &job.files[i];
+        loop {
+            match rx.recv() {
+                Ok(Msg::Data(b)) => {
+                    if let Err(e) = out.write_all(&b) {
+                        stop.store(true, Ordering::Relaxed);
+                        return Err(e);
+                    }
+                }
+                Ok(Msg::Done(Ok(s))) => {
+                    records += s.records;
+                    groups += s.row_groups;
+                    break;
+                }
+                Ok(Msg::Done(Err(e))) => {
+                    if n == 1 {
+                        return Err(e);
+                    }
+                    failed += 1;
+                    let _ = out.flush();
+                    // The name is in the message already when the file could not be opened.
+                    if e.to_string().contains(file.as_str()) {
+                        bar.note(&format!("aptscope: skipped: {e}"));
+                    } else {
+                        bar.note(&format!("aptscope: skipped {file}: {e}"));
+                    }
+                    break;
+                }
+                Err(_) => {
+                    return Err(io::Error::other(format!("{file}: its decoder stopped")));
+                }
+            }
+        }
+    }
+    out.flush()?;
+    if let Output::Parquet(root) = &job.out {
+        bar.note(&format!(
+            "{}: {} of {n} files, {records} records, {groups} row groups",
+            root.display(),
+            n - failed
+        ));
+    }
+    if failed > 0 {
+        return Err(io::Error::other(format!(
+            "{failed} of {n} inputs skipped (see above)"
+        )));
+    }
+    Ok(())
+}
+
+/// Decode file `i` of the job into its channel (text, NDJSON) or dataset parts (Parquet).
+fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<Stats> {
+    let file = job.files[i].as_str();
+    let mut seen = 0u64;
+    // One input decodes whatever it holds (as before); among several, junk is skipped.
+    let judge = job.files.len() > 1 || matches!(job.out, Output::Parquet(_));
+    match &job.out {
+        Output::Parquet(root) => {
+            let opts = aptscope_parquet::Options::default();
+            let w = CaptureWriter::new(DirSink::new(root, i, opts), file, opts);
+            let o = aptscope_parquet::DecodeOpts {
+                open: job.open,
+                proto: proto_of(job.proto),
+                units: job.units.clone(),
+                timeout_ns: job.timeout,
+                judge,
+            };
+            let (_, s) = decode_file(file, &o, w, &mut |p| bar.tick(p, &mut seen))?;
+            Ok(Stats {
+                records: s.records,
+                row_groups: s.row_groups,
+            })
+        }
+        Output::Lines { json: as_json } => {
+            let (mut reader, format, progress) = open_with_progress(file, job.open)?;
+            // Held until the detector has judged the first 4 KiB (a given protocol: nothing to
+            // judge).
+            let held = Cell::new(judge && job.proto == ProtoArg::Auto);
+            let mut out = ChanWriter {
+                tx,
+                buf: Vec::with_capacity(BLOCK),
+                held: &held,
+            };
+            let tag = (job.files.len() > 1).then_some((i, file));
+            if let Some((i, name)) = tag {
+                if *as_json {
+                    let mut l = String::from("{\"file\":");
+                    json::string(&mut l, name);
+                    writeln!(out, "{l},\"type\":\"file\",\"index\":{i}}}")?;
+                } else {
+                    writeln!(out, "# file {}: {name}", i + 1)?;
+                }
+            }
+            let fmt = if *as_json {
+                PFormat::Json
+            } else {
+                PFormat::Text
+            };
+            let mut p = Pipeline::new(proto_of(job.proto), fmt);
+            if let Some((_, name)) = tag {
+                p.set_file(name);
+            }
+            p.set_units(job.units.clone());
+            if let Some(t) = job.timeout {
+                p.set_reply_timeout(t);
+            }
+            if let Some(f) = job.filter {
+                let f = compile_filter(f)?;
+                p.set_filter(f);
+            }
+            let mut k = 0u32;
+            let mut emit = |line: &str| -> io::Result<()> {
+                out.write_all(line.as_bytes())?;
+                out.write_all(b"\n")
+            };
+            while let Some(ev) = reader.next_event() {
+                match ev {
+                    Event::Chunk(c) => p.push_chunk(c.ctx(), c.bytes, &mut emit)?,
+                    Event::Diag(d) => {
+                        fatal(&d)?;
+                        p.file_diag(d.offset, d.kind, &d.msg, &mut emit)?
+                    }
+                    Event::Stream(s) => {
+                        p.stream_info(s.id, &s.name, s.settings.as_deref(), &mut emit)?
+                    }
+                }
+                if held.get() {
+                    if let Some(d) = p.detection() {
+                        if not_a_capture(format, d) {
+                            return Err(not_a_capture_error(d));
+                        }
+                        held.set(false);
+                    }
+                }
+                k = k.wrapping_add(1);
+                if k.is_multiple_of(256) {
+                    bar.tick(&progress, &mut seen);
+                }
+            }
+            p.finish(&mut emit)?;
+            if let Some(d) = p.detection().filter(|_| held.get()) {
+                if not_a_capture(format, d) {
+                    return Err(not_a_capture_error(d));
+                }
+            }
+            held.set(false);
+            bar.tick(&progress, &mut seen);
+            out.flush()?;
+            Ok(Stats::default())
+        }
+    }
+}

@@ -1,0 +1,193 @@
+//! `decode` over many files: parallel output in input order, the Parquet dataset, bad inputs.
+
+mod common;
+
+use arrow_array::cast::AsArray;
+use arrow_array::Array;
+use common::aptscope;
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+const SAMPLES: [&str; 4] = [
+    "samples/kdc101-session.pcapng",
+    "samples/damaged.bin",
+    "samples/elliptec-bus.txt",
+    "samples/kdc101-session.mcap",
+];
+
+fn tmp(name: &str) -> PathBuf {
+    let p = std::env::temp_dir().join(format!("aptscope-batch-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&p);
+    let _ = std::fs::remove_file(&p);
+    p
+}
+
+/// Rows of every part file of one table, in file-name order.
+fn rows(dir: &Path) -> Vec<arrow_array::RecordBatch> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .expect("table dir")
+        .map(|e| e.expect("entry").path())
+        .collect();
+    files.sort();
+    files
+        .iter()
+        .flat_map(|f| {
+            let file = std::fs::File::open(f).expect("part");
+            ParquetRecordBatchReaderBuilder::try_new(file)
+                .expect("parquet")
+                .build()
+                .expect("reader")
+                .map(|b| b.expect("batch"))
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+#[test]
+fn parallel_output_is_the_sequential_output() {
+    for fmt in ["--json", "--to=text"] {
+        let mut a = vec!["decode", fmt, "-j", "1"];
+        a.extend(SAMPLES);
+        let (one, err, ok) = aptscope(&a, None);
+        assert!(ok, "{err}");
+        a[3] = "3";
+        let (three, err, ok) = aptscope(&a, None);
+        assert!(ok, "{err}");
+        assert_eq!(one, three, "{fmt}");
+        assert!(one.lines().count() > 50);
+    }
+}
+
+#[test]
+fn parquet_dataset_has_every_record_with_its_file() {
+    let out = tmp("ds");
+    let o = out.to_str().expect("utf-8 path");
+    let mut a = vec!["decode", "--to", "parquet", "-o", o];
+    a.extend(SAMPLES);
+    let (_, err, ok) = aptscope(&a, None);
+    assert!(ok, "{err}");
+    assert!(err.contains("4 of 4 files"), "{err}");
+    // Frames and garbage runs: as many rows as NDJSON has numbered records, per file.
+    let mut j = vec!["decode", "--json"];
+    j.extend(SAMPLES);
+    let (nd, _, ok) = aptscope(&j, None);
+    assert!(ok);
+    let numbered: Vec<(String, u64)> = nd
+        .lines()
+        .map(|l| serde_json::from_str::<Value>(l).expect("JSON"))
+        .filter(|v| v["n"].is_u64())
+        .map(|v| {
+            (
+                v["file"].as_str().unwrap_or_default().to_string(),
+                v["n"].as_u64().unwrap_or(0),
+            )
+        })
+        .collect();
+    let mut got = vec![];
+    for b in rows(&out.join("records")) {
+        let file = b
+            .column_by_name("file")
+            .expect("file")
+            .as_string::<i32>()
+            .clone();
+        let n = b
+            .column_by_name("n")
+            .expect("n")
+            .as_primitive::<arrow_array::types::UInt64Type>()
+            .clone();
+        for i in 0..b.num_rows() {
+            if !n.is_null(i) {
+                got.push((file.value(i).to_string(), n.value(i)));
+            }
+        }
+    }
+    assert_eq!(got, numbered);
+    // A typed kind table: positions as integers, joinable on (file, n).
+    let st = rows(&out.join("MOT_GET_DCSTATUSUPDATE"));
+    assert!(!st.is_empty());
+    let pos = st[0].column_by_name("position").expect("position");
+    assert_eq!(pos.data_type(), &arrow_schema::DataType::Int32);
+    // The damaged file's problems are in the diagnostics column.
+    let mut damaged_diags = 0;
+    for b in rows(&out.join("records")) {
+        let file = b
+            .column_by_name("file")
+            .expect("file")
+            .as_string::<i32>()
+            .clone();
+        let d = b
+            .column_by_name("diagnostics")
+            .expect("diagnostics")
+            .as_list::<i32>()
+            .clone();
+        for i in 0..b.num_rows() {
+            if file.value(i) == "samples/damaged.bin" {
+                damaged_diags += d.value(i).len();
+            }
+        }
+    }
+    assert!(damaged_diags > 0);
+    // An existing dataset is kept unless --force.
+    let (_, err, ok) = aptscope(&a, None);
+    assert!(!ok && err.contains("--force"), "{err}");
+    a.insert(1, "--force");
+    let (_, err, ok) = aptscope(&a, None);
+    assert!(ok, "{err}");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn bad_inputs_are_named_and_skipped() {
+    let junk = tmp("junk.bin");
+    // Bytes that frame as neither protocol (a PNG header and text).
+    let mut b = b"\x89PNG\r\n\x1a\n".to_vec();
+    b.extend(b"IHDR not a capture at all, just an image header and some prose. ".repeat(40));
+    std::fs::write(&junk, &b).expect("write");
+    let j = junk.to_str().expect("utf-8");
+    let out = tmp("bad-ds");
+    let o = out.to_str().expect("utf-8");
+    let (_, err, ok) = aptscope(
+        &[
+            "decode",
+            "--to",
+            "parquet",
+            "-o",
+            o,
+            "samples/kdc101-session.bin",
+            j,
+            "samples/nope.bin",
+        ],
+        None,
+    );
+    assert!(!ok, "skipped inputs fail the run at its end");
+    assert!(
+        err.contains(&format!("skipped {j}: not a capture")),
+        "{err}"
+    );
+    assert!(err.contains("samples/nope.bin"), "{err}");
+    assert!(err.contains("1 of 3 files"), "{err}");
+    let good: usize = rows(&out.join("records"))
+        .iter()
+        .map(|b| b.num_rows())
+        .sum();
+    assert!(good > 0, "the good file is in the dataset");
+    // Text output: the good file's lines, then the run fails.
+    let (txt, err, ok) = aptscope(&["decode", "samples/kdc101-session.bin", j], None);
+    assert!(!ok && err.contains("not a capture"), "{err}");
+    assert!(
+        txt.contains("MOT_MOVE_HOME") && !txt.contains("# file 2"),
+        "{txt}"
+    );
+    // Alone, a file is decoded whatever it holds (as before).
+    let (_, _, ok) = aptscope(&["decode", j], None);
+    assert!(ok);
+    // No directory: said so.
+    let (_, err, ok) = aptscope(
+        &["decode", "--to", "parquet", "samples/kdc101-session.bin"],
+        None,
+    );
+    assert!(!ok && err.contains("-o DIR"), "{err}");
+    let _ = std::fs::remove_dir_all(&out);
+    let _ = std::fs::remove_file(&junk);
+}
