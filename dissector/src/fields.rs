@@ -764,8 +764,9 @@ fn apt_visit(a: &AptRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_
             return true;
         }
         Key::Phys => {
-            let conv =
-                |fd: &crate::table::Field, v: &AptValue<'_>| crate::json::apt_phys(fd, v, a.scale);
+            let conv = |fd: &crate::table::Field, v: &AptValue<'_>| {
+                crate::apt::phys_or_scaled(fd, v, a.scale)
+            };
             let any = fr.fields().any(|(fd, v)| conv(fd, &v).is_some());
             if !any {
                 return false;

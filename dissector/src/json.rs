@@ -260,7 +260,7 @@ pub fn apt_frame_in(
         string(out, fd.name);
         out.push(':');
         value(out, f.table(), fd, &v);
-        if let Some((x, unit)) = apt_phys(fd, &v, scale) {
+        if let Some((x, unit)) = crate::apt::phys_or_scaled(fd, &v, scale) {
             if !phys.is_empty() {
                 phys.push(',');
             }
@@ -332,19 +332,6 @@ pub fn apt_diags<'x>(
     p: &'x crate::pair::PairInfo,
 ) -> impl Iterator<Item = Diag> + 'x {
     f.diags().chain(p.diags(f.offset))
-}
-
-/// A field's physical value and unit (`phys`): the device's or stage's conversion when it
-/// applies (piezo % in V or µm, motion values in mm), else the table's fixed scale.
-pub fn apt_phys<'s>(
-    fd: &Field,
-    v: &Value<'_>,
-    scale: Option<&'s crate::units::Scale>,
-) -> Option<(f64, &'s str)> {
-    crate::apt::phys(fd, v, scale).or_else(|| {
-        let (s, x) = fd.scale.zip(v.as_f64())?;
-        Some((x * s, fd.unit.unwrap_or("")))
-    })
 }
 
 /// Append the JSON object of a units notice: what converts a device's motion values from now

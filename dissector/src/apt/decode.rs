@@ -517,7 +517,10 @@ pub fn phys_or_scaled<'s>(
     v: &Value<'_>,
     scale: Option<&'s crate::units::Scale>,
 ) -> Option<(f64, &'s str)> {
-    let (x, unit) = crate::json::apt_phys(f, v, scale)?;
+    let (x, unit) = phys(f, v, scale).or_else(|| {
+        let (s, x) = f.scale.zip(v.as_f64())?;
+        Some((x * s, f.unit.unwrap_or("")))
+    })?;
     Some((round_sig(x), unit))
 }
 
