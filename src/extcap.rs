@@ -347,8 +347,12 @@ fn capture(iface: &str, a: &ExtcapArgs) -> io::Result<()> {
     let stats = match stats {
         Ok(s) => s,
         Err(e) => {
+            // Said before the FIFO is released: dumpcap shows what the extcap wrote to
+            // standard error by the time the FIFO ends.
+            aptscope_capture::note!("aptscope: {e}");
+            let _ = io::stderr().flush();
             release_reader(&fifo);
-            return Err(e);
+            std::process::exit(1);
         }
     };
     if let Some(d) = stats.disconnects.last().filter(|_| !a.reconnect) {
