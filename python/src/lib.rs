@@ -90,7 +90,14 @@ impl Lines {
     fn new(source_obj: &Bound<'_, PyAny>, proto: &str) -> PyResult<Self> {
         let proto = proto_of(proto)?;
         let (reader, bytes) = match source(source_obj)? {
-            Source::Path(p) => (Some(open(&p, OpenOptions::default()).map_err(err)?.0), None),
+            Source::Path(p) => (
+                Some(
+                    open(&p, OpenOptions::default())
+                        .map_err(|e| err(e.into()))?
+                        .0,
+                ),
+                None,
+            ),
             Source::Bytes(b) => (None, Some(b)),
         };
         Ok(Lines {
