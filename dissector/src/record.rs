@@ -587,9 +587,18 @@ impl Decoder {
         let t = Table::global();
         let first = self.first_ts;
         let (ts, stream, cap_dir) = (self.lanes[i].ts, self.lanes[i].stream, self.lanes[i].dir);
-        let rel = |ts: Option<u64>| match (ts, first) {
-            (Some(a), Some(b)) => Some(a.saturating_sub(b) as f64 / 1e9),
-            _ => None,
+        // A record's context: frames get the time of the chunk that completed them, garbage
+        // the time of its first byte.
+        let meta = |n: u64, ts: Option<u64>, cap_offset: u64| Meta {
+            n,
+            stream,
+            cap_dir,
+            ts_ns: ts,
+            rel_s: match (ts, first) {
+                (Some(a), Some(b)) => Some(a.saturating_sub(b) as f64 / 1e9),
+                _ => None,
+            },
+            cap_offset,
         };
         if self.proto == Some(Proto::Apt) {
             let pi_idx = match self.pairers.iter().position(|(s, _)| *s == stream) {
@@ -634,14 +643,7 @@ impl Decoder {
                             // Before the frame: what its values are converted with.
                             emit(&Record::Units(&nt))?;
                         }
-                        let meta = Meta {
-                            n,
-                            stream,
-                            cap_dir,
-                            ts_ns: ts,
-                            rel_s: rel(ts),
-                            cap_offset,
-                        };
+                        let meta = meta(n, ts, cap_offset);
                         emit(&Record::Apt(AptRec {
                             meta,
                             frame: &f,
@@ -654,14 +656,7 @@ impl Decoder {
                         bytes,
                         kind,
                     } => {
-                        let meta = Meta {
-                            n,
-                            stream,
-                            cap_dir,
-                            ts_ns: first_ts,
-                            rel_s: rel(first_ts),
-                            cap_offset,
-                        };
+                        let meta = meta(n, first_ts, cap_offset);
                         emit(&Record::Garbage(GarbageRec {
                             meta,
                             proto: Proto::Apt,
@@ -712,14 +707,7 @@ impl Decoder {
                     }
                     self.expired
                         .extend(o.expired.iter().map(|e| ell_no_reply(stream, e)));
-                    let meta = Meta {
-                        n,
-                        stream,
-                        cap_dir,
-                        ts_ns: ts,
-                        rel_s: rel(ts),
-                        cap_offset,
-                    };
+                    let meta = meta(n, ts, cap_offset);
                     emit(&Record::Ell(EllRec {
                         meta,
                         frame: &f,
@@ -727,14 +715,7 @@ impl Decoder {
                     }))?;
                 }
                 EllItem::Garbage { offset, bytes, .. } => {
-                    let meta = Meta {
-                        n,
-                        stream,
-                        cap_dir,
-                        ts_ns: first_ts,
-                        rel_s: rel(first_ts),
-                        cap_offset,
-                    };
+                    let meta = meta(n, first_ts, cap_offset);
                     emit(&Record::Garbage(GarbageRec {
                         meta,
                         proto: Proto::Elliptec,

@@ -1366,6 +1366,23 @@ impl Recording {
     }
 }
 
+/// Run `f` with the stop signals handled (when `handle`), then print the statistics as `what`.
+fn run_signalled(
+    handle: bool,
+    what: &str,
+    f: impl FnOnce(Option<&Signals>) -> io::Result<TapStats>,
+) -> io::Result<TapStats> {
+    let signals = if handle {
+        Some(Signals::install()?)
+    } else {
+        None
+    };
+    let stats = f(signals.as_ref())?;
+    drop(signals);
+    crate::note!("{}", stats.summary(what));
+    Ok(stats)
+}
+
 /// Run a tap: create the pseudo-terminal (symlinked at `opts.link`), open the device, forward
 /// both ways until stopped (signal, [`StopHandle`], duration) or the device disappears (unless
 /// `reconnect`), write the capture, show the timeline; print and return the statistics.
@@ -1442,15 +1459,9 @@ impl Tap {
 
     /// Run until stopped, with the timeline going to `display` (standard output when `None`).
     fn run(self, display: Option<Box<dyn Write + Send>>) -> io::Result<TapStats> {
-        let signals = if self.opts.signals {
-            Some(Signals::install()?)
-        } else {
-            None
-        };
-        let stats = self.run_with(display, signals.as_ref())?;
-        drop(signals);
-        crate::note!("{}", stats.summary("aptscope tap"));
-        Ok(stats)
+        run_signalled(self.opts.signals, "aptscope tap", |sig| {
+            self.run_with(display, sig)
+        })
     }
 
     /// [`Tap::run`] with the signals (when handled) already installed by the caller; the
@@ -1664,15 +1675,9 @@ impl Sniff {
 
     /// Run until stopped, with the timeline going to `display` (standard output when `None`).
     fn run(self, display: Option<Box<dyn Write + Send>>) -> io::Result<TapStats> {
-        let signals = if self.opts.signals {
-            Some(Signals::install()?)
-        } else {
-            None
-        };
-        let stats = self.run_with(display, signals.as_ref())?;
-        drop(signals);
-        crate::note!("{}", stats.summary("aptscope sniff"));
-        Ok(stats)
+        run_signalled(self.opts.signals, "aptscope sniff", |sig| {
+            self.run_with(display, sig)
+        })
     }
 
     /// [`Sniff::run`] with the signals already installed by the caller; the statistics are
