@@ -9,7 +9,31 @@ use crate::apt::AptFrame;
 use crate::apt::Value;
 use crate::diag::{Diag, DiagKind};
 use crate::table::{Class, DeviceProfile, Dir, MsgDef, Table, DEFAULT_TIMEOUT_MS};
-use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
+use std::collections::{BTreeSet, HashMap, VecDeque};
+use std::hash::{BuildHasherDefault, Hasher};
+
+/// The hash of a number (message id, record number): one multiplication (the keys are distinct
+/// small numbers; SipHash was a noticeable share of pairing).
+#[derive(Default)]
+struct IdHash(u64);
+
+impl Hasher for IdHash {
+    fn finish(&self) -> u64 {
+        // Fibonacci hashing: the top bits (hashbrown's tag) vary too.
+        self.0.wrapping_mul(0x9E37_79B9_7F4A_7C15)
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.0 = (self.0 << 8) | u64::from(*b);
+        }
+    }
+    fn write_u16(&mut self, i: u16) {
+        self.0 = u64::from(i);
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = i;
+    }
+}
 
 /// A request still waiting.
 #[derive(Debug, Clone)]
@@ -18,10 +42,39 @@ struct Pending {
     offset: u64,
     ts: Option<u64>,
     name: &'static str,
-    expects: Vec<u16>,
+    id: u16,
+    expects: Expects,
     device: u8,
     chan: Option<i64>,
     timeout_ns: u64,
+}
+
+/// Most replies a request can have (the table's `reply=` lists name at most two, plus GET_x for
+/// REQ_x; a table test checks the bound).
+pub const MAX_REPLIES: usize = 4;
+
+/// The ids of the messages that answer a request, kept inline (no allocation per request).
+#[derive(Debug, Clone, Copy)]
+struct Expects {
+    ids: [u16; MAX_REPLIES],
+    len: u8,
+}
+
+impl Expects {
+    fn new(ids: &[u16]) -> Self {
+        let mut e = Expects {
+            ids: [0; MAX_REPLIES],
+            len: 0,
+        };
+        for (slot, id) in e.ids.iter_mut().zip(ids) {
+            *slot = *id;
+            e.len += 1;
+        }
+        e
+    }
+    fn as_slice(&self) -> &[u16] {
+        &self.ids[..usize::from(self.len)]
+    }
 }
 
 /// A request answered recently (to recognise duplicate replies).
@@ -88,6 +141,8 @@ impl PairInfo {
 /// oldest is given up and every later reply would pair one request too late.
 const MAX_PENDING: usize = 4096;
 const RECENT: usize = 64;
+// `recent_ids` counts in a u8.
+const _: () = assert!(RECENT < 256);
 
 /// How long a request waits for its reply: the table's `timeout=` (motion waits for the end of
 /// the move), else [`DEFAULT_TIMEOUT_MS`] (the spec gives none; requests are answered within
@@ -108,7 +163,8 @@ struct Waiting {
     n: u64,
     device: u8,
     chan: Option<i64>,
-    name: &'static str,
+    /// The request's message id.
+    id: u16,
 }
 
 /// How many of the oldest waiting requests a reply looks at: replies come in order, so its
@@ -119,18 +175,26 @@ const SCAN: usize = 256;
 /// APT pairing state for one stream.
 #[derive(Debug, Default)]
 pub struct AptPairer {
-    /// Waiting requests by record number (oldest first).
-    pending: BTreeMap<u64, Pending>,
+    /// Waiting requests by record number.
+    pending: HashMap<u64, Pending, BuildHasherDefault<IdHash>>,
+    /// Record numbers of the waiting requests, oldest first; those answered since are dropped
+    /// when they reach the front (or when they are most of the list).
+    order: VecDeque<u64>,
     /// The waiting requests that expect each message id, oldest first, with what a reply is
     /// matched on: a reply looks only at the requests it can answer, without map lookups.
-    by_reply: HashMap<u16, VecDeque<Waiting>>,
+    by_reply: HashMap<u16, VecDeque<Waiting>, BuildHasherDefault<IdHash>>,
     /// Waiting requests with a time, by the time they expire (the timeout fixed when they came).
     deadlines: BTreeSet<(u64, u64)>,
     recent: VecDeque<Answered>,
+    /// How many of `recent` each reply id has (by id): most replies nobody waited for have
+    /// none, and need no look at `recent`.
+    recent_ids: Vec<u8>,
     /// What each device address (by its HW_GET_INFO) implements.
     models: Vec<(u8, [u8; 8], Option<DeviceProfile>)>,
     /// Overrides the per-message default timeout.
     pub timeout_ns: Option<u64>,
+    /// Scratch list of the other requests a reply also answers (reused, not allocated per reply).
+    also: Vec<u64>,
 }
 
 impl AptPairer {
@@ -144,15 +208,20 @@ impl AptPairer {
             n: p.n,
             device: p.device,
             chan: p.chan,
-            name: p.name,
+            id: p.id,
         };
-        for id in &p.expects {
+        for id in p.expects.as_slice() {
             self.by_reply.entry(*id).or_default().push_back(w);
         }
         if let Some(d) = self.deadline(&p) {
             self.deadlines.insert((d, p.n));
         }
+        self.order.push_back(p.n);
         self.pending.insert(p.n, p);
+        if self.order.len() > 2 * self.pending.len() + 1024 {
+            let pending = &self.pending;
+            self.order.retain(|n| pending.contains_key(n));
+        }
     }
 
     fn remove(&mut self, n: u64) -> Option<Pending> {
@@ -160,13 +229,11 @@ impl AptPairer {
         if let Some(d) = self.deadline(&p) {
             self.deadlines.remove(&(d, n));
         }
-        for id in &p.expects {
+        for id in p.expects.as_slice() {
             if let Some(v) = self.by_reply.get_mut(id) {
-                // Requests are mostly answered in order: the front, at no cost.
-                if v.front().is_some_and(|w| w.n == n) {
-                    v.pop_front();
-                } else {
-                    v.retain(|w| w.n != n);
+                // Requests are mostly answered in order: at or near the front.
+                if let Some(i) = v.iter().position(|w| w.n == n) {
+                    v.remove(i);
                 }
                 if v.is_empty() {
                     self.by_reply.remove(id);
@@ -174,6 +241,17 @@ impl AptPairer {
             }
         }
         Some(p)
+    }
+
+    /// The oldest waiting request.
+    fn oldest(&mut self) -> Option<u64> {
+        while let Some(&n) = self.order.front() {
+            if self.pending.contains_key(&n) {
+                return Some(n);
+            }
+            self.order.pop_front();
+        }
+        None
     }
 
     /// When a waiting request expires, if it has a time.
@@ -230,10 +308,9 @@ impl AptPairer {
         if from_host {
             let expects = table.reply_ids(m);
             if !expects.is_empty() {
-                let expects = expects.to_vec();
+                let expects = Expects::new(expects);
                 if self.pending.len() >= MAX_PENDING {
-                    let oldest = self.pending.keys().next().copied();
-                    if let Some(p) = oldest.and_then(|k| self.remove(k)) {
+                    if let Some(p) = self.oldest().and_then(|k| self.remove(k)) {
                         info.expired.push(Unanswered {
                             n: p.n,
                             offset: p.offset,
@@ -246,6 +323,7 @@ impl AptPairer {
                     offset: f.offset,
                     ts,
                     name: m.name,
+                    id: m.id,
                     expects,
                     device: h.dst_byte(),
                     chan,
@@ -258,14 +336,16 @@ impl AptPairer {
         let chan_ok = |c: Option<i64>| c.is_none() || chan.is_none() || c == chan;
         let empty = VecDeque::new();
         let candidates = self.by_reply.get(&m.id).unwrap_or(&empty);
-        let usable = |w: &&Waiting| chan_ok(w.chan);
-        let found = candidates
-            .iter()
-            .take(SCAN)
-            .filter(usable)
-            .find(|w| w.device == src)
-            .or_else(|| candidates.iter().take(SCAN).find(usable))
-            .map(|w| w.n);
+        // The oldest usable request to the replying address, else the oldest usable one.
+        let (mut found, mut any) = (None, None);
+        for w in candidates.iter().take(SCAN).filter(|w| chan_ok(w.chan)) {
+            if w.device == src {
+                found = Some(w.n);
+                break;
+            }
+            any = any.or(Some(w.n));
+        }
+        let found = found.or(any);
         match found.and_then(|k| self.remove(k)) {
             Some(p) => {
                 // The same message also answers other waiting requests to that device and
@@ -274,33 +354,42 @@ impl AptPairer {
                 // in the table). Any other reply (a GET) answers one request: repeated
                 // requests wait for their own replies.
                 let one_to_one = !m.class.has(Class::END_OF_MOVE);
-                let also: Vec<u64> = self
-                    .by_reply
-                    .get(&m.id)
-                    .map(|v| {
+                let mut also = std::mem::take(&mut self.also);
+                also.clear();
+                // A reply only one kind of request expects answers one request of that kind.
+                let several = !one_to_one || table.requesters(m) > 1;
+                if let Some(v) = self.by_reply.get(&m.id).filter(|_| several) {
+                    also.extend(
                         v.iter()
                             .take(SCAN)
                             .filter(|q| {
                                 q.device == p.device
                                     && q.chan == p.chan
-                                    && !(one_to_one && q.name == p.name)
+                                    && !(one_to_one && q.id == p.id)
                             })
-                            .map(|q| q.n)
-                            .collect()
-                    })
-                    .unwrap_or_default();
-                for k in also {
+                            .map(|q| q.n),
+                    );
+                }
+                for &k in &also {
                     self.remove(k);
                 }
+                self.also = also;
                 info.pair = Some(p.n);
                 info.other_address = p.device != src;
                 info.latency_ns = match (p.ts, ts) {
                     (Some(a), Some(b)) => Some(b.saturating_sub(a)),
                     _ => None,
                 };
-                if self.recent.len() == RECENT {
-                    self.recent.pop_front();
+                if self.recent_ids.is_empty() {
+                    self.recent_ids = vec![0; 1 << 16];
                 }
+                if self.recent.len() == RECENT {
+                    if let Some(old) = self.recent.pop_front() {
+                        let c = &mut self.recent_ids[usize::from(old.reply_id)];
+                        *c = c.saturating_sub(1);
+                    }
+                }
+                self.recent_ids[usize::from(m.id)] += 1;
                 self.recent.push_back(Answered {
                     n: p.n,
                     reply_id: m.id,
@@ -312,11 +401,18 @@ impl AptPairer {
                 if comes_unasked(m) {
                     return info;
                 }
-                match self
-                    .recent
-                    .iter()
-                    .rev()
-                    .find(|a| a.reply_id == m.id && a.device == src && chan_ok(a.chan))
+                let seen = self
+                    .recent_ids
+                    .get(usize::from(m.id))
+                    .is_some_and(|&c| c > 0);
+                match seen
+                    .then(|| {
+                        self.recent
+                            .iter()
+                            .rev()
+                            .find(|a| a.reply_id == m.id && a.device == src && chan_ok(a.chan))
+                    })
+                    .flatten()
                 {
                     Some(a) => {
                         info.pair = Some(a.n);
@@ -372,8 +468,10 @@ impl AptPairer {
     pub fn finish(&mut self) -> Vec<Unanswered> {
         self.by_reply.clear();
         self.deadlines.clear();
-        std::mem::take(&mut self.pending)
-            .into_values()
+        self.order.clear();
+        let mut left: Vec<Pending> = std::mem::take(&mut self.pending).into_values().collect();
+        left.sort_unstable_by_key(|p| p.n);
+        left.into_iter()
             .map(|p| Unanswered {
                 n: p.n,
                 offset: p.offset,

@@ -478,7 +478,7 @@ pub fn parse_scale(s: &str) -> Result<StageChoice, String> {
 }
 
 /// A conversion for one device: raw motion values to physical ones.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct Scale {
     /// The stage name (section 8's) or `custom`.
     pub stage: &'static str,
@@ -494,9 +494,45 @@ pub struct Scale {
     /// The device's maxima that percentages refer to (piezo: output voltage limit in V, travel
     /// in µm), once it has reported them.
     maxima: [Option<f64>; 2],
+    /// See [`Scale::revision`].
+    revision: u64,
+}
+
+/// Equal conversions (the revision, which only says when a value was made, is left out).
+impl PartialEq for Scale {
+    fn eq(&self, o: &Self) -> bool {
+        (
+            self.stage,
+            self.family,
+            self.counts_per_unit,
+            &self.unit,
+            &self.per,
+            self.maxima,
+        ) == (
+            o.stage,
+            o.family,
+            o.counts_per_unit,
+            &o.unit,
+            &o.per,
+            o.maxima,
+        )
+    }
+}
+
+/// A number no other scale value has had in this process.
+fn next_revision() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
 impl Scale {
+    /// Changes whenever this conversion is made or changed (a copy keeps it): two scales with
+    /// the same revision are equal, so a consumer can tell "the same as before" per frame
+    /// without comparing them.
+    pub fn revision(&self) -> u64 {
+        self.revision
+    }
+
     /// The conversion for `counts_per_unit` counts per `unit` under `family`'s rules.
     pub fn new(
         stage: &'static str,
@@ -525,6 +561,7 @@ impl Scale {
             unit: unit.to_string(),
             per,
             maxima: [None; 2],
+            revision: next_revision(),
         }
     }
 
@@ -547,7 +584,11 @@ impl Scale {
 
     /// Set the device maximum `m` (in V or µm).
     pub fn set_maximum(&mut self, m: Maximum, v: f64) {
-        self.maxima[Self::max_slot(m)] = Some(v);
+        let slot = &mut self.maxima[Self::max_slot(m)];
+        if *slot != Some(v) {
+            *slot = Some(v);
+            self.revision = next_revision();
+        }
     }
 
     /// A percentage of maximum `m` in its physical unit, when the maximum is known.
@@ -738,11 +779,7 @@ impl Tracker {
     ) -> (Option<&Scale>, Option<Notice>) {
         let h = f.header();
         let info = h.msg_id() == HW_GET_INFO;
-        let has_q = f.form.is_some_and(|fm| {
-            fm.fields
-                .iter()
-                .any(|x| x.q.is_some() || x.pct_of.is_some() || x.max_of.is_some())
-        });
+        let has_q = f.form.is_some_and(|fm| fm.has_units());
         if !info && !has_q {
             return (None, None);
         }
@@ -807,7 +844,7 @@ impl Tracker {
         }
         // A device reporting a maximum (piezo output voltage limit, travel): later percentages
         // of it convert to V and µm.
-        if h.src() != crate::apt::Addr::Host {
+        if h.src() != crate::apt::Addr::Host && f.form.is_some_and(|fm| fm.has_maxima()) {
             for (fd, v) in f.fields() {
                 let (Some(m), Some(x)) = (fd.max_of, v.as_f64()) else {
                     continue;

@@ -157,7 +157,7 @@ impl<'a, 't> AptFrame<'a, 't> {
                     f.msg_form = Some(form);
                     f.form = Some(form);
                     if let Some(g) = m.subs {
-                        if let Some(p1) = form.fields.iter().find(|x| x.name == "sub_id") {
+                        if let Some(p1) = form.sub_field() {
                             f.sub = table.sub_of(m, g, bytes[p1.loc.frame_offset()] as u16);
                             if f.sub.is_none() {
                                 f.diag_bits |= D_SUB_HDR;
@@ -363,8 +363,10 @@ impl<'a, 't> AptFrame<'a, 't> {
     /// The channel number (1-based), from the `chan_ident` field: idents 0x01, 0x02, 0x04, 0x08
     /// are channels 1–4; other values are given as they are.
     pub fn channel(&self) -> Option<i64> {
-        self.field("chan_ident")
-            .and_then(|(_, v)| v.as_i64())
+        self.form
+            .and_then(|f| f.chan_field())
+            .and_then(|f| self.value(f))
+            .and_then(|v| v.as_i64())
             .map(|c| match c {
                 4 => 3,
                 8 => 4,

@@ -33,6 +33,10 @@ pub struct Table {
     msg_subs: Vec<Vec<(u16, usize)>>,
     /// Per message index: the ids of the messages that answer it (see [`Table::replies_of`]).
     reply_ids: Vec<Vec<u16>>,
+    /// Per message index: how many messages it answers (saturating).
+    requesters: Vec<u8>,
+    /// Per message index: the names of the fields of its forms and sub-messages' forms.
+    field_names: Vec<Vec<&'static str>>,
 }
 
 impl Table {
@@ -126,7 +130,10 @@ impl Table {
 
     /// Parse table files (`(file name, text)`, in order).
     pub fn from_sources(src: &[(&'static str, &'static str)]) -> Result<Table, TableErrors> {
-        let data = parse::parse_sources(src)?;
+        let mut data = parse::parse_sources(src)?;
+        let msg_forms = data.msgs.iter_mut().flat_map(|m| m.forms.iter_mut());
+        let sub_forms = data.subs.iter_mut().flat_map(|s| s.forms.iter_mut());
+        msg_forms.chain(sub_forms).for_each(Form::index);
         let mut by_id = vec![u16::MAX; 65536].into_boxed_slice();
         for (i, m) in data.msgs.iter().enumerate() {
             by_id[m.id as usize] = i as u16;
@@ -146,13 +153,38 @@ impl Table {
             by_id,
             msg_subs,
             reply_ids: vec![],
+            requesters: vec![],
+            field_names: vec![],
         };
+        t.field_names = (0..t.data.msgs.len())
+            .map(|i| {
+                let m = &t.data.msgs[i];
+                let subs = t.msg_subs[i].iter().map(|&(_, s)| &t.data.subs[s]);
+                let forms = m.forms.iter().chain(subs.flat_map(|s| s.forms.iter()));
+                let mut names: Vec<&'static str> = forms
+                    .flat_map(|f| f.fields.iter().map(|x| x.name))
+                    .collect();
+                names.sort_unstable();
+                names.dedup();
+                names
+            })
+            .collect();
         t.reply_ids = t
             .data
             .msgs
             .iter()
             .map(|m| t.replies_of(m).iter().map(|r| r.id).collect())
             .collect();
+        t.requesters = vec![0; t.data.msgs.len()];
+        for ids in &t.reply_ids {
+            for id in ids {
+                if let Some(&i) = t.by_id.get(usize::from(*id)).filter(|&&i| i != u16::MAX) {
+                    if let Some(c) = t.requesters.get_mut(usize::from(i)) {
+                        *c = c.saturating_add(1);
+                    }
+                }
+            }
+        }
         Ok(t)
     }
 
@@ -270,6 +302,28 @@ impl Table {
         }
     }
 
+    /// Whether any form of message `id` (or of its sub-messages) has a field called `name`:
+    /// a filter on a field skips, without decoding, the frames that cannot have it.
+    #[inline]
+    pub fn may_have_field(&self, id: u16, name: &str) -> bool {
+        match self.by_id[id as usize] {
+            u16::MAX => false,
+            i => self
+                .field_names
+                .get(i as usize)
+                .is_some_and(|v| v.contains(&name)),
+        }
+    }
+
+    /// How many kinds of message `m` answers (0 for one that answers none; saturates at 255).
+    #[inline]
+    pub fn requesters(&self, m: &MsgDef) -> u8 {
+        match self.by_id[m.id as usize] {
+            u16::MAX => 0,
+            i => self.requesters.get(i as usize).copied().unwrap_or(0),
+        }
+    }
+
     /// The messages that answer `m`: its `reply=` list, or GET_x for REQ_x.
     pub fn replies_of<'a>(&'a self, m: &'a MsgDef) -> Vec<&'a MsgDef> {
         let mut out: Vec<&MsgDef> = m.reply.iter().filter_map(|r| self.msg_by_name(r)).collect();
@@ -312,6 +366,38 @@ mod tests {
             format!("msg 0x0413 MOT_SET_VELPARAMS h2d\n  form 4\n    {field}\n").into_boxed_str(),
         );
         Table::from_sources(&[("t.apt", text)])
+    }
+
+    /// The pairer keeps a request's reply ids inline: no message may have more, and the
+    /// per-form indexes name the fields they stand for.
+    #[test]
+    fn replies_fit_the_pairer_and_forms_are_indexed() {
+        let t = Table::global();
+        for m in t.msgs() {
+            assert!(
+                t.reply_ids(m).len() <= crate::pair::MAX_REPLIES,
+                "{}",
+                m.name
+            );
+        }
+        let forms = t.msgs().iter().flat_map(|m| &m.forms);
+        let forms = forms.chain(t.subs().iter().flat_map(|s| &s.forms));
+        let mut chans = 0;
+        for f in forms {
+            let named = |n: &str| f.fields.iter().find(|x| x.name == n).map(|x| x.name);
+            assert_eq!(f.chan_field().map(|x| x.name), named("chan_ident"));
+            assert_eq!(f.sub_field().map(|x| x.name), named("sub_id"));
+            let units = f.fields.iter().any(|x| x.q.is_some() || x.pct_of.is_some());
+            assert!(!units || f.has_units());
+            let maxima = f.fields.iter().any(|x| x.max_of.is_some());
+            assert_eq!(f.has_maxima(), maxima);
+            chans += usize::from(f.chan_field().is_some());
+        }
+        assert!(chans > 100, "{chans}");
+        let t_ = t.msg_by_name("MOT_MOVE_ABSOLUTE").map(|m| m.id);
+        let id = t_.unwrap_or(0);
+        assert!(t.may_have_field(id, "absolute_position") && t.may_have_field(id, "chan_ident"));
+        assert!(!t.may_have_field(id, "velocity") && !t.may_have_field(0xFFFF, "chan_ident"));
     }
 
     /// SET_x and REQ_x find their GET_x; other messages have none.

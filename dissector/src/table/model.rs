@@ -306,9 +306,63 @@ pub struct Form {
     pub note: &'static str,
     /// Fields in order.
     pub fields: Vec<Field>,
+    /// What per-frame code asks of every form, worked out once when the table is built.
+    pub(crate) idx: FormIdx,
+}
+
+/// Per-form facts read for every frame (set by [`Form::index`]): looking them up by field name
+/// on each frame was most of the pairing and units cost.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct FormIdx {
+    /// Position of `chan_ident` in `fields`.
+    chan: Option<u16>,
+    /// Position of `sub_id` in `fields`.
+    sub: Option<u16>,
+    /// A field converts to physical units (`q=`, `pct_of=`, `max_of=`).
+    units: bool,
+    /// A field reports a device maximum (`max_of=`).
+    maxima: bool,
 }
 
 impl Form {
+    /// Work out [`FormIdx`] (after the fields are final).
+    pub(crate) fn index(&mut self) {
+        let at = |name: &str| {
+            self.fields
+                .iter()
+                .position(|f| f.name == name)
+                .and_then(|i| u16::try_from(i).ok())
+        };
+        self.idx = FormIdx {
+            chan: at("chan_ident"),
+            sub: at("sub_id"),
+            units: self
+                .fields
+                .iter()
+                .any(|x| x.q.is_some() || x.pct_of.is_some() || x.max_of.is_some()),
+            maxima: self.fields.iter().any(|x| x.max_of.is_some()),
+        };
+    }
+    /// The `chan_ident` field, if the form has one.
+    #[inline]
+    pub fn chan_field(&self) -> Option<&Field> {
+        self.fields.get(usize::from(self.idx.chan?))
+    }
+    /// The `sub_id` field, if the form has one.
+    #[inline]
+    pub fn sub_field(&self) -> Option<&Field> {
+        self.fields.get(usize::from(self.idx.sub?))
+    }
+    /// Whether a field converts to physical units (`q=`, `pct_of=`, `max_of=`).
+    #[inline]
+    pub fn has_units(&self) -> bool {
+        self.idx.units
+    }
+    /// Whether a field reports a device maximum (`max_of=`).
+    #[inline]
+    pub fn has_maxima(&self) -> bool {
+        self.idx.maxima
+    }
     /// `hdr`, the data length (`14`), or `sub`: how listings and `--form` name the form.
     pub fn label(&self) -> String {
         match self.kind {

@@ -535,6 +535,7 @@ impl Parser {
             kind,
             note,
             fields: vec![],
+            idx: Default::default(),
         });
     }
 
