@@ -40,6 +40,7 @@
 //!
 //! An empty filter matches every record.
 
+use crate::table::Table;
 use std::cmp::Ordering;
 use std::fmt;
 
@@ -144,6 +145,28 @@ impl Filter {
         self.expr.eval(rec)
     }
 
+    /// The APT message ids whose frames can match, worked out from the table before a scan:
+    /// a term on a field (`apt.position > 1000`, `apt.chan == 1`) needs a message that has
+    /// it, so a scan skips every other frame by its id without decoding it. `None` when every
+    /// id can match. Says nothing about records other than APT frames.
+    pub fn apt_ids(&self, table: &Table) -> Option<IdSet> {
+        let mut set = IdSet(vec![0u64; 1024].into_boxed_slice());
+        // Unknown ids have no fields: one answer for all of them.
+        let unknown = self.expr.can_match(&|_| false);
+        let mut all = unknown;
+        for id in 0..=u16::MAX {
+            let yes = match table.msg(id) {
+                Some(_) => self.expr.can_match(&|name| table.may_have_field(id, name)),
+                None => unknown,
+            };
+            all &= yes;
+            if yes {
+                set.0[usize::from(id >> 6)] |= 1 << (id & 63);
+            }
+        }
+        (!all).then_some(set)
+    }
+
     /// The filter as it was written.
     pub fn as_str(&self) -> &str {
         &self.text
@@ -187,6 +210,20 @@ impl std::str::FromStr for Filter {
 impl fmt::Display for Filter {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(&self.text)
+    }
+}
+
+/// A set of APT message ids (see [`Filter::apt_ids`]).
+#[derive(Clone, Debug)]
+pub struct IdSet(Box<[u64]>);
+
+impl IdSet {
+    /// Whether `id` is in the set.
+    #[inline]
+    pub fn contains(&self, id: u16) -> bool {
+        self.0
+            .get(usize::from(id >> 6))
+            .is_some_and(|w| w & (1 << (id & 63)) != 0)
     }
 }
 
@@ -392,6 +429,24 @@ impl Expr {
         }
     }
 
+    /// Can an APT frame whose message has exactly the fields `has` accepts pass? (`false`
+    /// only when it certainly cannot.)
+    fn can_match(&self, has: &dyn Fn(&str) -> bool) -> bool {
+        match self {
+            Expr::All | Expr::Not(_) => true,
+            Expr::Or(xs) => xs.iter().any(|x| x.can_match(has)),
+            Expr::And(xs) => xs.iter().all(|x| x.can_match(has)),
+            Expr::Test(
+                Test::Exists(f)
+                | Test::Cmp(f, ..)
+                | Test::Contains(f, _)
+                | Test::Matches(f, _)
+                | Test::In(f, _),
+            ) => f.can_have_value(has),
+            Expr::Test(_) => true,
+        }
+    }
+
     fn eval<F: Fields + ?Sized>(&self, rec: &F) -> bool {
         match self {
             Expr::All => true,
@@ -487,6 +542,23 @@ impl Test {
 }
 
 impl FieldRef {
+    /// Can an APT frame whose message has the fields `has` accepts give this field a value?
+    /// Every test on a field needs one.
+    fn can_have_value(&self, has: &dyn Fn(&str) -> bool) -> bool {
+        if self.proto.is_some_and(|p| p != "apt") {
+            return false;
+        }
+        // A whole object (`apt.fields`) is there whatever the message.
+        let named = |path: &[String]| path.first().is_none_or(|n| has(n));
+        let direct = match self.key {
+            Key::Fields | Key::Codes | Key::Phys if self.proto.is_some() => named(&self.rest),
+            // The channel is read from `chan_ident`.
+            Key::Channel => has("chan_ident"),
+            _ => return true,
+        };
+        direct || self.fallback.as_deref().is_some_and(named)
+    }
+
     /// Pass each value at this field to `g` (nothing when the record is of another protocol).
     fn each<F: Fields + ?Sized>(&self, rec: &F, g: &mut dyn FnMut(Val<'_>, Role)) {
         if !proto_is(rec, self.proto) {
@@ -1424,6 +1496,35 @@ mod tests {
 
     fn yes(rec: &Value, src: &str) -> bool {
         f(src).matches(rec)
+    }
+
+    /// A term on a field narrows a scan to the messages that have it; anything that can
+    /// match without the field (negation, `||` with a record-level term) does not.
+    #[test]
+    fn apt_ids_follow_the_fields_a_filter_needs() {
+        let t = Table::global();
+        let id = |n: &str| t.msg_by_name(n).map(|m| m.id).expect(n);
+        let ids = |f: &str| Filter::parse(f).expect(f).apt_ids(t);
+        let pos = ids("apt.position > 1000 && dir == d2h").expect("narrowed");
+        assert!(
+            pos.contains(id("MOT_GET_DCSTATUSUPDATE")) && pos.contains(id("MOT_MOVE_COMPLETED"))
+        );
+        assert!(!pos.contains(id("MOT_MOVE_HOME")) && !pos.contains(0x7FFF));
+        let chan = ids("apt.chan == 1").expect("narrowed");
+        assert!(chan.contains(id("MOT_MOVE_HOME")) && !chan.contains(id("HW_REQ_INFO")));
+        let sub = ids("apt.codes.status_bits").expect("narrowed");
+        assert!(sub.contains(id("MOT_GET_DCSTATUSUPDATE")));
+        let ell = ids("ell.position > 0").expect("no APT frame");
+        assert!(!ell.contains(id("MOT_GET_DCSTATUSUPDATE")));
+        for any in [
+            "!apt.position",
+            "apt.position > 1 || n > 5",
+            "apt.fields",
+            "dir == h2d",
+            "",
+        ] {
+            assert!(ids(any).is_none(), "{any}");
+        }
     }
 
     #[test]

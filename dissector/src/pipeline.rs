@@ -4,7 +4,7 @@
 use crate::detect::Proto;
 use crate::diag::Diag;
 use crate::fields::InFile;
-use crate::filter::Filter;
+use crate::filter::{Filter, IdSet};
 use crate::record::{Decoder, Record};
 use crate::table::Dir;
 use crate::units::UnitsOpts;
@@ -36,6 +36,8 @@ pub struct Renderer {
     line: String,
     jline: String,
     filter: Option<Filter>,
+    /// The APT message ids whose frames can pass the filter (`None`: any).
+    ids: Option<IdSet>,
     /// The input's name when records name it (several inputs).
     file: Option<String>,
     /// `{"file":NAME,` when records name their input, else empty.
@@ -82,6 +84,7 @@ impl Pipeline {
     /// records; only what is emitted is rendered). Records are still numbered, so a kept record
     /// keeps its number. Detection, stream, input and units records always pass.
     pub fn set_filter(&mut self, filter: Filter) {
+        self.r.ids = filter.apt_ids(crate::Table::global());
         self.r.filter = Some(filter);
     }
 
@@ -193,6 +196,7 @@ impl Renderer {
             line: String::with_capacity(512),
             jline: String::with_capacity(512),
             filter: None,
+            ids: None,
             file: None,
             file_prefix: String::new(),
             streams: vec![],
@@ -201,6 +205,11 @@ impl Renderer {
 
     /// Whether a record passes the filter (every record when there is none).
     fn keep(&self, rec: &Record<'_>) -> bool {
+        if let (Some(ids), Record::Apt(a)) = (&self.ids, rec) {
+            if !ids.contains(a.frame.header().msg_id()) {
+                return false;
+            }
+        }
         self.filter.as_ref().is_none_or(|f| {
             f.matches(&InFile {
                 file: self.file.as_deref(),

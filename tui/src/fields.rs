@@ -289,6 +289,11 @@ impl Fields for View<'_> {
                 None => return false,
             },
             Key::Msgid if apt_frame => num(r.id),
+            Key::Channel if apt_frame => match r.chan() {
+                KeptChan::Chan(c) => num(c),
+                KeptChan::None => return false,
+                KeptChan::InFrame => return self.decoded(key, rest, f),
+            },
             Key::Name if apt_frame => match Table::global().msg(r.id) {
                 Some(m) => Val::Str(Cow::Borrowed(m.name)),
                 None => return true,

@@ -84,6 +84,48 @@ pub struct Rec {
     /// The kinds of the frame's own diagnostics (decoding's, not pairing's): index + 1 in
     /// [`Index::diag_sets`], 0 when it has none.
     pub diags: u16,
+    /// APT: the channel (`AptFrame::channel`) + 1; 0 for none, [`CHAN_OTHER`] for one that
+    /// does not fit (read from the frame). Filters on `apt.chan` read it without decoding.
+    pub chan: u8,
+}
+
+/// [`Rec::chan`] of a channel outside 0–253.
+pub const CHAN_OTHER: u8 = u8::MAX;
+
+// The compact record stays one 56-byte slot (memory per record of the index).
+const _: () = assert!(std::mem::size_of::<Rec>() == 56);
+
+/// An APT record's channel as the index kept it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum KeptChan {
+    /// The frame has none.
+    None,
+    /// This channel.
+    Chan(i64),
+    /// One that did not fit: read it from the frame.
+    InFrame,
+}
+
+impl Rec {
+    /// The APT channel the index kept.
+    pub fn chan(&self) -> KeptChan {
+        match self.chan {
+            0 => KeptChan::None,
+            CHAN_OTHER => KeptChan::InFrame,
+            c => KeptChan::Chan(i64::from(c) - 1),
+        }
+    }
+}
+
+/// [`Rec::chan`] for a channel.
+fn chan_code(c: Option<i64>) -> u8 {
+    match c {
+        None => 0,
+        Some(c) => u8::try_from(c + 1)
+            .ok()
+            .filter(|&x| x != CHAN_OTHER)
+            .unwrap_or(CHAN_OTHER),
+    }
 }
 
 impl Rec {
@@ -481,8 +523,8 @@ struct Sink {
     /// them are published.
     scales: Vec<Scale>,
     scales_published: usize,
-    /// The entry last given for a conversion of the decoder, by its address.
-    scale_at: HashMap<usize, u32>,
+    /// The entry given for each revision of a conversion ([`Scale::revision`]).
+    scale_at: HashMap<u64, u32>,
     units_notes: Vec<String>,
     /// Pair links and flags for already-published records: (record number, pair, flags to set).
     patches: Vec<(u64, u32, u16)>,
@@ -600,15 +642,12 @@ impl Sink {
         id
     }
 
-    /// The entry of a conversion in `scales` (+ 1): the one last given for the decoder's
-    /// conversion at that address when still equal (one comparison: a device's conversion
-    /// changes seldom), else a new one.
+    /// The entry of a conversion in `scales` (+ 1): the one kept for its revision (a
+    /// device's conversion changes seldom), else a new one.
     fn scale_id(&mut self, sc: &Scale) -> u32 {
-        let key = sc as *const Scale as usize;
+        let key = sc.revision();
         if let Some(&id) = self.scale_at.get(&key) {
-            if self.scales.get(id as usize - 1) == Some(sc) {
-                return id;
-            }
+            return id;
         }
         self.scales.push(sc.clone());
         let id = self.scales.len() as u32;
@@ -706,6 +745,7 @@ impl Sink {
             dst: h.dst_byte(),
             id: h.msg_id(),
             diags,
+            chan: chan_code(fr.channel()),
         };
         self.add(m.n, rec, fr.bytes);
     }
@@ -789,6 +829,7 @@ impl Sink {
             dst: 0,
             id: u16::from_be_bytes(fr.code),
             diags,
+            chan: 0,
         };
         self.add(m.n, rec, fr.bytes);
     }
@@ -817,6 +858,7 @@ impl Sink {
             dst: 0,
             id: 0,
             diags: 0,
+            chan: 0,
         };
         self.add(m.n, rec, g.bytes);
     }

@@ -8,8 +8,9 @@
 use crate::fields::{self, View, DIRS};
 use crate::index::{Index, Rec, Shared, F_ELL, F_GARBAGE, F_IS_REPLY};
 use aptscope_dissector::fields::{Fields, Key, Val};
-use aptscope_dissector::filter::Filter;
+use aptscope_dissector::filter::{Filter, IdSet};
 use aptscope_dissector::stats::{Latencies, Stats, StreamStat, Tally};
+use aptscope_dissector::Table;
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::hash::{BuildHasherDefault, Hasher};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -75,6 +76,8 @@ impl Default for Scan {
 struct Work {
     gen: u64,
     filter: Option<Filter>,
+    /// The APT message ids whose frames can pass the filter (`None`: any).
+    ids: Option<IdSet>,
     /// Next record to scan.
     next: u64,
     counts: Counts,
@@ -87,6 +90,7 @@ impl Work {
     fn new(gen: u64, filter: Option<Filter>) -> Self {
         Work {
             gen,
+            ids: filter.as_ref().and_then(|f| f.apt_ids(Table::global())),
             filter,
             next: 1,
             counts: Counts::default(),
@@ -177,6 +181,10 @@ impl Scan {
         for (i, r) in recs.iter().enumerate() {
             let n = from + i as u64;
             if let Some(f) = &w.filter {
+                let apt_frame = r.flags & (F_ELL | F_GARBAGE) == 0;
+                if apt_frame && w.ids.as_ref().is_some_and(|ids| !ids.contains(r.id)) {
+                    continue;
+                }
                 if !f.matches(&View { ix: &ix, n, r }) {
                     continue;
                 }

@@ -174,6 +174,7 @@ fn synthetic(count: u64) -> App {
                 dst: 0x50,
                 id: 0x0005,
                 diags: 0,
+                chan: 0,
             })
             .collect();
         ix.first_ts = Some(0);
