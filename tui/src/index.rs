@@ -500,6 +500,9 @@ impl Indexer {
 /// Conversions remembered for reuse (one per device).
 const MAX_SCALE_AT: usize = 4096;
 
+/// Series keys remembered (beyond, series are found by name).
+const MAX_SERIES_OF: usize = 4096;
+
 /// Which plotted quantity a series holds.
 const QUANTITIES: [&str; 2] = ["position", "velocity"];
 
@@ -531,6 +534,9 @@ struct Sink {
     /// Plot series by key, points not yet published; `series_at` finds a key's entry.
     series: Vec<(String, Vec<Point>)>,
     series_at: HashMap<String, usize>,
+    /// The series of (message id, source, channel, quantity, scale revision): a status update
+    /// finds its series without formatting and hashing its name.
+    series_of: HashMap<(u16, u8, Option<i64>, u8, u64), usize>,
     /// Lists of diagnostic kinds given out (`Rec::diags - 1`), how many are published, and
     /// the entry of each.
     diag_sets: Vec<Vec<&'static str>>,
@@ -612,7 +618,13 @@ impl Sink {
 
     /// Add a point to the series named by `self.scratch`.
     fn point(&mut self, x: f64, y: f64) {
-        let i = match self.series_at.get(self.scratch.as_str()) {
+        let i = self.series_index();
+        self.series[i].1.push((x, y));
+    }
+
+    /// The entry of the series named by `self.scratch` (made if new).
+    fn series_index(&mut self) -> usize {
+        match self.series_at.get(self.scratch.as_str()) {
             Some(i) => *i,
             None => {
                 self.series.push((self.scratch.clone(), vec![]));
@@ -620,8 +632,7 @@ impl Sink {
                     .insert(self.scratch.clone(), self.series.len() - 1);
                 self.series.len() - 1
             }
-        };
-        self.series[i].1.push((x, y));
+        }
     }
 
     /// The entry (+ 1) of the diagnostic kinds in `self.kinds`; 0 when there are none, or too
@@ -707,26 +718,40 @@ impl Sink {
             }
             if self.plotted[id] == 1 {
                 let x = m.rel_s.unwrap_or(m.n as f64);
-                for q in QUANTITIES {
+                let chan = fr.channel();
+                for (qi, q) in QUANTITIES.iter().enumerate() {
                     let Some((fd, v)) = fr.field(q) else {
                         continue;
                     };
-                    self.scratch.clear();
-                    let _ = write!(self.scratch, "{q} {}", fr.src().name());
-                    if let Some(c) = fr.channel() {
-                        let _ = write!(self.scratch, " ch{c}");
-                    }
                     // In mm (deg) once the stage is known: its own series.
-                    let y = match aptscope_dissector::apt::phys(fd, &v, a.scale) {
-                        Some((y, unit)) => {
-                            let _ = write!(self.scratch, " ({unit})");
-                            Some(y)
-                        }
-                        None => v.as_f64(),
+                    let phys = aptscope_dissector::apt::phys(fd, &v, a.scale);
+                    let Some(y) = phys.map(|(y, _)| y).or_else(|| v.as_f64()) else {
+                        continue;
                     };
-                    if let Some(y) = y {
-                        self.point(x, y);
-                    }
+                    let rev = a
+                        .scale
+                        .filter(|_| phys.is_some())
+                        .map_or(0, |sc| sc.revision());
+                    let key = (h.msg_id(), h.src_byte(), chan, qi as u8, rev);
+                    let i = match self.series_of.get(&key) {
+                        Some(&i) => i,
+                        None => {
+                            self.scratch.clear();
+                            let _ = write!(self.scratch, "{q} {}", fr.src().name());
+                            if let Some(c) = chan {
+                                let _ = write!(self.scratch, " ch{c}");
+                            }
+                            if let Some((_, unit)) = phys {
+                                let _ = write!(self.scratch, " ({unit})");
+                            }
+                            let i = self.series_index();
+                            if self.series_of.len() < MAX_SERIES_OF {
+                                self.series_of.insert(key, i);
+                            }
+                            i
+                        }
+                    };
+                    self.series[i].1.push((x, y));
                 }
             }
         }
