@@ -13,6 +13,7 @@ pub mod diag;
 pub mod ell;
 pub mod fields;
 pub mod filter;
+pub mod hash;
 pub mod hex;
 pub mod json;
 pub mod listing;

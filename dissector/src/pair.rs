@@ -8,32 +8,9 @@
 use crate::apt::AptFrame;
 use crate::apt::Value;
 use crate::diag::{Diag, DiagKind};
+use crate::hash::NumMap;
 use crate::table::{Class, DeviceProfile, Dir, MsgDef, Table, DEFAULT_TIMEOUT_MS};
-use std::collections::{BTreeSet, HashMap, VecDeque};
-use std::hash::{BuildHasherDefault, Hasher};
-
-/// The hash of a number (message id, record number): one multiplication (the keys are distinct
-/// small numbers; SipHash was a noticeable share of pairing).
-#[derive(Default)]
-struct IdHash(u64);
-
-impl Hasher for IdHash {
-    fn finish(&self) -> u64 {
-        // Fibonacci hashing: the top bits (hashbrown's tag) vary too.
-        self.0.wrapping_mul(0x9E37_79B9_7F4A_7C15)
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for b in bytes {
-            self.0 = (self.0 << 8) | u64::from(*b);
-        }
-    }
-    fn write_u16(&mut self, i: u16) {
-        self.0 = u64::from(i);
-    }
-    fn write_u64(&mut self, i: u64) {
-        self.0 = i;
-    }
-}
+use std::collections::{BTreeSet, VecDeque};
 
 /// A request still waiting.
 #[derive(Debug, Clone)]
@@ -176,13 +153,13 @@ const SCAN: usize = 256;
 #[derive(Debug, Default)]
 pub struct AptPairer {
     /// Waiting requests by record number.
-    pending: HashMap<u64, Pending, BuildHasherDefault<IdHash>>,
+    pending: NumMap<u64, Pending>,
     /// Record numbers of the waiting requests, oldest first; those answered since are dropped
     /// when they reach the front (or when they are most of the list).
     order: VecDeque<u64>,
     /// The waiting requests that expect each message id, oldest first, with what a reply is
     /// matched on: a reply looks only at the requests it can answer, without map lookups.
-    by_reply: HashMap<u16, VecDeque<Waiting>, BuildHasherDefault<IdHash>>,
+    by_reply: NumMap<u16, VecDeque<Waiting>>,
     /// Waiting requests with a time, by the time they expire (the timeout fixed when they came).
     deadlines: BTreeSet<(u64, u64)>,
     recent: VecDeque<Answered>,

@@ -13,6 +13,7 @@ use aptscope_dissector::apt::GarbageKind;
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::diag::DiagKind;
 use aptscope_dissector::ell::Module;
+use aptscope_dissector::hash::NumMap;
 use aptscope_dissector::record::{AptRec, Ctx, Decoder, EllRec, GarbageRec, Record};
 use aptscope_dissector::table::Dir;
 use aptscope_dissector::units::{Scale, UnitsOpts};
@@ -527,7 +528,7 @@ struct Sink {
     scales: Vec<Scale>,
     scales_published: usize,
     /// The entry given for each revision of a conversion ([`Scale::revision`]).
-    scale_at: HashMap<u64, u32>,
+    scale_at: NumMap<u64, u32>,
     units_notes: Vec<String>,
     /// Pair links and flags for already-published records: (record number, pair, flags to set).
     patches: Vec<(u64, u32, u16)>,
@@ -536,7 +537,7 @@ struct Sink {
     series_at: HashMap<String, usize>,
     /// The series of (message id, source, channel, quantity, scale revision): a status update
     /// finds its series without formatting and hashing its name.
-    series_of: HashMap<(u16, u8, Option<i64>, u8, u64), usize>,
+    series_of: NumMap<(u16, u8, Option<i64>, u8, u64), usize>,
     /// Lists of diagnostic kinds given out (`Rec::diags - 1`), how many are published, and
     /// the entry of each.
     diag_sets: Vec<Vec<&'static str>>,

@@ -11,8 +11,7 @@ use aptscope_dissector::fields::{Fields, Key, Val};
 use aptscope_dissector::filter::{Filter, IdSet};
 use aptscope_dissector::stats::{Latencies, Stats, StreamStat, Tally};
 use aptscope_dissector::Table;
-use std::collections::{BTreeMap, HashMap, VecDeque};
-use std::hash::{BuildHasherDefault, Hasher};
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -224,28 +223,7 @@ impl Scan {
     }
 }
 
-/// A hasher for the small integer keys of [`Counts`] (one multiply).
-#[derive(Default)]
-struct IdHasher(u64);
-
-impl Hasher for IdHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for b in bytes {
-            self.0 = (self.0 ^ *b as u64).wrapping_mul(0x100_0000_01B3);
-        }
-    }
-    fn write_u64(&mut self, x: u64) {
-        self.0 = (x ^ (x >> 29)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    }
-    fn write_u32(&mut self, x: u32) {
-        self.write_u64(x as u64);
-    }
-}
-
-type IdMap<K, V> = HashMap<K, V, BuildHasherDefault<IdHasher>>;
+type IdMap<K, V> = aptscope_dissector::hash::NumMap<K, V>;
 
 /// Count and bytes of frames of one kind, with one of them (whose names the kind takes).
 #[derive(Debug, Clone, Copy)]

@@ -33,6 +33,9 @@ pub struct AptFrame<'a, 't> {
     /// Problems found, as `D_*` bits (see [`diags`](Self::diags)).
     diag_bits: u16,
     table: &'t Table,
+    /// [`channel`](Self::channel), read once (pairing, units, the index and the output all
+    /// ask for it).
+    chan: Option<i64>,
 }
 
 /// A field's value, read from the frame bytes.
@@ -126,6 +129,7 @@ impl<'a, 't> AptFrame<'a, 't> {
             form: None,
             diag_bits: 0,
             table,
+            chan: None,
         };
         if truncated {
             f.diag_bits |= D_TRUNCATED;
@@ -202,6 +206,16 @@ impl<'a, 't> AptFrame<'a, 't> {
                 D_LENGTH
             };
         }
+        f.chan = f
+            .form
+            .and_then(|fm| fm.chan_field())
+            .and_then(|fd| f.value(fd))
+            .and_then(|v| v.as_i64())
+            .map(|c| match c {
+                4 => 3,
+                8 => 4,
+                c => c,
+            });
         Some(f)
     }
 
@@ -362,16 +376,9 @@ impl<'a, 't> AptFrame<'a, 't> {
 
     /// The channel number (1-based), from the `chan_ident` field: idents 0x01, 0x02, 0x04, 0x08
     /// are channels 1–4; other values are given as they are.
+    #[inline]
     pub fn channel(&self) -> Option<i64> {
-        self.form
-            .and_then(|f| f.chan_field())
-            .and_then(|f| self.value(f))
-            .and_then(|v| v.as_i64())
-            .map(|c| match c {
-                4 => 3,
-                8 => 4,
-                c => c,
-            })
+        self.chan
     }
 
     /// Whether a field is the form's sub-id or channel (shown in their own columns).
