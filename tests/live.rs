@@ -240,7 +240,7 @@ fn read_capture(path: &Path) -> Capture {
                     Direction::Unknown => panic!("a chunk without direction"),
                 }
             }
-            Event::Diag(d) => c.diags.push((d.kind, d.to_string())),
+            Event::Diag(d) => c.diags.push((d.kind(), d.to_string())),
         }
     }
     c

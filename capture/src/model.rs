@@ -131,15 +131,263 @@ pub struct StreamInfo {
 pub struct ReadDiag {
     /// Byte offset in the file.
     pub offset: u64,
-    /// What kind of problem (stable snake_case name).
-    pub kind: &'static str,
-    /// Human explanation.
-    pub msg: String,
+    /// What went wrong: what was expected there and what was found.
+    pub problem: ReadProblem,
+}
+
+impl ReadDiag {
+    /// `problem` at byte `offset` of the file.
+    pub fn new(offset: u64, problem: ReadProblem) -> Self {
+        ReadDiag { offset, problem }
+    }
+
+    /// A problem of a reader that does not report typed problems yet: its stable name and
+    /// text (see [`ReadProblem::Untyped`]).
+    pub fn untyped(offset: u64, kind: &'static str, msg: impl Into<String>) -> Self {
+        ReadDiag::new(
+            offset,
+            ReadProblem::Untyped {
+                kind,
+                msg: msg.into(),
+            },
+        )
+    }
+
+    /// The problem's stable snake_case name (the `kind` of NDJSON `file_diag` records).
+    pub fn kind(&self) -> &'static str {
+        self.problem.kind()
+    }
+
+    /// The problem's explanation (the `msg` of NDJSON `file_diag` records).
+    pub fn msg(&self) -> String {
+        self.problem.to_string()
+    }
 }
 
 impl fmt::Display for ReadDiag {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "@{}: {}: {}", self.offset, self.kind, self.msg)
+        write!(f, "@{}: {}: {}", self.offset, self.kind(), self.problem)
+    }
+}
+
+/// What a capture reader found wrong in a file. Reading carries on where the format allows
+/// (a damaged block is skipped to the next plausible one); the texts are the diagnostics'
+/// `msg`, [`ReadProblem::kind`] their stable name.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ReadProblem {
+    /// Reading the file failed; nothing after `offset` is read.
+    Io {
+        /// What failed.
+        kind: std::io::ErrorKind,
+        /// The error's text.
+        error: String,
+    },
+    /// The file name says one format, the content starts like another (read as the content).
+    FormatMismatch {
+        /// The format the name says.
+        named: &'static str,
+        /// The format the content is read as.
+        read_as: &'static str,
+    },
+    /// Not a pcap or pcapng file: the magic expected at the start is not there.
+    BadMagic {
+        /// The first bytes found (up to 4).
+        found: Vec<u8>,
+    },
+    /// A pcapng section header or pcap file header the parser rejects.
+    BadFileHeader {
+        /// pcapng (section header block) or pcap (file header).
+        ng: bool,
+        /// The parser's complaint.
+        error: String,
+    },
+    /// A damaged block or record, skipped.
+    Damaged {
+        /// What was wrong with it.
+        damage: Damage,
+        /// How far reading skipped.
+        skipped: Skipped,
+    },
+    /// A record longer than what is left of the file (a cut file).
+    TruncatedRecord {
+        /// Its declared length in bytes.
+        expected: usize,
+        /// The bytes left.
+        found: usize,
+    },
+    /// Bytes at the end of the file too few for a record header (a cut file).
+    TruncatedTail {
+        /// How many.
+        found: usize,
+    },
+    /// A link type that is neither aptscope serial nor USB: its packets are skipped.
+    UnknownLinkType {
+        /// The link type.
+        linktype: u32,
+    },
+    /// A pcap serial record shorter than its 2-byte direction header.
+    ShortRecord {
+        /// Its length.
+        found: usize,
+    },
+    /// A packet captured shorter than it was (snap length): the rest is lost.
+    SnappedPacket {
+        /// Bytes captured.
+        captured: usize,
+        /// Bytes on the wire.
+        original: u32,
+    },
+    /// A pcapng packet of an interface no Interface Description Block declared.
+    UnknownInterface {
+        /// The interface id.
+        interface: u32,
+    },
+    /// A problem of hex or raw input (bad hex digit …), as the dissector reports it.
+    Input(aptscope_dissector::DiagKind),
+    /// A problem of a reader not converted to typed problems yet (MCAP, USB, text logs): its
+    /// stable name and text.
+    Untyped {
+        /// Stable snake_case name.
+        kind: &'static str,
+        /// Explanation.
+        msg: String,
+    },
+}
+
+/// What was wrong with a damaged block ([`ReadProblem::Damaged`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Damage {
+    /// Its header declares a length no block can have.
+    BadLength {
+        /// The declared length.
+        declared: usize,
+    },
+    /// The parser rejects it.
+    Unparsable {
+        /// The parser's complaint.
+        error: String,
+    },
+}
+
+/// How far reading skipped past a damaged block ([`ReadProblem::Damaged`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Skipped {
+    /// To the next plausible record, this many bytes on.
+    ToNext {
+        /// Bytes skipped.
+        bytes: usize,
+    },
+    /// To the end: no plausible record in the rest.
+    ToEnd {
+        /// Bytes left unread.
+        rest: usize,
+    },
+}
+
+impl ReadProblem {
+    /// A failed read.
+    pub fn io(e: &std::io::Error) -> Self {
+        ReadProblem::Io {
+            kind: e.kind(),
+            error: e.to_string(),
+        }
+    }
+
+    /// The stable snake_case name (the NDJSON `file_diag` record's `kind`).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            ReadProblem::Io { .. } => "io_error",
+            ReadProblem::FormatMismatch { .. } => "format_mismatch",
+            ReadProblem::BadMagic { .. } => "bad_magic",
+            ReadProblem::BadFileHeader { ng: true, .. } => "bad_section_header",
+            ReadProblem::BadFileHeader { ng: false, .. } => "bad_pcap_header",
+            ReadProblem::Damaged {
+                damage: Damage::BadLength { .. },
+                ..
+            } => "bad_block_length",
+            ReadProblem::Damaged {
+                damage: Damage::Unparsable { .. },
+                ..
+            } => "bad_record",
+            ReadProblem::TruncatedRecord { .. } | ReadProblem::TruncatedTail { .. } => {
+                "truncated_record"
+            }
+            ReadProblem::UnknownLinkType { .. } => "unknown_linktype",
+            ReadProblem::ShortRecord { .. } => "short_record",
+            ReadProblem::SnappedPacket { .. } => "snapped_packet",
+            ReadProblem::UnknownInterface { .. } => "unknown_interface",
+            ReadProblem::Input(k) => k.name(),
+            ReadProblem::Untyped { kind, .. } => kind,
+        }
+    }
+}
+
+impl fmt::Display for ReadProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ReadProblem::Io { error, .. } => f.write_str(error),
+            ReadProblem::FormatMismatch { named, read_as } => write!(
+                f,
+                "the name says {named} but the content does not start like one; read as \
+                 {read_as} (--format {named} to force)"
+            ),
+            ReadProblem::BadMagic { found } => {
+                f.write_str("not a pcap or pcapng file (starts ")?;
+                for (i, b) in found.iter().enumerate() {
+                    let sep = if i == 0 { "" } else { " " };
+                    write!(f, "{sep}{b:02x}")?;
+                }
+                f.write_str(")")
+            }
+            ReadProblem::BadFileHeader { error, .. } => f.write_str(error),
+            ReadProblem::Damaged { damage, skipped } => {
+                match damage {
+                    Damage::BadLength { declared } => {
+                        write!(f, "declared length {declared} is not a valid length")?
+                    }
+                    Damage::Unparsable { error } => f.write_str(error)?,
+                }
+                match skipped {
+                    Skipped::ToNext { bytes } => {
+                        write!(f, "; skipped {bytes} bytes to the next plausible record")
+                    }
+                    Skipped::ToEnd { rest } => {
+                        write!(f, "; no record follows in the last {rest} bytes")
+                    }
+                }
+            }
+            ReadProblem::TruncatedRecord { expected, found } => write!(
+                f,
+                "record of {expected} bytes runs past the end of the file ({found} bytes left)"
+            ),
+            ReadProblem::TruncatedTail { found } => {
+                write!(
+                    f,
+                    "{found} bytes at the end of the file are not a whole record"
+                )
+            }
+            ReadProblem::UnknownLinkType { linktype } => write!(
+                f,
+                "link type {linktype} is neither aptscope serial (147/148) nor USB \
+                 (189/220/249): its packets are skipped"
+            ),
+            ReadProblem::ShortRecord { .. } => {
+                f.write_str("record shorter than its 2-byte direction header")
+            }
+            ReadProblem::SnappedPacket { captured, original } => {
+                write!(
+                    f,
+                    "{captured} of {original} bytes captured: the rest is lost"
+                )
+            }
+            ReadProblem::UnknownInterface { interface } => write!(
+                f,
+                "packet of interface {interface}, which no Interface Description Block declared"
+            ),
+            ReadProblem::Input(k) => write!(f, "{k}"),
+            ReadProblem::Untyped { msg, .. } => f.write_str(msg),
+        }
     }
 }
 

@@ -496,8 +496,9 @@ struct Sink {
 impl Sink {
     fn diag(&mut self, offset: u64, kind: &'static str, msg: String) {
         if self.mute_at != Some(offset) {
-            self.q
-                .push_back(Pending::Ev(Event::Diag(ReadDiag { offset, kind, msg })));
+            self.q.push_back(Pending::Ev(Event::Diag(ReadDiag::untyped(
+                offset, kind, msg,
+            ))));
         }
     }
 

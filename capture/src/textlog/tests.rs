@@ -26,7 +26,7 @@ impl Got {
             .collect()
     }
     fn kinds(&self) -> Vec<(&'static str, u64)> {
-        self.diags.iter().map(|d| (d.kind, d.offset)).collect()
+        self.diags.iter().map(|d| (d.kind(), d.offset)).collect()
     }
 }
 
@@ -261,7 +261,11 @@ fn socat_bad_hex() {
             ("length_mismatch", SOCAT_OK.len() as u64)
         ]
     );
-    assert!(g.diags[0].msg.contains("column 5"), "{}", g.diags[0].msg);
+    assert!(
+        g.diags[0].msg().contains("column 5"),
+        "{}",
+        g.diags[0].msg()
+    );
     // What is readable is kept: the block before, the byte before the bad one, the block after.
     assert_eq!(
         g.bytes(),
@@ -489,7 +493,11 @@ fn xxd_bad_hex_truncated_and_gap() {
             ("truncated_line", 4 * l)
         ]
     );
-    assert!(g.diags[0].msg.contains("column 18"), "{}", g.diags[0].msg);
+    assert!(
+        g.diags[0].msg().contains("column 18"),
+        "{}",
+        g.diags[0].msg()
+    );
     let bin = sample("kdc101-session.bin");
     let want = [&bin[..19], &bin[32..48], &bin[64..80], &bin[336..340]].concat();
     assert_eq!(g.bytes(), want);

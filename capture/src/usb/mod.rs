@@ -779,7 +779,7 @@ fn snap_note(have: usize, orig_len: u32) -> String {
 }
 
 fn diag(out: &mut Vec<UsbOut>, offset: u64, kind: &'static str, msg: String) {
-    out.push(UsbOut::Diag(ReadDiag { offset, kind, msg }));
+    out.push(UsbOut::Diag(ReadDiag::untyped(offset, kind, msg)));
 }
 
 fn rd16(d: &[u8], at: usize, be: bool) -> u16 {
