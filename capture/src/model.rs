@@ -245,8 +245,10 @@ pub enum ReadProblem {
     },
     /// A problem of hex or raw input (bad hex digit …), as the dissector reports it.
     Input(aptscope_dissector::DiagKind),
-    /// A problem of a reader not converted to typed problems yet (MCAP, USB, text logs): its
-    /// stable name and text.
+    /// A problem of a text log (socat, interceptty, jpnevulator, hex dumps, hex columns).
+    Log(LogProblem),
+    /// A problem of a reader not converted to typed problems yet (MCAP, USB): its stable name
+    /// and text.
     Untyped {
         /// Stable snake_case name.
         kind: &'static str,
@@ -318,6 +320,7 @@ impl ReadProblem {
             ReadProblem::SnappedPacket { .. } => "snapped_packet",
             ReadProblem::UnknownInterface { .. } => "unknown_interface",
             ReadProblem::Input(k) => k.name(),
+            ReadProblem::Log(p) => p.kind(),
             ReadProblem::Untyped { kind, .. } => kind,
         }
     }
@@ -386,6 +389,7 @@ impl fmt::Display for ReadProblem {
                 "packet of interface {interface}, which no Interface Description Block declared"
             ),
             ReadProblem::Input(k) => write!(f, "{k}"),
+            ReadProblem::Log(p) => write!(f, "{p}"),
             ReadProblem::Untyped { msg, .. } => f.write_str(msg),
         }
     }
@@ -428,5 +432,214 @@ pub trait Writer {
     /// each (said by `convert`): empty when the file holds all of it.
     fn lost(&self) -> Vec<String> {
         vec![]
+    }
+}
+
+/// The part of a text log line that could not be read ([`LogProblem::Unreadable`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LogField {
+    /// The hex bytes.
+    Hex,
+    /// The time stamp.
+    Timestamp,
+    /// The line as a whole: no hex bytes where its columns start.
+    Line,
+}
+
+/// What a text log reader found wrong ([`ReadProblem::Log`]); the line's text is shortened to
+/// its first 60 bytes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum LogProblem {
+    /// A line longer than the reader holds: skipped.
+    LineTooLong {
+        /// The longest line read.
+        max: usize,
+    },
+    /// The last line has no end of line (a cut file); what it holds is still read.
+    TruncatedLine,
+    /// A line that is not part of the log's format.
+    GarbageLine {
+        /// What was expected (`a socat dump` …).
+        expected: String,
+        /// The line.
+        line: String,
+    },
+    /// Not a hex byte where one was expected.
+    BadHex {
+        /// Its column (from 1).
+        column: usize,
+        /// The text from there.
+        found: String,
+    },
+    /// A hex-column or interceptty line whose bytes or time stamp (or the line as a whole)
+    /// cannot be read.
+    Unreadable {
+        /// Which part.
+        field: LogField,
+        /// Its column (from 1).
+        column: usize,
+        /// The line.
+        line: String,
+    },
+    /// An ASCII column that does not show the line's hex bytes.
+    AsciiMismatch {
+        /// The ASCII column.
+        ascii: String,
+    },
+    /// A hex dump's offset is not where the lines before it end: bytes are missing.
+    OffsetGap {
+        /// The offset due.
+        expected: u64,
+        /// The offset found.
+        found: u64,
+    },
+    /// A jpnevulator byte count is not where the lines before it end: bytes are missing.
+    ByteCountGap {
+        /// The count due.
+        expected: u64,
+        /// The count found.
+        found: u64,
+    },
+    /// A hex dump's `*` standing for more bytes than a dump repeats: not expanded.
+    RepeatTooLong {
+        /// The bytes it stands for.
+        bytes: u64,
+        /// The most expanded.
+        max: u64,
+    },
+    /// A hex dump's `*` that does not fit before the next line's offset.
+    RepeatMisfit {
+        /// The next line's offset.
+        before: u64,
+    },
+    /// A hex dump's `*` with no line before it to repeat.
+    RepeatNothing,
+    /// A hex dump ending after `*`: how often the line repeats is unknown.
+    TruncatedRepeat,
+    /// A socat block whose bytes are not as many as its header says.
+    LengthMismatch {
+        /// The header's `length=`.
+        expected: u64,
+        /// The bytes that follow.
+        found: u64,
+    },
+    /// A socat header whose `from=` and `to=` do not span its `length=`.
+    SpanMismatch {
+        /// `from=`.
+        from: u64,
+        /// `to=`.
+        to: u64,
+        /// `length=`.
+        length: u64,
+    },
+    /// A socat header whose `from=` is not what was logged before in its direction: blocks are
+    /// missing.
+    SequenceGap {
+        /// The bytes logged before in this direction (the `from=` due).
+        expected: u64,
+        /// `from=`.
+        found: u64,
+    },
+    /// Socat hex data without a direction line before it: kept, direction unknown.
+    MissingHeader,
+    /// A socat direction line that cannot be read.
+    BadHeader {
+        /// The line.
+        line: String,
+    },
+}
+
+impl LogProblem {
+    /// The stable snake_case name.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            LogProblem::LineTooLong { .. } => "line_too_long",
+            LogProblem::TruncatedLine => "truncated_line",
+            LogProblem::GarbageLine { .. }
+            | LogProblem::Unreadable {
+                field: LogField::Line,
+                ..
+            } => "garbage_line",
+            LogProblem::BadHex { .. }
+            | LogProblem::Unreadable {
+                field: LogField::Hex,
+                ..
+            } => "bad_hex",
+            LogProblem::Unreadable {
+                field: LogField::Timestamp,
+                ..
+            } => "bad_timestamp",
+            LogProblem::AsciiMismatch { .. } => "ascii_mismatch",
+            LogProblem::OffsetGap { .. } => "offset_gap",
+            LogProblem::ByteCountGap { .. } => "byte_count_gap",
+            LogProblem::RepeatTooLong { .. }
+            | LogProblem::RepeatMisfit { .. }
+            | LogProblem::RepeatNothing => "bad_repeat",
+            LogProblem::TruncatedRepeat => "truncated_repeat",
+            LogProblem::LengthMismatch { .. } | LogProblem::SpanMismatch { .. } => {
+                "length_mismatch"
+            }
+            LogProblem::SequenceGap { .. } => "sequence_gap",
+            LogProblem::MissingHeader => "missing_header",
+            LogProblem::BadHeader { .. } => "bad_header",
+        }
+    }
+}
+
+impl fmt::Display for LogProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            LogProblem::LineTooLong { max } => write!(f, "line longer than {max} bytes, skipped"),
+            LogProblem::TruncatedLine => {
+                f.write_str("the last line has no end of line: the file was cut")
+            }
+            LogProblem::GarbageLine { expected, line } => {
+                write!(f, "not part of {expected}: {line:?}")
+            }
+            LogProblem::BadHex { column, found } => {
+                write!(f, "not a hex byte at column {column}: {found:?}")
+            }
+            LogProblem::Unreadable { column, line, .. } => {
+                write!(f, "unreadable at column {column}: {line:?}")
+            }
+            LogProblem::AsciiMismatch { ascii } => {
+                write!(f, "the ASCII column {ascii:?} does not match the hex bytes")
+            }
+            LogProblem::OffsetGap { expected, found } => {
+                write!(f, "offset {found:#x} where {expected:#x} was due")
+            }
+            LogProblem::ByteCountGap { expected, found } => write!(
+                f,
+                "byte count {found:08X} where {expected:08X} was due: bytes are missing"
+            ),
+            LogProblem::RepeatTooLong { bytes, max } => write!(
+                f,
+                "a '*' line standing for {bytes} bytes (more than {max}); not expanded"
+            ),
+            LogProblem::RepeatMisfit { before } => {
+                write!(f, "a '*' line that does not fit before offset {before:#x}")
+            }
+            LogProblem::RepeatNothing => f.write_str("a '*' line without a line to repeat"),
+            LogProblem::TruncatedRepeat => {
+                f.write_str("the dump ends after '*': how often the line repeats is unknown")
+            }
+            LogProblem::LengthMismatch { expected, found } => write!(
+                f,
+                "the header says length={expected} but {found} bytes follow"
+            ),
+            LogProblem::SpanMismatch { from, to, length } => {
+                write!(f, "from={from} to={to} do not span length={length}")
+            }
+            LogProblem::SequenceGap { expected, found } => write!(
+                f,
+                "from={found} but {expected} bytes were logged before in this direction: blocks \
+                 are missing"
+            ),
+            LogProblem::MissingHeader => {
+                f.write_str("hex data without a direction line before it: kept, direction unknown")
+            }
+            LogProblem::BadHeader { line } => write!(f, "unreadable direction line {line:?}"),
+        }
     }
 }

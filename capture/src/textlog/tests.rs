@@ -313,6 +313,47 @@ fn socat_garbage_gap_and_headerless_data() {
 }
 
 #[test]
+fn socat_problems_are_typed_and_say_what_was_expected_and_found() {
+    let text = format!(
+        " 01 02\n{SOCAT_OK}hello there\n{}{}",
+        SOCAT_OK.replace("from=0 to=5", "from=10 to=15"),
+        SOCAT_OK.replace("from=0 to=5", "from=16 to=30")
+    );
+    let g = read_str(TextFormat::Socat, &text);
+    let log = ReadProblem::Log;
+    let problems: Vec<ReadProblem> = g.diags.iter().map(|d| d.problem.clone()).collect();
+    assert_eq!(
+        problems,
+        [
+            log(LogProblem::MissingHeader),
+            log(LogProblem::GarbageLine {
+                expected: "a socat dump".into(),
+                line: "hello there".into()
+            }),
+            log(LogProblem::SequenceGap {
+                expected: 6,
+                found: 10
+            }),
+            log(LogProblem::SpanMismatch {
+                from: 16,
+                to: 30,
+                length: 6
+            }),
+        ]
+    );
+    let texts: Vec<String> = g.diags.iter().map(ReadDiag::msg).collect();
+    assert_eq!(
+        texts[1..],
+        [
+            "not part of a socat dump: \"hello there\"",
+            "from=10 but 6 bytes were logged before in this direction: blocks are missing",
+            "from=16 to=30 do not span length=6"
+        ]
+    );
+    assert_eq!(g.diags[3].kind(), "length_mismatch");
+}
+
+#[test]
 fn socat_ascii_mismatch() {
     let g = read_str(TextFormat::Socat, &SOCAT_OK.replace("....P.", "....Q."));
     assert_eq!(g.kinds(), vec![("ascii_mismatch", 51)]);
