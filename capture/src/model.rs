@@ -247,8 +247,11 @@ pub enum ReadProblem {
     Input(aptscope_dissector::DiagKind),
     /// A problem of a text log (socat, interceptty, jpnevulator, hex dumps, hex columns).
     Log(LogProblem),
-    /// A problem of a reader not converted to typed problems yet (MCAP, USB): its stable name
-    /// and text.
+    /// A damaged record of a USB capture (usbmon, USBPcap).
+    Usb(UsbProblem),
+    /// A problem of a reader not converted to typed problems yet (MCAP), or a note that is not
+    /// a damaged record (what a USB device was found to be, its line settings): its stable
+    /// name and text.
     Untyped {
         /// Stable snake_case name.
         kind: &'static str,
@@ -321,6 +324,7 @@ impl ReadProblem {
             ReadProblem::UnknownInterface { .. } => "unknown_interface",
             ReadProblem::Input(k) => k.name(),
             ReadProblem::Log(p) => p.kind(),
+            ReadProblem::Usb(p) => p.kind(),
             ReadProblem::Untyped { kind, .. } => kind,
         }
     }
@@ -390,6 +394,7 @@ impl fmt::Display for ReadProblem {
             ),
             ReadProblem::Input(k) => write!(f, "{k}"),
             ReadProblem::Log(p) => write!(f, "{p}"),
+            ReadProblem::Usb(p) => write!(f, "{p}"),
             ReadProblem::Untyped { msg, .. } => f.write_str(msg),
         }
     }
@@ -640,6 +645,247 @@ impl fmt::Display for LogProblem {
                 f.write_str("hex data without a direction line before it: kept, direction unknown")
             }
             LogProblem::BadHeader { line } => write!(f, "unreadable direction line {line:?}"),
+        }
+    }
+}
+
+/// The USB capture format of a record ([`UsbProblem`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum UsbFormat {
+    /// Linux usbmon (link types 189, 220).
+    Usbmon,
+    /// Windows USBPcap (link type 249).
+    UsbPcap,
+}
+
+impl UsbFormat {
+    fn name(self) -> &'static str {
+        match self {
+            UsbFormat::Usbmon => "usbmon",
+            UsbFormat::UsbPcap => "USBPcap",
+        }
+    }
+}
+
+/// A record cut by the capture's snapshot length: what was on the wire.
+struct Snap {
+    record: usize,
+    original: u32,
+}
+
+impl fmt::Display for Snap {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if u64::from(self.original) > self.record as u64 {
+            write!(
+                f,
+                " (cut from {} by the capture's snapshot length)",
+                self.original
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// Why a USB transfer's data is short ([`UsbProblem::TruncatedUrb`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum UrbCut {
+    /// The record holds fewer data bytes than its header announces.
+    Record {
+        /// The format.
+        format: UsbFormat,
+        /// The data bytes the header announces.
+        expected: u64,
+        /// The data bytes the record holds.
+        found: usize,
+        /// The record's length.
+        record: usize,
+        /// The packet's length on the wire (more than `record` when the snapshot length cut
+        /// it).
+        original: u32,
+    },
+    /// usbmon captured none of the transfer's data (its data flag says why).
+    NoData {
+        /// The transfer's length.
+        length: u32,
+        /// usbmon's data flag.
+        flag: u8,
+    },
+    /// usbmon captured fewer bytes of the transfer than it had.
+    Uncaptured {
+        /// The transfer's length.
+        length: u32,
+        /// The bytes captured.
+        captured: u32,
+    },
+}
+
+/// A damaged record of a USB capture ([`ReadProblem::Usb`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum UsbProblem {
+    /// A link type that is not USB.
+    UnknownLinkType {
+        /// The link type.
+        linktype: u32,
+    },
+    /// A record shorter than its header.
+    RecordTooShort {
+        /// The format.
+        format: UsbFormat,
+        /// The header's length.
+        expected: usize,
+        /// The record's length.
+        found: usize,
+        /// The packet's length on the wire.
+        original: u32,
+    },
+    /// A USBPcap header length below the smallest header.
+    HeaderTooShort {
+        /// The smallest header.
+        min: usize,
+        /// The length it says.
+        found: usize,
+    },
+    /// A USBPcap control setup stage without its 8 setup bytes.
+    ShortSetup {
+        /// The bytes there.
+        found: usize,
+    },
+    /// A usbmon event type other than S, C, E.
+    UnknownEvent {
+        /// The event type.
+        found: u8,
+    },
+    /// A transfer type the format does not define.
+    UnknownTransferType {
+        /// The format.
+        format: UsbFormat,
+        /// The transfer type.
+        found: u8,
+        /// The device's bus.
+        bus: u16,
+        /// The device's address.
+        addr: u16,
+    },
+    /// A transfer whose data is short: the bytes present are shown.
+    TruncatedUrb {
+        /// Why.
+        cut: UrbCut,
+        /// The device's bus.
+        bus: u16,
+        /// The device's address.
+        addr: u16,
+        /// The endpoint.
+        ep: u8,
+    },
+}
+
+impl UsbProblem {
+    /// The stable snake_case name.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            UsbProblem::UnknownLinkType { .. } => "usb_unknown_linktype",
+            UsbProblem::RecordTooShort { .. } => "usb_record_too_short",
+            UsbProblem::HeaderTooShort { .. } | UsbProblem::ShortSetup { .. } => "usb_bad_header",
+            UsbProblem::UnknownEvent { .. } => "usb_unknown_event",
+            UsbProblem::UnknownTransferType { .. } => "usb_unknown_transfer_type",
+            UsbProblem::TruncatedUrb { .. } => "truncated_urb",
+        }
+    }
+}
+
+impl fmt::Display for UrbCut {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            UrbCut::Record {
+                format,
+                expected,
+                found,
+                record,
+                original,
+            } => {
+                let what = match format {
+                    UsbFormat::Usbmon => "captured bytes",
+                    UsbFormat::UsbPcap => "data bytes",
+                };
+                let snap = Snap { record, original };
+                write!(
+                    f,
+                    "{} header announces {expected} {what}, the record holds {found}{snap}",
+                    format.name()
+                )
+            }
+            UrbCut::NoData { length, flag } => write!(
+                f,
+                "URB of {length} bytes whose data usbmon did not capture (data flag 0x{flag:02x})"
+            ),
+            UrbCut::Uncaptured { length, captured } => {
+                write!(
+                    f,
+                    "URB of {length} bytes of which usbmon captured {captured}"
+                )
+            }
+        }
+    }
+}
+
+impl fmt::Display for UsbProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            UsbProblem::UnknownLinkType { linktype } => {
+                write!(
+                    f,
+                    "link type {linktype} is not a USB capture (189, 220, 249)"
+                )
+            }
+            UsbProblem::RecordTooShort {
+                format,
+                expected,
+                found,
+                original,
+            } => {
+                let snap = Snap {
+                    record: *found,
+                    original: *original,
+                };
+                write!(
+                    f,
+                    "{} record of {found} bytes{snap} is shorter than its {expected}-byte header",
+                    format.name()
+                )
+            }
+            UsbProblem::HeaderTooShort { min, found } => {
+                write!(f, "USBPcap header length {found} is less than {min}")
+            }
+            UsbProblem::ShortSetup { found } => write!(
+                f,
+                "USBPcap control setup stage with {found} bytes instead of 8"
+            ),
+            UsbProblem::UnknownEvent { found } => {
+                write!(f, "usbmon event type 0x{found:02x} is none of S, C, E")
+            }
+            UsbProblem::UnknownTransferType {
+                format: UsbFormat::Usbmon,
+                found,
+                bus,
+                addr,
+            } => write!(
+                f,
+                "usbmon transfer type {found} is none of 0-3 (usb {bus}:{addr})"
+            ),
+            UsbProblem::UnknownTransferType {
+                format: UsbFormat::UsbPcap,
+                found,
+                bus,
+                addr,
+            } => write!(
+                f,
+                "USBPcap transfer type 0x{found:02x} is none of 0-3, 0xfe, 0xff (usb {bus}:{addr})"
+            ),
+            UsbProblem::TruncatedUrb { cut, bus, addr, ep } => write!(
+                f,
+                "{cut} (usb {bus}:{addr} endpoint 0x{ep:02x}): the bytes present are shown"
+            ),
         }
     }
 }

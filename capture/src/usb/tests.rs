@@ -430,6 +430,37 @@ fn truncated_and_bad_records() {
         ]
     );
     assert!(diags_of(&out)[0].msg().contains("snapshot length"));
+    // The typed problems say what was expected and found, in the words they always had.
+    let msgs: Vec<String> = diags_of(&out).iter().map(ReadDiag::msg).collect();
+    let shown = "(usb 1:2 endpoint 0x02): the bytes present are shown";
+    assert_eq!(
+        msgs,
+        [
+            "usbmon record of 30 bytes (cut from 200 by the capture's snapshot length) is \
+             shorter than its 64-byte header"
+                .to_string(),
+            format!(
+                "usbmon header announces 10 captured bytes, the record holds 4 (cut from 200 by \
+                 the capture's snapshot length) {shown}"
+            ),
+            format!("URB of 8 bytes of which usbmon captured 3 {shown}"),
+            format!("URB of 2 bytes whose data usbmon did not capture (data flag 0x5a) {shown}"),
+            "usbmon transfer type 7 is none of 0-3 (usb 1:2)".to_string(),
+            "usbmon event type 0x5a is none of S, C, E".to_string(),
+        ]
+    );
+    assert_eq!(
+        diags_of(&out)[2].problem,
+        ReadProblem::Usb(UsbProblem::TruncatedUrb {
+            cut: UrbCut::Uncaptured {
+                length: 8,
+                captured: 3
+            },
+            bus: 1,
+            addr: 2,
+            ep: 2
+        })
+    );
     let bytes: Vec<Vec<u8>> = chunks_of(&out).into_iter().map(|c| c.bytes).collect();
     assert_eq!(
         bytes,
@@ -460,6 +491,16 @@ fn truncated_and_bad_records() {
             (11, "usb_record_too_short"),
             (22, "usb_record_too_short"),
             (33, "truncated_urb")
+        ]
+    );
+    let msgs: Vec<String> = diags_of(&out).iter().map(ReadDiag::msg).collect();
+    assert_eq!(
+        msgs,
+        [
+            "USBPcap record of 10 bytes is shorter than its 27-byte header",
+            "USBPcap record of 30 bytes is shorter than its 200-byte header",
+            "USBPcap header announces 6 data bytes, the record holds 2 (cut from 33 by the \
+             capture's snapshot length) (usb 1:5 endpoint 0x02): the bytes present are shown"
         ]
     );
     demux.finish(&mut out);
