@@ -335,7 +335,7 @@ fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<S
                     Event::Chunk(c) => p.push_chunk(c.ctx(), c.bytes, &mut emit)?,
                     Event::Diag(d) => {
                         fatal(&d)?;
-                        p.file_diag(d.offset, d.kind, &d.msg, &mut emit)?
+                        p.file_diag(d.offset, d.kind(), &d.msg(), &mut emit)?
                     }
                     Event::Stream(s) => {
                         p.stream_info(s.id, &s.name, s.settings.as_deref(), &mut emit)?

@@ -765,8 +765,8 @@ fn open_opts(format: Option<&str>, hex: bool, usb: Option<&str>) -> io::Result<O
 /// A reader's diagnostic that makes the command fail: the input has nothing of what was asked
 /// for (`--usb-device` naming no device of the capture).
 fn fatal(d: &aptscope_capture::ReadDiag) -> io::Result<()> {
-    if d.kind == aptscope_capture::usb::NOT_FOUND {
-        return Err(bad(d.msg.clone()));
+    if d.kind() == aptscope_capture::usb::NOT_FOUND {
+        return Err(bad(d.msg()));
     }
     Ok(())
 }
@@ -854,7 +854,7 @@ fn stats(
             Event::Chunk(c) => dec.push(c.ctx(), c.bytes, &mut each)?,
             Event::Diag(d) => {
                 fatal(&d)?;
-                dec.file_diag(d.offset, d.kind, &d.msg, &mut each)?
+                dec.file_diag(d.offset, d.kind(), &d.msg(), &mut each)?
             }
             Event::Stream(s) => dec.stream_info(s.id, &s.name, s.settings.as_deref(), &mut each)?,
         }

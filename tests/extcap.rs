@@ -6,75 +6,24 @@
 //! tshark is required (see `aptscope_capture::tools::require`). Every wait is a poll against a
 //! generous deadline that only a broken build reaches.
 
+mod common;
+
 use aptscope_capture::tools::require;
+use common::host::{ask_info, ready, start_sim, HW_REQ_INFO};
+use common::proc::{wait_for, Proc};
+use common::Scratch;
 use nix::fcntl::OFlag;
-use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
-use nix::sys::signal::{kill, Signal};
+use nix::poll::PollFlags;
+use nix::sys::signal::Signal;
 use nix::sys::stat::Mode;
-use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
-use nix::unistd::Pid;
 use serde_json::Value;
 use std::fs::File;
-use std::io::{self, Read, Write};
-use std::os::fd::AsFd;
+use std::io::{self, Read};
 use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Output, Stdio};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
-use std::thread::{self, JoinHandle};
-use std::time::{Duration, Instant};
+use std::process::{Command, Output, Stdio};
 
 const BIN: &str = env!("CARGO_BIN_EXE_aptscope");
-/// Only reached when something is broken (a loaded 2-core CI machine is slow, not stuck).
-const DEADLINE: Duration = Duration::from_secs(60);
-const POLL: Duration = Duration::from_millis(10);
-/// HW_REQ_INFO from the host to a controller (0x50).
-const HW_REQ_INFO: [u8; 6] = [0x05, 0x00, 0x00, 0x00, 0x50, 0x01];
-/// The header of the simulated KDC101's HW_GET_INFO reply (84 data bytes, 0x81 → host).
-const HW_GET_INFO_HDR: [u8; 6] = [0x06, 0x00, 0x54, 0x00, 0x81, 0x50];
-
-fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-fn wait_for(what: &str, ctx: impl Fn() -> String, mut cond: impl FnMut() -> bool) {
-    let t0 = Instant::now();
-    while !cond() {
-        assert!(
-            t0.elapsed() < DEADLINE,
-            "timed out waiting for {what}\n{}",
-            ctx()
-        );
-        thread::sleep(POLL);
-    }
-}
-
-/// A scratch directory of one test, removed when the test ends.
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn new(name: &str) -> Self {
-        static N: AtomicUsize = AtomicUsize::new(0);
-        let d = std::env::temp_dir().join(format!(
-            "aptscope-extcap-{}-{}-{name}",
-            std::process::id(),
-            N.fetch_add(1, Ordering::SeqCst)
-        ));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).expect("scratch dir");
-        Scratch(d)
-    }
-    fn join(&self, p: &str) -> PathBuf {
-        self.0.join(p)
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
 
 fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8 path")
@@ -90,166 +39,6 @@ fn aptscope(args: &[&str]) -> Output {
 
 fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
-}
-
-/// A running program, its standard output and error collected as they come; killed if still
-/// running when dropped (a failing test leaves nothing behind).
-struct Proc {
-    name: String,
-    child: Child,
-    out: Arc<Mutex<String>>,
-    err: Arc<Mutex<String>>,
-    readers: Vec<JoinHandle<()>>,
-    status: Option<ExitStatus>,
-}
-
-fn collect(mut pipe: impl Read + Send + 'static, sink: Arc<Mutex<String>>) -> JoinHandle<()> {
-    thread::spawn(move || {
-        let mut buf = [0u8; 4096];
-        while let Ok(n) = pipe.read(&mut buf) {
-            if n == 0 {
-                break;
-            }
-            lock(&sink).push_str(&String::from_utf8_lossy(&buf[..n]));
-        }
-    })
-}
-
-impl Proc {
-    fn spawn(mut cmd: Command, name: &str) -> Proc {
-        let mut child = cmd
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap_or_else(|e| panic!("run {name}: {e}"));
-        let (out, err) = <(Arc<Mutex<String>>, Arc<Mutex<String>>)>::default();
-        let readers = vec![
-            collect(child.stdout.take().expect("stdout"), out.clone()),
-            collect(child.stderr.take().expect("stderr"), err.clone()),
-        ];
-        Proc {
-            name: name.into(),
-            child,
-            out,
-            err,
-            readers,
-            status: None,
-        }
-    }
-    fn stdout(&self) -> String {
-        lock(&self.out).clone()
-    }
-    fn stderr(&self) -> String {
-        lock(&self.err).clone()
-    }
-    fn both(&self) -> String {
-        format!(
-            "{}: stdout:\n{}\nstderr:\n{}",
-            self.name,
-            self.stdout(),
-            self.stderr()
-        )
-    }
-    fn signal(&self, sig: Signal) {
-        kill(Pid::from_raw(self.child.id() as i32), sig).expect("send signal");
-    }
-    fn running(&mut self) -> bool {
-        matches!(self.child.try_wait(), Ok(None))
-    }
-    /// Wait for it to exit (failing, not hanging, when it does not), then for its output.
-    fn wait_exit(&mut self) -> ExitStatus {
-        if let Some(s) = self.status {
-            return s;
-        }
-        let t0 = Instant::now();
-        let status = loop {
-            if let Some(s) = self.child.try_wait().expect("try_wait") {
-                break s;
-            }
-            if t0.elapsed() > DEADLINE {
-                let _ = self.child.kill();
-                let _ = self.child.wait();
-                panic!("{} did not exit\n{}", self.name, self.both());
-            }
-            thread::sleep(POLL);
-        };
-        self.status = Some(status);
-        for r in self.readers.drain(..) {
-            let _ = r.join();
-        }
-        status
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        if self.status.is_none() && self.running() {
-            let _ = self.child.kill();
-        }
-        let _ = self.child.wait();
-    }
-}
-
-/// `aptscope sim apt --model kdc101 --pty LINK`, once its link is there.
-fn start_sim(link: &Path) -> Proc {
-    let mut c = Command::new(BIN);
-    c.args(["sim", "apt", "--model", "kdc101", "--pty", s(link)]);
-    let p = Proc::spawn(c, "aptscope sim");
-    wait_for(
-        "the simulator's link",
-        || p.both(),
-        || p.stdout().contains(&format!("{} -> /dev/", link.display())),
-    );
-    p
-}
-
-/// The host's serial port: the tap's link opened like a program would (no controlling
-/// terminal, raw mode), non-blocking.
-fn open_host(path: &Path) -> File {
-    let f = File::options()
-        .read(true)
-        .write(true)
-        .custom_flags((OFlag::O_NOCTTY | OFlag::O_NONBLOCK).bits())
-        .open(path)
-        .unwrap_or_else(|e| panic!("open {}: {e}", path.display()));
-    let mut t = tcgetattr(&f).expect("tcgetattr");
-    cfmakeraw(&mut t);
-    tcsetattr(&f, SetArg::TCSANOW, &t).expect("tcsetattr");
-    f
-}
-
-fn ready(f: &File, ev: PollFlags) -> bool {
-    let mut fds = [PollFd::new(f.as_fd(), ev)];
-    matches!(poll(&mut fds, PollTimeout::from(100u16)), Ok(n) if n > 0)
-}
-
-/// Send HW_REQ_INFO on the tap's host link (once it is there) and read the whole reply.
-fn ask_info(link: &Path, ctx: impl Fn() -> String) -> Vec<u8> {
-    wait_for("the extcap's host link", &ctx, || {
-        std::fs::read_link(link).is_ok()
-    });
-    let mut host = open_host(link);
-    host.write_all(&HW_REQ_INFO).expect("host write");
-    let got = std::cell::RefCell::new(vec![]);
-    let mut buf = [0u8; 256];
-    wait_for(
-        "the simulator's HW_GET_INFO through the tap",
-        || format!("host got {:02x?}\n{}", got.borrow(), ctx()),
-        || {
-            if ready(&host, PollFlags::POLLIN) {
-                match host.read(&mut buf) {
-                    Ok(n) => got.borrow_mut().extend_from_slice(&buf[..n]),
-                    Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
-                    Err(e) => panic!("host read: {e}"),
-                }
-            }
-            got.borrow().len() >= 90
-        },
-    );
-    let got = got.into_inner();
-    assert_eq!(got[..6], HW_GET_INFO_HDR, "{got:02x?}");
-    got
 }
 
 /// The frame names of `aptscope decode --json FILE`.
@@ -562,30 +351,42 @@ fn a_device_that_cannot_be_opened_is_what_wireshark_shows() {
     );
 }
 
-#[test]
-fn the_extcap_ends_cleanly_when_the_fifo_reader_goes_away() {
-    let dir = Scratch::new("fifo");
+/// A capture as Wireshark runs it: a simulator on DIR/dev, `aptscope extcap --capture
+/// --extcap-interface aptscope --fifo DIR/fifo --device DIR/dev --link DIR/host EXTRA…`, and
+/// the FIFO opened for reading without waiting for the writer. Returns the simulator, the
+/// extcap and the FIFO.
+fn fifo_capture(dir: &Scratch, extra: &[&str]) -> (Proc, Proc, File) {
     let (dev, host, fifo) = (dir.join("dev"), dir.join("host"), dir.join("fifo"));
     nix::unistd::mkfifo(&fifo, Mode::S_IRUSR | Mode::S_IWUSR).expect("mkfifo");
-    let _sim = start_sim(&dev);
+    let sim = start_sim(&dev);
     let mut c = Command::new(BIN);
-    c.args([
-        "extcap",
-        "--capture",
-        "--extcap-interface",
-        "aptscope",
-        "--fifo",
-        s(&fifo),
-    ])
-    .args(["--device", s(&dev), "--link", s(&host), "--proto", "apt"])
-    .args(["--baud", "auto", "--flow", "auto"]);
-    let mut ext = Proc::spawn(c, "aptscope extcap");
-    // Opened without waiting for the writer, then read as Wireshark would.
-    let mut r = File::options()
+    c.args(["extcap", "--capture", "--extcap-interface", "aptscope"])
+        .args(["--fifo", s(&fifo), "--device", s(&dev), "--link", s(&host)])
+        .args(extra);
+    let ext = Proc::spawn(c, "aptscope extcap");
+    let r = File::options()
         .read(true)
         .custom_flags(OFlag::O_NONBLOCK.bits())
         .open(&fifo)
         .expect("open fifo");
+    (sim, ext, r)
+}
+
+/// The extcap ended cleanly: success, nothing on stderr (Wireshark would show it as an error),
+/// its host link removed.
+fn assert_clean_end(ext: &mut Proc, host: &Path) {
+    assert!(ext.wait_exit().success(), "{}", ext.both());
+    assert_eq!(ext.stderr(), "");
+    assert!(std::fs::symlink_metadata(host).is_err(), "link left behind");
+}
+
+#[test]
+fn the_extcap_ends_cleanly_when_the_fifo_reader_goes_away() {
+    let dir = Scratch::new("fifo");
+    let host = dir.join("host");
+    let extra = ["--proto", "apt", "--baud", "auto", "--flow", "auto"];
+    let (_sim, mut ext, mut r) = fifo_capture(&dir, &extra);
+    // Read as Wireshark would.
     let mut got = vec![];
     let mut buf = [0u8; 4096];
     let mut pump = |got: &mut Vec<u8>| {
@@ -610,14 +411,7 @@ fn the_extcap_ends_cleanly_when_the_fifo_reader_goes_away() {
     // pcapng: a section header block first, flushed live.
     assert_eq!(got[..4], [0x0a, 0x0d, 0x0d, 0x0a]);
     drop(r);
-    let st = ext.wait_exit();
-    assert!(st.success(), "{}", ext.both());
-    // Nothing on stderr: Wireshark would show it as an error.
-    assert_eq!(ext.stderr(), "");
-    assert!(
-        std::fs::symlink_metadata(&host).is_err(),
-        "link left behind"
-    );
+    assert_clean_end(&mut ext, &host);
     // What went through the FIFO is a capture aptscope reads.
     let cap = dir.join("got.pcapng");
     std::fs::write(&cap, &got).expect("write");
@@ -627,35 +421,13 @@ fn the_extcap_ends_cleanly_when_the_fifo_reader_goes_away() {
 #[test]
 fn sigterm_ends_the_capture_cleanly() {
     let dir = Scratch::new("sigterm");
-    let (dev, host, fifo) = (dir.join("dev"), dir.join("host"), dir.join("fifo"));
-    nix::unistd::mkfifo(&fifo, Mode::S_IRUSR | Mode::S_IWUSR).expect("mkfifo");
-    let _sim = start_sim(&dev);
-    let mut c = Command::new(BIN);
-    c.args([
-        "extcap",
-        "--capture",
-        "--extcap-interface",
-        "aptscope",
-        "--fifo",
-        s(&fifo),
-    ])
-    .args(["--device", s(&dev), "--link", s(&host)]);
-    let mut ext = Proc::spawn(c, "aptscope extcap");
-    let _r = File::options()
-        .read(true)
-        .custom_flags(OFlag::O_NONBLOCK.bits())
-        .open(&fifo)
-        .expect("open fifo");
+    let host = dir.join("host");
+    let (_sim, mut ext, _r) = fifo_capture(&dir, &[]);
     wait_for(
         "the extcap's host link",
         || ext.both(),
         || std::fs::read_link(&host).is_ok(),
     );
     ext.signal(Signal::SIGTERM);
-    assert!(ext.wait_exit().success(), "{}", ext.both());
-    assert_eq!(ext.stderr(), "");
-    assert!(
-        std::fs::symlink_metadata(&host).is_err(),
-        "link left behind"
-    );
+    assert_clean_end(&mut ext, &host);
 }

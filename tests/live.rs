@@ -7,243 +7,68 @@ mod common;
 
 use aptscope_capture::open::{open, Format, OpenOptions};
 use aptscope_capture::{Direction, Event};
-use common::scratch;
+use common::host::{ask_info, open_host, ready, start_sim, start_sim_with, HW_GET_INFO_LEN};
+use common::proc::{lock, wait_for, Proc, DEADLINE, POLL};
+use common::term::Term;
+use common::{apt_frames as frames, scratch};
 use nix::fcntl::OFlag;
-use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+use nix::poll::PollFlags;
 use nix::sys::signal::{kill, Signal};
 use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
 use nix::unistd::Pid;
-use std::cell::RefCell;
 use std::fs::File;
 use std::io::{self, Read, Write};
-use std::os::fd::AsFd;
-use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
 
-/// Only reached when something is broken (a loaded 2-core CI machine is slow, not stuck).
-const DEADLINE: Duration = Duration::from_secs(60);
-/// How often conditions are looked at again.
-const POLL: Duration = Duration::from_millis(10);
-
-/// Wait for `cond` until the deadline; panics with `what` (and `ctx()`) when it never holds.
-fn wait_for(what: &str, ctx: impl Fn() -> String, mut cond: impl FnMut() -> bool) {
-    let t0 = Instant::now();
-    while !cond() {
-        assert!(
-            t0.elapsed() < DEADLINE,
-            "timed out waiting for {what}\n{}",
-            ctx()
-        );
-        thread::sleep(POLL);
-    }
+/// `tap --device DIR/dev --link DIR/host -w DIR/cap.pcapng EXTRA…`: the tap between the
+/// simulator and the host in the tests' scratch directory.
+fn tap_args(dir: &Path, extra: &[&str]) -> Vec<String> {
+    let p = |f: &str| dir.join(f).to_str().expect("utf-8 path").to_string();
+    let mut a: Vec<String> = vec!["tap".into(), "--device".into(), p("dev"), "--link".into()];
+    a.extend([p("host"), "-w".into(), p("cap.pcapng")]);
+    a.extend(extra.iter().map(|s| s.to_string()));
+    a
 }
 
-fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-// ---------------------------------------------------------------------------------------------
-// Processes
-
-/// A running `aptscope`, its standard error collected as it comes; killed if still running
-/// when dropped (a failing test leaves nothing behind).
-struct Proc {
-    name: String,
-    child: Child,
-    stdout: Arc<Mutex<String>>,
-    stderr: Arc<Mutex<String>>,
-    readers: Vec<JoinHandle<()>>,
-    status: Option<ExitStatus>,
-}
-
-/// Collect what `pipe` gives into `sink` as it comes.
-fn collect(mut pipe: impl Read + Send + 'static, sink: Arc<Mutex<String>>) -> JoinHandle<()> {
-    thread::spawn(move || {
-        let mut buf = [0u8; 4096];
-        while let Ok(n) = pipe.read(&mut buf) {
-            if n == 0 {
-                break;
-            }
-            lock(&sink).push_str(&String::from_utf8_lossy(&buf[..n]));
-        }
-    })
-}
-
-impl Proc {
-    fn spawn(args: &[&str]) -> Proc {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_aptscope"))
-            .args(args)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("run aptscope");
-        let (stdout, stderr) = Default::default();
-        let readers = vec![
-            collect(child.stdout.take().expect("stdout"), Arc::clone(&stdout)),
-            collect(child.stderr.take().expect("stderr"), Arc::clone(&stderr)),
-        ];
-        Proc {
-            name: args[..2.min(args.len())].join(" "),
-            child,
-            stdout,
-            stderr,
-            readers,
-            status: None,
-        }
-    }
-
-    fn pid(&self) -> Pid {
-        Pid::from_raw(self.child.id() as i32)
-    }
-
-    fn signal(&self, sig: Signal) {
-        kill(self.pid(), sig).expect("send signal");
-    }
-
-    /// What it wrote on standard output so far.
-    fn stdout(&self) -> String {
-        lock(&self.stdout).clone()
-    }
-
-    /// What it wrote on standard error so far.
-    fn stderr(&self) -> String {
-        lock(&self.stderr).clone()
-    }
-
-    /// Wait until its standard error contains `s`.
-    fn wait_stderr(&self, s: &str) {
-        wait_for(
-            &format!("`{s}` from {}", self.name),
-            || self.stderr(),
-            || self.stderr().contains(s),
-        );
-    }
-
-    /// Wait for it to exit (failing, not hanging, when it does not), then for the rest of its
-    /// standard error.
-    fn wait_exit(&mut self) -> ExitStatus {
-        if let Some(s) = self.status {
-            return s;
-        }
-        let t0 = Instant::now();
-        let status = loop {
-            if let Some(s) = self.child.try_wait().expect("try_wait") {
-                break s;
-            }
-            if t0.elapsed() > DEADLINE {
-                let _ = self.child.kill();
-                let _ = self.child.wait();
-                panic!("{} did not exit\n{}", self.name, self.stderr());
-            }
-            thread::sleep(POLL);
-        };
-        self.status = Some(status);
-        for r in self.readers.drain(..) {
-            let _ = r.join();
-        }
-        status
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        if self.status.is_none() && matches!(self.child.try_wait(), Ok(None)) {
-            let _ = self.child.kill();
-        }
-        let _ = self.child.wait();
-    }
-}
-
-/// `aptscope sim …` with `--pty LINK`, once its link is there (it says so on standard output
-/// when it is).
-fn start_sim_with(args: &[&str], link: &Path) -> Proc {
-    let mut args = args.to_vec();
-    args.extend(["--pty", link.to_str().unwrap()]);
-    let p = Proc::spawn(&args);
-    let said = format!("{} -> /dev/", link.display());
-    wait_for(
-        "the simulator's link",
-        || format!("{}{}", p.stdout(), p.stderr()),
-        || p.stdout().contains(&said),
-    );
-    assert!(std::fs::read_link(link).is_ok());
-    p
-}
-
-/// `aptscope sim apt --model kdc101 --pty LINK`, once its link is there.
-fn start_sim(link: &Path) -> Proc {
-    start_sim_with(&["sim", "apt", "--model", "kdc101"], link)
-}
-
-/// `aptscope tap --device DEV --link HOST -w CAP --quiet [extra]`, once its link is there.
+/// `aptscope tap … --quiet EXTRA…` (see [`tap_args`]), once its link is there.
 fn start_tap(dir: &Path, extra: &[&str]) -> Proc {
-    let (dev, host, cap) = (dir.join("dev"), dir.join("host"), dir.join("cap.pcapng"));
-    let mut args = vec![
-        "tap",
-        "--device",
-        dev.to_str().unwrap(),
-        "--link",
-        host.to_str().unwrap(),
-        "-w",
-        cap.to_str().unwrap(),
-        "--quiet",
-    ];
-    args.extend_from_slice(extra);
-    let p = Proc::spawn(&args);
+    let p = Proc::aptscope(&tap_args(dir, &[&["--quiet"], extra].concat()));
     p.wait_stderr("aptscope tap: host side");
-    assert!(std::fs::read_link(&host).is_ok(), "{}", p.stderr());
+    assert!(std::fs::read_link(dir.join("host")).is_ok(), "{}", p.both());
     p
 }
 
 // ---------------------------------------------------------------------------------------------
 // The host program
 
-/// The host's serial port: the tap's link opened like a program would (no controlling
-/// terminal, raw mode), non-blocking and waited on with poll.
-fn open_host(path: &Path) -> File {
-    let f = File::options()
-        .read(true)
-        .write(true)
-        .custom_flags((OFlag::O_NOCTTY | OFlag::O_NONBLOCK).bits())
-        .open(path)
-        .unwrap_or_else(|e| panic!("open {}: {e}", path.display()));
-    let mut t = tcgetattr(&f).unwrap();
-    cfmakeraw(&mut t);
-    tcsetattr(&f, SetArg::TCSANOW, &t).unwrap();
-    f
-}
-
-fn ready(f: &File, ev: PollFlags) -> bool {
-    let mut fds = [PollFd::new(f.as_fd(), ev)];
-    matches!(poll(&mut fds, PollTimeout::from(100u16)), Ok(n) if n > 0)
-}
-
-/// Write `bytes` back to back; returns how many were written before the other side went away
-/// (all of them normally).
-fn send(mut f: File, bytes: Vec<u8>) -> JoinHandle<usize> {
-    thread::spawn(move || {
-        let t0 = Instant::now();
-        let mut done = 0;
-        while done < bytes.len() {
-            assert!(t0.elapsed() < DEADLINE, "host write timed out at {done}");
-            if !ready(&f, PollFlags::POLLOUT) {
-                continue;
-            }
-            match f.write(&bytes[done..]) {
-                Ok(n) => done += n,
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                Err(_) => break,
-            }
+/// Write `bytes` to the host's port as fast as it takes them; returns how many were written
+/// before the other side went away (all of them normally).
+fn write_polled(f: &mut File, bytes: &[u8]) -> usize {
+    let t0 = Instant::now();
+    let mut done = 0;
+    while done < bytes.len() {
+        assert!(t0.elapsed() < DEADLINE, "host write timed out at {done}");
+        if !ready(f, PollFlags::POLLOUT) {
+            continue;
         }
-        done
-    })
+        match f.write(&bytes[done..]) {
+            Ok(n) => done += n,
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(_) => break,
+        }
+    }
+    done
+}
+
+/// [`write_polled`] in a thread of its own.
+fn send(mut f: File, bytes: Vec<u8>) -> JoinHandle<usize> {
+    thread::spawn(move || write_polled(&mut f, &bytes))
 }
 
 /// Everything the host receives, read as it comes until `stop` or the other side goes away.
@@ -358,25 +183,6 @@ fn traffic(target: usize, reqs: &[u16]) -> (Vec<u8>, Vec<(u16, Option<i32>)>) {
     (v, replies)
 }
 
-/// Split an APT byte stream into frames (only whole ones).
-fn frames(b: &[u8]) -> Vec<&[u8]> {
-    let mut out = vec![];
-    let mut i = 0;
-    while i + 6 <= b.len() {
-        let len = if b[i + 4] & 0x80 != 0 {
-            6 + u16::from_le_bytes([b[i + 2], b[i + 3]]) as usize
-        } else {
-            6
-        };
-        if i + len > b.len() {
-            break;
-        }
-        out.push(&b[i..i + len]);
-        i += len;
-    }
-    out
-}
-
 fn msg_id(f: &[u8]) -> u16 {
     u16::from_le_bytes([f[0], f[1]])
 }
@@ -434,7 +240,7 @@ fn read_capture(path: &Path) -> Capture {
                     Direction::Unknown => panic!("a chunk without direction"),
                 }
             }
-            Event::Diag(d) => c.diags.push((d.kind, d.to_string())),
+            Event::Diag(d) => c.diags.push((d.kind(), d.to_string())),
         }
     }
     c
@@ -472,39 +278,69 @@ fn first_difference(a: &[u8], b: &[u8]) -> String {
     )
 }
 
+/// A megabyte of [`traffic`] with every request kind under way: simulator ⇄ tap ⇄ host, the
+/// host writing in a thread of its own.
+struct Burst {
+    dir: PathBuf,
+    sim: Proc,
+    tap: Proc,
+    /// What the host receives.
+    rx: Receiver,
+    /// What the host sends.
+    sent: Vec<u8>,
+    /// The replies expected (see [`traffic`]).
+    expected: Vec<(u16, Option<i32>)>,
+    /// The host's writer: how much it wrote.
+    writer: JoinHandle<usize>,
+}
+
+impl Burst {
+    fn start(name: &str) -> Burst {
+        let dir = scratch(name);
+        let sim = start_sim(&dir.join("dev"));
+        let tap = start_tap(&dir, &[]);
+        let host = open_host(&dir.join("host"));
+        let rx = Receiver::start(host.try_clone().expect("dup"));
+        let (sent, expected) = traffic(1 << 20, &ALL_REQS);
+        let writer = send(host, sent.clone());
+        Burst {
+            dir,
+            sim,
+            tap,
+            rx,
+            sent,
+            expected,
+            writer,
+        }
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Tests
 
 #[test]
 fn a_megabyte_burst_through_the_tap_is_recorded_exactly_and_ctrl_c_leaves_a_valid_file() {
-    let dir = scratch("burst");
-    let mut sim = start_sim(&dir.join("dev"));
-    let mut tap = start_tap(&dir, &[]);
-    let host = open_host(&dir.join("host"));
-    let rx = Receiver::start(host.try_clone().unwrap());
-
-    let (sent, expected) = traffic(1 << 20, &ALL_REQS);
-    let writer = send(host, sent.clone());
+    let mut b = Burst::start("burst");
     // Every request answered (the simulator paces its replies at 115200 baud: ~3 s).
     wait_for(
         "every reply",
-        || format!("{} bytes received\n{}", rx.len(), tap.stderr()),
-        || frames(&rx.got()).len() >= expected.len(),
+        || format!("{} bytes received\n{}", b.rx.len(), b.tap.stderr()),
+        || frames(&b.rx.got()).len() >= b.expected.len(),
     );
-    assert_eq!(writer.join().unwrap(), sent.len());
+    assert_eq!(b.writer.join().unwrap(), b.sent.len());
 
-    tap.signal(Signal::SIGINT);
-    let status = tap.wait_exit();
-    let err = tap.stderr();
+    b.tap.signal(Signal::SIGINT);
+    let status = b.tap.wait_exit();
+    let err = b.tap.stderr();
     assert!(status.success(), "tap: {status}\n{err}");
-    let got = rx.finish();
+    let got = b.rx.finish();
 
     // The host got exactly the replies, in order, and each velocity reply carries the
     // parameters set just before its request.
     let fs = frames(&got);
     assert_eq!(fs.concat().len(), got.len(), "a partial frame at the end");
-    assert_eq!(fs.len(), expected.len());
-    for (i, (f, (id, acc))) in fs.iter().zip(&expected).enumerate() {
+    assert_eq!(fs.len(), b.expected.len());
+    for (i, (f, (id, acc))) in fs.iter().zip(&b.expected).enumerate() {
         assert_eq!(msg_id(f), *id, "reply {i}");
         if let Some(acc) = acc {
             assert_eq!(f[12..16], acc.to_le_bytes(), "reply {i}: acceleration");
@@ -515,7 +351,7 @@ fn a_megabyte_burst_through_the_tap_is_recorded_exactly_and_ctrl_c_leaves_a_vali
     assert!(err.contains("SIGINT: stopping"), "{err}");
     let counts = format!(
         "host → device {} bytes, device → host {} bytes",
-        sent.len(),
+        b.sent.len(),
         got.len()
     );
     assert!(err.contains(&format!("aptscope tap: {counts}")), "{err}");
@@ -527,26 +363,26 @@ fn a_megabyte_burst_through_the_tap_is_recorded_exactly_and_ctrl_c_leaves_a_vali
     assert!(!err.contains("gone at"), "{err}");
 
     // The file holds exactly those bytes, in order, with their direction.
-    let cap = read_capture(&dir.join("cap.pcapng"));
+    let cap = read_capture(&b.dir.join("cap.pcapng"));
     assert!(cap.diags.is_empty(), "{:?}", cap.diags);
     assert!(
-        cap.h2d == sent,
+        cap.h2d == b.sent,
         "h2d: {}",
-        first_difference(&cap.h2d, &sent)
+        first_difference(&cap.h2d, &b.sent)
     );
     assert!(cap.d2h == got, "d2h: {}", first_difference(&cap.d2h, &got));
 
     // And the decoder agrees: every frame whole, in the right direction, no framing problem.
     // (Pairing may flag replies: a burst leaves ~1000 requests waiting at once, and the last
     // replies come more than the 2 s request timeout after their requests.)
-    let recs = decode_json(&dir.join("cap.pcapng"));
-    let frames_of = |dir: &str| {
+    let recs = decode_json(&b.dir.join("cap.pcapng"));
+    let frames_of = |way: &str| {
         recs.iter()
-            .filter(|r| r["type"] == "frame" && r["dir"] == dir)
+            .filter(|r| r["type"] == "frame" && r["dir"] == way)
             .count()
     };
-    assert_eq!(frames_of("h2d"), frames(&sent).len());
-    assert_eq!(frames_of("d2h"), expected.len());
+    assert_eq!(frames_of("h2d"), frames(&b.sent).len());
+    assert_eq!(frames_of("d2h"), b.expected.len());
     let pairing = ["duplicate_reply", "unsolicited", "no_reply"];
     let flagged: Vec<_> = recs
         .iter()
@@ -562,43 +398,35 @@ fn a_megabyte_burst_through_the_tap_is_recorded_exactly_and_ctrl_c_leaves_a_vali
 
     // The simulator stays up when the tap hangs up (a controller does not vanish with its
     // host); SIGINT ends it, and it removes its link.
-    assert!(matches!(sim.child.try_wait(), Ok(None)), "{}", sim.stderr());
-    sim.signal(Signal::SIGINT);
-    let st = sim.wait_exit();
-    assert!(st.success(), "sim: {st}\n{}", sim.stderr());
-    assert!(std::fs::symlink_metadata(dir.join("dev")).is_err());
+    assert!(b.sim.running(), "{}", b.sim.both());
+    b.sim.interrupt();
+    assert!(std::fs::symlink_metadata(b.dir.join("dev")).is_err());
     // So does the tap's link.
-    assert!(std::fs::symlink_metadata(dir.join("host")).is_err());
-    let _ = std::fs::remove_dir_all(&dir);
+    assert!(std::fs::symlink_metadata(b.dir.join("host")).is_err());
+    let _ = std::fs::remove_dir_all(&b.dir);
 }
 
 #[test]
 fn kill_9_of_the_tap_leaves_a_readable_prefix() {
-    let dir = scratch("kill9");
-    let mut sim = start_sim(&dir.join("dev"));
-    let mut tap = start_tap(&dir, &[]);
-    let host = open_host(&dir.join("host"));
-    let rx = Receiver::start(host.try_clone().unwrap());
-    let (sent, expected) = traffic(1 << 20, &ALL_REQS);
-    let writer = send(host, sent.clone());
+    let mut b = Burst::start("kill9");
 
     // Mid-stream: replies still coming, and some of the file flushed.
-    let cap_path = dir.join("cap.pcapng");
+    let cap_path = b.dir.join("cap.pcapng");
     wait_for(
         "replies and a flushed file",
-        || tap.stderr(),
+        || b.tap.stderr(),
         || {
-            frames(&rx.got()).len() >= 10
+            frames(&b.rx.got()).len() >= 10
                 && std::fs::metadata(&cap_path).is_ok_and(|m| m.len() > 100_000)
         },
     );
-    tap.signal(Signal::SIGKILL);
-    let st = tap.wait_exit();
+    b.tap.signal(Signal::SIGKILL);
+    let st = b.tap.wait_exit();
     assert!(!st.success());
-    let _ = writer.join().unwrap();
-    let got = rx.finish();
+    let _ = b.writer.join().unwrap();
+    let got = b.rx.finish();
     assert!(
-        frames(&got).len() < expected.len(),
+        frames(&got).len() < b.expected.len(),
         "killed after the stream ended"
     );
 
@@ -610,9 +438,9 @@ fn kill_9_of_the_tap_leaves_a_readable_prefix() {
     assert!(cap.diags.len() <= 1, "{:?}", cap.diags);
     assert!(cap.chunks > 0 && !cap.h2d.is_empty());
     assert!(
-        is_prefix(&cap.h2d, &sent),
+        is_prefix(&cap.h2d, &b.sent),
         "h2d: {}",
-        first_difference(&cap.h2d, &sent)
+        first_difference(&cap.h2d, &b.sent)
     );
     // What the file says the host got and what it did get agree (either may be ahead: the
     // file lags by up to a second, and a hang-up may flush what the host had not read yet).
@@ -625,36 +453,28 @@ fn kill_9_of_the_tap_leaves_a_readable_prefix() {
     assert!(decode_json(&cap_path).iter().any(|r| r["type"] == "frame"));
 
     // The simulator outlives the host's session; SIGINT ends it.
-    sim.signal(Signal::SIGINT);
-    let st = sim.wait_exit();
-    assert!(st.success(), "sim: {st}\n{}", sim.stderr());
-    let _ = std::fs::remove_dir_all(&dir);
+    b.sim.interrupt();
+    let _ = std::fs::remove_dir_all(&b.dir);
 }
 
 #[test]
 fn the_device_vanishing_mid_stream_is_reported_with_its_time_and_ends_the_tap() {
-    let dir = scratch("devgone");
-    let mut sim = start_sim(&dir.join("dev"));
-    let mut tap = start_tap(&dir, &[]);
-    let host = open_host(&dir.join("host"));
-    let rx = Receiver::start(host.try_clone().unwrap());
-    let (sent, expected) = traffic(1 << 20, &ALL_REQS);
-    let writer = send(host, sent.clone());
+    let mut b = Burst::start("devgone");
     wait_for(
         "some replies",
-        || tap.stderr(),
-        || frames(&rx.got()).len() >= 10,
+        || b.tap.stderr(),
+        || frames(&b.rx.got()).len() >= 10,
     );
 
     // The cable is pulled.
-    sim.signal(Signal::SIGKILL);
-    sim.wait_exit();
+    b.sim.signal(Signal::SIGKILL);
+    b.sim.wait_exit();
     let t0 = Instant::now();
-    let status = tap.wait_exit();
-    let err = tap.stderr();
+    let status = b.tap.wait_exit();
+    let err = b.tap.stderr();
     assert!(status.success(), "tap: {status}\n{err}");
     assert!(t0.elapsed() < Duration::from_secs(30), "slow to notice");
-    let dev = dir.join("dev");
+    let dev = b.dir.join("dev");
     let gone = format!("aptscope: {} gone at ", dev.display());
     let line = err
         .lines()
@@ -667,27 +487,27 @@ fn the_device_vanishing_mid_stream_is_reported_with_its_time_and_ends_the_tap() 
         "{line}"
     );
     assert!(err.contains("matches what was forwarded"), "{err}");
-    let _ = writer.join().unwrap();
-    let got = rx.finish();
+    let _ = b.writer.join().unwrap();
+    let got = b.rx.finish();
     assert!(
-        frames(&got).len() < expected.len(),
+        frames(&got).len() < b.expected.len(),
         "the sim was killed too late"
     );
 
-    let cap = read_capture(&dir.join("cap.pcapng"));
+    let cap = read_capture(&b.dir.join("cap.pcapng"));
     assert!(cap.diags.is_empty(), "{:?}", cap.diags);
     assert!(
-        is_prefix(&cap.h2d, &sent),
+        is_prefix(&cap.h2d, &b.sent),
         "{}",
-        first_difference(&cap.h2d, &sent)
+        first_difference(&cap.h2d, &b.sent)
     );
     assert!(
         is_prefix(&got, &cap.d2h),
         "{}",
         first_difference(&got, &cap.d2h)
     );
-    assert!(std::fs::symlink_metadata(dir.join("host")).is_err());
-    let _ = std::fs::remove_dir_all(&dir);
+    assert!(std::fs::symlink_metadata(b.dir.join("host")).is_err());
+    let _ = std::fs::remove_dir_all(&b.dir);
 }
 
 #[test]
@@ -745,9 +565,7 @@ fn with_reconnect_traffic_continues_in_the_same_file_after_the_device_comes_back
     assert!(cap.d2h == got, "d2h: {}", first_difference(&cap.d2h, &got));
     assert_eq!(count(&got, &GET_POSCOUNTER_HDR), b_replies.len());
 
-    sim2.signal(Signal::SIGINT);
-    let st = sim2.wait_exit();
-    assert!(st.success(), "sim: {st}\n{}", sim2.stderr());
+    sim2.interrupt();
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -770,8 +588,7 @@ fn the_simulator_exits_cleanly_on_sigint_and_sigterm_and_removes_its_link() {
     // Elliptec too.
     let link = dir.join("ell");
     let mut sim = start_sim_with(&["sim", "elliptec", "--modules", "0:ELL14,1:ELL9"], &link);
-    sim.signal(Signal::SIGINT);
-    assert!(sim.wait_exit().success(), "{}", sim.stderr());
+    sim.interrupt();
     assert!(std::fs::symlink_metadata(&link).is_err());
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -784,11 +601,9 @@ fn a_simulator_leaves_a_link_it_no_longer_owns() {
     let mut old = start_sim(&link);
     let mut new = start_sim(&link);
     let target = std::fs::read_link(&link).unwrap();
-    old.signal(Signal::SIGINT);
-    assert!(old.wait_exit().success(), "{}", old.stderr());
+    old.interrupt();
     assert_eq!(std::fs::read_link(&link).ok(), Some(target));
-    new.signal(Signal::SIGINT);
-    assert!(new.wait_exit().success(), "{}", new.stderr());
+    new.interrupt();
     assert!(std::fs::symlink_metadata(&link).is_err());
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -808,14 +623,8 @@ fn a_simulator_on_a_serial_port_answers_and_ends_cleanly_on_sigint() {
         nix::fcntl::FcntlArg::F_SETFL(OFlag::from_bits_truncate(fl) | OFlag::O_NONBLOCK),
     )
     .expect("non-blocking");
-    let mut sim = Proc::spawn(&[
-        "sim",
-        "apt",
-        "--model",
-        "kdc101",
-        "--port",
-        path.to_str().unwrap(),
-    ]);
+    let port = path.to_str().expect("utf-8 path");
+    let mut sim = Proc::aptscope(&["sim", "apt", "--model", "kdc101", "--port", port]);
     let master = File::from(pty.master);
     // Ask until the simulator has the port open and answers.
     let mut got = vec![];
@@ -834,14 +643,12 @@ fn a_simulator_on_a_serial_port_answers_and_ends_cleanly_on_sigint() {
                     got.extend_from_slice(&buf[..n]);
                 }
             }
-            got.len() >= 90
+            got.len() >= HW_GET_INFO_LEN
         },
     );
     assert_eq!(&got[..2], &[0x06, 0x00], "{got:02x?}");
     assert_eq!(&got[10..16], b"KDC101");
-    sim.signal(Signal::SIGINT);
-    let status = sim.wait_exit();
-    assert!(status.success(), "{status:?}\n{}", sim.stderr());
+    sim.interrupt();
     drop(pty.slave);
 }
 
@@ -853,39 +660,19 @@ fn a_simulator_serves_one_host_session_after_another() {
     let dir = scratch("sim-sessions");
     let link = dir.join("dev");
     let mut sim = start_sim(&link);
-    let req_info = vec![0x05, 0x00, 0x00, 0x00, 0x50, 0x01];
     for session in 0..3 {
-        let host = open_host(&link);
-        let rx = Receiver::start(host.try_clone().unwrap());
-        assert_eq!(send(host, req_info.clone()).join().unwrap(), 6);
-        wait_for(
-            "HW_GET_INFO",
-            || format!("session {session}: {:02x?}", rx.got()),
-            || rx.len() >= 90,
-        );
-        let got = rx.finish();
-        assert_eq!(got.len(), 90, "session {session}: exactly one reply");
-        assert_eq!(&got[..2], &[0x06, 0x00], "session {session}");
+        ask_info(&link, || format!("session {session}\n{}", sim.both()));
         assert!(
-            sim.status.is_none() && matches!(sim.child.try_wait(), Ok(None)),
+            sim.running(),
             "session {session}: the simulator ended\n{}",
-            sim.stderr()
+            sim.both()
         );
     }
-    sim.signal(Signal::SIGINT);
-    assert!(sim.wait_exit().success(), "{}", sim.stderr());
+    sim.interrupt();
 
     let once = dir.join("once");
     let mut sim = start_sim_with(&["sim", "apt", "--once"], &once);
-    let host = open_host(&once);
-    let rx = Receiver::start(host.try_clone().unwrap());
-    assert_eq!(send(host, req_info).join().unwrap(), 6);
-    wait_for(
-        "HW_GET_INFO",
-        || format!("{:02x?}", rx.got()),
-        || rx.len() >= 90,
-    );
-    drop(rx.finish());
+    ask_info(&once, || sim.both());
     assert!(
         sim.wait_exit().success(),
         "--once ends with the host\n{}",
@@ -902,17 +689,9 @@ fn the_tap_stops_on_signals_when_its_output_pipes_are_gone() {
     for sig in [Signal::SIGINT, Signal::SIGTERM, Signal::SIGHUP] {
         let dir = scratch("broken-pipes");
         let _sim = start_sim(&dir.join("dev"));
-        let (dev, host, cap) = (dir.join("dev"), dir.join("host"), dir.join("cap.pcapng"));
+        let (host, cap) = (dir.join("host"), dir.join("cap.pcapng"));
         let mut child = Command::new(env!("CARGO_BIN_EXE_aptscope"))
-            .args([
-                "tap",
-                "--device",
-                dev.to_str().unwrap(),
-                "--link",
-                host.to_str().unwrap(),
-                "-w",
-                cap.to_str().unwrap(),
-            ])
+            .args(tap_args(&dir, &[]))
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -932,16 +711,11 @@ fn the_tap_stops_on_signals_when_its_output_pipes_are_gone() {
         }
         let h = open_host(&host);
         let rx = Receiver::start(h.try_clone().unwrap());
-        assert_eq!(
-            send(h, vec![0x05, 0x00, 0x00, 0x00, 0x50, 0x01])
-                .join()
-                .unwrap(),
-            6
-        );
+        assert_eq!(send(h, req(HW_REQ_INFO).to_vec()).join().unwrap(), 6);
         wait_for(
             "HW_GET_INFO",
             || format!("{:02x?}", rx.got()),
-            || rx.len() >= 90,
+            || rx.len() >= HW_GET_INFO_LEN,
         );
         drop(err);
         drop(child.stdout.take());
@@ -963,140 +737,14 @@ fn the_tap_stops_on_signals_when_its_output_pipes_are_gone() {
         );
         drop(rx.finish());
         let c = read_capture(&cap);
-        assert_eq!(c.h2d, [0x05, 0x00, 0x00, 0x00, 0x50, 0x01], "{sig}");
-        assert_eq!(c.d2h.len(), 90, "{sig}");
+        assert_eq!(c.h2d, req(HW_REQ_INFO), "{sig}");
+        assert_eq!(c.d2h.len(), HW_GET_INFO_LEN, "{sig}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
 
 // ---------------------------------------------------------------------------------------------
 // The live view, in a terminal (tmux)
-
-/// A terminal running `aptscope ARGS`: a tmux session on a server of its own (never the
-/// user's), the program's standard error in a file and its exit status written when it ends.
-/// The server is killed on drop (a failing test leaves nothing running).
-struct Term {
-    sock: String,
-    err: PathBuf,
-    status: PathBuf,
-}
-
-fn tmux(sock: &str, args: &[&str]) -> String {
-    let o = Command::new("tmux")
-        .args(["-L", sock])
-        .args(args)
-        .stdin(Stdio::null())
-        .output()
-        .expect("run tmux");
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-/// Quoted for the shell tmux runs the command with.
-fn sh_quote(s: &str) -> String {
-    format!("'{}'", s.replace('\'', r"'\''"))
-}
-
-impl Term {
-    /// `aptscope ARGS` in a 160×40 terminal (room for the scratch paths in the title); `None`
-    /// when tmux is missing and the rule of [`aptscope_capture::tools::require`] says skip (in
-    /// CI it fails instead).
-    fn start(dir: &Path, args: &[&str]) -> Option<Term> {
-        if !aptscope_capture::tools::require("tmux", "-V", "tmux") {
-            return None;
-        }
-        static N: AtomicUsize = AtomicUsize::new(0);
-        let sock = format!(
-            "aptscope-live-{}-{}",
-            std::process::id(),
-            N.fetch_add(1, Ordering::SeqCst)
-        );
-        let (err, status) = (dir.join("term.err"), dir.join("term.status"));
-        let mut line = sh_quote(env!("CARGO_BIN_EXE_aptscope"));
-        for a in args {
-            line.push(' ');
-            line.push_str(&sh_quote(a));
-        }
-        let cmd = format!(
-            "{line} 2>{}; echo $? >{}",
-            sh_quote(err.to_str().unwrap()),
-            sh_quote(status.to_str().unwrap())
-        );
-        tmux(
-            &sock,
-            &[
-                "new-session",
-                "-d",
-                "-s",
-                "t",
-                "-x",
-                "160",
-                "-y",
-                "40",
-                &cmd,
-            ],
-        );
-        Some(Term { sock, err, status })
-    }
-
-    fn screen(&self) -> String {
-        tmux(&self.sock, &["capture-pane", "-p", "-t", "t"])
-    }
-
-    fn keys(&self, keys: &[&str]) {
-        let mut a = vec!["send-keys", "-t", "t"];
-        a.extend_from_slice(keys);
-        tmux(&self.sock, &a);
-    }
-
-    fn stderr(&self) -> String {
-        std::fs::read_to_string(&self.err).unwrap_or_default()
-    }
-
-    /// The screen once `cond` holds of it (panics at the deadline, showing it).
-    fn wait(&self, what: &str, cond: impl Fn(&str) -> bool) -> String {
-        let last = RefCell::new(String::new());
-        wait_for(
-            what,
-            || format!("{}\n{}", last.borrow(), self.stderr()),
-            || {
-                *last.borrow_mut() = self.screen();
-                cond(&last.borrow())
-            },
-        );
-        last.into_inner()
-    }
-
-    /// Wait for `aptscope` to end: its exit code and standard error.
-    fn exit(&self) -> (i32, String) {
-        wait_for(
-            "the program in the terminal to end",
-            || format!("{}\n{}", self.screen(), self.stderr()),
-            || std::fs::read_to_string(&self.status).is_ok_and(|s| s.ends_with('\n')),
-        );
-        let code = std::fs::read_to_string(&self.status).unwrap_or_default();
-        (code.trim().parse().unwrap_or(-1), self.stderr())
-    }
-
-    /// The `aptscope` process (the child of the pane's shell).
-    fn pid(&self) -> Pid {
-        let shell = tmux(&self.sock, &["display", "-p", "-t", "t", "#{pane_pid}"]);
-        let shell = shell.trim();
-        let children = std::fs::read_to_string(format!("/proc/{shell}/task/{shell}/children"))
-            .unwrap_or_default();
-        let pid = children
-            .split_whitespace()
-            .next()
-            .and_then(|p| p.parse().ok())
-            .expect("the program in the terminal");
-        Pid::from_raw(pid)
-    }
-}
-
-impl Drop for Term {
-    fn drop(&mut self) {
-        tmux(&self.sock, &["kill-server"]);
-    }
-}
 
 /// The record count the view's title bar shows (`… · 4 records`).
 fn shown_records(screen: &str) -> Option<u64> {
@@ -1105,19 +753,18 @@ fn shown_records(screen: &str) -> Option<u64> {
     first[..at].rsplit(' ').next()?.parse().ok()
 }
 
-/// One host session on `link`: HW_REQ_INFO, its 90-byte reply; returns when and what was sent.
-fn ask_info(link: &Path) -> Instant {
-    let host = open_host(link);
-    let rx = Receiver::start(host.try_clone().unwrap());
-    let t0 = Instant::now();
-    assert_eq!(send(host, req(HW_REQ_INFO).to_vec()).join().unwrap(), 6);
-    wait_for(
-        "HW_GET_INFO at the host",
-        || format!("{:02x?}", rx.got()),
-        || rx.len() >= 90,
-    );
-    assert_eq!(rx.finish().len(), 90);
-    t0
+/// `aptscope SIM… --pty LINK --view -w CAP` in a terminal, once its link and view are up.
+fn sim_view(dir: &Path, sim: &[&str], link: &Path, cap: &Path) -> Option<Term> {
+    let path = |p: &Path| p.to_str().expect("utf-8 path").to_string();
+    let mut args: Vec<String> = sim.iter().map(|s| s.to_string()).collect();
+    args.extend([
+        "--pty".into(),
+        path(link),
+        "--view".into(),
+        "-w".into(),
+        path(cap),
+    ]);
+    Term::start_view(dir, &args, link)
 }
 
 /// `decode --json` of a capture: frames only, whole, no diagnostics but pairing's; returns the
@@ -1139,33 +786,17 @@ fn decoded_names(path: &Path) -> Vec<String> {
 fn tap_view_shows_the_traffic_live_and_q_leaves_a_complete_capture() {
     let dir = scratch("tap-view");
     let mut sim = start_sim(&dir.join("dev"));
-    let (dev, host, cap) = (dir.join("dev"), dir.join("host"), dir.join("cap.pcapng"));
-    let Some(term) = Term::start(
-        &dir,
-        &[
-            "tap",
-            "--device",
-            dev.to_str().unwrap(),
-            "--link",
-            host.to_str().unwrap(),
-            "-w",
-            cap.to_str().unwrap(),
-            "--view",
-        ],
-    ) else {
+    let (host, cap) = (dir.join("host"), dir.join("cap.pcapng"));
+    let Some(term) = Term::start_view(&dir, &tap_args(&dir, &["--view"]), &host) else {
         return;
     };
-    wait_for(
-        "the tap's link",
-        || term.stderr(),
-        || std::fs::read_link(&host).is_ok(),
-    );
     // The title says where host programs connect.
     let title = format!("cap.pcapng · host {} ·", host.display());
-    term.wait("the view", |s| s.contains("Timeline") && s.contains(&title));
+    term.wait("the title", |s| s.contains(&title));
 
     // The reply is on the screen within a second of the request.
-    let t0 = ask_info(&host);
+    let t0 = Instant::now();
+    ask_info(&host, || term.stderr());
     let screen = term.wait("HW_GET_INFO on the screen", |s| s.contains("HW_GET_INFO"));
     let lag = t0.elapsed();
     assert!(
@@ -1183,7 +814,7 @@ fn tap_view_shows_the_traffic_live_and_q_leaves_a_complete_capture() {
     // A filter applied live: a second host session shows up in it.
     term.keys(&["/apt.name == HW_GET_INFO", "Enter"]);
     term.wait("the filter", |s| s.contains("1 shown"));
-    ask_info(&host);
+    ask_info(&host, || term.stderr());
     let screen = term.wait("the new reply in the filter", |s| s.contains("2 shown"));
     assert!(!screen.contains("HW_REQ_INFO"), "{screen}");
 
@@ -1205,8 +836,7 @@ fn tap_view_shows_the_traffic_live_and_q_leaves_a_complete_capture() {
         ["HW_REQ_INFO", "HW_GET_INFO", "HW_REQ_INFO", "HW_GET_INFO"]
     );
     assert!(std::fs::symlink_metadata(&host).is_err(), "the link stays");
-    sim.signal(Signal::SIGINT);
-    assert!(sim.wait_exit().success());
+    sim.interrupt();
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -1221,11 +851,11 @@ fn view_follow_shows_a_file_a_running_tap_writes() {
     };
     term.wait("the view", |s| s.contains("Timeline"));
     // Shown at once, not after 4 KiB of traffic: the protocol is detected from what there is.
-    ask_info(&dir.join("host"));
+    ask_info(&dir.join("host"), || tap.both());
     term.wait("the reply", |s| {
         s.contains("HW_GET_INFO") && shown_records(s) == Some(2)
     });
-    ask_info(&dir.join("host"));
+    ask_info(&dir.join("host"), || tap.both());
     let screen = term.wait("the second session", |s| shown_records(s) == Some(4));
     assert!(!screen.contains("truncated"), "{screen}");
     // The tap ends; the view stays on the complete file until q.
@@ -1237,8 +867,7 @@ fn view_follow_shows_a_file_a_running_tap_writes() {
     term.keys(&["C-c"]);
     let (code, err) = term.exit();
     assert_eq!(code, 0, "{err}");
-    sim.signal(Signal::SIGINT);
-    assert!(sim.wait_exit().success());
+    sim.interrupt();
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -1246,29 +875,12 @@ fn view_follow_shows_a_file_a_running_tap_writes() {
 fn sim_view_shows_the_simulators_traffic_across_sessions_and_ends_on_sigterm() {
     let dir = scratch("sim-view");
     let (link, cap) = (dir.join("dev"), dir.join("sim.pcapng"));
-    let Some(term) = Term::start(
-        &dir,
-        &[
-            "sim",
-            "apt",
-            "--pty",
-            link.to_str().unwrap(),
-            "--view",
-            "-w",
-            cap.to_str().unwrap(),
-        ],
-    ) else {
+    let Some(term) = sim_view(&dir, &["sim", "apt"], &link, &cap) else {
         return;
     };
-    wait_for(
-        "the simulator's link",
-        || term.stderr(),
-        || std::fs::read_link(&link).is_ok(),
-    );
-    term.wait("the view", |s| s.contains("Timeline"));
     // Two host programs one after the other: the simulator stays up.
     for n in [2, 4] {
-        ask_info(&link);
+        ask_info(&link, || term.stderr());
         term.wait("the session", |s| shown_records(s) == Some(n));
     }
     kill(term.pid(), Signal::SIGTERM).expect("signal");
@@ -1309,28 +921,10 @@ fn soak_of_the_live_view_loses_nothing_lags_under_a_second_and_keeps_memory_flat
         .unwrap_or(20.0);
     let dir = scratch("soak");
     let mut sim = start_sim(&dir.join("dev"));
-    let (dev, host, cap) = (dir.join("dev"), dir.join("host"), dir.join("cap.pcapng"));
-    let Some(term) = Term::start(
-        &dir,
-        &[
-            "tap",
-            "--device",
-            dev.to_str().unwrap(),
-            "--link",
-            host.to_str().unwrap(),
-            "-w",
-            cap.to_str().unwrap(),
-            "--view",
-        ],
-    ) else {
+    let (host, cap) = (dir.join("host"), dir.join("cap.pcapng"));
+    let Some(term) = Term::start_view(&dir, &tap_args(&dir, &["--view"]), &host) else {
         return;
     };
-    wait_for(
-        "the tap's link",
-        || term.stderr(),
-        || std::fs::read_link(&host).is_ok(),
-    );
-    term.wait("the view", |s| s.contains("Timeline"));
     let pid = term.pid();
     let rss0 = rss_kib(pid).expect("the tap's memory");
 
@@ -1346,17 +940,7 @@ fn soak_of_the_live_view_loses_nothing_lags_under_a_second_and_keeps_memory_flat
         let mut h = h;
         let mut sent = Vec::with_capacity(3 << 20);
         let mut write = |b: &[u8], sent: &mut Vec<u8>| {
-            let mut done = 0;
-            while done < b.len() {
-                if !ready(&h, PollFlags::POLLOUT) {
-                    continue;
-                }
-                match h.write(&b[done..]) {
-                    Ok(n) => done += n,
-                    Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
-                    Err(e) => panic!("host write: {e}"),
-                }
-            }
+            assert_eq!(write_polled(&mut h, b), b.len(), "host write");
             sent.extend_from_slice(b);
         };
         let t0 = Instant::now();
@@ -1468,8 +1052,7 @@ fn soak_of_the_live_view_loses_nothing_lags_under_a_second_and_keeps_memory_flat
         rss_max.saturating_sub(rss0) <= index_kib + 16 * 1024,
         "memory grew from {rss0} to {rss_max} KiB for {total} records"
     );
-    sim.signal(Signal::SIGINT);
-    assert!(sim.wait_exit().success());
+    sim.interrupt();
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -1477,28 +1060,10 @@ fn soak_of_the_live_view_loses_nothing_lags_under_a_second_and_keeps_memory_flat
 fn sim_elliptec_view_shows_host_commands_sent_without_terminator_at_once() {
     let dir = scratch("ell-view");
     let (link, cap) = (dir.join("ell"), dir.join("ell.pcapng"));
-    let Some(term) = Term::start(
-        &dir,
-        &[
-            "sim",
-            "elliptec",
-            "--modules",
-            "0:ELL14,1:ELL9",
-            "--pty",
-            link.to_str().unwrap(),
-            "--view",
-            "-w",
-            cap.to_str().unwrap(),
-        ],
-    ) else {
+    let sim = ["sim", "elliptec", "--modules", "0:ELL14,1:ELL9"];
+    let Some(term) = sim_view(&dir, &sim, &link, &cap) else {
         return;
     };
-    wait_for(
-        "the simulator's link",
-        || term.stderr(),
-        || std::fs::read_link(&link).is_ok(),
-    );
-    term.wait("the view", |s| s.contains("Timeline"));
     let host = open_host(&link);
     let rx = Receiver::start(host.try_clone().unwrap());
     // Commands as hosts send them, without CR LF: each shown as soon as it is sent.

@@ -5,8 +5,11 @@
 //! tshark is required: without it these tests fail with an install hint (in CI always; locally
 //! unless `APTSCOPE_SKIP_MISSING_TOOLS=1`, which makes them pass with a notice on stderr).
 
+mod common;
+
 use aptscope_dissector::synth::{all_forms, random_frame, Rng};
 use aptscope_dissector::table::{Dir, FormKind, Table};
+use common::Scratch;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -25,26 +28,6 @@ fn aptscope(args: &[&str]) -> String {
         String::from_utf8_lossy(&o.stderr)
     );
     String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-/// A scratch directory of one test, removed when the test ends.
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn new(name: &str) -> Self {
-        let d = std::env::temp_dir().join(format!("aptscope-ws-{}-{name}", std::process::id()));
-        std::fs::create_dir_all(&d).expect("scratch dir");
-        Scratch(d)
-    }
-    fn join(&self, p: &str) -> PathBuf {
-        self.0.join(p)
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 /// The generated dissector in a scratch directory, or `None` when tshark is missing and the

@@ -190,7 +190,7 @@ mod tests {
             let line = match ev {
                 Event::Stream(s) => format!("stream {}", s.name),
                 Event::Chunk(c) => format!("chunk {:02x?}", c.bytes),
-                Event::Diag(d) => format!("diag {}", d.kind),
+                Event::Diag(d) => format!("diag {}", d.kind()),
             };
             let _ = tx.send(line);
         }

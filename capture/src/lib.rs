@@ -21,7 +21,10 @@ pub mod usb;
 #[path = "../../tests/common/scratch.rs"]
 mod scratch;
 
-pub use model::{Chunk, Direction, Event, OwnedChunk, ReadDiag, Reader, StreamInfo, Writer};
+pub use model::{
+    Chunk, Damage, Direction, Event, LogField, LogProblem, OwnedChunk, ReadDiag, ReadProblem,
+    Reader, Skipped, StreamInfo, UrbCut, UsbFormat, UsbProblem, Writer,
+};
 pub use raw::{ByteSource, InputFormat, CHUNK};
 
 /// `eprintln!` that cannot panic: a closed or failing standard error is ignored, so a live tool

@@ -131,15 +131,272 @@ pub struct StreamInfo {
 pub struct ReadDiag {
     /// Byte offset in the file.
     pub offset: u64,
-    /// What kind of problem (stable snake_case name).
-    pub kind: &'static str,
-    /// Human explanation.
-    pub msg: String,
+    /// What went wrong: what was expected there and what was found.
+    pub problem: ReadProblem,
+}
+
+impl ReadDiag {
+    /// `problem` at byte `offset` of the file.
+    pub fn new(offset: u64, problem: ReadProblem) -> Self {
+        ReadDiag { offset, problem }
+    }
+
+    /// A problem of a reader that does not report typed problems yet: its stable name and
+    /// text (see [`ReadProblem::Untyped`]).
+    pub fn untyped(offset: u64, kind: &'static str, msg: impl Into<String>) -> Self {
+        ReadDiag::new(
+            offset,
+            ReadProblem::Untyped {
+                kind,
+                msg: msg.into(),
+            },
+        )
+    }
+
+    /// The problem's stable snake_case name (the `kind` of NDJSON `file_diag` records).
+    pub fn kind(&self) -> &'static str {
+        self.problem.kind()
+    }
+
+    /// The problem's explanation (the `msg` of NDJSON `file_diag` records).
+    pub fn msg(&self) -> String {
+        self.problem.to_string()
+    }
 }
 
 impl fmt::Display for ReadDiag {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "@{}: {}: {}", self.offset, self.kind, self.msg)
+        write!(f, "@{}: {}: {}", self.offset, self.kind(), self.problem)
+    }
+}
+
+/// What a capture reader found wrong in a file. Reading carries on where the format allows
+/// (a damaged block is skipped to the next plausible one); the texts are the diagnostics'
+/// `msg`, [`ReadProblem::kind`] their stable name.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ReadProblem {
+    /// Reading the file failed; nothing after `offset` is read.
+    Io {
+        /// What failed.
+        kind: std::io::ErrorKind,
+        /// The error's text.
+        error: String,
+    },
+    /// The file name says one format, the content starts like another (read as the content).
+    FormatMismatch {
+        /// The format the name says.
+        named: &'static str,
+        /// The format the content is read as.
+        read_as: &'static str,
+    },
+    /// Not a pcap or pcapng file: the magic expected at the start is not there.
+    BadMagic {
+        /// The first bytes found (up to 4).
+        found: Vec<u8>,
+    },
+    /// A pcapng section header or pcap file header the parser rejects.
+    BadFileHeader {
+        /// pcapng (section header block) or pcap (file header).
+        ng: bool,
+        /// The parser's complaint.
+        error: String,
+    },
+    /// A damaged block or record, skipped.
+    Damaged {
+        /// What was wrong with it.
+        damage: Damage,
+        /// How far reading skipped.
+        skipped: Skipped,
+    },
+    /// A record longer than what is left of the file (a cut file).
+    TruncatedRecord {
+        /// Its declared length in bytes.
+        expected: usize,
+        /// The bytes left.
+        found: usize,
+    },
+    /// Bytes at the end of the file too few for a record header (a cut file).
+    TruncatedTail {
+        /// How many.
+        found: usize,
+    },
+    /// A link type that is neither aptscope serial nor USB: its packets are skipped.
+    UnknownLinkType {
+        /// The link type.
+        linktype: u32,
+    },
+    /// A pcap serial record shorter than its 2-byte direction header.
+    ShortRecord {
+        /// Its length.
+        found: usize,
+    },
+    /// A packet captured shorter than it was (snap length): the rest is lost.
+    SnappedPacket {
+        /// Bytes captured.
+        captured: usize,
+        /// Bytes on the wire.
+        original: u32,
+    },
+    /// A pcapng packet of an interface no Interface Description Block declared.
+    UnknownInterface {
+        /// The interface id.
+        interface: u32,
+    },
+    /// A problem of hex or raw input (bad hex digit …), as the dissector reports it.
+    Input(aptscope_dissector::DiagKind),
+    /// A problem of a text log (socat, interceptty, jpnevulator, hex dumps, hex columns).
+    Log(LogProblem),
+    /// A damaged record of a USB capture (usbmon, USBPcap).
+    Usb(UsbProblem),
+    /// A problem of a reader not converted to typed problems yet (MCAP), or a note that is not
+    /// a damaged record (what a USB device was found to be, its line settings): its stable
+    /// name and text.
+    Untyped {
+        /// Stable snake_case name.
+        kind: &'static str,
+        /// Explanation.
+        msg: String,
+    },
+}
+
+/// What was wrong with a damaged block ([`ReadProblem::Damaged`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Damage {
+    /// Its header declares a length no block can have.
+    BadLength {
+        /// The declared length.
+        declared: usize,
+    },
+    /// The parser rejects it.
+    Unparsable {
+        /// The parser's complaint.
+        error: String,
+    },
+}
+
+/// How far reading skipped past a damaged block ([`ReadProblem::Damaged`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Skipped {
+    /// To the next plausible record, this many bytes on.
+    ToNext {
+        /// Bytes skipped.
+        bytes: usize,
+    },
+    /// To the end: no plausible record in the rest.
+    ToEnd {
+        /// Bytes left unread.
+        rest: usize,
+    },
+}
+
+impl ReadProblem {
+    /// A failed read.
+    pub fn io(e: &std::io::Error) -> Self {
+        ReadProblem::Io {
+            kind: e.kind(),
+            error: e.to_string(),
+        }
+    }
+
+    /// The stable snake_case name (the NDJSON `file_diag` record's `kind`).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            ReadProblem::Io { .. } => "io_error",
+            ReadProblem::FormatMismatch { .. } => "format_mismatch",
+            ReadProblem::BadMagic { .. } => "bad_magic",
+            ReadProblem::BadFileHeader { ng: true, .. } => "bad_section_header",
+            ReadProblem::BadFileHeader { ng: false, .. } => "bad_pcap_header",
+            ReadProblem::Damaged {
+                damage: Damage::BadLength { .. },
+                ..
+            } => "bad_block_length",
+            ReadProblem::Damaged {
+                damage: Damage::Unparsable { .. },
+                ..
+            } => "bad_record",
+            ReadProblem::TruncatedRecord { .. } | ReadProblem::TruncatedTail { .. } => {
+                "truncated_record"
+            }
+            ReadProblem::UnknownLinkType { .. } => "unknown_linktype",
+            ReadProblem::ShortRecord { .. } => "short_record",
+            ReadProblem::SnappedPacket { .. } => "snapped_packet",
+            ReadProblem::UnknownInterface { .. } => "unknown_interface",
+            ReadProblem::Input(k) => k.name(),
+            ReadProblem::Log(p) => p.kind(),
+            ReadProblem::Usb(p) => p.kind(),
+            ReadProblem::Untyped { kind, .. } => kind,
+        }
+    }
+}
+
+impl fmt::Display for ReadProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ReadProblem::Io { error, .. } => f.write_str(error),
+            ReadProblem::FormatMismatch { named, read_as } => write!(
+                f,
+                "the name says {named} but the content does not start like one; read as \
+                 {read_as} (--format {named} to force)"
+            ),
+            ReadProblem::BadMagic { found } => {
+                f.write_str("not a pcap or pcapng file (starts ")?;
+                for (i, b) in found.iter().enumerate() {
+                    let sep = if i == 0 { "" } else { " " };
+                    write!(f, "{sep}{b:02x}")?;
+                }
+                f.write_str(")")
+            }
+            ReadProblem::BadFileHeader { error, .. } => f.write_str(error),
+            ReadProblem::Damaged { damage, skipped } => {
+                match damage {
+                    Damage::BadLength { declared } => {
+                        write!(f, "declared length {declared} is not a valid length")?
+                    }
+                    Damage::Unparsable { error } => f.write_str(error)?,
+                }
+                match skipped {
+                    Skipped::ToNext { bytes } => {
+                        write!(f, "; skipped {bytes} bytes to the next plausible record")
+                    }
+                    Skipped::ToEnd { rest } => {
+                        write!(f, "; no record follows in the last {rest} bytes")
+                    }
+                }
+            }
+            ReadProblem::TruncatedRecord { expected, found } => write!(
+                f,
+                "record of {expected} bytes runs past the end of the file ({found} bytes left)"
+            ),
+            ReadProblem::TruncatedTail { found } => {
+                write!(
+                    f,
+                    "{found} bytes at the end of the file are not a whole record"
+                )
+            }
+            ReadProblem::UnknownLinkType { linktype } => write!(
+                f,
+                "link type {linktype} is neither aptscope serial (147/148) nor USB \
+                 (189/220/249): its packets are skipped"
+            ),
+            ReadProblem::ShortRecord { .. } => {
+                f.write_str("record shorter than its 2-byte direction header")
+            }
+            ReadProblem::SnappedPacket { captured, original } => {
+                write!(
+                    f,
+                    "{captured} of {original} bytes captured: the rest is lost"
+                )
+            }
+            ReadProblem::UnknownInterface { interface } => write!(
+                f,
+                "packet of interface {interface}, which no Interface Description Block declared"
+            ),
+            ReadProblem::Input(k) => write!(f, "{k}"),
+            ReadProblem::Log(p) => write!(f, "{p}"),
+            ReadProblem::Usb(p) => write!(f, "{p}"),
+            ReadProblem::Untyped { msg, .. } => f.write_str(msg),
+        }
     }
 }
 
@@ -180,5 +437,455 @@ pub trait Writer {
     /// each (said by `convert`): empty when the file holds all of it.
     fn lost(&self) -> Vec<String> {
         vec![]
+    }
+}
+
+/// The part of a text log line that could not be read ([`LogProblem::Unreadable`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LogField {
+    /// The hex bytes.
+    Hex,
+    /// The time stamp.
+    Timestamp,
+    /// The line as a whole: no hex bytes where its columns start.
+    Line,
+}
+
+/// What a text log reader found wrong ([`ReadProblem::Log`]); the line's text is shortened to
+/// its first 60 bytes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum LogProblem {
+    /// A line longer than the reader holds: skipped.
+    LineTooLong {
+        /// The longest line read.
+        max: usize,
+    },
+    /// The last line has no end of line (a cut file); what it holds is still read.
+    TruncatedLine,
+    /// A line that is not part of the log's format.
+    GarbageLine {
+        /// What was expected (`a socat dump` …).
+        expected: String,
+        /// The line.
+        line: String,
+    },
+    /// Not a hex byte where one was expected.
+    BadHex {
+        /// Its column (from 1).
+        column: usize,
+        /// The text from there.
+        found: String,
+    },
+    /// A hex-column or interceptty line whose bytes or time stamp (or the line as a whole)
+    /// cannot be read.
+    Unreadable {
+        /// Which part.
+        field: LogField,
+        /// Its column (from 1).
+        column: usize,
+        /// The line.
+        line: String,
+    },
+    /// An ASCII column that does not show the line's hex bytes.
+    AsciiMismatch {
+        /// The ASCII column.
+        ascii: String,
+    },
+    /// A hex dump's offset is not where the lines before it end: bytes are missing.
+    OffsetGap {
+        /// The offset due.
+        expected: u64,
+        /// The offset found.
+        found: u64,
+    },
+    /// A jpnevulator byte count is not where the lines before it end: bytes are missing.
+    ByteCountGap {
+        /// The count due.
+        expected: u64,
+        /// The count found.
+        found: u64,
+    },
+    /// A hex dump's `*` standing for more bytes than a dump repeats: not expanded.
+    RepeatTooLong {
+        /// The bytes it stands for.
+        bytes: u64,
+        /// The most expanded.
+        max: u64,
+    },
+    /// A hex dump's `*` that does not fit before the next line's offset.
+    RepeatMisfit {
+        /// The next line's offset.
+        before: u64,
+    },
+    /// A hex dump's `*` with no line before it to repeat.
+    RepeatNothing,
+    /// A hex dump ending after `*`: how often the line repeats is unknown.
+    TruncatedRepeat,
+    /// A socat block whose bytes are not as many as its header says.
+    LengthMismatch {
+        /// The header's `length=`.
+        expected: u64,
+        /// The bytes that follow.
+        found: u64,
+    },
+    /// A socat header whose `from=` and `to=` do not span its `length=`.
+    SpanMismatch {
+        /// `from=`.
+        from: u64,
+        /// `to=`.
+        to: u64,
+        /// `length=`.
+        length: u64,
+    },
+    /// A socat header whose `from=` is not what was logged before in its direction: blocks are
+    /// missing.
+    SequenceGap {
+        /// The bytes logged before in this direction (the `from=` due).
+        expected: u64,
+        /// `from=`.
+        found: u64,
+    },
+    /// Socat hex data without a direction line before it: kept, direction unknown.
+    MissingHeader,
+    /// A socat direction line that cannot be read.
+    BadHeader {
+        /// The line.
+        line: String,
+    },
+}
+
+impl LogProblem {
+    /// The stable snake_case name.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            LogProblem::LineTooLong { .. } => "line_too_long",
+            LogProblem::TruncatedLine => "truncated_line",
+            LogProblem::GarbageLine { .. }
+            | LogProblem::Unreadable {
+                field: LogField::Line,
+                ..
+            } => "garbage_line",
+            LogProblem::BadHex { .. }
+            | LogProblem::Unreadable {
+                field: LogField::Hex,
+                ..
+            } => "bad_hex",
+            LogProblem::Unreadable {
+                field: LogField::Timestamp,
+                ..
+            } => "bad_timestamp",
+            LogProblem::AsciiMismatch { .. } => "ascii_mismatch",
+            LogProblem::OffsetGap { .. } => "offset_gap",
+            LogProblem::ByteCountGap { .. } => "byte_count_gap",
+            LogProblem::RepeatTooLong { .. }
+            | LogProblem::RepeatMisfit { .. }
+            | LogProblem::RepeatNothing => "bad_repeat",
+            LogProblem::TruncatedRepeat => "truncated_repeat",
+            LogProblem::LengthMismatch { .. } | LogProblem::SpanMismatch { .. } => {
+                "length_mismatch"
+            }
+            LogProblem::SequenceGap { .. } => "sequence_gap",
+            LogProblem::MissingHeader => "missing_header",
+            LogProblem::BadHeader { .. } => "bad_header",
+        }
+    }
+}
+
+impl fmt::Display for LogProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            LogProblem::LineTooLong { max } => write!(f, "line longer than {max} bytes, skipped"),
+            LogProblem::TruncatedLine => {
+                f.write_str("the last line has no end of line: the file was cut")
+            }
+            LogProblem::GarbageLine { expected, line } => {
+                write!(f, "not part of {expected}: {line:?}")
+            }
+            LogProblem::BadHex { column, found } => {
+                write!(f, "not a hex byte at column {column}: {found:?}")
+            }
+            LogProblem::Unreadable { column, line, .. } => {
+                write!(f, "unreadable at column {column}: {line:?}")
+            }
+            LogProblem::AsciiMismatch { ascii } => {
+                write!(f, "the ASCII column {ascii:?} does not match the hex bytes")
+            }
+            LogProblem::OffsetGap { expected, found } => {
+                write!(f, "offset {found:#x} where {expected:#x} was due")
+            }
+            LogProblem::ByteCountGap { expected, found } => write!(
+                f,
+                "byte count {found:08X} where {expected:08X} was due: bytes are missing"
+            ),
+            LogProblem::RepeatTooLong { bytes, max } => write!(
+                f,
+                "a '*' line standing for {bytes} bytes (more than {max}); not expanded"
+            ),
+            LogProblem::RepeatMisfit { before } => {
+                write!(f, "a '*' line that does not fit before offset {before:#x}")
+            }
+            LogProblem::RepeatNothing => f.write_str("a '*' line without a line to repeat"),
+            LogProblem::TruncatedRepeat => {
+                f.write_str("the dump ends after '*': how often the line repeats is unknown")
+            }
+            LogProblem::LengthMismatch { expected, found } => write!(
+                f,
+                "the header says length={expected} but {found} bytes follow"
+            ),
+            LogProblem::SpanMismatch { from, to, length } => {
+                write!(f, "from={from} to={to} do not span length={length}")
+            }
+            LogProblem::SequenceGap { expected, found } => write!(
+                f,
+                "from={found} but {expected} bytes were logged before in this direction: blocks \
+                 are missing"
+            ),
+            LogProblem::MissingHeader => {
+                f.write_str("hex data without a direction line before it: kept, direction unknown")
+            }
+            LogProblem::BadHeader { line } => write!(f, "unreadable direction line {line:?}"),
+        }
+    }
+}
+
+/// The USB capture format of a record ([`UsbProblem`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum UsbFormat {
+    /// Linux usbmon (link types 189, 220).
+    Usbmon,
+    /// Windows USBPcap (link type 249).
+    UsbPcap,
+}
+
+impl UsbFormat {
+    fn name(self) -> &'static str {
+        match self {
+            UsbFormat::Usbmon => "usbmon",
+            UsbFormat::UsbPcap => "USBPcap",
+        }
+    }
+}
+
+/// A record cut by the capture's snapshot length: what was on the wire.
+struct Snap {
+    record: usize,
+    original: u32,
+}
+
+impl fmt::Display for Snap {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if u64::from(self.original) > self.record as u64 {
+            write!(
+                f,
+                " (cut from {} by the capture's snapshot length)",
+                self.original
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// Why a USB transfer's data is short ([`UsbProblem::TruncatedUrb`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum UrbCut {
+    /// The record holds fewer data bytes than its header announces.
+    Record {
+        /// The format.
+        format: UsbFormat,
+        /// The data bytes the header announces.
+        expected: u64,
+        /// The data bytes the record holds.
+        found: usize,
+        /// The record's length.
+        record: usize,
+        /// The packet's length on the wire (more than `record` when the snapshot length cut
+        /// it).
+        original: u32,
+    },
+    /// usbmon captured none of the transfer's data (its data flag says why).
+    NoData {
+        /// The transfer's length.
+        length: u32,
+        /// usbmon's data flag.
+        flag: u8,
+    },
+    /// usbmon captured fewer bytes of the transfer than it had.
+    Uncaptured {
+        /// The transfer's length.
+        length: u32,
+        /// The bytes captured.
+        captured: u32,
+    },
+}
+
+/// A damaged record of a USB capture ([`ReadProblem::Usb`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum UsbProblem {
+    /// A link type that is not USB.
+    UnknownLinkType {
+        /// The link type.
+        linktype: u32,
+    },
+    /// A record shorter than its header.
+    RecordTooShort {
+        /// The format.
+        format: UsbFormat,
+        /// The header's length.
+        expected: usize,
+        /// The record's length.
+        found: usize,
+        /// The packet's length on the wire.
+        original: u32,
+    },
+    /// A USBPcap header length below the smallest header.
+    HeaderTooShort {
+        /// The smallest header.
+        min: usize,
+        /// The length it says.
+        found: usize,
+    },
+    /// A USBPcap control setup stage without its 8 setup bytes.
+    ShortSetup {
+        /// The bytes there.
+        found: usize,
+    },
+    /// A usbmon event type other than S, C, E.
+    UnknownEvent {
+        /// The event type.
+        found: u8,
+    },
+    /// A transfer type the format does not define.
+    UnknownTransferType {
+        /// The format.
+        format: UsbFormat,
+        /// The transfer type.
+        found: u8,
+        /// The device's bus.
+        bus: u16,
+        /// The device's address.
+        addr: u16,
+    },
+    /// A transfer whose data is short: the bytes present are shown.
+    TruncatedUrb {
+        /// Why.
+        cut: UrbCut,
+        /// The device's bus.
+        bus: u16,
+        /// The device's address.
+        addr: u16,
+        /// The endpoint.
+        ep: u8,
+    },
+}
+
+impl UsbProblem {
+    /// The stable snake_case name.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            UsbProblem::UnknownLinkType { .. } => "usb_unknown_linktype",
+            UsbProblem::RecordTooShort { .. } => "usb_record_too_short",
+            UsbProblem::HeaderTooShort { .. } | UsbProblem::ShortSetup { .. } => "usb_bad_header",
+            UsbProblem::UnknownEvent { .. } => "usb_unknown_event",
+            UsbProblem::UnknownTransferType { .. } => "usb_unknown_transfer_type",
+            UsbProblem::TruncatedUrb { .. } => "truncated_urb",
+        }
+    }
+}
+
+impl fmt::Display for UrbCut {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            UrbCut::Record {
+                format,
+                expected,
+                found,
+                record,
+                original,
+            } => {
+                let what = match format {
+                    UsbFormat::Usbmon => "captured bytes",
+                    UsbFormat::UsbPcap => "data bytes",
+                };
+                let snap = Snap { record, original };
+                write!(
+                    f,
+                    "{} header announces {expected} {what}, the record holds {found}{snap}",
+                    format.name()
+                )
+            }
+            UrbCut::NoData { length, flag } => write!(
+                f,
+                "URB of {length} bytes whose data usbmon did not capture (data flag 0x{flag:02x})"
+            ),
+            UrbCut::Uncaptured { length, captured } => {
+                write!(
+                    f,
+                    "URB of {length} bytes of which usbmon captured {captured}"
+                )
+            }
+        }
+    }
+}
+
+impl fmt::Display for UsbProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            UsbProblem::UnknownLinkType { linktype } => {
+                write!(
+                    f,
+                    "link type {linktype} is not a USB capture (189, 220, 249)"
+                )
+            }
+            UsbProblem::RecordTooShort {
+                format,
+                expected,
+                found,
+                original,
+            } => {
+                let snap = Snap {
+                    record: *found,
+                    original: *original,
+                };
+                write!(
+                    f,
+                    "{} record of {found} bytes{snap} is shorter than its {expected}-byte header",
+                    format.name()
+                )
+            }
+            UsbProblem::HeaderTooShort { min, found } => {
+                write!(f, "USBPcap header length {found} is less than {min}")
+            }
+            UsbProblem::ShortSetup { found } => write!(
+                f,
+                "USBPcap control setup stage with {found} bytes instead of 8"
+            ),
+            UsbProblem::UnknownEvent { found } => {
+                write!(f, "usbmon event type 0x{found:02x} is none of S, C, E")
+            }
+            UsbProblem::UnknownTransferType {
+                format: UsbFormat::Usbmon,
+                found,
+                bus,
+                addr,
+            } => write!(
+                f,
+                "usbmon transfer type {found} is none of 0-3 (usb {bus}:{addr})"
+            ),
+            UsbProblem::UnknownTransferType {
+                format: UsbFormat::UsbPcap,
+                found,
+                bus,
+                addr,
+            } => write!(
+                f,
+                "USBPcap transfer type 0x{found:02x} is none of 0-3, 0xfe, 0xff (usb {bus}:{addr})"
+            ),
+            UsbProblem::TruncatedUrb { cut, bus, addr, ep } => write!(
+                f,
+                "{cut} (usb {bus}:{addr} endpoint 0x{ep:02x}): the bytes present are shown"
+            ),
+        }
     }
 }

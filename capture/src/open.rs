@@ -1,7 +1,7 @@
 //! Opening any capture: format detection from content, readers and writers by format.
 
 use crate::follow::{Follow, FollowStop};
-use crate::model::{Chunk, Direction, Event, ReadDiag, Reader, Writer};
+use crate::model::{Chunk, Direction, Event, ReadDiag, ReadProblem, Reader, Writer};
 use crate::raw::{ByteSource, InputFormat};
 use crate::{mcap, pcap, textlog};
 use std::fs::File;
@@ -283,11 +283,8 @@ impl Reader for ByteReader {
                 self.chunk.clear();
                 self.chunk.extend_from_slice(bytes);
                 for d in diags.iter().rev() {
-                    self.pending.push(ReadDiag {
-                        offset: d.offset,
-                        kind: d.kind.name(),
-                        msg: d.kind.to_string(),
-                    });
+                    self.pending
+                        .push(ReadDiag::new(d.offset, ReadProblem::Input(d.kind)));
                 }
                 self.offset += bytes.len() as u64;
                 if self.chunk.is_empty() {
@@ -306,11 +303,7 @@ impl Reader for ByteReader {
             }
             Err(e) => {
                 self.done = true;
-                Some(Event::Diag(ReadDiag {
-                    offset: self.offset,
-                    kind: "io_error",
-                    msg: e.to_string(),
-                }))
+                Some(Event::Diag(ReadDiag::new(self.offset, ReadProblem::io(&e))))
             }
         }
     }
@@ -427,17 +420,13 @@ pub fn open_with_progress(
         });
         let reader: Box<dyn Reader> = match named {
             Some(n) => Box::new(Prefixed {
-                first: Some(ReadDiag {
-                    offset: 0,
-                    kind: "format_mismatch",
-                    msg: format!(
-                        "the name says {} but the content does not start like one; read as {} \
-                         (--format {} to force)",
-                        n.name(),
-                        format.name(),
-                        n.name()
-                    ),
-                }),
+                first: Some(ReadDiag::new(
+                    0,
+                    ReadProblem::FormatMismatch {
+                        named: n.name(),
+                        read_as: format.name(),
+                    },
+                )),
                 inner: reader,
             }),
             None => reader,

@@ -13,7 +13,10 @@
 //!   stream]` (direction 0 unknown, 1 host → device, 2 device → host), because legacy pcap has
 //!   no per-packet flags and one link type for the whole file; ns timestamps (magic a1b23c4d).
 
-use crate::model::{Chunk, Direction, Event, OwnedChunk, ReadDiag, Reader, StreamInfo, Writer};
+use crate::model::{
+    Chunk, Damage, Direction, Event, OwnedChunk, ReadDiag, ReadProblem, Reader, Skipped,
+    StreamInfo, Writer,
+};
 use crate::usb::{is_usb_linktype, UsbDemux, UsbOut};
 use pcap_file::pcap::{PcapHeader, PcapPacket, PcapParser, PcapWriter};
 use pcap_file::pcapng::blocks::enhanced_packet::{EnhancedPacketBlock, EnhancedPacketOption};
@@ -97,12 +100,16 @@ pub struct PcapReader<R: Read> {
     usb_flushed: bool,
 }
 
-fn diag(offset: u64, kind: &'static str, msg: impl Into<String>) -> Owned {
-    Owned::Diag(ReadDiag {
-        offset,
-        kind,
-        msg: msg.into(),
-    })
+fn diag(offset: u64, problem: ReadProblem) -> Owned {
+    Owned::Diag(ReadDiag::new(offset, problem))
+}
+
+/// A file header the parser rejects (`ng`: a pcapng section header).
+fn bad_header(ng: bool, e: &PcapError) -> ReadProblem {
+    ReadProblem::BadFileHeader {
+        ng,
+        error: e.to_string(),
+    }
 }
 
 fn dir_of_flags(flags: u32) -> Direction {
@@ -193,7 +200,7 @@ impl<R: Read> PcapReader<R> {
                     self.buf.truncate(old);
                     self.eof = true;
                     let at = self.base + old as u64;
-                    self.queue.push_back(diag(at, "io_error", e.to_string()));
+                    self.queue.push_back(diag(at, ReadProblem::io(&e)));
                     return false;
                 }
             }
@@ -267,7 +274,7 @@ impl<R: Read> PcapReader<R> {
     }
 
     /// Skip a corrupt block: find the next plausible one.
-    fn resync(&mut self, kind: &'static str, msg: String) {
+    fn resync(&mut self, damage: Damage) {
         let from = self.offset();
         // pcapng blocks are 4-byte aligned; pcap records are not.
         let mut at = self.start + if self.ng { 4 } else { 1 };
@@ -275,12 +282,11 @@ impl<R: Read> PcapReader<R> {
             while at < self.buf.len() {
                 match self.plausible_at(at) {
                     Some(true) => {
-                        let skipped = at - self.start;
-                        self.queue.push_back(diag(
-                            from,
-                            kind,
-                            format!("{msg}; skipped {skipped} bytes to the next plausible record"),
-                        ));
+                        let skipped = Skipped::ToNext {
+                            bytes: at - self.start,
+                        };
+                        self.queue
+                            .push_back(diag(from, ReadProblem::Damaged { damage, skipped }));
                         self.start = at;
                         return;
                     }
@@ -293,12 +299,11 @@ impl<R: Read> PcapReader<R> {
             let more = self.fill();
             at = self.start + rel;
             if !more && at >= self.buf.len() {
-                let rest = self.buf.len() - self.start;
-                self.queue.push_back(diag(
-                    from,
-                    kind,
-                    format!("{msg}; no record follows in the last {rest} bytes"),
-                ));
+                let skipped = Skipped::ToEnd {
+                    rest: self.buf.len() - self.start,
+                };
+                self.queue
+                    .push_back(diag(from, ReadProblem::Damaged { damage, skipped }));
                 self.start = self.buf.len();
                 return;
             }
@@ -318,7 +323,7 @@ impl<R: Read> PcapReader<R> {
                 }
                 Err(e) => {
                     self.queue
-                        .push_back(diag(self.offset(), "bad_section_header", e.to_string()));
+                        .push_back(diag(self.offset(), bad_header(true, &e)));
                     false
                 }
             }
@@ -334,17 +339,14 @@ impl<R: Read> PcapReader<R> {
                 }
                 Err(e) => {
                     self.queue
-                        .push_back(diag(self.offset(), "bad_pcap_header", e.to_string()));
+                        .push_back(diag(self.offset(), bad_header(false, &e)));
                     false
                 }
             }
         } else {
-            let magic: Vec<String> = head.iter().take(4).map(|b| format!("{b:02x}")).collect();
-            self.queue.push_back(diag(
-                self.offset(),
-                "bad_magic",
-                format!("not a pcap or pcapng file (starts {})", magic.join(" ")),
-            ));
+            let found = head.iter().take(4).copied().collect();
+            self.queue
+                .push_back(diag(self.offset(), ReadProblem::BadMagic { found }));
             false
         }
     }
@@ -359,7 +361,8 @@ impl<R: Read> PcapReader<R> {
         }
         self.warned_linktypes.push(lt);
         let at = self.offset();
-        self.queue.push_back(diag(at, "unknown_linktype", format!("link type {lt} is neither aptscope serial (147/148) nor USB (189/220/249): its packets are skipped")));
+        let problem = ReadProblem::UnknownLinkType { linktype: lt };
+        self.queue.push_back(diag(at, problem));
     }
 
     fn stream_for(
@@ -395,11 +398,9 @@ impl<R: Read> PcapReader<R> {
         }
         if lt == LINKTYPE_SERIAL_PCAP {
             let (Some(&d), Some(&s)) = (data.first(), data.get(1)) else {
-                self.queue.push_back(diag(
-                    at,
-                    "short_record",
-                    "record shorter than its 2-byte direction header",
-                ));
+                let found = data.len();
+                self.queue
+                    .push_back(diag(at, ReadProblem::ShortRecord { found }));
                 return;
             };
             let mut known = std::mem::take(&mut self.pcap_streams);
@@ -413,14 +414,11 @@ impl<R: Read> PcapReader<R> {
             }));
         } else if lt == LINKTYPE_SERIAL_NG {
             if orig_len as usize > data.len() {
-                self.queue.push_back(diag(
-                    at,
-                    "snapped_packet",
-                    format!(
-                        "{} of {orig_len} bytes captured: the rest is lost",
-                        data.len()
-                    ),
-                ));
+                let problem = ReadProblem::SnappedPacket {
+                    captured: data.len(),
+                    original: orig_len,
+                };
+                self.queue.push_back(diag(at, problem));
             }
             self.queue.push_back(Owned::Chunk(OwnedChunk {
                 ts_ns: Some(ts),
@@ -454,16 +452,17 @@ impl<R: Read> PcapReader<R> {
         // A header whose length is absurd is corruption, not a reason to buffer the whole file.
         if let Some(len) = self.declared_len() {
             if len > MAX_RECORD || (self.ng && (len < 12 || !len.is_multiple_of(4))) {
-                self.resync(
-                    "bad_block_length",
-                    format!("declared length {len} is not a valid length"),
-                );
+                self.resync(Damage::BadLength { declared: len });
                 return true;
             }
             while self.buf.len() - self.start < len {
                 if !self.fill() {
                     let have = self.buf.len() - self.start;
-                    self.queue.push_back(diag(at, "truncated_record", format!("record of {len} bytes runs past the end of the file ({have} bytes left)")));
+                    let problem = ReadProblem::TruncatedRecord {
+                        expected: len,
+                        found: have,
+                    };
+                    self.queue.push_back(diag(at, problem));
                     self.start = self.buf.len();
                     return true;
                 }
@@ -548,7 +547,8 @@ impl<R: Read> PcapReader<R> {
                             match self.ifaces.get(ifid as usize).cloned() {
                                 Some(i) => (i.linktype, scale_ts(raw_ts, i.units_per_s), i.stream),
                                 None => {
-                                    self.queue.push_back(diag(at, "unknown_interface", format!("packet of interface {ifid}, which no Interface Description Block declared")));
+                                    let problem = ReadProblem::UnknownInterface { interface: ifid };
+                                    self.queue.push_back(diag(at, problem));
                                     return true;
                                 }
                             }
@@ -563,11 +563,8 @@ impl<R: Read> PcapReader<R> {
                 if !self.fill() {
                     let have = self.buf.len() - self.start;
                     if have > 0 {
-                        self.queue.push_back(diag(
-                            at,
-                            "truncated_record",
-                            format!("{have} bytes at the end of the file are not a whole record"),
-                        ));
+                        let problem = ReadProblem::TruncatedTail { found: have };
+                        self.queue.push_back(diag(at, problem));
                         self.start = self.buf.len();
                     }
                     return have > 0;
@@ -575,7 +572,9 @@ impl<R: Read> PcapReader<R> {
                 true
             }
             Err(e) => {
-                self.resync("bad_record", e.to_string());
+                self.resync(Damage::Unparsable {
+                    error: e.to_string(),
+                });
                 true
             }
         }
@@ -994,7 +993,7 @@ mod tests {
     fn bad_magic_unknown_linktype_and_short_files() {
         let (c, d, _) = read_all(b"hello world, not a capture".to_vec());
         assert!(c.is_empty());
-        assert_eq!(d[0].kind, "bad_magic");
+        assert_eq!(d[0].kind(), "bad_magic");
         assert_eq!(d[0].offset, 0);
         let (c, d, _) = read_all(vec![]);
         assert!(c.is_empty());
@@ -1013,9 +1012,117 @@ mod tests {
         let (c, d, _) = read_all(w.into_writer());
         assert!(c.is_empty());
         assert_eq!(
-            d.iter().map(|x| x.kind).collect::<Vec<_>>(),
+            d.iter().map(|x| x.kind()).collect::<Vec<_>>(),
             ["unknown_linktype"]
         );
+    }
+
+    /// A pcapng of [`chunks`] and where its blocks start.
+    fn pcapng_blocks() -> (Vec<u8>, Vec<usize>) {
+        let mut w = PcapNgOut::new(Vec::new()).expect("writer");
+        for c in chunks() {
+            w.chunk(&c.as_chunk()).expect("chunk");
+        }
+        let bytes = w.w.take().expect("writer").into_inner();
+        let mut starts = vec![];
+        let mut at = 0;
+        while at + 8 <= bytes.len() {
+            starts.push(at);
+            at += u32::from_le_bytes([bytes[at + 4], bytes[at + 5], bytes[at + 6], bytes[at + 7]])
+                as usize;
+        }
+        (bytes, starts)
+    }
+
+    #[test]
+    fn damaged_and_cut_files_report_typed_problems_in_the_same_words() {
+        let (bytes, starts) = pcapng_blocks();
+        let last = *starts.last().expect("blocks");
+        // The last packet's block declares a length no block has: skipped to the end.
+        let mut bad = bytes.clone();
+        bad[last + 4..last + 8].copy_from_slice(&7u32.to_le_bytes());
+        let (c, d, _) = read_all(bad);
+        assert_eq!(c.len(), chunks().len() - 1);
+        let rest = bytes.len() - last;
+        assert_eq!(
+            d[0],
+            ReadDiag::new(
+                last as u64,
+                ReadProblem::Damaged {
+                    damage: Damage::BadLength { declared: 7 },
+                    skipped: Skipped::ToEnd { rest },
+                }
+            )
+        );
+        assert_eq!(
+            d[0].to_string(),
+            format!(
+                "@{last}: bad_block_length: declared length 7 is not a valid length; no record \
+                 follows in the last {rest} bytes"
+            )
+        );
+        // The second block of three damaged: reading resumes at the third.
+        let second = starts[starts.len() - 2];
+        let mut bad = bytes.clone();
+        bad[second + 4..second + 8].copy_from_slice(&7u32.to_le_bytes());
+        let (c, d, _) = read_all(bad);
+        assert_eq!(c.len(), chunks().len() - 1);
+        let skipped = Skipped::ToNext {
+            bytes: last - second,
+        };
+        assert!(
+            matches!(d[0].problem, ReadProblem::Damaged { skipped: s, .. } if s == skipped),
+            "{d:?}"
+        );
+        assert!(
+            d[0].msg().ends_with(&format!(
+                "; skipped {} bytes to the next plausible record",
+                last - second
+            )),
+            "{d:?}"
+        );
+
+        // Cut inside the last block: its length is known, the bytes are not there.
+        let cut = last + 20;
+        let (_, d, _) = read_all(bytes[..cut].to_vec());
+        let expected = bytes.len() - last;
+        assert_eq!(
+            d[0].problem,
+            ReadProblem::TruncatedRecord {
+                expected,
+                found: 20
+            }
+        );
+        assert_eq!(d[0].kind(), "truncated_record");
+        assert_eq!(
+            d[0].msg(),
+            format!("record of {expected} bytes runs past the end of the file (20 bytes left)")
+        );
+        // Cut inside its header: too few bytes for one.
+        let (_, d, _) = read_all(bytes[..last + 5].to_vec());
+        assert_eq!(
+            (d[0].offset, &d[0].problem),
+            (last as u64, &ReadProblem::TruncatedTail { found: 5 })
+        );
+        assert_eq!(
+            d[0].msg(),
+            "5 bytes at the end of the file are not a whole record"
+        );
+
+        // Not a capture: what was found instead of a magic.
+        let (_, d, _) = read_all(b"hello".to_vec());
+        assert_eq!(
+            d[0].problem,
+            ReadProblem::BadMagic {
+                found: b"hell".to_vec()
+            }
+        );
+        assert_eq!(
+            d[0].to_string(),
+            "@0: bad_magic: not a pcap or pcapng file (starts 68 65 6c 6c)"
+        );
+        let (_, d, _) = read_all(vec![]);
+        assert_eq!(d[0].msg(), "not a pcap or pcapng file (starts )");
     }
 
     /// Yields at most `n` bytes per read, like a pipe.

@@ -20,7 +20,7 @@ fn huge_hexdump_repeats_are_reported_not_expanded() {
                     bytes += c.bytes.len() as u64;
                     assert!(bytes < 1 << 20, "{f}: the repeat is being expanded");
                 }
-                Event::Diag(d) => kinds.push(d.kind),
+                Event::Diag(d) => kinds.push(d.kind()),
                 Event::Stream(_) => {}
             }
         }
@@ -52,7 +52,7 @@ fn resynchronisation_rebases_after_reading_more() {
         let mut v = vec![];
         while let Some(ev) = r.next_event() {
             v.push(match ev {
-                Event::Diag(d) => format!("diag {}@{}", d.kind, d.offset),
+                Event::Diag(d) => format!("diag {}@{}", d.kind(), d.offset),
                 e => format!("{e:?}"),
             });
         }

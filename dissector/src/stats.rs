@@ -118,7 +118,6 @@ pub struct Stats {
     scratch: String,
     /// Paths read below keys, built once.
     p_kind: Vec<String>,
-    p_name: Vec<String>,
 }
 
 /// At most this many rate bins are shown (text and JSON): a longer capture gets wider bins.
@@ -137,6 +136,50 @@ fn push_str<F: Fields + ?Sized>(rec: &F, key: Key, rest: &[String], out: &mut St
         }
     });
     found
+}
+
+/// Append the key a frame is counted under in [`Stats::messages`] to `out`: `apt NAME` (its
+/// `msgid_hex` when the table does not know it), `ell CMD NAME`. The one spelling of these
+/// keys: every view that counts frames (the TUI's statistics too) builds them here.
+pub fn message_key<F: Fields + ?Sized>(rec: &F, out: &mut String) {
+    if rec.proto() == Some("ell") {
+        out.push_str("ell ");
+        if !push_str(rec, Key::Cmd, &[], out) {
+            out.push('?');
+        }
+        out.push(' ');
+        if !push_str(rec, Key::Name, &[], out) {
+            out.push_str("UNKNOWN");
+        }
+    } else {
+        out.push_str("apt ");
+        if !push_str(rec, Key::Name, &[], out) && !push_str(rec, Key::MsgidHex, &[], out) {
+            out.push('?');
+        }
+    }
+}
+
+/// Append the key a frame is counted under in [`Stats::addresses`] (and
+/// [`Stats::stream_addresses`]) to `out`: `apt SRC → DST` (the addresses' names), `ell ADDR`.
+/// The one spelling, as for [`message_key`].
+pub fn address_key<F: Fields + ?Sized>(rec: &F, out: &mut String) {
+    static NAME: std::sync::OnceLock<[String; 1]> = std::sync::OnceLock::new();
+    let name = NAME.get_or_init(|| ["name".to_string()]);
+    if rec.proto() == Some("ell") {
+        out.push_str("ell ");
+        if !push_str(rec, Key::Addr, &[], out) {
+            out.push('?');
+        }
+    } else {
+        out.push_str("apt ");
+        if !push_str(rec, Key::Src, name, out) {
+            out.push('?');
+        }
+        out.push_str(" → ");
+        if !push_str(rec, Key::Dst, name, out) {
+            out.push('?');
+        }
+    }
 }
 
 /// The number at `key` of `rec`.
@@ -196,7 +239,6 @@ impl Stats {
             requests: BTreeMap::new(),
             scratch: String::new(),
             p_kind: vec!["kind".to_string()],
-            p_name: vec!["name".to_string()],
         }
     }
 
@@ -236,26 +278,8 @@ impl Stats {
         }
         self.frames.count += 1;
         self.frames.bytes += len;
-        let ell = rec.proto() == Some("ell");
-        // The message key: `apt NAME` (or its id when unknown), `ell cmd NAME`.
         self.scratch.clear();
-        if ell {
-            self.scratch.push_str("ell ");
-            if !push_str(rec, Key::Cmd, &[], &mut self.scratch) {
-                self.scratch.push('?');
-            }
-            self.scratch.push(' ');
-            if !push_str(rec, Key::Name, &[], &mut self.scratch) {
-                self.scratch.push_str("UNKNOWN");
-            }
-        } else {
-            self.scratch.push_str("apt ");
-            if !push_str(rec, Key::Name, &[], &mut self.scratch)
-                && !push_str(rec, Key::MsgidHex, &[], &mut self.scratch)
-            {
-                self.scratch.push('?');
-            }
-        }
+        message_key(rec, &mut self.scratch);
         if let Some(m) = entry(&mut self.messages, &self.scratch) {
             m.tally.count += 1;
             m.tally.bytes += len;
@@ -289,21 +313,7 @@ impl Stats {
             }
         }
         self.scratch.clear();
-        if ell {
-            self.scratch.push_str("ell ");
-            if !push_str(rec, Key::Addr, &[], &mut self.scratch) {
-                self.scratch.push('?');
-            }
-        } else {
-            self.scratch.push_str("apt ");
-            if !push_str(rec, Key::Src, &self.p_name, &mut self.scratch) {
-                self.scratch.push('?');
-            }
-            self.scratch.push_str(" → ");
-            if !push_str(rec, Key::Dst, &self.p_name, &mut self.scratch) {
-                self.scratch.push('?');
-            }
-        }
+        address_key(rec, &mut self.scratch);
         if let Some(a) = entry(&mut self.addresses, &self.scratch) {
             a.count += 1;
             a.bytes += len;

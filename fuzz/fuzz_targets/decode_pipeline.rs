@@ -76,7 +76,7 @@ fn run(
                     break;
                 }
             }
-            Event::Diag(d) => p.file_diag(d.offset, d.kind, &d.msg, &mut emit).unwrap(),
+            Event::Diag(d) => p.file_diag(d.offset, d.kind(), &d.msg(), &mut emit).unwrap(),
             Event::Stream(_) => {}
         }
     }

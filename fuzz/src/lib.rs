@@ -148,18 +148,18 @@ pub fn drain_reader(r: &mut dyn Reader, file_len: usize, check_streams: bool) ->
             }
             Event::Diag(x) => {
                 assert!(
-                    !x.kind.is_empty()
-                        && x.kind
+                    !x.kind().is_empty()
+                        && x.kind()
                             .bytes()
                             .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_'),
                     "diag kind {:?} is not snake_case",
-                    x.kind
+                    x.kind()
                 );
                 assert!(
                     x.offset <= file_len as u64,
                     "diag {x} at an offset beyond the file's {file_len} bytes"
                 );
-                d.diags.push((x.offset, x.kind));
+                d.diags.push((x.offset, x.kind()));
             }
         }
     }
@@ -180,7 +180,7 @@ pub fn event_keys(r: &mut dyn Reader, limit: usize) -> Vec<String> {
     let mut out = vec![];
     while let Some(ev) = r.next_event() {
         out.push(match ev {
-            Event::Diag(d) => format!("diag {}@{}", d.kind, d.offset),
+            Event::Diag(d) => format!("diag {}@{}", d.kind(), d.offset),
             e => format!("{e:?}"),
         });
         if out.len() > limit {

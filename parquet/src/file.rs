@@ -73,10 +73,10 @@ pub fn decode_file<S: Sink>(
             Event::Chunk(c) => dec.push(c.ctx(), c.bytes, &mut emit)?,
             Event::Diag(d) => {
                 // A USB capture without the device asked for has nothing to decode.
-                if d.kind == aptscope_capture::usb::NOT_FOUND {
-                    return Err(io::Error::new(io::ErrorKind::InvalidInput, d.msg));
+                if d.kind() == aptscope_capture::usb::NOT_FOUND {
+                    return Err(io::Error::new(io::ErrorKind::InvalidInput, d.msg()));
                 }
-                dec.file_diag(d.offset, d.kind, &d.msg, &mut emit)?
+                dec.file_diag(d.offset, d.kind(), &d.msg(), &mut emit)?
             }
             Event::Stream(s) => dec.stream_info(s.id, &s.name, s.settings.as_deref(), &mut emit)?,
         }

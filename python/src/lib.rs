@@ -141,7 +141,7 @@ impl Lines {
         };
         match r.next_event() {
             Some(Event::Chunk(c)) => self.p.push_chunk(c.ctx(), c.bytes, &mut emit),
-            Some(Event::Diag(d)) => self.p.file_diag(d.offset, d.kind, &d.msg, &mut emit),
+            Some(Event::Diag(d)) => self.p.file_diag(d.offset, d.kind(), &d.msg(), &mut emit),
             Some(Event::Stream(s)) => {
                 self.p
                     .stream_info(s.id, &s.name, s.settings.as_deref(), &mut emit)

@@ -345,7 +345,7 @@ impl Script {
         while let Some(ev) = reader.next_event() {
             let _ = match ev {
                 Event::Chunk(ch) => dec.push(ch.ctx(), ch.bytes, &mut emit),
-                Event::Diag(d) => dec.file_diag(d.offset, d.kind, &d.msg, &mut emit),
+                Event::Diag(d) => dec.file_diag(d.offset, d.kind(), &d.msg(), &mut emit),
                 Event::Stream(_) => Ok(()),
             };
         }

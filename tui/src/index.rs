@@ -445,7 +445,7 @@ impl Indexer {
             }
             Event::Diag(d) => self
                 .dec
-                .file_diag(d.offset, d.kind, &d.msg, &mut |r| sink.on(r)),
+                .file_diag(d.offset, d.kind(), &d.msg(), &mut |r| sink.on(r)),
             Event::Chunk(c) => {
                 let ctx = c.ctx();
                 let r = self.dec.push(ctx, c.bytes, &mut |r| sink.on(r));

@@ -7,9 +7,8 @@
 
 use crate::fields::{self, View, DIRS};
 use crate::index::{Index, Rec, Shared, F_ELL, F_GARBAGE, F_IS_REPLY};
-use aptscope_dissector::fields::{Fields, Key, Val};
 use aptscope_dissector::filter::{Filter, IdSet};
-use aptscope_dissector::stats::{Latencies, Stats, StreamStat, Tally};
+use aptscope_dissector::stats::{self, Latencies, Stats, StreamStat, Tally};
 use aptscope_dissector::Table;
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -275,26 +274,10 @@ struct Counts {
     far_bins: BTreeMap<u64, u64>,
 }
 
-fn name_path() -> &'static [String] {
-    static P: std::sync::OnceLock<Vec<String>> = std::sync::OnceLock::new();
-    P.get_or_init(|| vec!["name".to_string()])
-}
-
 fn add_to<K: Ord>(map: &mut BTreeMap<K, Tally>, k: K, c: &Class) {
     let t = map.entry(k).or_default();
     t.count += c.count;
     t.bytes += c.bytes;
-}
-
-/// The text of a field of a record (its first value).
-fn text(v: &View<'_>, key: Key, rest: &[String]) -> Option<String> {
-    let mut out = None;
-    v.visit(key, rest, &mut |x, _| {
-        if let (None, Val::Str(s)) = (&out, x) {
-            out = Some(s.into_owned());
-        }
-    });
-    out
 }
 
 impl Counts {
@@ -392,22 +375,12 @@ impl Counts {
             }
         }
         let view = |n: u64| ix.rec(n).map(|r| View { ix, n, r });
-        // As `Stats` names them: `apt NAME` (or its id), `ell cmd NAME`.
+        // Named as `Stats` names them, from one record of each.
         for (msg, c) in self.messages.iter().enumerate() {
             let Some(c) = c else { continue };
             let Some(v) = view(c.rep) else { continue };
-            let key = if msg >> 16 != 0 {
-                format!(
-                    "ell {} {}",
-                    text(&v, Key::Cmd, &[]).unwrap_or_else(|| "?".into()),
-                    text(&v, Key::Name, &[]).unwrap_or_else(|| "UNKNOWN".into())
-                )
-            } else {
-                let name = text(&v, Key::Name, &[])
-                    .or_else(|| text(&v, Key::MsgidHex, &[]))
-                    .unwrap_or_else(|| "?".into());
-                format!("apt {name}")
-            };
+            let mut key = String::new();
+            stats::message_key(&v, &mut key);
             let m = s.messages.entry(key).or_default();
             m.tally.count += c.count;
             m.tally.bytes += c.bytes;
@@ -415,18 +388,11 @@ impl Counts {
                 m.latencies = lat.clone();
             }
         }
-        // `apt SRC → DST`, `ell ADDR`; per stream too.
+        // Per stream too.
         for (k, c) in &self.addresses {
             let Some(v) = view(c.rep) else { continue };
-            let addr = if v.r.has(F_ELL) {
-                format!(
-                    "ell {}",
-                    text(&v, Key::Addr, &[]).unwrap_or_else(|| "?".into())
-                )
-            } else {
-                let name = |k| text(&v, k, name_path()).unwrap_or_else(|| "?".into());
-                format!("apt {} → {}", name(Key::Src), name(Key::Dst))
-            };
+            let mut addr = String::new();
+            stats::address_key(&v, &mut addr);
             let st = k >> 24;
             add_to(&mut s.stream_addresses, (st, addr.clone()), c);
             add_to(&mut s.addresses, addr, c);

@@ -478,7 +478,7 @@ impl McapReader {
     fn diag(&mut self, offset: u64, kind: &'static str, msg: String) {
         self.damaged = true;
         self.queue
-            .push_back(Event::Diag(ReadDiag { offset, kind, msg }));
+            .push_back(Event::Diag(ReadDiag::untyped(offset, kind, msg)));
     }
 
     fn io_fail(&mut self, e: io::Error) {

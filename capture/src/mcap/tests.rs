@@ -586,7 +586,7 @@ fn damage_only_the_data_crc_sees_is_reported() {
     let got = read(&bytes);
     assert_eq!(got.streams[1].name, "/dev/XtyUSB1");
     assert_eq!(got.diags.len(), 1, "{:?}", got.diags);
-    assert_eq!(got.diags[0].kind, "bad_data_crc");
+    assert_eq!(got.diags[0].kind(), "bad_data_crc");
     let data_end = records(&bytes)
         .into_iter()
         .find(|r| r.1 == op::DATA_END)
@@ -849,7 +849,7 @@ fn truncated_file_gives_messages_before_and_a_diag() {
         let d = got
             .diags
             .iter()
-            .find(|d| d.kind == "truncated_record")
+            .find(|d| d.kind() == "truncated_record")
             .unwrap_or_else(|| panic!("{:?}", got.diags));
         assert_eq!(d.offset, at as u64, "{:?}", got.diags);
         // Every chunk of the MCAP chunks before came out, and then some.
@@ -861,7 +861,7 @@ fn truncated_file_gives_messages_before_and_a_diag() {
     // Cut at a record boundary: everything before, and the missing footer is reported.
     let got = read(&bytes[..at]);
     let d = got.diags.last().unwrap();
-    assert_eq!((d.kind, d.offset), ("missing_footer", at as u64));
+    assert_eq!((d.kind(), d.offset), ("missing_footer", at as u64));
     assert_eq!(&got.chunks[..], &chunks[..got.chunks.len()]);
 }
 
@@ -890,7 +890,7 @@ fn bad_chunk_crc_is_reported_and_reading_goes_on() {
     bytes[last.unwrap()] ^= 0xFF;
     let got = read(&bytes);
     assert_eq!(got.diags.len(), 1, "{:?}", got.diags);
-    assert_eq!(got.diags[0].kind, "bad_chunk_crc");
+    assert_eq!(got.diags[0].kind(), "bad_chunk_crc");
     assert_eq!(got.diags[0].offset, at as u64);
     // Every raw chunk is still produced (the damaged byte is in a decoded message here or
     // in raw data; either way the count and the chunks of other MCAP chunks are intact).
@@ -919,11 +919,11 @@ fn garbage_between_records_is_skipped() {
     let got = read(&damaged);
     assert_eq!(got.chunks, chunks, "{:?}", got.diags);
     assert_eq!(got.diags.len(), 2, "{:?}", got.diags);
-    assert_eq!(got.diags[0].kind, "bad_record");
+    assert_eq!(got.diags[0].kind(), "bad_record");
     assert_eq!(got.diags[0].offset, at as u64);
-    assert_eq!(got.diags[1].kind, "skipped_bytes");
+    assert_eq!(got.diags[1].kind(), "skipped_bytes");
     assert!(
-        got.diags[1].msg.starts_with("100 byte(s)"),
+        got.diags[1].msg().starts_with("100 byte(s)"),
         "{:?}",
         got.diags
     );
@@ -962,11 +962,11 @@ fn bad_magic_is_reported_and_records_still_read() {
     let mut bytes = write(&stream_infos(2), &chunks, None, WriteOptions::new());
     bytes[1] = b'X';
     let got = read(&bytes);
-    assert_eq!(got.diags[0].kind, "bad_magic");
+    assert_eq!(got.diags[0].kind(), "bad_magic");
     assert_eq!(got.diags[0].offset, 0);
     assert_eq!(got.chunks, chunks, "{:?}", got.diags);
     let got = read(b"hello world, this is not mcap at all");
-    assert_eq!(got.diags[0].kind, "bad_magic");
+    assert_eq!(got.diags[0].kind(), "bad_magic");
     assert!(got.chunks.is_empty());
 }
 
@@ -1026,9 +1026,9 @@ fn lying_string_lengths_are_caught_before_parsing() {
     b.extend_from_slice(&(body.len() as u64).to_le_bytes());
     b.extend_from_slice(&body);
     let got = read(&b);
-    assert_eq!(got.diags[0].kind, "bad_record", "{:?}", got.diags);
+    assert_eq!(got.diags[0].kind(), "bad_record", "{:?}", got.diags);
     assert_eq!(got.diags[0].offset, 8);
-    assert_eq!(got.diags[1].kind, "missing_footer");
+    assert_eq!(got.diags[1].kind(), "missing_footer");
     assert!(!lengths_ok(op::METADATA, &[5, 0, 0, 0, b'a']));
     assert!(lengths_ok(op::METADATA, &[1, 0, 0, 0, b'a', 0, 0, 0, 0]));
 }
@@ -1129,7 +1129,7 @@ fn every_sample_conforms_to_its_channels_schemas() {
             match ev {
                 Event::Stream(s) => w.stream(&s).unwrap(),
                 Event::Chunk(c) => w.chunk(&c).unwrap(),
-                Event::Diag(d) => w.file_diag(d.offset, d.kind, &d.msg).unwrap(),
+                Event::Diag(d) => w.file_diag(d.offset, d.kind(), &d.msg()).unwrap(),
             }
         }
         w.finish().unwrap();

@@ -215,7 +215,7 @@ impl<W: Write + Seek + Send + 'static> Writer for McapWriter<W> {
     }
 
     fn diag(&mut self, d: &ReadDiag) -> io::Result<()> {
-        self.file_diag(d.offset, d.kind, &d.msg)
+        self.file_diag(d.offset, d.kind(), &d.msg())
     }
 
     fn finish(&mut self) -> io::Result<()> {

@@ -156,9 +156,9 @@ impl Dump {
         }
     }
 
-    fn diag(&mut self, off: u64, kind: &'static str, msg: String, sink: &mut Sink) {
+    fn diag(&mut self, off: u64, problem: LogProblem, sink: &mut Sink) {
         self.acc.flush(sink);
-        sink.diag(off, kind, msg);
+        sink.diag(off, problem);
     }
 
     /// Check a line's offset against the previous lines; set up a `*` expansion before it.
@@ -170,11 +170,10 @@ impl Dump {
                 // damage, and expanding it would take minutes (found by fuzzing).
                 Some(exp) if offset >= exp && offset - exp > MAX_REPEAT => self.diag(
                     star_off,
-                    "bad_repeat",
-                    format!(
-                        "a '*' line standing for {} bytes (more than {MAX_REPEAT}); not expanded",
-                        offset - exp
-                    ),
+                    LogProblem::RepeatTooLong {
+                        bytes: offset - exp,
+                        max: MAX_REPEAT,
+                    },
                     sink,
                 ),
                 Some(exp) if offset >= exp && plen > 0 && (offset - exp).is_multiple_of(plen) => {
@@ -182,21 +181,15 @@ impl Dump {
                     self.pattern.clear();
                     self.pattern.extend_from_slice(&self.prev);
                 }
-                _ => self.diag(
-                    star_off,
-                    "bad_repeat",
-                    format!("a '*' line that does not fit before offset {offset:#x}"),
-                    sink,
-                ),
+                _ => self.diag(star_off, LogProblem::RepeatMisfit { before: offset }, sink),
             }
         } else if let Some(exp) = self.expected {
             if offset != exp {
-                self.diag(
-                    off,
-                    "offset_gap",
-                    format!("offset {offset:#x} where {exp:#x} was due"),
-                    sink,
-                );
+                let problem = LogProblem::OffsetGap {
+                    expected: exp,
+                    found: offset,
+                };
+                self.diag(off, problem, sink);
             }
         }
     }
@@ -216,12 +209,7 @@ impl LineParser for Dump {
         match parsed {
             Ok(Some(DumpLine::Repeat)) => {
                 if self.prev.is_empty() || self.star.is_some() {
-                    self.diag(
-                        off,
-                        "bad_repeat",
-                        "a '*' line without a line to repeat".into(),
-                        sink,
-                    );
+                    self.diag(off, LogProblem::RepeatNothing, sink);
                 } else {
                     self.star = Some(off);
                 }
@@ -235,15 +223,7 @@ impl LineParser for Dump {
                 self.place(offset, off, sink);
                 if let Some(g) = gutter {
                     if !gutter_matches(&self.scratch, g) {
-                        self.diag(
-                            off,
-                            "ascii_mismatch",
-                            format!(
-                                "the ASCII column {:?} does not match the hex bytes",
-                                show(g)
-                            ),
-                            sink,
-                        );
+                        self.diag(off, LogProblem::AsciiMismatch { ascii: show(g) }, sink);
                     }
                 }
                 self.expected = Some(offset.saturating_add(self.scratch.len() as u64));
@@ -258,25 +238,15 @@ impl LineParser for Dump {
             }
             Ok(None) => {
                 let name = self.name();
-                self.diag(
-                    off,
-                    "garbage_line",
-                    format!("not part of a {name} dump: {:?}", show(s)),
-                    sink,
-                );
+                let problem = LogProblem::GarbageLine {
+                    expected: format!("a {name} dump"),
+                    line: show(s),
+                };
+                self.diag(off, problem, sink);
             }
             Err(col) => {
                 // Keep the bytes before the bad one; the next line's offset is then unknown.
-                self.diag(
-                    off,
-                    "bad_hex",
-                    format!(
-                        "not a hex byte at column {}: {:?}",
-                        col + 1,
-                        show(&s[col.min(s.len())..])
-                    ),
-                    sink,
-                );
+                self.diag(off, bad_hex(s, col), sink);
                 self.acc.push(&self.scratch, sink);
                 self.expected = None;
                 self.star = None;
@@ -312,12 +282,7 @@ impl LineParser for Dump {
 
     fn finish(&mut self, _end: u64, sink: &mut Sink) {
         if let Some(star_off) = self.star.take() {
-            self.diag(
-                star_off,
-                "truncated_repeat",
-                "the dump ends after '*': how often the line repeats is unknown".into(),
-                sink,
-            );
+            self.diag(star_off, LogProblem::TruncatedRepeat, sink);
         }
         self.acc.close(sink);
     }

@@ -30,18 +30,18 @@ pub(super) fn col_sep(b: u8) -> bool {
 
 /// `[timestamp] [offset] 05 00 … [ascii]`: appends the bytes. `Err((kind, column))` when
 /// unreadable.
-pub(super) fn cols_line(s: &[u8], out: &mut Vec<u8>) -> Result<ColsLine, (&'static str, usize)> {
+pub(super) fn cols_line(s: &[u8], out: &mut Vec<u8>) -> Result<ColsLine, (LogField, usize)> {
     let mut p = skip_ws(s, 0);
     let mut ts = None;
     if s.get(p) == Some(&b'[') {
         let close = s
             .iter()
             .position(|&b| b == b']')
-            .ok_or(("bad_timestamp", p))?;
+            .ok_or((LogField::Timestamp, p))?;
         let inner = trim(&s[p + 1..close]);
         match col_timestamp(inner) {
             Some((t, n)) if n == inner.len() => ts = Some(t),
-            _ => return Err(("bad_timestamp", p)),
+            _ => return Err((LogField::Timestamp, p)),
         }
         p = close + 1;
     } else if let Some((t, n)) = col_timestamp(&s[p..]) {
@@ -93,9 +93,9 @@ pub(super) fn cols_line(s: &[u8], out: &mut Vec<u8>) -> Result<ColsLine, (&'stat
             Some(b) => out.push(b),
             None if out.len() > first && (gap >= 2 || tok[0] == b'|' || tok[0] == b'>') => break,
             None if out.len() == first && tok.len() > 2 && ts.is_none() && !offset => {
-                return Err(("garbage_line", p))
+                return Err((LogField::Line, p))
             }
-            None => return Err(("bad_hex", p)),
+            None => return Err((LogField::Hex, p)),
         }
         gap = 0;
         p = end;
@@ -124,12 +124,8 @@ impl LineParser for HexCols {
                 });
                 sink.chunk(ts, Direction::Unknown, 0, &self.scratch);
             }
-            Err((kind, col)) => {
-                sink.diag(
-                    off,
-                    kind,
-                    format!("unreadable at column {}: {:?}", col + 1, show(s)),
-                );
+            Err((field, col)) => {
+                sink.diag(off, unreadable(field, col, s));
                 sink.chunk(None, Direction::Unknown, 0, &self.scratch);
             }
         }

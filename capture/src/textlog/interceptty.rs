@@ -13,7 +13,7 @@ pub(super) struct IcptLine {
 pub(super) fn icpt_line(
     s: &[u8],
     out: &mut Vec<u8>,
-) -> Result<Option<IcptLine>, (&'static str, usize)> {
+) -> Result<Option<IcptLine>, (LogField, usize)> {
     let mut p = 0;
     let mut tod = None;
     if s.first() == Some(&b'[') {
@@ -23,7 +23,7 @@ pub(super) fn icpt_line(
         let inner = &s[1..close];
         match parse_tod(inner, true) {
             Some((t, n)) if n == inner.len() => tod = Some(t),
-            _ => return Err(("bad_timestamp", 1)),
+            _ => return Err((LogField::Timestamp, 1)),
         }
         p = close + 1;
     }
@@ -37,7 +37,7 @@ pub(super) fn icpt_line(
         return Ok(None);
     }
     p = skip_ws(s, p + 2);
-    let bad = |p: usize| Err(("bad_hex", p));
+    let bad = |p: usize| Err((LogField::Hex, p));
     if s[p..].starts_with(b"0x") || s[p..].starts_with(b"0X") {
         let Some(b) = s.get(p + 2..p + 4).and_then(|h| pair(h[0], h[1])) else {
             return bad(p);
@@ -102,18 +102,10 @@ impl LineParser for Icpt {
                 self.acc.push(&self.scratch, sink);
             }
             Ok(None) => {
-                sink.diag(
-                    off,
-                    "garbage_line",
-                    format!("not part of an interceptty log: {:?}", show(s)),
-                );
+                sink.diag(off, garbage("an interceptty log", s));
             }
-            Err((kind, col)) => {
-                sink.diag(
-                    off,
-                    kind,
-                    format!("unreadable at column {}: {:?}", col + 1, show(s)),
-                );
+            Err((field, col)) => {
+                sink.diag(off, unreadable(field, col, s));
             }
         }
     }

@@ -265,46 +265,25 @@ impl LineParser for Jpn {
                     };
                     if let Some(exp) = *slot {
                         if exp != c {
-                            sink.diag(
-                                off,
-                                "byte_count_gap",
-                                format!(
-                                    "byte count {c:08X} where {exp:08X} was due: bytes are missing"
-                                ),
-                            );
+                            let problem = LogProblem::ByteCountGap {
+                                expected: exp,
+                                found: c,
+                            };
+                            sink.diag(off, problem);
                         }
                     }
                     *slot = Some(c + n);
                 }
                 if let Some(g) = gutter {
                     if !gutter_matches(&self.scratch, g) {
-                        sink.diag(
-                            off,
-                            "ascii_mismatch",
-                            format!(
-                                "the ASCII column {:?} does not match the hex bytes",
-                                show(g)
-                            ),
-                        );
+                        sink.diag(off, LogProblem::AsciiMismatch { ascii: show(g) });
                     }
                 }
             }
             Err(col) if n == 0 && col == 0 => {
-                sink.diag(
-                    off,
-                    "garbage_line",
-                    format!("not part of a jpnevulator log: {:?}", show(s)),
-                );
+                sink.diag(off, garbage("a jpnevulator log", s));
             }
-            Err(col) => sink.diag(
-                off,
-                "bad_hex",
-                format!(
-                    "not a hex byte at column {}: {:?}",
-                    col + 1,
-                    show(&s[col.min(s.len())..])
-                ),
-            ),
+            Err(col) => sink.diag(off, bad_hex(s, col)),
         }
         if n > 0 {
             if !self.acc.open {

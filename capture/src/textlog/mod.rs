@@ -29,7 +29,9 @@
 //! only the time of day (interceptty `-T`, time-of-day columns) give nanoseconds since the
 //! midnight before the first line, counting a day on when the clock goes back by more than 12 h.
 
-use crate::model::{Chunk, Direction, Event, ReadDiag, Reader, StreamInfo};
+use crate::model::{
+    Chunk, Direction, Event, LogField, LogProblem, ReadDiag, ReadProblem, Reader, StreamInfo,
+};
 use std::collections::VecDeque;
 use std::io::{self, BufRead, Cursor, Read};
 
@@ -274,6 +276,31 @@ fn show(s: &[u8]) -> String {
     String::from_utf8_lossy(s).into_owned()
 }
 
+/// Line `s` is not part of the log (`expected`: `a socat dump` …).
+fn garbage(expected: &str, s: &[u8]) -> LogProblem {
+    LogProblem::GarbageLine {
+        expected: expected.to_string(),
+        line: show(s),
+    }
+}
+
+/// Not a hex byte at (0-based) column `col` of line `s`.
+fn bad_hex(s: &[u8], col: usize) -> LogProblem {
+    LogProblem::BadHex {
+        column: col + 1,
+        found: show(&s[col.min(s.len())..]),
+    }
+}
+
+/// The `field` of line `s` unreadable from (0-based) column `col`.
+fn unreadable(field: LogField, col: usize, s: &[u8]) -> LogProblem {
+    LogProblem::Unreadable {
+        field,
+        column: col + 1,
+        line: show(s),
+    }
+}
+
 /// Text, not binary: no NUL and almost no control characters.
 fn looks_binary(head: &[u8]) -> bool {
     let ctrl = head
@@ -494,10 +521,14 @@ struct Sink {
 }
 
 impl Sink {
-    fn diag(&mut self, offset: u64, kind: &'static str, msg: String) {
+    fn diag(&mut self, offset: u64, problem: LogProblem) {
+        self.read_diag(offset, ReadProblem::Log(problem));
+    }
+
+    fn read_diag(&mut self, offset: u64, problem: ReadProblem) {
         if self.mute_at != Some(offset) {
-            self.q
-                .push_back(Pending::Ev(Event::Diag(ReadDiag { offset, kind, msg })));
+            let d = ReadDiag::new(offset, problem);
+            self.q.push_back(Pending::Ev(Event::Diag(d)));
         }
     }
 
@@ -623,17 +654,10 @@ impl<R: BufRead, P: LineParser> Reader for TextReader<R, P> {
             match self.lines.next_line() {
                 Ok(Some(info)) => {
                     if info.too_long {
-                        self.sink.diag(
-                            info.offset,
-                            "line_too_long",
-                            format!("line longer than {MAX_LINE} bytes, skipped"),
-                        );
+                        let problem = LogProblem::LineTooLong { max: MAX_LINE };
+                        self.sink.diag(info.offset, problem);
                     } else if !info.terminated {
-                        self.sink.diag(
-                            info.offset,
-                            "truncated_line",
-                            "the last line has no end of line: the file was cut".into(),
-                        );
+                        self.sink.diag(info.offset, LogProblem::TruncatedLine);
                         self.sink.mute_at = Some(info.offset);
                         self.p.line(&self.lines.buf, info.offset, &mut self.sink);
                         self.sink.mute_at = None;
@@ -646,7 +670,7 @@ impl<R: BufRead, P: LineParser> Reader for TextReader<R, P> {
                     self.done = true;
                 }
                 Err(e) => {
-                    self.sink.diag(self.lines.pos, "io_error", e.to_string());
+                    self.sink.read_diag(self.lines.pos, ReadProblem::io(&e));
                     self.p.finish(self.lines.pos, &mut self.sink);
                     self.done = true;
                 }

@@ -88,11 +88,11 @@ impl Socat {
         if let Some((off, length)) = self.block.take() {
             if let Some(len) = length {
                 if len != self.got {
-                    sink.diag(
-                        off,
-                        "length_mismatch",
-                        format!("the header says length={len} but {} bytes follow", self.got),
-                    );
+                    let problem = LogProblem::LengthMismatch {
+                        expected: len,
+                        found: self.got,
+                    };
+                    sink.diag(off, problem);
                 }
             }
             self.acc.close(sink);
@@ -123,26 +123,20 @@ impl LineParser for Socat {
             let di = usize::from(h.dir == Direction::DeviceToHost);
             if let Some(exp) = self.next_from[di] {
                 if h.from != exp {
-                    sink.diag(
-                        off,
-                        "sequence_gap",
-                        format!(
-                            "from={} but {exp} bytes were logged before in this direction: \
-                             blocks are missing",
-                            h.from
-                        ),
-                    );
+                    let problem = LogProblem::SequenceGap {
+                        expected: exp,
+                        found: h.from,
+                    };
+                    sink.diag(off, problem);
                 }
             }
             if h.length == 0 || h.to.checked_sub(h.from) != Some(h.length - 1) {
-                sink.diag(
-                    off,
-                    "length_mismatch",
-                    format!(
-                        "from={} to={} do not span length={}",
-                        h.from, h.to, h.length
-                    ),
-                );
+                let problem = LogProblem::SpanMismatch {
+                    from: h.from,
+                    to: h.to,
+                    length: h.length,
+                };
+                sink.diag(off, problem);
             }
             self.next_from[di] = Some(h.from.saturating_add(h.length));
             self.begin(off, Some(h.length), h.ts, h.dir, sink);
@@ -154,46 +148,25 @@ impl LineParser for Socat {
         }
         if s[0] == b' ' {
             if self.block.is_none() {
-                sink.diag(
-                    off,
-                    "missing_header",
-                    "hex data without a direction line before it: kept, direction unknown".into(),
-                );
+                sink.diag(off, LogProblem::MissingHeader);
                 self.begin(off, None, None, Direction::Unknown, sink);
             }
             self.scratch.clear();
             let res = socat_hex(s, &mut self.scratch);
             self.got += self.scratch.len() as u64;
             match res {
-                Ok(Some(g)) if !gutter_matches(&self.scratch, g) => sink.diag(
-                    off,
-                    "ascii_mismatch",
-                    format!(
-                        "the ASCII column {:?} does not match the hex bytes",
-                        show(g)
-                    ),
-                ),
+                Ok(Some(g)) if !gutter_matches(&self.scratch, g) => {
+                    sink.diag(off, LogProblem::AsciiMismatch { ascii: show(g) })
+                }
                 Ok(_) => {}
-                Err(col) => sink.diag(
-                    off,
-                    "bad_hex",
-                    format!(
-                        "not a hex byte at column {}: {:?}",
-                        col + 1,
-                        show(&s[col.min(s.len())..])
-                    ),
-                ),
+                Err(col) => sink.diag(off, bad_hex(s, col)),
             }
             self.acc.push(&self.scratch, sink);
             return;
         }
         if let Some(&c) = s.first().filter(|&&c| c == b'>' || c == b'<') {
             if s.len() == 1 || s[1] == b' ' {
-                sink.diag(
-                    off,
-                    "bad_header",
-                    format!("unreadable direction line {:?}", show(s)),
-                );
+                sink.diag(off, LogProblem::BadHeader { line: show(s) });
                 let dir = if c == b'>' {
                     Direction::HostToDevice
                 } else {
@@ -206,11 +179,7 @@ impl LineParser for Socat {
         if socat_log_line(s) {
             return;
         }
-        sink.diag(
-            off,
-            "garbage_line",
-            format!("not part of a socat dump: {:?}", show(s)),
-        );
+        sink.diag(off, garbage("a socat dump", s));
     }
 
     fn finish(&mut self, _end: u64, sink: &mut Sink) {

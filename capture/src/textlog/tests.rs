@@ -26,7 +26,7 @@ impl Got {
             .collect()
     }
     fn kinds(&self) -> Vec<(&'static str, u64)> {
-        self.diags.iter().map(|d| (d.kind, d.offset)).collect()
+        self.diags.iter().map(|d| (d.kind(), d.offset)).collect()
     }
 }
 
@@ -261,7 +261,11 @@ fn socat_bad_hex() {
             ("length_mismatch", SOCAT_OK.len() as u64)
         ]
     );
-    assert!(g.diags[0].msg.contains("column 5"), "{}", g.diags[0].msg);
+    assert!(
+        g.diags[0].msg().contains("column 5"),
+        "{}",
+        g.diags[0].msg()
+    );
     // What is readable is kept: the block before, the byte before the bad one, the block after.
     assert_eq!(
         g.bytes(),
@@ -306,6 +310,47 @@ fn socat_garbage_gap_and_headerless_data() {
     );
     assert_eq!(g.chunks[0].dir, Direction::Unknown);
     assert_eq!(g.bytes().len(), 2 + 6 + 6);
+}
+
+#[test]
+fn socat_problems_are_typed_and_say_what_was_expected_and_found() {
+    let text = format!(
+        " 01 02\n{SOCAT_OK}hello there\n{}{}",
+        SOCAT_OK.replace("from=0 to=5", "from=10 to=15"),
+        SOCAT_OK.replace("from=0 to=5", "from=16 to=30")
+    );
+    let g = read_str(TextFormat::Socat, &text);
+    let log = ReadProblem::Log;
+    let problems: Vec<ReadProblem> = g.diags.iter().map(|d| d.problem.clone()).collect();
+    assert_eq!(
+        problems,
+        [
+            log(LogProblem::MissingHeader),
+            log(LogProblem::GarbageLine {
+                expected: "a socat dump".into(),
+                line: "hello there".into()
+            }),
+            log(LogProblem::SequenceGap {
+                expected: 6,
+                found: 10
+            }),
+            log(LogProblem::SpanMismatch {
+                from: 16,
+                to: 30,
+                length: 6
+            }),
+        ]
+    );
+    let texts: Vec<String> = g.diags.iter().map(ReadDiag::msg).collect();
+    assert_eq!(
+        texts[1..],
+        [
+            "not part of a socat dump: \"hello there\"",
+            "from=10 but 6 bytes were logged before in this direction: blocks are missing",
+            "from=16 to=30 do not span length=6"
+        ]
+    );
+    assert_eq!(g.diags[3].kind(), "length_mismatch");
 }
 
 #[test]
@@ -489,7 +534,11 @@ fn xxd_bad_hex_truncated_and_gap() {
             ("truncated_line", 4 * l)
         ]
     );
-    assert!(g.diags[0].msg.contains("column 18"), "{}", g.diags[0].msg);
+    assert!(
+        g.diags[0].msg().contains("column 18"),
+        "{}",
+        g.diags[0].msg()
+    );
     let bin = sample("kdc101-session.bin");
     let want = [&bin[..19], &bin[32..48], &bin[64..80], &bin[336..340]].concat();
     assert_eq!(g.bytes(), want);

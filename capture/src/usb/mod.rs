@@ -33,7 +33,9 @@
 
 use std::collections::{HashMap, VecDeque};
 
-use crate::model::{Direction, OwnedChunk, ReadDiag, StreamInfo};
+use crate::model::{
+    Direction, OwnedChunk, ReadDiag, ReadProblem, StreamInfo, UrbCut, UsbFormat, UsbProblem,
+};
 
 mod ftdi;
 #[cfg(test)]
@@ -119,7 +121,7 @@ struct Urb<'a> {
     /// The data captured (possibly fewer bytes than the transfer had).
     data: &'a [u8],
     /// Why `data` is short, when it is.
-    truncated: Option<String>,
+    truncated: Option<UrbCut>,
 }
 
 /// One serial port of a device: its stream and line settings.
@@ -241,12 +243,7 @@ impl UsbDemux {
             }
             LINKTYPE_USBPCAP => parse_usbpcap(data, orig_len, file_offset, out),
             _ => {
-                diag(
-                    out,
-                    file_offset,
-                    "usb_unknown_linktype",
-                    format!("link type {linktype} is not a USB capture (189, 220, 249)"),
-                );
+                usb_diag(out, file_offset, UsbProblem::UnknownLinkType { linktype });
                 None
             }
         };
@@ -609,7 +606,7 @@ impl UsbDemux {
                             });
                         }
                         if let Some(t) = &urb.truncated {
-                            truncated_diag(out, off, key, urb.ep, t);
+                            truncated_diag(out, off, key, urb.ep, t.clone());
                         }
                         if dev.pending_bytes > PENDING_LIMIT {
                             dev.verdict = Verdict::Ftdi;
@@ -645,7 +642,7 @@ impl UsbDemux {
             }));
         }
         if let Some(t) = &urb.truncated {
-            truncated_diag(out, off, key, urb.ep, t);
+            truncated_diag(out, off, key, urb.ep, t.clone());
         }
     }
 }
@@ -758,28 +755,30 @@ fn in_max_packet(
     64
 }
 
-fn truncated_diag(out: &mut Vec<UsbOut>, off: u64, key: (u16, u16), ep: u8, why: &str) {
-    diag(
-        out,
-        off,
-        "truncated_urb",
-        format!(
-            "{why} (usb {}:{} endpoint 0x{ep:02x}): the bytes present are shown",
-            key.0, key.1
-        ),
-    );
+fn truncated_diag(out: &mut Vec<UsbOut>, off: u64, key: (u16, u16), ep: u8, cut: UrbCut) {
+    let (bus, addr) = key;
+    usb_diag(out, off, UsbProblem::TruncatedUrb { cut, bus, addr, ep });
 }
 
-fn snap_note(have: usize, orig_len: u32) -> String {
-    if u64::from(orig_len) > have as u64 {
-        format!(" (cut from {orig_len} by the capture's snapshot length)")
-    } else {
-        String::new()
+/// A `format` record (`data`, `orig_len` bytes on the wire) shorter than its `header` bytes.
+fn too_short(format: UsbFormat, header: usize, data: &[u8], orig_len: u32) -> UsbProblem {
+    UsbProblem::RecordTooShort {
+        format,
+        expected: header,
+        found: data.len(),
+        original: orig_len,
     }
 }
 
+fn usb_diag(out: &mut Vec<UsbOut>, offset: u64, problem: UsbProblem) {
+    out.push(UsbOut::Diag(ReadDiag::new(
+        offset,
+        ReadProblem::Usb(problem),
+    )));
+}
+
 fn diag(out: &mut Vec<UsbOut>, offset: u64, kind: &'static str, msg: String) {
-    out.push(UsbOut::Diag(ReadDiag { offset, kind, msg }));
+    out.push(UsbOut::Diag(ReadDiag::untyped(offset, kind, msg)));
 }
 
 fn rd16(d: &[u8], at: usize, be: bool) -> u16 {

@@ -224,7 +224,7 @@ fn max_packet_512_inferred_without_descriptors() {
         .filter(|(_, r)| r[9] == XFER_BULK)
         .collect();
     let out = feed(&mut UsbDemux::new(None), LINKTYPE_USB_LINUX_MMAPPED, &recs);
-    let kinds: Vec<_> = diags_of(&out).iter().map(|d| d.kind).collect();
+    let kinds: Vec<_> = diags_of(&out).iter().map(|d| d.kind()).collect();
     assert_eq!(kinds, vec!["usb_max_packet_inferred"]);
     assert_eq!(chunks_of(&out), input);
 }
@@ -414,7 +414,10 @@ fn truncated_and_bad_records() {
         );
     }
     demux.finish(&mut out);
-    let d: Vec<(u64, &str)> = diags_of(&out).iter().map(|d| (d.offset, d.kind)).collect();
+    let d: Vec<(u64, &str)> = diags_of(&out)
+        .iter()
+        .map(|d| (d.offset, d.kind()))
+        .collect();
     assert_eq!(
         d,
         vec![
@@ -426,7 +429,38 @@ fn truncated_and_bad_records() {
             (6000, "usb_unknown_event"),
         ]
     );
-    assert!(diags_of(&out)[0].msg.contains("snapshot length"));
+    assert!(diags_of(&out)[0].msg().contains("snapshot length"));
+    // The typed problems say what was expected and found, in the words they always had.
+    let msgs: Vec<String> = diags_of(&out).iter().map(ReadDiag::msg).collect();
+    let shown = "(usb 1:2 endpoint 0x02): the bytes present are shown";
+    assert_eq!(
+        msgs,
+        [
+            "usbmon record of 30 bytes (cut from 200 by the capture's snapshot length) is \
+             shorter than its 64-byte header"
+                .to_string(),
+            format!(
+                "usbmon header announces 10 captured bytes, the record holds 4 (cut from 200 by \
+                 the capture's snapshot length) {shown}"
+            ),
+            format!("URB of 8 bytes of which usbmon captured 3 {shown}"),
+            format!("URB of 2 bytes whose data usbmon did not capture (data flag 0x5a) {shown}"),
+            "usbmon transfer type 7 is none of 0-3 (usb 1:2)".to_string(),
+            "usbmon event type 0x5a is none of S, C, E".to_string(),
+        ]
+    );
+    assert_eq!(
+        diags_of(&out)[2].problem,
+        ReadProblem::Usb(UsbProblem::TruncatedUrb {
+            cut: UrbCut::Uncaptured {
+                length: 8,
+                captured: 3
+            },
+            bus: 1,
+            addr: 2,
+            ep: 2
+        })
+    );
     let bytes: Vec<Vec<u8>> = chunks_of(&out).into_iter().map(|c| c.bytes).collect();
     assert_eq!(
         bytes,
@@ -447,13 +481,26 @@ fn truncated_and_bad_records() {
     demux.packet(LINKTYPE_USBPCAP, &[0; 10], 10, 1, 11, &mut out);
     demux.packet(LINKTYPE_USBPCAP, &bad_len, 30, 2, 22, &mut out);
     demux.packet(LINKTYPE_USBPCAP, &past, 33, 3, 33, &mut out);
-    let d: Vec<(u64, &str)> = diags_of(&out).iter().map(|d| (d.offset, d.kind)).collect();
+    let d: Vec<(u64, &str)> = diags_of(&out)
+        .iter()
+        .map(|d| (d.offset, d.kind()))
+        .collect();
     assert_eq!(
         d,
         vec![
             (11, "usb_record_too_short"),
             (22, "usb_record_too_short"),
             (33, "truncated_urb")
+        ]
+    );
+    let msgs: Vec<String> = diags_of(&out).iter().map(ReadDiag::msg).collect();
+    assert_eq!(
+        msgs,
+        [
+            "USBPcap record of 10 bytes is shorter than its 27-byte header",
+            "USBPcap record of 30 bytes is shorter than its 200-byte header",
+            "USBPcap header announces 6 data bytes, the record holds 2 (cut from 33 by the \
+             capture's snapshot length) (usb 1:5 endpoint 0x02): the bytes present are shown"
         ]
     );
     demux.finish(&mut out);
@@ -495,7 +542,7 @@ fn devices_filter_and_non_ftdi() {
         (1, b"from b".as_slice())
     );
     assert_eq!(c.len(), 2);
-    let kinds: Vec<_> = diags_of(&out).iter().map(|d| d.kind).collect();
+    let kinds: Vec<_> = diags_of(&out).iter().map(|d| d.kind()).collect();
     assert_eq!(kinds, vec!["usb_not_ftdi"]);
     // --usb-device 2:9
     let out = feed(
@@ -529,15 +576,15 @@ fn devices_filter_and_non_ftdi() {
         assert_eq!(chunks_of(&out), vec![]);
         let d = diags_of(&out);
         assert_eq!(d.len(), 1, "{d:?}");
-        assert_eq!(d[0].kind, NOT_FOUND);
-        assert!(d[0].msg.contains(why), "{}", d[0].msg);
+        assert_eq!(d[0].kind(), NOT_FOUND);
+        assert!(d[0].msg().contains(why), "{}", d[0].msg());
         assert!(
-            d[0].msg.contains(
+            d[0].msg().contains(
                 "devices present: 1:4 (no descriptor in the capture), 1:7 (0403:faf0, FTDI), \
                  2:9 (0403:faf0, FTDI), 3:3 (0403:faf0, FTDI)"
             ),
             "{}",
-            d[0].msg
+            d[0].msg()
         );
     }
 }
@@ -559,7 +606,7 @@ fn line_settings_change_after_announcement() {
     let out = feed(&mut UsbDemux::new(None), LINKTYPE_USB_LINUX_MMAPPED, &recs);
     let d: Vec<(&str, String)> = diags_of(&out)
         .into_iter()
-        .map(|d| (d.kind, d.msg))
+        .map(|d| (d.kind(), d.msg()))
         .collect();
     assert_eq!(
         d,

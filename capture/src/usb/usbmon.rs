@@ -34,15 +34,10 @@ impl UsbDemux {
         out: &mut Vec<UsbOut>,
     ) -> Option<Urb<'a>> {
         if data.len() < hdr_len {
-            diag(
+            usb_diag(
                 out,
                 off,
-                "usb_record_too_short",
-                format!(
-                    "usbmon record of {} bytes{} is shorter than its {hdr_len}-byte header",
-                    data.len(),
-                    snap_note(data.len(), orig_len)
-                ),
+                too_short(UsbFormat::Usbmon, hdr_len, data, orig_len),
             );
             return None;
         }
@@ -63,12 +58,7 @@ impl UsbDemux {
             // A submission error: nothing was transferred.
             b'E' => return None,
             other => {
-                diag(
-                    out,
-                    off,
-                    "usb_unknown_event",
-                    format!("usbmon event type 0x{other:02x} is none of S, C, E"),
-                );
+                usb_diag(out, off, UsbProblem::UnknownEvent { found: other });
                 return None;
             }
         };
@@ -77,12 +67,13 @@ impl UsbDemux {
             // Not used by FTDI serial converters.
             XFER_ISO | XFER_INTERRUPT => return None,
             other => {
-                diag(
-                    out,
-                    off,
-                    "usb_unknown_transfer_type",
-                    format!("usbmon transfer type {other} is none of 0-3 (usb {bus}:{addr})"),
-                );
+                let problem = UsbProblem::UnknownTransferType {
+                    format: UsbFormat::Usbmon,
+                    found: other,
+                    bus,
+                    addr,
+                };
+                usb_diag(out, off, problem);
                 return None;
             }
         }
@@ -100,24 +91,28 @@ impl UsbDemux {
             let cap = usize::try_from(len_cap).unwrap_or(usize::MAX);
             if cap > avail.len() {
                 payload = avail;
-                truncated = Some(format!(
-                    "usbmon header announces {len_cap} captured bytes, the record holds {}{}",
-                    avail.len(),
-                    snap_note(data.len(), orig_len)
-                ));
+                truncated = Some(UrbCut::Record {
+                    format: UsbFormat::Usbmon,
+                    expected: u64::from(len_cap),
+                    found: avail.len(),
+                    record: data.len(),
+                    original: orig_len,
+                });
             } else {
                 payload = &avail[..cap];
                 if len_cap < length {
-                    truncated = Some(format!(
-                        "URB of {length} bytes of which usbmon captured {len_cap}"
-                    ));
+                    truncated = Some(UrbCut::Uncaptured {
+                        length,
+                        captured: len_cap,
+                    });
                 }
             }
         } else if (ep & 0x80 != 0) != submit && length > 0 {
             // OUT submissions and IN completions carry data; usbmon says why it has none.
-            truncated = Some(format!(
-                "URB of {length} bytes whose data usbmon did not capture (data flag 0x{flag_data:02x})"
-            ));
+            truncated = Some(UrbCut::NoData {
+                length,
+                flag: flag_data,
+            });
         }
         Some(Urb {
             bus,

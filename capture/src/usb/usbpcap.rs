@@ -9,15 +9,10 @@ pub(super) fn parse_usbpcap<'a>(
     out: &mut Vec<UsbOut>,
 ) -> Option<Urb<'a>> {
     if data.len() < USBPCAP_HDR {
-        diag(
+        usb_diag(
             out,
             off,
-            "usb_record_too_short",
-            format!(
-                "USBPcap record of {} bytes{} is shorter than its {USBPCAP_HDR}-byte header",
-                data.len(),
-                snap_note(data.len(), orig_len)
-            ),
+            too_short(UsbFormat::UsbPcap, USBPCAP_HDR, data, orig_len),
         );
         return None;
     }
@@ -29,24 +24,14 @@ pub(super) fn parse_usbpcap<'a>(
         USBPCAP_HDR
     };
     if hlen < min {
-        diag(
-            out,
-            off,
-            "usb_bad_header",
-            format!("USBPcap header length {hlen} is less than {min}"),
-        );
+        usb_diag(out, off, UsbProblem::HeaderTooShort { min, found: hlen });
         return None;
     }
     if hlen > data.len() {
-        diag(
+        usb_diag(
             out,
             off,
-            "usb_record_too_short",
-            format!(
-                "USBPcap record of {} bytes{} is shorter than its {hlen}-byte header",
-                data.len(),
-                snap_note(data.len(), orig_len)
-            ),
+            too_short(UsbFormat::UsbPcap, hlen, data, orig_len),
         );
         return None;
     }
@@ -60,12 +45,13 @@ pub(super) fn parse_usbpcap<'a>(
         XFER_CONTROL | XFER_BULK => {}
         XFER_ISO | XFER_INTERRUPT | USBPCAP_IRP_INFO | USBPCAP_UNKNOWN => return None,
         other => {
-            diag(
-                out,
-                off,
-                "usb_unknown_transfer_type",
-                format!("USBPcap transfer type 0x{other:02x} is none of 0-3, 0xfe, 0xff (usb {bus}:{addr})"),
-            );
+            let problem = UsbProblem::UnknownTransferType {
+                format: UsbFormat::UsbPcap,
+                found: other,
+                bus,
+                addr,
+            };
+            usb_diag(out, off, problem);
             return None;
         }
     }
@@ -74,11 +60,13 @@ pub(super) fn parse_usbpcap<'a>(
         Ok(n) if n <= avail.len() => (&avail[..n], None),
         _ => (
             avail,
-            Some(format!(
-                "USBPcap header announces {data_len} data bytes, the record holds {}{}",
-                avail.len(),
-                snap_note(data.len(), orig_len)
-            )),
+            Some(UrbCut::Record {
+                format: UsbFormat::UsbPcap,
+                expected: u64::from(data_len),
+                found: avail.len(),
+                record: data.len(),
+                original: orig_len,
+            }),
         ),
     };
     let mut setup = None;
@@ -86,15 +74,8 @@ pub(super) fn parse_usbpcap<'a>(
         match data[USBPCAP_HDR] {
             USBPCAP_STAGE_SETUP if submit => {
                 if payload.len() < 8 {
-                    diag(
-                        out,
-                        off,
-                        "usb_bad_header",
-                        format!(
-                            "USBPcap control setup stage with {} bytes instead of 8",
-                            payload.len()
-                        ),
-                    );
+                    let found = payload.len();
+                    usb_diag(out, off, UsbProblem::ShortSetup { found });
                     return None;
                 }
                 let mut s = [0u8; 8];

@@ -385,6 +385,15 @@ fn int(v: i64) -> FieldValue {
     FieldValue::Int(v)
 }
 
+/// A decoded field's value as a SET message stores it for its GET (numbers only).
+fn stored(ty: Ty, v: Value<'_>) -> Option<FieldValue> {
+    match (ty, v) {
+        (Ty::Prim(_), Value::F(x)) => Some(FieldValue::Float(x)),
+        (Ty::Prim(_), v) => v.as_i64().map(FieldValue::Int),
+        _ => None,
+    }
+}
+
 /// A message to one unit, as the family handlers of [`AptSim`] take it.
 #[derive(Clone, Copy)]
 struct Req<'r, 'a> {
@@ -516,8 +525,22 @@ impl AptSim {
 
     /// Position counter of the unit at `addr` (0x50, or a bay address) at `now_ns`.
     pub fn position(&self, addr: u8, now_ns: u64) -> Option<i64> {
-        let u = self.units.iter().find(|u| u.addr == addr)?;
-        Some(u.motion.map_or(u.pos, |m| m.pos(now_ns).0))
+        let ui = self.units.iter().position(|u| u.addr == addr)?;
+        Some(self.unit_pos(ui, now_ns))
+    }
+
+    /// Position counter of unit `ui` at `now`.
+    fn unit_pos(&self, ui: usize, now: u64) -> i64 {
+        let u = &self.units[ui];
+        u.motion.map_or(u.pos, |m| m.pos(now).0)
+    }
+
+    /// Answer `r` with `get` from its unit to the host: its channel, then `vals`.
+    fn reply(&mut self, r: &Req<'_, '_>, get: &str, vals: &[(&str, FieldValue)]) {
+        let mut all = vec![("chan_ident", int(r.chan))];
+        all.extend_from_slice(vals);
+        let b = build(get, None, HOST, self.units[r.ui].addr, &all);
+        self.send(r.now, b);
     }
 
     fn handle(&mut self, bytes: &[u8], now: u64) {
@@ -557,7 +580,7 @@ impl AptSim {
             || self.motion_msg(&r)
             || self.output_msg(&r);
         if !handled {
-            self.generic(ui, &f, now);
+            self.generic(&r);
         }
     }
 
@@ -614,18 +637,14 @@ impl AptSim {
     /// when `r` is not of this family.
     fn module_msg(&mut self, r: &Req<'_, '_>) -> bool {
         let Req {
-            f,
-            name,
-            ui,
-            chan,
-            now,
+            f, name, ui, now, ..
         } = *r;
-        let addr = self.units[ui].addr;
         let bsc = self.model == AptModel::Bsc203;
         match name {
             "HW_REQ_INFO" => {
-                let (serial, nchs, hw) = (self.units[ui].serial, 1, if bsc { 45 } else { 44 });
-                let b = self.info(addr, serial, nchs, hw);
+                let u = &self.units[ui];
+                let (serial, nchs, hw) = (u.serial, 1, if bsc { 45 } else { 44 });
+                let b = self.info(u.addr, serial, nchs, hw);
                 self.line.send(now, b);
             }
             "MOD_IDENTIFY" => self.identified += 1,
@@ -650,14 +669,7 @@ impl AptSim {
             }
             "MOD_REQ_CHANENABLESTATE" => {
                 let st = if self.units[ui].enabled { 1 } else { 2 };
-                let b = build(
-                    "MOD_GET_CHANENABLESTATE",
-                    None,
-                    HOST,
-                    addr,
-                    &[("chan_ident", int(chan)), ("enable_state", int(st))],
-                );
-                self.send(now, b);
+                self.reply(r, "MOD_GET_CHANENABLESTATE", &[("enable_state", int(st))]);
             }
             _ => return false,
         }
@@ -674,23 +686,15 @@ impl AptSim {
             chan,
             now,
         } = *r;
-        let addr = self.units[ui].addr;
         match name {
             "MOT_REQ_POSCOUNTER" | "MOT_REQ_ENCCOUNTER" => {
-                let p = self.position(addr, now).unwrap_or(0);
+                let p = self.unit_pos(ui, now);
                 let (get, field) = if name == "MOT_REQ_POSCOUNTER" {
                     ("MOT_GET_POSCOUNTER", "position")
                 } else {
                     ("MOT_GET_ENCCOUNTER", "encoder_count")
                 };
-                let b = build(
-                    get,
-                    None,
-                    HOST,
-                    addr,
-                    &[("chan_ident", int(chan)), (field, int(p))],
-                );
-                self.send(now, b);
+                self.reply(r, get, &[(field, int(p))]);
             }
             "MOT_SET_POSCOUNTER" | "MOT_SET_ENCCOUNTER" => {
                 let field = if name == "MOT_SET_POSCOUNTER" {
@@ -705,14 +709,11 @@ impl AptSim {
             }
             "MOT_REQ_STATUSBITS" => {
                 let bits = self.status_bits(ui, now);
-                let b = build(
+                self.reply(
+                    r,
                     "MOT_GET_STATUSBITS",
-                    None,
-                    HOST,
-                    addr,
-                    &[("chan_ident", int(chan)), ("status_bits", int(bits as i64))],
+                    &[("status_bits", int(bits as i64))],
                 );
-                self.send(now, b);
             }
             "MOT_REQ_DCSTATUSUPDATE" => {
                 let b = self.dc_status(ui, now, "MOT_GET_DCSTATUSUPDATE", chan);
@@ -726,17 +727,8 @@ impl AptSim {
                 self.send(now, b);
             }
             "PZ_REQ_PZSTATUSBITS" => {
-                let b = build(
-                    "PZ_GET_PZSTATUSBITS",
-                    None,
-                    HOST,
-                    addr,
-                    &[
-                        ("chan_ident", int(chan)),
-                        ("status_bits", int(PZ_ACTUATOR_CONNECTED as i64)),
-                    ],
-                );
-                self.send(now, b);
+                let bits = int(PZ_ACTUATOR_CONNECTED as i64);
+                self.reply(r, "PZ_GET_PZSTATUSBITS", &[("status_bits", bits)]);
             }
             _ => return false,
         }
@@ -753,7 +745,6 @@ impl AptSim {
             chan,
             now,
         } = *r;
-        let addr = self.units[ui].addr;
         let sc = self.scaling;
         match name {
             "MOT_MOVE_HOME" => {
@@ -761,7 +752,7 @@ impl AptSim {
                 if !u.motor || !u.enabled {
                     return true;
                 }
-                let from = self.position(addr, now).unwrap_or(0);
+                let from = self.unit_pos(ui, now);
                 let hv = sc.counts_s(u.param("MOT_GET_HOMEPARAMS", "home_velocity").unwrap_or(1));
                 let secs = HOME_BASE_NS as f64 / SEC as f64 + from.unsigned_abs() as f64 / hv;
                 let mut mo = Motion::linear(Kind::Home, now, from, 0, secs, chan);
@@ -777,7 +768,7 @@ impl AptSim {
                 if !u.motor || !u.enabled {
                     return true;
                 }
-                let from = self.position(addr, now).unwrap_or(0);
+                let from = self.unit_pos(ui, now);
                 let fv = |n: &str| f.field(n).and_then(|(_, v)| v.as_i64());
                 let vel = |get: &str, vf: &str, af: &str| {
                     (
@@ -888,14 +879,13 @@ impl AptSim {
     }
 
     /// SET_x stores its fields for GET_x; REQ_x answers with GET_x when it is modelled.
-    fn generic(&mut self, ui: usize, f: &AptFrame<'_, '_>, now: u64) {
+    fn generic(&mut self, r: &Req<'_, '_>) {
+        let Req { f, ui, now, .. } = *r;
         let Some(m) = f.msg else { return };
         if m.subs.is_some() {
             self.sub_message(ui, f, now);
             return;
         }
-        let chan = f.channel().filter(|c| *c > 0).unwrap_or(1);
-        let addr = self.units[ui].addr;
         let Some((gm, access)) = Table::global().readback_of(m) else {
             return;
         };
@@ -911,13 +901,8 @@ impl AptSim {
                 if field.name == "chan_ident" {
                     continue;
                 }
-                let fv = match (field.ty, v) {
-                    (Ty::Prim(_), Value::F(x)) => FieldValue::Float(x),
-                    (Ty::Prim(_), v) => match v.as_i64() {
-                        Some(i) => FieldValue::Int(i),
-                        None => continue,
-                    },
-                    _ => continue,
+                let Some(fv) = stored(field.ty, v) else {
+                    continue;
                 };
                 if let Some(s) = slot.1.iter_mut().find(|(n, _)| *n == field.name) {
                     s.1 = fv;
@@ -929,10 +914,8 @@ impl AptSim {
             let Some((gname, p)) = self.units[ui].params.iter().find(|(n, _)| *n == gm.name) else {
                 return;
             };
-            let mut vals: Params = vec![("chan_ident", int(chan))];
-            vals.extend(p.iter().cloned());
-            let b = build(gname, None, HOST, addr, &vals);
-            self.send(now, b);
+            let (gname, p) = (*gname, p.clone());
+            self.reply(r, gname, &p);
         }
     }
 
@@ -965,13 +948,8 @@ impl AptSim {
                 if field.name == "sub_id" {
                     continue;
                 }
-                let fv = match (field.ty, v) {
-                    (Ty::Prim(_), Value::F(x)) => FieldValue::Float(x),
-                    (Ty::Prim(_), v) => match v.as_i64() {
-                        Some(i) => FieldValue::Int(i),
-                        None => continue,
-                    },
-                    _ => continue,
+                let Some(fv) = stored(field.ty, v) else {
+                    continue;
                 };
                 new.push((field.name, fv));
             }
