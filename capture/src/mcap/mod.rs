@@ -42,12 +42,14 @@ use std::io;
 
 mod reader;
 mod schema;
+mod sink;
 #[cfg(test)]
 mod tests;
 mod writer;
 
 pub use reader::{read_decoded, DecodedMsg, McapReader};
 pub use schema::{apt_schema, ell_schema};
+pub use sink::{McapOptions, DEFAULT_CHUNK_SIZE, DEFAULT_ZSTD_LEVEL};
 pub use writer::McapWriter;
 
 /// The MCAP magic, at the start and the end of every file.
