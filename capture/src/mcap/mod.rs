@@ -25,6 +25,11 @@
 //!   declared stream, in order), `aptscope.decode` (protocol and how it was chosen) and
 //!   `aptscope.times` (when some chunks have no capture time).
 //!
+//! Records are in zstd-compressed chunks (level 1, 4 MiB; [`McapOptions`] changes that) with
+//! message indexes, and the file ends with the summary (schemas, channels, statistics, chunk and
+//! metadata indexes), as `mcap::Writer` lays it out; the container is written by our own code
+//! (`sink.rs`, which says why), the chunks compressed on a pool of threads.
+//!
 //! **Reading** ([`McapReader`]) streams the file record by record with bounded buffers (chunks
 //! are decompressed incrementally through the `mcap` crate's sans-io [`LinearReader`]), so
 //! multi-GB files read in constant memory. It produces the raw channels of our files and any
