@@ -4,7 +4,7 @@
 //! A decoded capture is about 37 bytes of JSON per byte of payload, so nearly all the writer's
 //! work is per message and per compressed byte. `mcap::Writer` streams every record through a
 //! zstd stream in five or six small writes (each a `ZSTD_compressStream2` call and a CRC
-//! update): that bookkeeping cost about a third of its thread. Here the calling thread appends
+//! update): that bookkeeping cost about a quarter of its thread. Here the calling thread appends
 //! each record to the open chunk's buffer (a header and one copy), a sealed chunk is compressed
 //! in one call with a reused context on a pool of threads, and an output thread writes the
 //! chunks in order with their message indexes, then the summary. No seek: a chunk's header is
