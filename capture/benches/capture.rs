@@ -1,7 +1,7 @@
 //! Throughput of capture reading and writing: pcapng read, usbmon read with FTDI unwrapping,
 //! MCAP write (raw and decoded channels). Criterion prints MB/s of serial payload and chunks/s.
 
-use aptscope_capture::mcap::McapWriter;
+use aptscope_capture::mcap::{McapOptions, McapWriter};
 use aptscope_capture::model::{Event, Reader, Writer};
 use aptscope_capture::pcap::{PcapNgOut, PcapReader};
 use aptscope_capture::usb::synth_usbmon;
@@ -47,30 +47,35 @@ fn read_all(r: &mut dyn Reader) -> u64 {
     n
 }
 
-/// The MCAP options `APTSCOPE_MCAP_COMPRESSION` asks for (`zstd:LEVEL`, `lz4`, `none`), to
-/// compare compressions; the writer's defaults without it.
-fn mcap_options() -> Option<mcap::WriteOptions> {
-    let c = std::env::var("APTSCOPE_MCAP_COMPRESSION").ok()?;
-    let o = mcap::WriteOptions::new().compression_threads(0);
-    Some(match c.split_once(':') {
-        _ if c == "none" => o.compression(None),
-        _ if c == "lz4" => o.compression(Some(mcap::Compression::Lz4)),
-        Some(("zstd", l)) => o
-            .compression(Some(mcap::Compression::Zstd))
-            .compression_level(l.parse().expect("zstd:LEVEL")),
-        _ => panic!("APTSCOPE_MCAP_COMPRESSION: zstd:LEVEL, lz4 or none"),
-    })
+/// The MCAP options the environment asks for, to compare settings: `APTSCOPE_MCAP_COMPRESSION`
+/// (`zstd:LEVEL`, `lz4`, `none`), `APTSCOPE_MCAP_CHUNK` (chunk size in bytes),
+/// `APTSCOPE_MCAP_THREADS` (compression threads); the writer's defaults without them.
+fn mcap_options() -> McapOptions {
+    let mut o = McapOptions::new();
+    if let Ok(c) = std::env::var("APTSCOPE_MCAP_COMPRESSION") {
+        o = match c.split_once(':') {
+            _ if c == "none" => o.compression(None),
+            _ if c == "lz4" => o.compression(Some(mcap::Compression::Lz4)),
+            Some(("zstd", l)) => o
+                .compression(Some(mcap::Compression::Zstd))
+                .compression_level(l.parse().expect("zstd:LEVEL")),
+            _ => panic!("APTSCOPE_MCAP_COMPRESSION: zstd:LEVEL, lz4 or none"),
+        };
+    }
+    if let Ok(n) = std::env::var("APTSCOPE_MCAP_CHUNK") {
+        o = o.chunk_size(Some(n.parse().expect("APTSCOPE_MCAP_CHUNK=<bytes>")));
+    }
+    if let Ok(n) = std::env::var("APTSCOPE_MCAP_THREADS") {
+        o = o.compression_threads(n.parse().expect("APTSCOPE_MCAP_THREADS=<n>"));
+    }
+    o
 }
 
 /// Write `cs` as MCAP (raw and decoded channels).
 #[inline(never)]
 fn mcap_write_once(cs: &[OwnedChunk], port: &StreamInfo) -> Vec<u8> {
     let out = Cursor::new(Vec::with_capacity(64 << 20));
-    let mut w = match mcap_options() {
-        Some(o) => McapWriter::with_options(out, None, o),
-        None => McapWriter::new(out, None),
-    }
-    .expect("mcap");
+    let mut w = McapWriter::with_options(out, None, mcap_options()).expect("mcap");
     w.stream(port).expect("stream");
     for ch in cs {
         w.chunk(&ch.as_chunk()).expect("chunk");
@@ -91,7 +96,7 @@ fn port() -> StreamInfo {
 /// `APTSCOPE_MCAP_OUT` when set), instead of running criterion, for a repeatable instruction
 /// count on a fixed input: `APTSCOPE_MCAP_ONCE=1 valgrind --tool=callgrind --separate-threads=yes
 /// target/release/deps/capture-<hash>`. The write costs `mcap_write_once` (inclusive) in the
-/// main thread's profile plus the whole of the `mcap-writer` thread's.
+/// main thread's profile plus the whole of the `mcap-zstd-*` and `mcap-writer` threads'.
 fn mcap_once() -> bool {
     let Ok(mib) = std::env::var("APTSCOPE_MCAP_ONCE") else {
         return false;
@@ -99,16 +104,51 @@ fn mcap_once() -> bool {
     let mib: usize = mib.parse().expect("APTSCOPE_MCAP_ONCE=<MiB>");
     let cs = chunks(mib << 20);
     let payload: usize = cs.iter().map(|c| c.bytes.len()).sum();
+    let (wall, proc0, main0) = (std::time::Instant::now(), process_cpu(), thread_cpu());
     let mcap = mcap_write_once(&cs, &port());
+    let (wall, proc_s, main_s) = (
+        wall.elapsed().as_secs_f64(),
+        process_cpu() - proc0,
+        thread_cpu() - main0,
+    );
+    let mib = payload as f64 / (1 << 20) as f64;
     eprintln!(
-        "{} chunks, {payload} payload bytes -> {} bytes of MCAP",
+        "{} chunks, {payload} payload bytes -> {} bytes of MCAP\n\
+         wall {wall:.2} s ({:.1} MiB/s); CPU {proc_s:.2} s = {:.3} s/MiB \
+         (calling thread {:.3}, other threads {:.3}): {:.1} MiB per CPU-second",
         cs.len(),
-        mcap.len()
+        mcap.len(),
+        mib / wall,
+        proc_s / mib,
+        main_s / mib,
+        (proc_s - main_s) / mib,
+        mib / proc_s,
     );
     if let Ok(path) = std::env::var("APTSCOPE_MCAP_OUT") {
         std::fs::write(path, &mcap).expect("write MCAP");
     }
     true
+}
+
+/// CPU time of the whole process so far (every thread, ended ones included), in seconds; the
+/// kernel counts it in clock ticks (10 ms), so runs should last a few seconds.
+fn process_cpu() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // Fields after the command name (which may hold spaces): utime and stime are 14 and 15.
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| f.get(i).and_then(|x| x.parse::<u64>().ok()).unwrap_or(0);
+    (ticks(11) + ticks(12)) as f64 / 100.0
+}
+
+/// CPU time of the calling thread so far, in seconds (ns resolution).
+fn thread_cpu() -> f64 {
+    let s = std::fs::read_to_string("/proc/thread-self/schedstat").unwrap_or_default();
+    s.split_whitespace()
+        .next()
+        .and_then(|x| x.parse::<u64>().ok())
+        .unwrap_or(0) as f64
+        / 1e9
 }
 
 fn benches(c: &mut Criterion) {

@@ -25,6 +25,11 @@
 //!   declared stream, in order), `aptscope.decode` (protocol and how it was chosen) and
 //!   `aptscope.times` (when some chunks have no capture time).
 //!
+//! Records are in zstd-compressed chunks (level 1, 4 MiB; [`McapOptions`] changes that) with
+//! message indexes, and the file ends with the summary (schemas, channels, statistics, chunk and
+//! metadata indexes), as `mcap::Writer` lays it out; the container is written by our own code
+//! (`sink.rs`, which says why), the chunks compressed on a pool of threads.
+//!
 //! **Reading** ([`McapReader`]) streams the file record by record with bounded buffers (chunks
 //! are decompressed incrementally through the `mcap` crate's sans-io [`LinearReader`]), so
 //! multi-GB files read in constant memory. It produces the raw channels of our files and any
@@ -42,12 +47,14 @@ use std::io;
 
 mod reader;
 mod schema;
+mod sink;
 #[cfg(test)]
 mod tests;
 mod writer;
 
 pub use reader::{read_decoded, DecodedMsg, McapReader};
 pub use schema::{apt_schema, ell_schema};
+pub use sink::{McapOptions, DEFAULT_CHUNK_SIZE, DEFAULT_ZSTD_LEVEL};
 pub use writer::McapWriter;
 
 /// The MCAP magic, at the start and the end of every file.

@@ -5,7 +5,6 @@ use super::schema::{apt_unknown_schema, garbage_schema, late_diag_schema};
 use super::*;
 use crate::model::{Direction, Event, OwnedChunk, ReadDiag, Reader, StreamInfo, Writer};
 use ::mcap::records::{op, MessageHeader};
-use ::mcap::WriteOptions;
 use aptscope_dissector::apt::AptFramer;
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::Table;
@@ -50,7 +49,7 @@ fn shared(limit: usize) -> Shared {
 #[test]
 fn a_write_error_of_the_writer_thread_is_returned() {
     let out = shared(50_000);
-    let opts = WriteOptions::new().compression(None).chunk_size(Some(4096));
+    let opts = McapOptions::new().compression(None).chunk_size(Some(4096));
     let mut w = McapWriter::with_options(out, Some(Proto::Apt), opts).unwrap();
     let chunks = some_chunks(2000);
     let mut err = None;
@@ -337,15 +336,15 @@ fn conforms(v: &J, s: &J, path: &str) -> Result<(), String> {
 
 // --- helpers ----------------------------------------------------------------------------
 
-fn uncompressed(chunk_size: Option<u64>) -> WriteOptions {
-    WriteOptions::new().compression(None).chunk_size(chunk_size)
+fn uncompressed(chunk_size: Option<u64>) -> McapOptions {
+    McapOptions::new().compression(None).chunk_size(chunk_size)
 }
 
 fn write(
     streams: &[StreamInfo],
     chunks: &[OwnedChunk],
     proto: Option<Proto>,
-    opts: WriteOptions,
+    opts: McapOptions,
 ) -> Vec<u8> {
     let mut w = McapWriter::with_options(Cursor::new(Vec::new()), proto, opts).unwrap();
     for s in streams {
@@ -471,10 +470,10 @@ proptest! {
             })
             .collect();
         let opts = match mode {
-            0 => WriteOptions::new(),
+            0 => McapOptions::new(),
             1 => uncompressed(Some(200)),
             2 => uncompressed(None).use_chunks(false),
-            _ => WriteOptions::new()
+            _ => McapOptions::new()
                 .compression(Some(mcap::Compression::Lz4))
                 .chunk_size(Some(300)),
         };
@@ -542,7 +541,7 @@ proptest! {
     ) {
         let chunks = some_chunks(30);
         let opts = if compressed {
-            WriteOptions::new().chunk_size(Some(400))
+            McapOptions::new().chunk_size(Some(400))
         } else {
             uncompressed(Some(400))
         };
@@ -571,12 +570,7 @@ fn crc32_is_ieee() {
 
 #[test]
 fn damage_only_the_data_crc_sees_is_reported() {
-    let mut bytes = write(
-        &stream_infos(2),
-        &some_chunks(10),
-        None,
-        WriteOptions::new(),
-    );
+    let mut bytes = write(&stream_infos(2), &some_chunks(10), None, McapOptions::new());
     // A stream's name, in an `aptscope.stream` metadata record.
     let at = bytes
         .windows(12)
@@ -603,10 +597,105 @@ fn sniffs_the_magic() {
 
 #[test]
 fn empty_capture() {
-    let bytes = write(&[], &[], None, WriteOptions::new());
+    let bytes = write(&[], &[], None, McapOptions::new());
     let got = read(&bytes);
     assert!(got.diags.is_empty(), "{:?}", got.diags);
     assert!(got.chunks.is_empty() && got.streams.is_empty());
+}
+
+/// The summary and the indexes (which the linear readers above never use) lead to every
+/// message, with every compression, several compression threads and many small chunks: what
+/// Foxglove's random access and `mcap info` read.
+#[test]
+fn summary_and_indexes_lead_to_every_message() {
+    type Msg = (u16, u32, u64, Vec<u8>);
+    let chunks = some_chunks(400);
+    for compression in [
+        Some(mcap::Compression::Zstd),
+        Some(mcap::Compression::Lz4),
+        None,
+    ] {
+        let opts = McapOptions::new()
+            .compression(compression)
+            .chunk_size(Some(3000))
+            .compression_threads(3);
+        let bytes = write(&stream_infos(2), &chunks, None, opts);
+        let linear: Vec<Msg> = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .map(|m| {
+                let m = m.unwrap();
+                assert_eq!(m.log_time, m.publish_time);
+                (m.channel.id, m.sequence, m.log_time, m.data.to_vec())
+            })
+            .collect();
+        let sum = mcap::Summary::read(&bytes).unwrap().expect("a summary");
+        let stats = sum.stats.as_ref().expect("statistics");
+        assert_eq!(stats.message_count, linear.len() as u64);
+        assert_eq!(
+            stats.channel_message_counts.values().sum::<u64>(),
+            linear.len() as u64
+        );
+        assert_eq!(stats.channel_count as usize, sum.channels.len());
+        assert_eq!(stats.schema_count as usize, sum.schemas.len());
+        assert_eq!(stats.chunk_count as usize, sum.chunk_indexes.len());
+        assert!(sum.chunk_indexes.len() > 20, "{}", sum.chunk_indexes.len());
+        assert_eq!(
+            (stats.message_start_time, stats.message_end_time),
+            (
+                linear.iter().map(|m| m.2).min().unwrap(),
+                linear.iter().map(|m| m.2).max().unwrap()
+            )
+        );
+        let mut indexed: Vec<Msg> = vec![];
+        for ci in &sum.chunk_indexes {
+            let mut in_chunk = vec![];
+            for m in sum.stream_chunk(&bytes, ci).unwrap() {
+                let m = m.unwrap();
+                assert!((ci.message_start_time..=ci.message_end_time).contains(&m.log_time));
+                in_chunk.push((m.channel.id, m.sequence, m.log_time, m.data.to_vec()));
+            }
+            if ci.message_index_offsets.is_empty() {
+                // A chunk of schema and channel records only.
+                assert!(in_chunk.is_empty());
+                continue;
+            }
+            let mut by_index = vec![];
+            for (ch, entries) in sum.read_message_indexes(&bytes, ci).unwrap() {
+                for e in entries {
+                    let m = sum.seek_message(&bytes, ci, &e).unwrap();
+                    assert_eq!((m.channel.id, m.log_time), (ch.id, e.log_time));
+                    by_index.push((m.channel.id, m.sequence, m.log_time, m.data.to_vec()));
+                }
+            }
+            by_index.sort();
+            let mut sorted = in_chunk.clone();
+            sorted.sort();
+            assert_eq!(by_index, sorted);
+            indexed.extend(in_chunk);
+        }
+        assert_eq!(indexed, linear);
+        let names: Vec<String> = sum
+            .metadata_indexes
+            .iter()
+            .map(|i| mcap::read::metadata(&bytes, i).unwrap().name)
+            .collect();
+        assert_eq!(
+            names,
+            [
+                "aptscope",
+                "aptscope.stream",
+                "aptscope.stream",
+                "aptscope.decode"
+            ]
+        );
+        // The footer's CRC covers the summary section and the footer up to the CRC.
+        let footer = mcap::read::footer(&bytes).unwrap();
+        let end = bytes.len() - MAGIC.len() - 4;
+        assert_eq!(
+            footer.summary_crc,
+            !crc32_update(!0, &bytes[footer.summary_start as usize..end])
+        );
+    }
 }
 
 // --- decoded channels -------------------------------------------------------------------
@@ -675,7 +764,7 @@ fn kdc101() -> Vec<OwnedChunk> {
 fn kdc101_session_has_decoded_channels_with_schemas() {
     let chunks = kdc101();
     assert_eq!(chunks.len(), 20);
-    let bytes = write(&stream_infos(1), &chunks, None, WriteOptions::new());
+    let bytes = write(&stream_infos(1), &chunks, None, McapOptions::new());
     let dec = decoded(&bytes);
     let (name, schema, msgs) = &dec["/apt/MOT_GET_DCSTATUSUPDATE"];
     assert_eq!(name, "aptscope.apt.MOT_GET_DCSTATUSUPDATE");
@@ -781,7 +870,7 @@ fn elliptec_bus_decodes_on_ell_channels() {
             bytes: l.to_vec(),
         })
         .collect();
-    let bytes = write(&stream_infos(1), &chunks, None, WriteOptions::new());
+    let bytes = write(&stream_infos(1), &chunks, None, McapOptions::new());
     let dec = decoded(&bytes);
     let (_, schema, po) = &dec["/ell/PO"];
     assert_eq!(
@@ -809,7 +898,7 @@ fn damaged_sample_gives_garbage_and_unknown_channels() {
         &stream_infos(1),
         &chunks,
         Some(Proto::Apt),
-        WriteOptions::new(),
+        McapOptions::new(),
     );
     let dec = decoded(&bytes);
     assert!(dec.contains_key("/apt/garbage"), "{:?}", dec.keys());
@@ -959,7 +1048,7 @@ fn a_chunk_with_a_wild_length_is_resynchronised() {
 #[test]
 fn bad_magic_is_reported_and_records_still_read() {
     let chunks = some_chunks(10);
-    let mut bytes = write(&stream_infos(2), &chunks, None, WriteOptions::new());
+    let mut bytes = write(&stream_infos(2), &chunks, None, McapOptions::new());
     bytes[1] = b'X';
     let got = read(&bytes);
     assert_eq!(got.diags[0].kind(), "bad_magic");
@@ -1040,7 +1129,8 @@ fn large_file_reads_in_bounded_memory() {
     let path = std::env::temp_dir().join("aptscope-mcap-large.mcap");
     {
         let f = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
-        let mut w = mcap::Writer::with_options(f, WriteOptions::new().compression(None)).unwrap();
+        let mut w =
+            mcap::Writer::with_options(f, ::mcap::WriteOptions::new().compression(None)).unwrap();
         let mut m = BTreeMap::new();
         m.insert("stream".to_string(), "0".to_string());
         let ch = w.add_channel(0, "/serial/0/d2h", RAW_ENCODING, &m).unwrap();
@@ -1097,7 +1187,7 @@ fn streams_without_chunks_and_untimed_chunks_survive() {
             bytes: b"def".to_vec(),
         },
     ];
-    let bytes = write(&streams, &chunks, None, WriteOptions::new());
+    let bytes = write(&streams, &chunks, None, McapOptions::new());
     let got = read(&bytes);
     assert_eq!(got.streams, streams);
     assert_eq!(got.chunks, chunks);

@@ -2,28 +2,28 @@
 //! ([`record::Decoder`]) and rendered by the one renderer ([`Renderer`]).
 
 use super::schema::{self, Schema};
-use super::{failed_err, finished_err, mcap_err, RAW_ENCODING};
+use super::sink::{McapOptions, Sink};
+use super::{failed_err, finished_err, RAW_ENCODING};
 use crate::model::{Chunk, Direction, ReadDiag, StreamInfo, Writer};
-use ::mcap::records::{MessageHeader, Metadata};
-use ::mcap::{McapError, WriteOptions};
+use ::mcap::records::Metadata;
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::pipeline::{Format, Renderer};
 use aptscope_dissector::record::{self, Record};
 use std::collections::{BTreeMap, HashMap};
 use std::hash::BuildHasherDefault;
-use std::io::{self, Seek, Write};
+use std::io::{self, Write};
 
 /// An MCAP capture writer: raw lossless channels plus decoded JSON channels (see the module
 /// documentation for the layout).
 ///
-/// The calling thread frames, decodes and renders the records; a writer thread owns the
-/// [`mcap::Writer`] and does the MCAP encoding and the zstd compression (about 70 % of the
-/// instructions), so the two overlap when a second core is free. The writer thread makes exactly the calls a single-threaded
-/// writer would, in the same order, so the file is the same. An I/O error of the writer thread
-/// is returned by a later [`chunk`](Writer::chunk) or by [`finish`](Writer::finish) (as with a
-/// `BufWriter`); dropping the writer without `finish` still closes the file as
-/// [`mcap::Writer`] does.
-pub struct McapWriter<W: Write + Seek + Send + 'static> {
+/// The calling thread frames, decodes and renders the records and appends them to the open
+/// chunk; sealed chunks are compressed on a pool of threads and written, in order, by an output
+/// thread (the `sink` module says why the container is written here and not by
+/// [`mcap::Writer`]). An I/O error of the output thread is returned by a later
+/// [`chunk`](Writer::chunk) or by [`finish`](Writer::finish) (as with a `BufWriter`); dropping
+/// the writer without `finish` still closes the file, as [`mcap::Writer`] does. The writer
+/// need not seek.
+pub struct McapWriter<W: Write + Send + 'static> {
     sink: Option<Sink>,
     thread: Option<std::thread::JoinHandle<io::Result<W>>>,
     /// An error stopped the writer thread (and was returned).
@@ -37,28 +37,17 @@ pub struct McapWriter<W: Write + Seek + Send + 'static> {
     dec: Decoded,
 }
 
-impl<W: Write + Seek + Send + 'static> McapWriter<W> {
-    /// A writer with zstd-compressed chunks. `proto` chooses the decoder of the decoded
-    /// channels; `None` detects it as `decode` does (the busiest lane of the first 4 KiB).
-    ///
-    /// zstd runs single-threaded: a chunk (1 MiB) is smaller than one job of zstd's
-    /// multi-threaded mode, so its worker threads never overlapped with anything and only
-    /// added a copy and locking per write; the writer thread is what runs in parallel now.
+impl<W: Write + Send + 'static> McapWriter<W> {
+    /// A writer with the default [`McapOptions`] (zstd-compressed chunks). `proto` chooses
+    /// the decoder of the decoded channels; `None` detects it as `decode` does (the busiest
+    /// lane of the first 4 KiB).
     pub fn new(w: W, proto: Option<Proto>) -> io::Result<Self> {
-        Self::with_options(
-            w,
-            proto,
-            WriteOptions::new().compression_threads(0).library(format!(
-                "aptscope {}; {}",
-                env!("CARGO_PKG_VERSION"),
-                mcap::LIBRARY_IDENTIFIER
-            )),
-        )
+        Self::with_options(w, proto, McapOptions::new())
     }
 
-    /// A writer with the given MCAP options (compression, chunk size, …).
-    pub fn with_options(w: W, proto: Option<Proto>, opts: WriteOptions) -> io::Result<Self> {
-        let mut mw = opts.create(w).map_err(mcap_err)?;
+    /// A writer with the given options (compression, chunk size, threads, …).
+    pub fn with_options(w: W, proto: Option<Proto>, opts: McapOptions) -> io::Result<Self> {
+        let (mut sink, thread) = Sink::start(w, opts)?;
         let meta: BTreeMap<String, String> = [
             ("version", env!("CARGO_PKG_VERSION")),
             ("lossless", "bytes, times, direction"),
@@ -71,12 +60,10 @@ impl<W: Write + Seek + Send + 'static> McapWriter<W> {
         .into_iter()
         .map(|(k, v)| (k.to_string(), v.to_string()))
         .collect();
-        mw.write_metadata(&Metadata {
+        sink.metadata(Metadata {
             name: "aptscope".into(),
             metadata: meta,
-        })
-        .map_err(mcap_err)?;
-        let (sink, thread) = Sink::start(mw)?;
+        })?;
         Ok(McapWriter {
             sink: Some(sink),
             thread: Some(thread),
@@ -163,12 +150,11 @@ impl<W: Write + Seek + Send + 'static> McapWriter<W> {
     }
 }
 
-impl<W: Write + Seek + Send + 'static> Drop for McapWriter<W> {
+impl<W: Write + Send + 'static> Drop for McapWriter<W> {
     fn drop(&mut self) {
-        // Hand over what was written so far and hang up; the thread then closes the file (as
-        // dropping an `mcap::Writer` does).
-        if let Some(mut sink) = self.sink.take() {
-            let _ = sink.flush();
+        // Close the file with what was written so far (as dropping an `mcap::Writer` does).
+        if let Some(sink) = self.sink.take() {
+            let _ = sink.finish();
         }
         if let Some(t) = self.thread.take() {
             let _ = t.join();
@@ -176,7 +162,7 @@ impl<W: Write + Seek + Send + 'static> Drop for McapWriter<W> {
     }
 }
 
-impl<W: Write + Seek + Send + 'static> Writer for McapWriter<W> {
+impl<W: Write + Send + 'static> Writer for McapWriter<W> {
     fn stream(&mut self, s: &StreamInfo) -> io::Result<()> {
         if self.sink.is_none() {
             return Err(self.no_sink());
@@ -258,10 +244,14 @@ impl<W: Write + Seek + Send + 'static> Writer for McapWriter<W> {
                     metadata: m,
                 })?;
             }
-            w.flush()
+            Ok(())
         })?;
-        // Hang up: the thread finishes the file and hands the writer back.
-        self.sink = None;
+        // The last chunk and the summary; the output thread then hands the writer back.
+        if let Some(sink) = self.sink.take() {
+            if let Err(e) = sink.finish() {
+                return Err(self.stop(e));
+            }
+        }
         let res = match self.thread.take().map(|t| t.join()) {
             Some(Ok(r)) => r,
             Some(Err(_)) => Err(io::Error::other("MCAP writer thread panicked")),
@@ -272,225 +262,6 @@ impl<W: Write + Seek + Send + 'static> Writer for McapWriter<W> {
         inner.flush()?;
         self.inner = Some(inner);
         Ok(())
-    }
-}
-
-// --- the writer thread -----------------------------------------------------------------------
-
-/// One call to make on the [`mcap::Writer`].
-enum Op {
-    /// `add_schema` (jsonschema), which must return `id`.
-    Schema {
-        id: u16,
-        name: String,
-        body: String,
-    },
-    /// `add_channel`, which must return `id`.
-    Channel {
-        id: u16,
-        schema: u16,
-        topic: String,
-        encoding: &'static str,
-        meta: BTreeMap<String, String>,
-    },
-    /// `write_to_known_channel`; the message is the next `len` bytes of the batch's data.
-    Message {
-        channel: u16,
-        sequence: u32,
-        log_time: u64,
-        len: usize,
-    },
-    Metadata(Metadata),
-}
-
-/// Calls to make, in order, with the messages' bytes back to back.
-#[derive(Default)]
-struct Batch {
-    ops: Vec<Op>,
-    data: Vec<u8>,
-}
-
-/// Send a batch to the writer thread once it holds this many message bytes …
-const BATCH_BYTES: usize = 256 * 1024;
-/// … or this many calls.
-const BATCH_OPS: usize = 4096;
-/// Full batches on their way to the writer thread (bounds the memory to a few batches).
-const BATCHES_IN_FLIGHT: usize = 2;
-
-/// The calling thread's end of the writer thread: it batches the calls, and assigns schema
-/// and channel ids exactly as [`mcap::Writer::add_schema`] and
-/// [`mcap::Writer::add_channel`] will (sequentially from 1, identical content deduplicated),
-/// so no call waits for an answer. The writer thread checks every id.
-struct Sink {
-    batch: Batch,
-    tx: std::sync::mpsc::SyncSender<Batch>,
-    /// Emptied batches, back from the writer thread for reuse.
-    spare: std::sync::mpsc::Receiver<Batch>,
-    schemas: HashMap<(String, String), u16>,
-    channels: u16,
-}
-
-impl Sink {
-    fn start<W: Write + Seek + Send + 'static>(
-        mut w: mcap::Writer<W>,
-    ) -> io::Result<(Sink, std::thread::JoinHandle<io::Result<W>>)> {
-        let (tx, rx) = std::sync::mpsc::sync_channel::<Batch>(BATCHES_IN_FLIGHT);
-        let (spare_tx, spare) = std::sync::mpsc::channel::<Batch>();
-        let thread = std::thread::Builder::new()
-            .name("mcap-writer".into())
-            .spawn(move || {
-                for mut b in rx {
-                    run_batch(&mut w, &mut b).map_err(mcap_err)?;
-                    b.ops.clear();
-                    b.data.clear();
-                    let _ = spare_tx.send(b);
-                }
-                // Hung up: finish or drop; either way close the file as `mcap::Writer` does.
-                w.finish().map_err(mcap_err)?;
-                Ok(w.into_inner())
-            })?;
-        let sink = Sink {
-            batch: Batch {
-                ops: Vec::with_capacity(BATCH_OPS),
-                data: Vec::with_capacity(BATCH_BYTES + 4096),
-            },
-            tx,
-            spare,
-            schemas: HashMap::new(),
-            channels: 0,
-        };
-        Ok((sink, thread))
-    }
-
-    fn push(&mut self, op: Op) -> io::Result<()> {
-        self.batch.ops.push(op);
-        if self.batch.ops.len() >= BATCH_OPS || self.batch.data.len() >= BATCH_BYTES {
-            self.flush()?;
-        }
-        Ok(())
-    }
-
-    /// Hand the batch to the writer thread.
-    fn flush(&mut self) -> io::Result<()> {
-        if self.batch.ops.is_empty() {
-            return Ok(());
-        }
-        let next = self.spare.try_recv().unwrap_or_else(|_| Batch {
-            ops: Vec::with_capacity(BATCH_OPS),
-            data: Vec::with_capacity(BATCH_BYTES + 4096),
-        });
-        let full = std::mem::replace(&mut self.batch, next);
-        self.tx
-            .send(full)
-            .map_err(|_| io::Error::other("MCAP writer thread stopped"))
-    }
-
-    fn add_schema(&mut self, name: String, body: String) -> io::Result<u16> {
-        let key = (name, body);
-        if let Some(&id) = self.schemas.get(&key) {
-            return Ok(id);
-        }
-        let id = u16::try_from(self.schemas.len() + 1)
-            .map_err(|_| mcap_err(McapError::TooManySchemas))?;
-        self.schemas.insert(key.clone(), id);
-        let (name, body) = key;
-        self.push(Op::Schema { id, name, body })?;
-        Ok(id)
-    }
-
-    /// Every channel we add has a distinct topic or metadata, so each gets a new id.
-    fn add_channel(
-        &mut self,
-        schema: u16,
-        topic: String,
-        encoding: &'static str,
-        meta: BTreeMap<String, String>,
-    ) -> io::Result<u16> {
-        self.channels = self
-            .channels
-            .checked_add(1)
-            .ok_or_else(|| mcap_err(McapError::TooManyChannels))?;
-        let id = self.channels;
-        self.push(Op::Channel {
-            id,
-            schema,
-            topic,
-            encoding,
-            meta,
-        })?;
-        Ok(id)
-    }
-
-    fn message(
-        &mut self,
-        channel: u16,
-        sequence: u32,
-        log_time: u64,
-        data: &[u8],
-    ) -> io::Result<()> {
-        self.batch.data.extend_from_slice(data);
-        self.push(Op::Message {
-            channel,
-            sequence,
-            log_time,
-            len: data.len(),
-        })
-    }
-
-    fn metadata(&mut self, m: Metadata) -> io::Result<()> {
-        self.push(Op::Metadata(m))
-    }
-}
-
-/// Make a batch's calls on the MCAP writer (in the writer thread).
-fn run_batch<W: Write + Seek>(w: &mut mcap::Writer<W>, b: &mut Batch) -> Result<(), McapError> {
-    let mut at = 0;
-    for op in b.ops.drain(..) {
-        match op {
-            Op::Message {
-                channel,
-                sequence,
-                log_time,
-                len,
-            } => {
-                w.write_to_known_channel(
-                    &MessageHeader {
-                        channel_id: channel,
-                        sequence,
-                        log_time,
-                        publish_time: log_time,
-                    },
-                    &b.data[at..at + len],
-                )?;
-                at += len;
-            }
-            Op::Schema { id, name, body } => {
-                let got = w.add_schema(&name, "jsonschema", body.as_bytes())?;
-                check_id("schema", &name, id, got)?;
-            }
-            Op::Channel {
-                id,
-                schema,
-                topic,
-                encoding,
-                meta,
-            } => {
-                let got = w.add_channel(schema, &topic, encoding, &meta)?;
-                check_id("channel", &topic, id, got)?;
-            }
-            Op::Metadata(m) => w.write_metadata(&m)?,
-        }
-    }
-    Ok(())
-}
-
-fn check_id(what: &str, name: &str, want: u16, got: u16) -> Result<(), McapError> {
-    if want == got {
-        Ok(())
-    } else {
-        Err(McapError::Io(io::Error::other(format!(
-            "internal error: MCAP {what} {name} got id {got}, not {want}"
-        ))))
     }
 }
 
