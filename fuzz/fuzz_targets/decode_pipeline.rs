@@ -12,7 +12,7 @@
 
 use aptscope_capture::open::{sniff, ByteReader, Format};
 use aptscope_capture::textlog;
-use aptscope_capture::{mcap_io, pcap, Direction, Event, Reader};
+use aptscope_capture::{mcap, pcap, Direction, Event, Reader};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::pipeline::{Ctx, Format as PFormat, Pipeline};
 use aptscope_dissector::table::Dir;
@@ -24,7 +24,7 @@ fn reader(file: &[u8], format: Format) -> Box<dyn Reader> {
     let stream = Cursor::new(file.to_vec());
     match format {
         Format::Pcap | Format::PcapNg => Box::new(pcap::PcapReader::new(stream, None)),
-        Format::Mcap => Box::new(mcap_io::McapReader::new(stream)),
+        Format::Mcap => Box::new(mcap::McapReader::new(stream)),
         Format::Text(t) => textlog::open(t, BufReader::new(stream)),
         Format::Hex => Box::new(ByteReader::new(Box::new(stream), true)),
         Format::Raw => Box::new(ByteReader::new(Box::new(stream), false)),

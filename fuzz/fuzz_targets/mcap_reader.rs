@@ -8,7 +8,7 @@
 //! the file is read.
 #![no_main]
 
-use aptscope_capture::mcap_io::McapReader;
+use aptscope_capture::mcap::McapReader;
 use aptscope_fuzz::{drain_reader, event_keys, split_ctl, ShortReads};
 use libfuzzer_sys::fuzz_target;
 
