@@ -26,6 +26,11 @@ pub trait Sink {
     /// The key of the next member of the innermost object. Keys are identifiers (names from
     /// this module and the message tables): NDJSON writes them without escaping.
     fn key(&mut self, k: &str);
+    /// A key that lives as long as the program (a table's field name): a sink may keep what
+    /// it makes of it.
+    fn key_static(&mut self, k: &'static str) {
+        self.key(k)
+    }
     /// A key written in the code (see [`key!`]): NDJSON copies its prepared spelling.
     fn key_lit(&mut self, k: &Lit) {
         self.key(k.name)
@@ -110,6 +115,10 @@ impl Sink for String {
         self.push('"');
         self.push_str(k);
         self.push_str("\":");
+    }
+    #[inline(always)]
+    fn key_static(&mut self, k: &'static str) {
+        self.key(k);
     }
     #[inline(always)]
     fn key_lit(&mut self, k: &Lit) {
@@ -491,7 +500,7 @@ pub fn sub<S: Sink + ?Sized>(out: &mut S, s: &crate::table::SubDef) {
 pub fn apt_fields<S: Sink + ?Sized>(out: &mut S, f: &AptFrame<'_, '_>) {
     out.begin_obj();
     for (fd, v) in f.fields() {
-        out.key(fd.name);
+        out.key_static(fd.name);
         value(out, f.table(), fd, &v);
     }
     out.end_obj();
@@ -633,7 +642,7 @@ fn phys_map<'u, S: Sink + ?Sized>(
             out.begin_obj();
             first = false;
         }
-        out.key(name);
+        out.key_static(name);
         out.begin_obj();
         key!(out, "value");
         out.float(x);
@@ -655,7 +664,7 @@ fn codes<S: Sink + ?Sized>(out: &mut S, items: impl Iterator<Item = (&'static st
             out.begin_obj();
             first = false;
         }
-        out.key(name);
+        out.key_static(name);
         match u64::try_from(c) {
             Ok(u) => out.uint(u),
             Err(_) => out.int(c as i64),
@@ -794,7 +803,7 @@ pub fn ell_fields<S: Sink + ?Sized>(out: &mut S, f: &EllFrame<'_>) {
     use crate::ell::table::Kind;
     out.begin_obj();
     for (fd, v) in f.fields() {
-        out.key(fd.name);
+        out.key_static(fd.name);
         match (fd.kind, v) {
             (Kind::Status, EllValue::U(c)) => out.str(crate::ell::table::status_name(c as u32)),
             (_, EllValue::U(x)) => out.uint(x),

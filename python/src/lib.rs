@@ -19,7 +19,7 @@ use pyo3::create_exception;
 use pyo3::exceptions::{PyFileNotFoundError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString};
-use std::collections::VecDeque;
+use std::collections::{HashMap, VecDeque};
 use std::convert::Infallible;
 use std::io;
 use std::path::Path;
@@ -83,6 +83,7 @@ struct Records {
     dec: Decoder,
     queue: VecDeque<Py<PyAny>>,
     done: bool,
+    keys: Keys,
 }
 
 #[pymethods]
@@ -108,6 +109,7 @@ impl Records {
             dec: Decoder::new(proto),
             queue: VecDeque::new(),
             done: false,
+            keys: Keys::default(),
         })
     }
 
@@ -126,9 +128,9 @@ impl Records {
 impl Records {
     /// Decode the next event (or all the bytes) into the queue.
     fn fill(&mut self, py: Python<'_>) -> PyResult<()> {
-        let q = &mut self.queue;
+        let (q, keys) = (&mut self.queue, &mut self.keys);
         let mut emit = |r: &Record<'_>| -> PyResult<()> {
-            let mut sink = PySink::new(py);
+            let mut sink = PySink::new(py, keys);
             json::record(&mut sink, r, None);
             q.push_back(sink.finish()?);
             Ok(())
@@ -161,8 +163,9 @@ impl Records {
 /// A record's shape built straight as Python objects (dicts, lists, str, int, float, bool,
 /// None) by `json::record`: the dicts `json.loads` would make of the NDJSON line, without the
 /// line.
-struct PySink<'py> {
+struct PySink<'py, 'k> {
     py: Python<'py>,
+    keys: &'k mut Keys,
     /// Open dicts and lists, innermost last (each already placed in its parent).
     stack: Vec<Open<'py>>,
     /// The key of the next member of the innermost dict.
@@ -178,10 +181,16 @@ enum Open<'py> {
     List(Bound<'py, PyList>),
 }
 
-impl<'py> PySink<'py> {
-    fn new(py: Python<'py>) -> Self {
+/// The Python strings of keys that live as long as the program, by address and length: made
+/// once (with their hash computed once), not per record.
+#[derive(Default)]
+struct Keys(HashMap<(usize, usize), Py<PyString>>);
+
+impl<'py, 'k> PySink<'py, 'k> {
+    fn new(py: Python<'py>, keys: &'k mut Keys) -> Self {
         PySink {
             py,
+            keys,
             stack: Vec::with_capacity(8),
             key: None,
             top: None,
@@ -226,7 +235,7 @@ impl<'py> PySink<'py> {
     }
 }
 
-impl json::Sink for PySink<'_> {
+impl json::Sink for PySink<'_, '_> {
     fn begin_obj(&mut self) {
         let d = PyDict::new(self.py);
         self.put(d.clone().into_any());
@@ -245,6 +254,18 @@ impl json::Sink for PySink<'_> {
     }
     fn key(&mut self, k: &str) {
         self.key = Some(PyString::new(self.py, k));
+    }
+    fn key_static(&mut self, k: &'static str) {
+        let py = self.py;
+        let s = self
+            .keys
+            .0
+            .entry((k.as_ptr() as usize, k.len()))
+            .or_insert_with(|| PyString::new(py, k).unbind());
+        self.key = Some(s.bind(py).clone());
+    }
+    fn key_lit(&mut self, k: &json::Lit) {
+        self.key_static(k.name);
     }
     fn str(&mut self, s: &str) {
         self.put(PyString::new(self.py, s).into_any());
