@@ -689,15 +689,32 @@ pub fn ell_code(fd: &crate::ell::table::Field, v: &EllValue<'_>) -> Option<u64> 
 fn apt_visit(a: &AptRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
     let fr = a.frame;
     let h = fr.header();
-    let m = &a.meta;
+    let common = Common {
+        meta: &a.meta,
+        offset: fr.offset,
+        bytes: fr.bytes,
+        pair: a.pair.pair,
+        latency_ns: a.pair.latency_ns,
+    };
+    if let Some(found) = frame_key(
+        &common,
+        || crate::json::apt_diags(fr, a.pair),
+        || {
+            fr.fields()
+                .filter_map(|(fd, v)| Some((fd.name, crate::apt::phys_or_scaled(fd, &v, a.scale)?)))
+        },
+        || {
+            fr.fields()
+                .filter_map(|(fd, v)| Some((fd.name, apt_code(fd, &v)?)))
+        },
+        key,
+        rest,
+        f,
+    ) {
+        return found;
+    }
     let v = match key {
-        Key::N => num(m.n),
         Key::Proto => str_val("apt"),
-        Key::Type => str_val("frame"),
-        Key::Offset => num(fr.offset),
-        Key::CapOffset => num(m.cap_offset),
-        Key::Len => num(fr.bytes.len() as u64),
-        Key::Raw => hex(fr.bytes),
         Key::Msgid => num(h.msg_id()),
         Key::MsgidHex => Val::Str(Cow::Owned(format!("0x{:04X}", h.msg_id()))),
         Key::Name => match fr.msg {
@@ -763,80 +780,8 @@ fn apt_visit(a: &AptRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_
             }
             return true;
         }
-        Key::Phys => {
-            let conv = |fd: &crate::table::Field, v: &AptValue<'_>| {
-                crate::apt::phys_or_scaled(fd, v, a.scale)
-            };
-            let any = fr.fields().any(|(fd, v)| conv(fd, &v).is_some());
-            if !any {
-                return false;
-            }
-            match rest.split_first() {
-                None => f(
-                    Val::Obj(Obj {
-                        num: None,
-                        text: None,
-                        nonempty: true,
-                    }),
-                    Role::Plain,
-                ),
-                Some((name, below)) => {
-                    if let Some((x, unit)) = fr.field(name).and_then(|(fd, v)| conv(fd, &v)) {
-                        let members = [
-                            ("value", float(crate::apt::round_sig(x))),
-                            ("unit", Some(str_val(unit))),
-                        ];
-                        object(below, &members, Role::Plain, f);
-                    }
-                }
-            }
-            return true;
-        }
-        Key::Codes => {
-            let any = fr.fields().any(|(fd, v)| apt_code(fd, &v).is_some());
-            if !any {
-                return false;
-            }
-            match rest.split_first() {
-                None => {
-                    let members: Vec<(&str, Option<Val<'_>>)> = fr
-                        .fields()
-                        .filter_map(|(fd, v)| {
-                            Some((fd.name, Some(Val::Num(Num::I(apt_code(fd, &v)?)))))
-                        })
-                        .collect();
-                    object(&[], &members, Role::Plain, f);
-                }
-                Some((name, below)) => {
-                    if let Some(c) = fr.field(name).and_then(|(fd, v)| apt_code(fd, &v)) {
-                        scalar(below, Val::Num(Num::I(c)), f);
-                    }
-                }
-            }
-            return true;
-        }
-        Key::Pair => match a.pair.pair {
-            Some(p) => num(p),
-            None => return false,
-        },
-        Key::LatencyMs => match a.pair.latency_ns {
-            Some(l) => match float(l as f64 / 1e6) {
-                Some(v) => v,
-                None => return true,
-            },
-            None => return false,
-        },
         Key::PairOtherAddress if a.pair.other_address => Val::Bool(true),
-        Key::Diag => {
-            diag_list(rest, crate::json::apt_diags(fr, a.pair), f);
-            return true;
-        }
         Key::Dir => str_val(a.dir().map_or("unknown", |d| d.as_str())),
-        Key::TsNs => match m.ts_ns {
-            Some(t) => num(t),
-            None => return false,
-        },
-        Key::Stream => num(m.stream),
         _ => return false,
     };
     scalar(rest, v, f);
@@ -939,22 +884,33 @@ fn ell_field(
 
 fn ell_visit(e: &EllRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
     let fr = e.frame;
-    let m = &e.meta;
     let scale = e.obs.module.as_ref().and_then(|m| m.scale());
-    let phys = |fd: &crate::ell::table::Field, v: &EllValue<'_>| match (fd.kind, v, scale) {
-        (EllKind::Position, EllValue::I(p), Some((ppu, unit))) if ppu > 0.0 => {
-            Some((crate::apt::round_sig(*p as f64 / ppu), unit))
-        }
-        _ => None,
+    let common = Common {
+        meta: &e.meta,
+        offset: fr.offset,
+        bytes: fr.bytes,
+        pair: e.obs.pair,
+        latency_ns: e.obs.latency_ns,
     };
+    if let Some(found) = frame_key(
+        &common,
+        || fr.diags().iter().copied(),
+        || {
+            fr.fields()
+                .filter_map(move |(fd, v)| Some((fd.name, crate::json::ell_phys(fd, &v, scale)?)))
+        },
+        || {
+            fr.fields()
+                .filter_map(|(fd, v)| Some((fd.name, i128::from(ell_code(fd, &v)?))))
+        },
+        key,
+        rest,
+        f,
+    ) {
+        return found;
+    }
     let v = match key {
-        Key::N => num(m.n),
         Key::Proto => str_val("ell"),
-        Key::Type => str_val("frame"),
-        Key::Offset => num(fr.offset),
-        Key::CapOffset => num(m.cap_offset),
-        Key::Len => num(fr.bytes.len() as u64),
-        Key::Raw => hex(fr.bytes),
         Key::Text => Val::Str(String::from_utf8_lossy(fr.bytes)),
         Key::Addr => Val::Str(Cow::Owned(fr.addr_char().to_string())),
         Key::Dir => str_val(fr.dir().as_str()),
@@ -982,58 +938,6 @@ fn ell_visit(e: &EllRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_
             }
             return true;
         }
-        Key::Phys => {
-            if !fr.fields().any(|(fd, v)| phys(fd, &v).is_some()) {
-                return false;
-            }
-            match rest.split_first() {
-                None => f(
-                    Val::Obj(Obj {
-                        num: None,
-                        text: None,
-                        nonempty: true,
-                    }),
-                    Role::Plain,
-                ),
-                Some((name, below)) => {
-                    let hit = fr
-                        .fields()
-                        .filter(|(fd, _)| fd.name == name.as_str())
-                        .filter_map(|(fd, v)| phys(fd, &v))
-                        .last();
-                    if let Some((x, unit)) = hit {
-                        let members = [("value", float(x)), ("unit", Some(str_val(unit)))];
-                        object(below, &members, Role::Plain, f);
-                    }
-                }
-            }
-            return true;
-        }
-        Key::Codes => {
-            if !fr.fields().any(|(fd, v)| ell_code(fd, &v).is_some()) {
-                return false;
-            }
-            match rest.split_first() {
-                None => {
-                    let members: Vec<(&str, Option<Val<'_>>)> = fr
-                        .fields()
-                        .filter_map(|(fd, v)| Some((fd.name, Some(num(ell_code(fd, &v)?)))))
-                        .collect();
-                    object(&[], &members, Role::Plain, f);
-                }
-                Some((name, below)) => {
-                    let hit = fr
-                        .fields()
-                        .filter(|(fd, _)| fd.name == name.as_str())
-                        .filter_map(|(fd, v)| ell_code(fd, &v))
-                        .last();
-                    if let Some(c) = hit {
-                        scalar(below, num(c), f);
-                    }
-                }
-            }
-            return true;
-        }
         Key::Module => match &e.obs.module {
             Some(md) => {
                 let members = [
@@ -1050,29 +954,111 @@ fn ell_visit(e: &EllRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_
             }
             None => return false,
         },
-        Key::Pair => match e.obs.pair {
-            Some(p) => num(p),
-            None => return false,
-        },
-        Key::LatencyMs => match e.obs.latency_ns {
-            Some(l) => match float(l as f64 / 1e6) {
-                Some(v) => v,
-                None => return true,
-            },
-            None => return false,
-        },
         Key::Interim if e.obs.interim => Val::Bool(true),
-        Key::Diag => {
-            diag_list(rest, fr.diags().iter().copied(), f);
-            return true;
-        }
-        Key::TsNs => match m.ts_ns {
-            Some(t) => num(t),
-            None => return false,
-        },
-        Key::Stream => num(m.stream),
         _ => return false,
     };
     scalar(rest, v, f);
     true
+}
+
+/// What APT and Elliptec frames give alike.
+struct Common<'a> {
+    meta: &'a crate::record::Meta,
+    offset: u64,
+    bytes: &'a [u8],
+    pair: Option<u64>,
+    latency_ns: Option<u64>,
+}
+
+/// The keys APT and Elliptec frames give the same way — number, offsets, bytes, pairing,
+/// diagnostics, `phys`, `codes`, time, stream — from what they have in common and their
+/// diagnostics, converted values and codes (`(field name, …)`; the last of a name counts, as
+/// in a JSON object). `None` for the keys each protocol gives its own way.
+fn frame_key<'u, D, P, C>(
+    c: &Common<'_>,
+    diags: impl FnOnce() -> D,
+    phys: impl Fn() -> P,
+    codes: impl Fn() -> C,
+    key: Key,
+    rest: &[String],
+    f: &mut dyn FnMut(Val<'_>, Role),
+) -> Option<bool>
+where
+    D: Iterator<Item = Diag>,
+    P: Iterator<Item = (&'static str, (f64, &'u str))>,
+    C: Iterator<Item = (&'static str, i128)>,
+{
+    let m = c.meta;
+    let v = match key {
+        Key::N => num(m.n),
+        Key::Type => str_val("frame"),
+        Key::Offset => num(c.offset),
+        Key::CapOffset => num(m.cap_offset),
+        Key::Len => num(c.bytes.len() as u64),
+        Key::Raw => hex(c.bytes),
+        Key::Pair => match c.pair {
+            Some(p) => num(p),
+            None => return Some(false),
+        },
+        Key::LatencyMs => match c.latency_ns {
+            Some(l) => match float(l as f64 / 1e6) {
+                Some(v) => v,
+                None => return Some(true),
+            },
+            None => return Some(false),
+        },
+        Key::Diag => {
+            diag_list(rest, diags(), f);
+            return Some(true);
+        }
+        Key::Phys => {
+            if phys().next().is_none() {
+                return Some(false);
+            }
+            match rest.split_first() {
+                None => f(
+                    Val::Obj(Obj {
+                        num: None,
+                        text: None,
+                        nonempty: true,
+                    }),
+                    Role::Plain,
+                ),
+                Some((name, below)) => {
+                    if let Some((_, (x, unit))) = phys().filter(|(n, _)| n == name).last() {
+                        let members = [("value", float(x)), ("unit", Some(str_val(unit)))];
+                        object(below, &members, Role::Plain, f);
+                    }
+                }
+            }
+            return Some(true);
+        }
+        Key::Codes => {
+            if codes().next().is_none() {
+                return Some(false);
+            }
+            match rest.split_first() {
+                None => {
+                    let members: Vec<(&str, Option<Val<'_>>)> = codes()
+                        .map(|(n, x)| (n, Some(Val::Num(Num::I(x)))))
+                        .collect();
+                    object(&[], &members, Role::Plain, f);
+                }
+                Some((name, below)) => {
+                    if let Some((_, x)) = codes().filter(|(n, _)| n == name).last() {
+                        scalar(below, Val::Num(Num::I(x)), f);
+                    }
+                }
+            }
+            return Some(true);
+        }
+        Key::TsNs => match m.ts_ns {
+            Some(t) => num(t),
+            None => return Some(false),
+        },
+        Key::Stream => num(m.stream),
+        _ => return None,
+    };
+    scalar(rest, v, f);
+    Some(true)
 }

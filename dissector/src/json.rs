@@ -1,11 +1,178 @@
-//! The NDJSON shape of decoded records, written without allocation per value.
-//!
-//! One object per line; the shape is documented in the README ("NDJSON output").
+//! The shape of decoded records (documented in the README, "NDJSON output"), written once
+//! through a [`Sink`]: NDJSON text (`String`, one object per line, no allocation per value),
+//! the Python package's dicts, the replay's owned values. Every view that gives a record's
+//! fields takes them from here, so the shape rules live in one place.
 
-use crate::apt::{text_of, AptFrame, GarbageKind, Value};
+use crate::apt::{text_of, Addr, AptFrame, GarbageKind, Value};
 use crate::diag::{Diag, DiagKind};
+use crate::ell::{EllFrame, EllValue, Observation};
+use crate::pair::PairInfo;
+use crate::record::{Meta, Record};
 use crate::table::{Field, Table};
+use crate::units::{Notice, Scale};
 use std::fmt::Write;
+
+/// Where a record's shape is written: objects, lists and scalars, in document order. A value
+/// inside an object follows its [`key`](Sink::key); a sink places commas and nesting itself.
+pub trait Sink {
+    /// Open an object (a value, or the record itself).
+    fn begin_obj(&mut self);
+    /// Close the innermost object.
+    fn end_obj(&mut self);
+    /// Open a list.
+    fn begin_list(&mut self);
+    /// Close the innermost list.
+    fn end_list(&mut self);
+    /// The key of the next member of the innermost object. Keys are identifiers (names from
+    /// this module and the message tables): NDJSON writes them without escaping.
+    fn key(&mut self, k: &str);
+    /// A key that lives as long as the program (a table's field name): a sink may keep what
+    /// it makes of it.
+    fn key_static(&mut self, k: &'static str) {
+        self.key(k)
+    }
+    /// A key written in the code (see [`key!`]): NDJSON copies its prepared spelling.
+    fn key_lit(&mut self, k: &Lit) {
+        self.key(k.name)
+    }
+    /// A string value.
+    fn str(&mut self, s: &str);
+    /// A string value known to need no escaping (ASCII words: codes, directions, kinds).
+    fn plain(&mut self, s: &str) {
+        self.str(s)
+    }
+    /// Bytes as a lower-case hex string.
+    fn hex(&mut self, b: &[u8]);
+    /// An unsigned integer.
+    fn uint(&mut self, x: u64);
+    /// A signed integer.
+    fn int(&mut self, x: i64);
+    /// A float as NDJSON writes it (`{x}`: shortest round-trip digits, no exponent, whole
+    /// numbers without a fraction); non-finite ones are null.
+    fn float(&mut self, x: f64);
+    /// A float with a fixed number of decimals (`0.950`).
+    fn fixed(&mut self, x: f64, decimals: usize);
+    /// A boolean.
+    fn bool(&mut self, b: bool);
+    /// Null.
+    fn null(&mut self);
+}
+
+/// A key written in the code, with its NDJSON spelling prepared at compile time (`"name":`).
+#[derive(Debug)]
+pub struct Lit {
+    /// The key.
+    pub name: &'static str,
+    /// `"name":`.
+    pub json: &'static str,
+}
+
+/// `key!(out, "name")`: the key `name` of the next member, spelled for NDJSON at compile time.
+macro_rules! key {
+    ($out:expr, $name:literal) => {
+        $out.key_lit(&Lit {
+            name: $name,
+            json: concat!("\"", $name, "\":"),
+        })
+    };
+}
+
+/// A comma before a member or element unless it is the first of its object or list (the
+/// last byte written tells: keys end in `:`, openings in `{`/`[`, a caller's prefix in `,`).
+#[inline(always)]
+fn sep(out: &mut String) {
+    if !matches!(
+        out.as_bytes().last(),
+        None | Some(b'{' | b'[' | b':' | b',')
+    ) {
+        out.push(',');
+    }
+}
+
+/// NDJSON text: the record appended to the string.
+impl Sink for String {
+    #[inline(always)]
+    fn begin_obj(&mut self) {
+        sep(self);
+        self.push('{');
+    }
+    #[inline(always)]
+    fn end_obj(&mut self) {
+        self.push('}');
+    }
+    #[inline(always)]
+    fn begin_list(&mut self) {
+        sep(self);
+        self.push('[');
+    }
+    #[inline(always)]
+    fn end_list(&mut self) {
+        self.push(']');
+    }
+    #[inline(always)]
+    fn key(&mut self, k: &str) {
+        sep(self);
+        self.push('"');
+        self.push_str(k);
+        self.push_str("\":");
+    }
+    #[inline(always)]
+    fn key_static(&mut self, k: &'static str) {
+        self.key(k);
+    }
+    #[inline(always)]
+    fn key_lit(&mut self, k: &Lit) {
+        sep(self);
+        // A constant length: copied inline, not through `memcpy`.
+        self.push_str(k.json);
+    }
+    #[inline(always)]
+    fn str(&mut self, s: &str) {
+        sep(self);
+        string(self, s);
+    }
+    #[inline(always)]
+    fn plain(&mut self, s: &str) {
+        sep(self);
+        self.push('"');
+        self.push_str(s);
+        self.push('"');
+    }
+    #[inline(always)]
+    fn hex(&mut self, b: &[u8]) {
+        sep(self);
+        hex(self, b);
+    }
+    #[inline(always)]
+    fn uint(&mut self, x: u64) {
+        sep(self);
+        uint(self, x);
+    }
+    #[inline(always)]
+    fn int(&mut self, x: i64) {
+        sep(self);
+        int(self, x);
+    }
+    #[inline(always)]
+    fn float(&mut self, x: f64) {
+        sep(self);
+        float(self, x);
+    }
+    fn fixed(&mut self, x: f64, decimals: usize) {
+        sep(self);
+        let _ = write!(self, "{x:.decimals$}");
+    }
+    #[inline(always)]
+    fn bool(&mut self, b: bool) {
+        sep(self);
+        self.push_str(if b { "true" } else { "false" });
+    }
+    #[inline(always)]
+    fn null(&mut self) {
+        sep(self);
+        self.push_str("null");
+    }
+}
 
 /// Append `s` as a JSON string literal.
 pub fn string(out: &mut String, s: &str) {
@@ -34,9 +201,15 @@ pub fn string(out: &mut String, s: &str) {
 
 /// Append bytes as a lower-case hex JSON string.
 pub fn hex(out: &mut String, b: &[u8]) {
-    const H: &[u8; 16] = b"0123456789abcdef";
     out.reserve(b.len() * 2 + 2);
     out.push('"');
+    hex_digits(out, b);
+    out.push('"');
+}
+
+/// Append bytes as lower-case hex digits (no quotes).
+pub fn hex_digits(out: &mut String, b: &[u8]) {
+    const H: &[u8; 16] = b"0123456789abcdef";
     // Through a stack buffer: pushing chars one by one costs a UTF-8 encode each.
     let mut buf = [0u8; 128];
     for part in b.chunks(buf.len() / 2) {
@@ -46,7 +219,6 @@ pub fn hex(out: &mut String, b: &[u8]) {
         }
         out.push_str(std::str::from_utf8(&buf[..2 * part.len()]).unwrap_or_default());
     }
-    out.push('"');
 }
 
 /// Append a float (non-finite as `null`).
@@ -58,107 +230,12 @@ pub fn float(out: &mut String, x: f64) {
     }
 }
 
-/// Append a diagnostics array: `[{"kind":…, "offset":…, "msg":…}]`.
-pub fn diags(out: &mut String, ds: impl Iterator<Item = Diag>) {
-    out.push('[');
-    for (i, d) in ds.enumerate() {
-        if i > 0 {
-            out.push(',');
-        }
-        out.push_str("{\"kind\":\"");
-        out.push_str(d.kind.name());
-        out.push_str("\",\"offset\":");
-        uint(out, d.offset);
-        out.push_str(",\"msg\":");
-        string(out, &d.kind.to_string());
-        out.push('}');
-    }
-    out.push(']');
-}
-
-/// Append one field value: numbers as numbers, enums as names, flags as lists of set names,
-/// text as strings, opaque bytes as hex, arrays as arrays.
-pub fn value(out: &mut String, table: &Table, f: &Field, v: &Value<'_>) {
-    match v {
-        Value::U(x) => {
-            if let Some(e) = f.enumeration {
-                if let Some(l) = table.enum_def(e).label(*x as i64) {
-                    return string(out, l);
-                }
-            }
-            if let Some(fl) = f.flags {
-                out.push('[');
-                let mut first = true;
-                for (m, l) in &table.flags_def(fl).items {
-                    if x & m == *m {
-                        if !first {
-                            out.push(',');
-                        }
-                        string(out, l);
-                        first = false;
-                    }
-                }
-                out.push(']');
-                return;
-            }
-            uint(out, *x);
-        }
-        Value::I(x) => {
-            if let Some(l) = f.enumeration.and_then(|e| table.enum_def(e).label(*x)) {
-                return string(out, l);
-            }
-            int(out, *x);
-        }
-        Value::F(x) => float(out, *x),
-        Value::Str(b) => string(out, &text_of(b)),
-        Value::Bytes(b) => hex(out, b),
-        Value::Array(..) => {
-            out.push('[');
-            for (i, e) in v.elements().enumerate() {
-                if i > 0 {
-                    out.push(',');
-                }
-                match e {
-                    Value::U(x) => uint(out, x),
-                    Value::I(x) => int(out, x),
-                    Value::F(x) => float(out, x),
-                    _ => out.push_str("null"),
-                }
-            }
-            out.push(']');
-        }
-    }
-}
-
-fn addr(out: &mut String, key: &str, a: crate::apt::Addr) {
-    use crate::apt::Addr;
-    out.push_str(",\"");
-    out.push_str(key);
-    out.push_str("\":{\"addr\":");
-    uint(out, a.byte() as u64);
-    out.push_str(",\"name\":\"");
-    match a {
-        Addr::Host => out.push_str("host"),
-        Addr::Rack => out.push_str("rack"),
-        Addr::Usb => out.push_str("usb"),
-        Addr::Bay(n) => {
-            out.push_str("bay");
-            out.push((b'0' + n) as char);
-        }
-        Addr::Unknown(x) => {
-            let _ = write!(out, "0x{x:02X}");
-        }
-    }
-    out.push('"');
-    if let Some(b) = a.bay() {
-        out.push_str(",\"bay\":");
-        uint(out, b as u64);
-    }
-    out.push('}');
-}
-
 /// Append an unsigned integer (cheaper than `write!` on the hot path).
 pub fn uint(out: &mut String, mut x: u64) {
+    if x < 10 {
+        out.push(char::from(b'0' + x as u8));
+        return;
+    }
     let mut buf = [0u8; 20];
     let mut i = buf.len();
     loop {
@@ -180,193 +257,474 @@ pub fn int(out: &mut String, x: i64) {
     uint(out, x.unsigned_abs());
 }
 
-/// Append the JSON object of a decoded APT frame (no trailing newline). `n` is the record number.
-pub fn apt_frame(out: &mut String, n: u64, f: &AptFrame<'_, '_>) {
-    apt_frame_paired(out, n, f, &crate::pair::PairInfo::default());
+/// Short text formatted on the stack (hex ids, model names, derived keys): no allocation.
+struct Small {
+    b: [u8; 64],
+    n: usize,
+}
+
+impl Small {
+    fn new() -> Self {
+        Small { b: [0; 64], n: 0 }
+    }
+    fn as_str(&self) -> &str {
+        std::str::from_utf8(&self.b[..self.n]).unwrap_or_default()
+    }
+}
+
+impl Write for Small {
+    fn write_str(&mut self, s: &str) -> std::fmt::Result {
+        let end = self.n + s.len();
+        self.b
+            .get_mut(self.n..end)
+            .ok_or(std::fmt::Error)?
+            .copy_from_slice(s.as_bytes());
+        self.n = end;
+        Ok(())
+    }
+}
+
+fn small(args: std::fmt::Arguments<'_>) -> Small {
+    let mut s = Small::new();
+    let _ = s.write_fmt(args);
+    s
+}
+
+/// Write one record as one object: what `decode --json` prints on a line (`file` first when
+/// records name their input).
+pub fn record<S: Sink + ?Sized>(out: &mut S, rec: &Record<'_>, file: Option<&str>) {
+    out.begin_obj();
+    if let Some(name) = file {
+        key!(out, "file");
+        out.str(name);
+    }
+    match rec {
+        Record::Detect {
+            proto,
+            detection: d,
+            ..
+        } => {
+            key!(out, "type");
+            out.plain("detect");
+            key!(out, "proto");
+            out.plain(proto.code());
+            key!(out, "certain");
+            out.bool(d.proto.is_some());
+            key!(out, "apt");
+            out.fixed(d.apt, 3);
+            key!(out, "ell");
+            out.fixed(d.elliptec, 3);
+        }
+        Record::Stream { id, name, settings } => {
+            key!(out, "type");
+            out.plain("stream");
+            key!(out, "stream");
+            out.uint(u64::from(*id));
+            key!(out, "stream_name");
+            out.str(name);
+            if let Some(x) = settings {
+                key!(out, "settings");
+                out.str(x);
+            }
+        }
+        Record::Input(d) => {
+            key!(out, "type");
+            out.plain("input");
+            key!(out, "diag");
+            diags(out, std::iter::once(*d));
+        }
+        Record::FileDiag { offset, kind, msg } => {
+            key!(out, "type");
+            out.plain("input");
+            key!(out, "diag");
+            out.begin_list();
+            out.begin_obj();
+            key!(out, "kind");
+            out.str(kind);
+            key!(out, "offset");
+            out.uint(*offset);
+            key!(out, "msg");
+            out.str(msg);
+            out.end_obj();
+            out.end_list();
+        }
+        Record::Units(nt) => units_members(out, nt),
+        Record::Apt(a) => {
+            apt_members(out, a.meta.n, a.frame, a.pair, a.scale);
+            meta(
+                out,
+                &a.meta,
+                Some(a.dir().map_or("unknown", |d| d.as_str())),
+            );
+        }
+        Record::Ell(e) => {
+            ell_members(out, e.meta.n, e.frame, e.obs);
+            meta(out, &e.meta, None);
+        }
+        Record::Garbage(g) => match g.kind {
+            Some(kind) => {
+                apt_garbage_members(out, g.meta.n, g.offset, g.bytes, kind);
+                let dir = g.meta.cap_dir.map_or("unknown", |d| d.as_str());
+                meta(out, &g.meta, Some(dir));
+            }
+            // Elliptec garbage has no direction (the bus tells none).
+            None => {
+                ell_garbage_members(out, g.meta.n, g.offset, g.bytes);
+                meta(out, &g.meta, None);
+            }
+        },
+        Record::NoReply(e) => {
+            late_diag_members(out, e.proto.code(), e.n, e.diag());
+            key!(out, "stream");
+            out.uint(u64::from(e.stream));
+        }
+    }
+    out.end_obj();
+}
+
+/// The capture context of a frame or garbage run, after its own members.
+fn meta<S: Sink + ?Sized>(out: &mut S, m: &Meta, dir: Option<&str>) {
+    key!(out, "cap_offset");
+    out.uint(m.cap_offset);
+    if let Some(d) = dir {
+        key!(out, "dir");
+        out.plain(d);
+    }
+    if let Some(t) = m.ts_ns {
+        key!(out, "ts_ns");
+        out.uint(t);
+    }
+    key!(out, "stream");
+    out.uint(u64::from(m.stream));
+}
+
+/// A diagnostics list: `[{"kind":…, "offset":…, "msg":…}]`.
+pub fn diags<S: Sink + ?Sized>(out: &mut S, ds: impl Iterator<Item = Diag>) {
+    out.begin_list();
+    for d in ds {
+        out.begin_obj();
+        key!(out, "kind");
+        out.plain(d.kind.name());
+        key!(out, "offset");
+        out.uint(d.offset);
+        key!(out, "msg");
+        out.str(&d.kind.to_string());
+        out.end_obj();
+    }
+    out.end_list();
+}
+
+/// One APT field value: numbers as numbers, enums as names, flags as lists of set names,
+/// text as strings, opaque bytes as hex, arrays as arrays.
+pub fn value<S: Sink + ?Sized>(out: &mut S, table: &Table, f: &Field, v: &Value<'_>) {
+    match v {
+        Value::U(x) => {
+            if let Some(e) = f.enumeration {
+                if let Some(l) = table.enum_def(e).label(*x as i64) {
+                    return out.str(l);
+                }
+            }
+            if let Some(fl) = f.flags {
+                out.begin_list();
+                for (m, l) in &table.flags_def(fl).items {
+                    if x & m == *m {
+                        out.str(l);
+                    }
+                }
+                return out.end_list();
+            }
+            out.uint(*x);
+        }
+        Value::I(x) => {
+            if let Some(l) = f.enumeration.and_then(|e| table.enum_def(e).label(*x)) {
+                return out.str(l);
+            }
+            out.int(*x);
+        }
+        Value::F(x) => out.float(*x),
+        Value::Str(b) => out.str(&text_of(b)),
+        Value::Bytes(b) => out.hex(b),
+        Value::Array(..) => {
+            out.begin_list();
+            for e in v.elements() {
+                match e {
+                    Value::U(x) => out.uint(x),
+                    Value::I(x) => out.int(x),
+                    Value::F(x) => out.float(x),
+                    _ => out.null(),
+                }
+            }
+            out.end_list();
+        }
+    }
+}
+
+const BAYS: [&str; 10] = [
+    "bay0", "bay1", "bay2", "bay3", "bay4", "bay5", "bay6", "bay7", "bay8", "bay9",
+];
+
+/// An APT address: `{"addr":80,"name":"usb"}`, with `"bay"` for bays.
+pub fn addr<S: Sink + ?Sized>(out: &mut S, a: Addr) {
+    out.begin_obj();
+    key!(out, "addr");
+    out.uint(u64::from(a.byte()));
+    key!(out, "name");
+    match a {
+        Addr::Host => out.plain("host"),
+        Addr::Rack => out.plain("rack"),
+        Addr::Usb => out.plain("usb"),
+        Addr::Bay(n) => match BAYS.get(n as usize) {
+            Some(b) => out.plain(b),
+            None => out.plain(small(format_args!("bay{n}")).as_str()),
+        },
+        Addr::Unknown(x) => out.plain(small(format_args!("0x{x:02X}")).as_str()),
+    }
+    if let Some(b) = a.bay() {
+        key!(out, "bay");
+        out.uint(u64::from(b));
+    }
+    out.end_obj();
+}
+
+/// An APT sub-message: `{"id":…,"name":…}`.
+pub fn sub<S: Sink + ?Sized>(out: &mut S, s: &crate::table::SubDef) {
+    out.begin_obj();
+    key!(out, "id");
+    out.uint(u64::from(s.id));
+    key!(out, "name");
+    out.str(s.name);
+    out.end_obj();
+}
+
+/// The `fields` object of an APT frame (decoded values by field name, in frame order).
+pub fn apt_fields<S: Sink + ?Sized>(out: &mut S, f: &AptFrame<'_, '_>) {
+    out.begin_obj();
+    for (fd, v) in f.fields() {
+        out.key_static(fd.name);
+        value(out, f.table(), fd, &v);
+    }
+    out.end_obj();
+}
+
+/// The object of a decoded APT frame. `n` is the record number.
+pub fn apt_frame<S: Sink + ?Sized>(out: &mut S, n: u64, f: &AptFrame<'_, '_>) {
+    apt_frame_paired(out, n, f, &PairInfo::default());
 }
 
 /// [`apt_frame`] with what pairing found: `pair`, `latency_ms`, `pair_other_address`, and the
 /// `unsolicited`/`duplicate_reply` diagnostics.
-pub fn apt_frame_paired(out: &mut String, n: u64, f: &AptFrame<'_, '_>, p: &crate::pair::PairInfo) {
+pub fn apt_frame_paired<S: Sink + ?Sized>(out: &mut S, n: u64, f: &AptFrame<'_, '_>, p: &PairInfo) {
     apt_frame_in(out, n, f, p, None)
 }
 
 /// [`apt_frame_paired`] with the stage's conversion: motion fields (`q=` in the table) get a
 /// `phys` entry (`{"value": 2.5, "unit": "mm/s"}`) beside their raw value in `fields`.
-pub fn apt_frame_in(
-    out: &mut String,
+pub fn apt_frame_in<S: Sink + ?Sized>(
+    out: &mut S,
     n: u64,
     f: &AptFrame<'_, '_>,
-    p: &crate::pair::PairInfo,
-    scale: Option<&crate::units::Scale>,
+    p: &PairInfo,
+    scale: Option<&Scale>,
 ) {
-    let h = f.header();
-    out.push_str("{\"n\":");
-    uint(out, n);
-    out.push_str(",\"proto\":\"apt\",\"type\":\"frame\",\"offset\":");
-    uint(out, f.offset);
-    out.push_str(",\"len\":");
-    uint(out, f.bytes.len() as u64);
-    out.push_str(",\"raw\":");
-    hex(out, f.bytes);
-    out.push_str(",\"msgid\":");
-    uint(out, h.msg_id() as u64);
-    const H: &[u8; 16] = b"0123456789ABCDEF";
-    out.push_str(",\"msgid_hex\":\"0x");
-    for sh in [12, 8, 4, 0] {
-        out.push(H[(h.msg_id() >> sh) as usize & 15] as char);
-    }
-    out.push_str("\",\"name\":");
-    match f.msg {
-        Some(m) => {
-            string(out, m.name);
-            out.push_str(",\"msg_dir\":\"");
-            out.push_str(m.dir.as_str());
-            out.push('"');
-        }
-        None => out.push_str("null"),
-    }
-    addr(out, "src", h.src());
-    addr(out, "dst", h.dst());
-    out.push_str(if h.has_data() {
-        ",\"data_flag\":true,\"data_len\":"
-    } else {
-        ",\"data_flag\":false,\"data_len\":"
-    });
-    uint(out, f.data_len() as u64);
-    if let Some(form) = f.form {
-        if !form.note.is_empty() {
-            out.push_str(",\"form_note\":");
-            string(out, form.note);
-        }
-    }
-    if let Some(c) = f.channel() {
-        out.push_str(",\"channel\":");
-        int(out, c);
-    }
-    if let Some(s) = f.sub {
-        out.push_str(",\"sub\":{\"id\":");
-        uint(out, s.id as u64);
-        out.push_str(",\"name\":");
-        string(out, s.name);
-        out.push('}');
-    }
-    out.push_str(",\"fields\":{");
-    let mut phys = String::new();
-    for (i, (fd, v)) in f.fields().enumerate() {
-        if i > 0 {
-            out.push(',');
-        }
-        string(out, fd.name);
-        out.push(':');
-        value(out, f.table(), fd, &v);
-        if let Some((x, unit)) = crate::apt::phys_or_scaled(fd, &v, scale) {
-            if !phys.is_empty() {
-                phys.push(',');
-            }
-            string(&mut phys, fd.name);
-            phys.push_str(":{\"value\":");
-            float(&mut phys, x);
-            phys.push_str(",\"unit\":");
-            string(&mut phys, unit);
-            phys.push('}');
-        }
-    }
-    out.push('}');
-    close_map(out, "phys", &phys);
-    // A second pass rather than a buffer: no allocation per frame.
-    codes(
-        out,
-        f.fields()
-            .filter_map(|(fd, v)| Some((fd.name, crate::fields::apt_code(fd, &v)?))),
-    );
-    if let Some(x) = p.pair {
-        out.push_str(",\"pair\":");
-        uint(out, x);
-    }
-    if let Some(l) = p.latency_ns {
-        out.push_str(",\"latency_ms\":");
-        float(out, l as f64 / 1e6);
-    }
-    if p.other_address {
-        out.push_str(",\"pair_other_address\":true");
-    }
-    out.push_str(",\"diag\":");
-    diags(out, apt_diags(f, p));
-    out.push('}');
+    out.begin_obj();
+    apt_members(out, n, f, p, scale);
+    out.end_obj();
 }
 
-/// `,"codes":{name:number,…}` when there are any.
-fn codes(out: &mut String, items: impl Iterator<Item = (&'static str, i128)>) {
+fn apt_members<S: Sink + ?Sized>(
+    out: &mut S,
+    n: u64,
+    f: &AptFrame<'_, '_>,
+    p: &PairInfo,
+    scale: Option<&Scale>,
+) {
+    let h = f.header();
+    key!(out, "n");
+    out.uint(n);
+    key!(out, "proto");
+    out.plain("apt");
+    key!(out, "type");
+    out.plain("frame");
+    key!(out, "offset");
+    out.uint(f.offset);
+    key!(out, "len");
+    out.uint(f.bytes.len() as u64);
+    key!(out, "raw");
+    out.hex(f.bytes);
+    key!(out, "msgid");
+    out.uint(u64::from(h.msg_id()));
+    key!(out, "msgid_hex");
+    const H: &[u8; 16] = b"0123456789ABCDEF";
+    let id = h.msg_id();
+    let mut x = *b"0x0000";
+    for (i, sh) in [12, 8, 4, 0].into_iter().enumerate() {
+        x[2 + i] = H[(id >> sh) as usize & 15];
+    }
+    out.plain(std::str::from_utf8(&x).unwrap_or_default());
+    key!(out, "name");
+    match f.msg {
+        Some(m) => {
+            out.str(m.name);
+            key!(out, "msg_dir");
+            out.plain(m.dir.as_str());
+        }
+        None => out.null(),
+    }
+    key!(out, "src");
+    addr(out, h.src());
+    key!(out, "dst");
+    addr(out, h.dst());
+    key!(out, "data_flag");
+    out.bool(h.has_data());
+    key!(out, "data_len");
+    out.uint(f.data_len() as u64);
+    if let Some(form) = f.form.filter(|x| !x.note.is_empty()) {
+        key!(out, "form_note");
+        out.str(form.note);
+    }
+    if let Some(c) = f.channel() {
+        key!(out, "channel");
+        out.int(c);
+    }
+    if let Some(s) = f.sub {
+        key!(out, "sub");
+        sub(out, s);
+    }
+    key!(out, "fields");
+    apt_fields(out, f);
+    // `phys` and `codes` in passes of their own (no buffer, no allocation per frame), taken
+    // only when the form has fields they concern.
+    let defs = f.form.map_or(&[][..], |x| x.fields.as_slice());
+    if defs.iter().any(|fd| {
+        fd.scale.is_some() || (scale.is_some() && (fd.q.is_some() || fd.pct_of.is_some()))
+    }) {
+        phys_map(
+            out,
+            f.fields()
+                .filter_map(|(fd, v)| Some((fd.name, crate::apt::phys_or_scaled(fd, &v, scale)?))),
+        );
+    }
+    if defs
+        .iter()
+        .any(|fd| fd.enumeration.is_some() || fd.flags.is_some())
+    {
+        codes(
+            out,
+            f.fields()
+                .filter_map(|(fd, v)| Some((fd.name, crate::fields::apt_code(fd, &v)?))),
+        );
+    }
+    if let Some(x) = p.pair {
+        key!(out, "pair");
+        out.uint(x);
+    }
+    if let Some(l) = p.latency_ns {
+        key!(out, "latency_ms");
+        out.float(l as f64 / 1e6);
+    }
+    if p.other_address {
+        key!(out, "pair_other_address");
+        out.bool(true);
+    }
+    key!(out, "diag");
+    diags(out, apt_diags(f, p));
+}
+
+/// `"phys":{name:{"value":…,"unit":…},…}` when any field converts.
+fn phys_map<'u, S: Sink + ?Sized>(
+    out: &mut S,
+    items: impl Iterator<Item = (&'static str, (f64, &'u str))>,
+) {
+    let mut first = true;
+    for (name, (x, unit)) in items {
+        if first {
+            key!(out, "phys");
+            out.begin_obj();
+            first = false;
+        }
+        out.key_static(name);
+        out.begin_obj();
+        key!(out, "value");
+        out.float(x);
+        key!(out, "unit");
+        out.str(unit);
+        out.end_obj();
+    }
+    if !first {
+        out.end_obj();
+    }
+}
+
+/// `"codes":{name:number,…}` when there are any.
+fn codes<S: Sink + ?Sized>(out: &mut S, items: impl Iterator<Item = (&'static str, i128)>) {
     let mut first = true;
     for (name, c) in items {
-        out.push_str(if first { ",\"codes\":{" } else { "," });
-        first = false;
-        string(out, name);
-        out.push(':');
+        if first {
+            key!(out, "codes");
+            out.begin_obj();
+            first = false;
+        }
+        out.key_static(name);
         match u64::try_from(c) {
-            Ok(u) => uint(out, u),
-            Err(_) => int(out, c as i64),
+            Ok(u) => out.uint(u),
+            Err(_) => out.int(c as i64),
         }
     }
     if !first {
-        out.push('}');
-    }
-}
-
-/// `,"key":{members}` when there are members.
-fn close_map(out: &mut String, key: &str, members: &str) {
-    if !members.is_empty() {
-        out.push_str(",\"");
-        out.push_str(key);
-        out.push_str("\":{");
-        out.push_str(members);
-        out.push('}');
+        out.end_obj();
     }
 }
 
 /// The diagnostics of an APT frame: the decoder's, then pairing's (`unsolicited`,
 /// `duplicate_reply`, `not_for_model`).
-pub fn apt_diags<'x>(
-    f: &'x AptFrame<'_, '_>,
-    p: &'x crate::pair::PairInfo,
-) -> impl Iterator<Item = Diag> + 'x {
+pub fn apt_diags<'x>(f: &'x AptFrame<'_, '_>, p: &'x PairInfo) -> impl Iterator<Item = Diag> + 'x {
     f.diags().chain(p.diags(f.offset))
 }
 
-/// Append the JSON object of a units notice: what converts a device's motion values from now
-/// on (`{"type":"units","stream":0,"addr":{…},"model":"KDC101","stage":"MTS25-Z8",
+/// The object of a units notice: what converts a device's motion values from now on
+/// (`{"type":"units","stream":0,"addr":{…},"model":"KDC101","stage":"MTS25-Z8",
 /// "family":"dc_servo","counts_per_unit":34554.96,"unit":"mm"}`), or why they stay raw
 /// (`"raw":"…"`).
-pub fn units_notice(out: &mut String, n: &crate::units::Notice) {
+pub fn units_notice<S: Sink + ?Sized>(out: &mut S, n: &Notice) {
+    out.begin_obj();
+    units_members(out, n);
+    out.end_obj();
+}
+
+fn units_members<S: Sink + ?Sized>(out: &mut S, n: &Notice) {
     use crate::units::Resolution;
-    out.push_str("{\"type\":\"units\",\"stream\":");
-    uint(out, n.stream as u64);
-    addr(out, "addr", crate::apt::Addr::from_byte(n.addr));
+    key!(out, "type");
+    out.plain("units");
+    key!(out, "stream");
+    out.uint(u64::from(n.stream));
+    key!(out, "addr");
+    addr(out, Addr::from_byte(n.addr));
     if let Some(m) = &n.model {
-        out.push_str(",\"model\":");
-        string(out, m);
+        key!(out, "model");
+        out.str(m);
     }
     match &n.resolution {
         Resolution::Scale(s) => {
-            out.push_str(",\"stage\":");
-            string(out, s.stage);
+            key!(out, "stage");
+            out.str(s.stage);
             if let Some(f) = s.family {
-                out.push_str(",\"family\":");
-                string(out, f.name());
+                key!(out, "family");
+                out.str(f.name());
             }
-            out.push_str(",\"counts_per_unit\":");
-            float(out, s.counts_per_unit);
-            out.push_str(",\"unit\":");
-            string(out, &s.unit);
+            key!(out, "counts_per_unit");
+            out.float(s.counts_per_unit);
+            key!(out, "unit");
+            out.str(&s.unit);
         }
         Resolution::Raw(why) => {
-            out.push_str(",\"raw\":");
-            string(out, why);
+            key!(out, "raw");
+            out.str(why);
         }
-        Resolution::None => out.push_str(",\"raw\":\"no stage\""),
+        Resolution::None => {
+            key!(out, "raw");
+            out.plain("no stage");
+        }
     }
-    out.push('}');
 }
 
 /// The diagnostic of a garbage record.
@@ -381,19 +739,238 @@ pub fn garbage_diag(offset: u64, len: usize, kind: GarbageKind) -> Diag {
     }
 }
 
-/// Append the JSON object of a garbage record.
-pub fn apt_garbage(out: &mut String, n: u64, offset: u64, bytes: &[u8], kind: GarbageKind) {
-    let _ = write!(
-        out,
-        "{{\"n\":{n},\"proto\":\"apt\",\"type\":\"garbage\",\"offset\":{offset},\"len\":{},\"raw\":",
-        bytes.len()
-    );
-    hex(out, bytes);
-    out.push_str(",\"diag\":");
-    let d = garbage_diag(offset, bytes.len(), kind);
-    diags(out, std::iter::once(d));
-    out.push('}');
+/// The object of an APT garbage record.
+pub fn apt_garbage<S: Sink + ?Sized>(
+    out: &mut S,
+    n: u64,
+    offset: u64,
+    bytes: &[u8],
+    kind: GarbageKind,
+) {
+    out.begin_obj();
+    apt_garbage_members(out, n, offset, bytes, kind);
+    out.end_obj();
 }
+
+fn garbage_head<S: Sink + ?Sized>(out: &mut S, proto: &str, n: u64, offset: u64, bytes: &[u8]) {
+    key!(out, "n");
+    out.uint(n);
+    key!(out, "proto");
+    out.plain(proto);
+    key!(out, "type");
+    out.plain("garbage");
+    key!(out, "offset");
+    out.uint(offset);
+    key!(out, "len");
+    out.uint(bytes.len() as u64);
+    key!(out, "raw");
+    out.hex(bytes);
+}
+
+fn apt_garbage_members<S: Sink + ?Sized>(
+    out: &mut S,
+    n: u64,
+    offset: u64,
+    bytes: &[u8],
+    kind: GarbageKind,
+) {
+    garbage_head(out, "apt", n, offset, bytes);
+    key!(out, "diag");
+    diags(
+        out,
+        std::iter::once(garbage_diag(offset, bytes.len(), kind)),
+    );
+}
+
+/// An Elliptec position in the module's physical unit (rounded to 6 significant digits), when
+/// its pulses per unit are known: what `phys` gives beside the raw count.
+pub fn ell_phys(
+    fd: &crate::ell::table::Field,
+    v: &EllValue<'_>,
+    scale: Option<(f64, &'static str)>,
+) -> Option<(f64, &'static str)> {
+    match (fd.kind, v, scale) {
+        (crate::ell::table::Kind::Position, EllValue::I(p), Some((ppu, unit))) if ppu > 0.0 => {
+            Some((crate::apt::round_sig(*p as f64 / ppu), unit))
+        }
+        _ => None,
+    }
+}
+
+/// The `fields` object of an Elliptec frame: status codes by name, and the keys derived beside
+/// a field (`curve_points`, `<name>_name`, `<name>_version`, `thread`, `hw_release`).
+pub fn ell_fields<S: Sink + ?Sized>(out: &mut S, f: &EllFrame<'_>) {
+    use crate::ell::table::Kind;
+    out.begin_obj();
+    for (fd, v) in f.fields() {
+        out.key_static(fd.name);
+        match (fd.kind, v) {
+            (Kind::Status, EllValue::U(c)) => out.str(crate::ell::table::status_name(c as u32)),
+            (_, EllValue::U(x)) => out.uint(x),
+            (_, EllValue::I(x)) => out.int(x),
+            (_, EllValue::Char(c)) => out.str(c.encode_utf8(&mut [0; 4])),
+            (_, EllValue::Digits(d)) => out.str(d),
+            (_, EllValue::Raw(b)) => out.hex(b),
+        }
+        match (fd.kind, v) {
+            // The binary current curve, point by point.
+            (Kind::Raw, EllValue::Raw(b)) => {
+                key!(out, "curve_points");
+                out.begin_list();
+                for p in crate::ell::curve_points(b) {
+                    out.begin_obj();
+                    key!(out, "period");
+                    out.uint(u64::from(p.period));
+                    key!(out, "current");
+                    out.uint(u64::from(p.current));
+                    key!(out, "hz");
+                    out.float(p.hz().round());
+                    key!(out, "amps");
+                    out.float(crate::apt::round_sig(p.amps()));
+                    out.end_obj();
+                }
+                out.end_list();
+            }
+            // Coded numbers also as the text shows them (the number stays for scripts).
+            (Kind::Model, EllValue::U(x)) => {
+                out.key(small(format_args!("{}_name", fd.name)).as_str());
+                out.plain(small(format_args!("ELL{x}")).as_str());
+            }
+            (Kind::Firmware, EllValue::U(x)) => {
+                out.key(small(format_args!("{}_version", fd.name)).as_str());
+                out.plain(small(format_args!("{}.{}", x >> 4, x & 15)).as_str());
+            }
+            // The manual packs two facts into this byte: give each its own key too.
+            (Kind::ThreadHw, EllValue::U(x)) => {
+                key!(out, "thread");
+                out.plain(if x & 0x80 != 0 { "imperial" } else { "metric" });
+                key!(out, "hw_release");
+                out.uint(x & 0x7F);
+            }
+            _ => {}
+        }
+    }
+    out.end_obj();
+}
+
+/// The object of a decoded Elliptec frame with what the bus made of it.
+pub fn ell_frame<S: Sink + ?Sized>(out: &mut S, n: u64, f: &EllFrame<'_>, o: &Observation) {
+    out.begin_obj();
+    ell_members(out, n, f, o);
+    out.end_obj();
+}
+
+fn ell_members<S: Sink + ?Sized>(out: &mut S, n: u64, f: &EllFrame<'_>, o: &Observation) {
+    key!(out, "n");
+    out.uint(n);
+    key!(out, "proto");
+    out.plain("ell");
+    key!(out, "type");
+    out.plain("frame");
+    key!(out, "offset");
+    out.uint(f.offset);
+    key!(out, "len");
+    out.uint(f.bytes.len() as u64);
+    key!(out, "raw");
+    out.hex(f.bytes);
+    key!(out, "text");
+    out.str(&String::from_utf8_lossy(f.bytes));
+    key!(out, "addr");
+    out.plain(f.addr_char().encode_utf8(&mut [0; 4]));
+    key!(out, "dir");
+    out.plain(f.dir().as_str());
+    key!(out, "cmd");
+    out.str(f.code_str());
+    key!(out, "name");
+    match f.cmd {
+        Some(c) => out.str(c.name),
+        None => out.null(),
+    }
+    key!(out, "fields");
+    ell_fields(out, f);
+    let scale = o.module.as_ref().and_then(|m| m.scale());
+    phys_map(
+        out,
+        f.fields()
+            .filter_map(|(fd, v)| Some((fd.name, ell_phys(fd, &v, scale)?))),
+    );
+    codes(
+        out,
+        f.fields()
+            .filter_map(|(fd, v)| Some((fd.name, i128::from(crate::fields::ell_code(fd, &v)?)))),
+    );
+    if let Some(m) = &o.module {
+        key!(out, "module");
+        out.begin_obj();
+        key!(out, "first_addr");
+        out.uint(u64::from(m.first_addr));
+        if let Some(x) = m.model {
+            key!(out, "model");
+            out.plain(small(format_args!("ELL{x}")).as_str());
+        }
+        if let Some(s) = &m.serial {
+            key!(out, "serial");
+            out.str(s);
+        }
+        out.end_obj();
+    }
+    if let Some(p) = o.pair {
+        key!(out, "pair");
+        out.uint(p);
+    }
+    if let Some(l) = o.latency_ns {
+        key!(out, "latency_ms");
+        out.float(l as f64 / 1e6);
+    }
+    if o.interim {
+        key!(out, "interim");
+        out.bool(true);
+    }
+    key!(out, "diag");
+    diags(out, f.diags().iter().copied());
+}
+
+/// The object of an Elliptec garbage record.
+pub fn ell_garbage<S: Sink + ?Sized>(out: &mut S, n: u64, offset: u64, bytes: &[u8]) {
+    out.begin_obj();
+    ell_garbage_members(out, n, offset, bytes);
+    out.end_obj();
+}
+
+fn ell_garbage_members<S: Sink + ?Sized>(out: &mut S, n: u64, offset: u64, bytes: &[u8]) {
+    garbage_head(out, "ell", n, offset, bytes);
+    key!(out, "text");
+    out.str(&String::from_utf8_lossy(bytes));
+    key!(out, "diag");
+    let d = Diag {
+        offset,
+        kind: DiagKind::Garbage {
+            len: bytes.len() as u32,
+        },
+    };
+    diags(out, std::iter::once(d));
+}
+
+/// The object of a diagnostic that refers to an earlier record (a command that got no reply).
+pub fn late_diag<S: Sink + ?Sized>(out: &mut S, proto: &str, refers_to: u64, d: Diag) {
+    out.begin_obj();
+    late_diag_members(out, proto, refers_to, d);
+    out.end_obj();
+}
+
+fn late_diag_members<S: Sink + ?Sized>(out: &mut S, proto: &str, refers_to: u64, d: Diag) {
+    key!(out, "proto");
+    out.plain(proto);
+    key!(out, "type");
+    out.plain("diag");
+    key!(out, "ref");
+    out.uint(refers_to);
+    key!(out, "diag");
+    diags(out, std::iter::once(d));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Message listings (`aptscope messages --json`): table definitions, not records.
 
 fn form_json(out: &mut String, table: &Table, form: &crate::table::Form) {
     use crate::table::{FormKind, Loc};
@@ -532,154 +1109,125 @@ pub fn sub_def(out: &mut String, table: &Table, s: &crate::table::SubDef) {
     let _ = write!(out, ",\"examples\":{}}}", s.examples.len());
 }
 
-/// Append the JSON object of a decoded Elliptec frame with what the bus made of it.
-pub fn ell_frame(
-    out: &mut String,
-    n: u64,
-    f: &crate::ell::EllFrame<'_>,
-    o: &crate::ell::Observation,
-) {
-    use crate::ell::{table::Kind, EllValue};
-    out.push_str("{\"n\":");
-    uint(out, n);
-    out.push_str(",\"proto\":\"ell\",\"type\":\"frame\",\"offset\":");
-    uint(out, f.offset);
-    out.push_str(",\"len\":");
-    uint(out, f.bytes.len() as u64);
-    out.push_str(",\"raw\":");
-    hex(out, f.bytes);
-    out.push_str(",\"text\":");
-    string(out, &String::from_utf8_lossy(f.bytes));
-    let _ = write!(
-        out,
-        ",\"addr\":\"{}\",\"dir\":\"{}\",\"cmd\":",
-        f.addr_char(),
-        f.dir().as_str()
-    );
-    string(out, f.code_str());
-    out.push_str(",\"name\":");
-    match f.cmd {
-        Some(c) => string(out, c.name),
-        None => out.push_str("null"),
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::detect::Proto;
+    use crate::record::{Ctx, Decoder};
+    use serde_json::Value as J;
+
+    /// A sink that builds `serde_json` values through the trait's structure calls only (what
+    /// the Python package and the replay do): keys, nesting and values must come in an order
+    /// that rebuilds the text's object.
+    #[derive(Default)]
+    struct Tree {
+        stack: Vec<(Option<String>, J)>,
+        key: Option<String>,
+        top: Option<J>,
     }
-    let scale = o.module.as_ref().and_then(|m| m.scale());
-    out.push_str(",\"fields\":{");
-    let mut phys = String::new();
-    for (i, (fd, v)) in f.fields().enumerate() {
-        if i > 0 {
-            out.push(',');
-        }
-        string(out, fd.name);
-        out.push(':');
-        match (fd.kind, v) {
-            (Kind::Status, EllValue::U(c)) => string(out, crate::ell::table::status_name(c as u32)),
-            (_, EllValue::U(x)) => uint(out, x),
-            (_, EllValue::I(x)) => int(out, x),
-            (_, EllValue::Char(c)) => string(out, c.encode_utf8(&mut [0; 4])),
-            (_, EllValue::Digits(d)) => string(out, d),
-            (_, EllValue::Raw(b)) => hex(out, b),
-        }
-        // The binary current curve, point by point.
-        if let (Kind::Raw, EllValue::Raw(b)) = (fd.kind, v) {
-            out.push_str(",\"curve_points\":[");
-            for (i, p) in crate::ell::curve_points(b).enumerate() {
-                if i > 0 {
-                    out.push(',');
+
+    impl Tree {
+        fn put(&mut self, v: J) {
+            match self.stack.last_mut() {
+                None => self.top = Some(v),
+                Some((_, J::Object(m))) => {
+                    let k = self.key.take().expect("a member without a key");
+                    assert!(!m.contains_key(&k), "key {k} twice");
+                    m.insert(k, v);
                 }
-                let _ = write!(
-                    out,
-                    "{{\"period\":{},\"current\":{},\"hz\":",
-                    p.period, p.current
-                );
-                float(out, p.hz().round());
-                out.push_str(",\"amps\":");
-                float(out, crate::apt::round_sig(p.amps()));
-                out.push('}');
-            }
-            out.push(']');
-        }
-        // Coded numbers also as the text shows them (the number stays for scripts).
-        if let (Kind::Model, EllValue::U(x)) = (fd.kind, v) {
-            let _ = write!(out, ",\"{}_name\":\"ELL{x}\"", fd.name);
-        }
-        if let (Kind::Firmware, EllValue::U(x)) = (fd.kind, v) {
-            let _ = write!(out, ",\"{}_version\":\"{}.{}\"", fd.name, x >> 4, x & 15);
-        }
-        // The manual packs two facts into this byte: give each its own key too.
-        if let (Kind::ThreadHw, EllValue::U(x)) = (fd.kind, v) {
-            let thread = if x & 0x80 != 0 { "imperial" } else { "metric" };
-            let _ = write!(out, ",\"thread\":\"{thread}\",\"hw_release\":{}", x & 0x7F);
-        }
-        if let (Kind::Position, EllValue::I(p), Some((ppu, unit))) = (fd.kind, v, scale) {
-            if ppu > 0.0 {
-                if !phys.is_empty() {
-                    phys.push(',');
-                }
-                string(&mut phys, fd.name);
-                phys.push_str(":{\"value\":");
-                float(&mut phys, crate::apt::round_sig(p as f64 / ppu));
-                let _ = write!(phys, ",\"unit\":\"{unit}\"}}");
+                Some((_, J::Array(a))) => a.push(v),
+                Some(_) => panic!("a value inside a scalar"),
             }
         }
-    }
-    out.push('}');
-    close_map(out, "phys", &phys);
-    codes(
-        out,
-        f.fields()
-            .filter_map(|(fd, v)| Some((fd.name, i128::from(crate::fields::ell_code(fd, &v)?)))),
-    );
-    if let Some(m) = &o.module {
-        out.push_str(",\"module\":{\"first_addr\":");
-        uint(out, m.first_addr as u64);
-        if let Some(x) = m.model {
-            let _ = write!(out, ",\"model\":\"ELL{x}\"");
+        fn close(&mut self) {
+            let (k, v) = self.stack.pop().expect("balanced");
+            self.key = k;
+            self.put(v);
         }
-        if let Some(s) = &m.serial {
-            out.push_str(",\"serial\":");
-            string(out, s);
+    }
+
+    impl Sink for Tree {
+        fn begin_obj(&mut self) {
+            self.stack
+                .push((self.key.take(), J::Object(Default::default())));
         }
-        out.push('}');
+        fn end_obj(&mut self) {
+            self.close();
+        }
+        fn begin_list(&mut self) {
+            self.stack.push((self.key.take(), J::Array(vec![])));
+        }
+        fn end_list(&mut self) {
+            self.close();
+        }
+        fn key(&mut self, k: &str) {
+            assert!(self.key.is_none(), "two keys in a row");
+            self.key = Some(k.to_string());
+        }
+        fn str(&mut self, s: &str) {
+            self.put(J::from(s));
+        }
+        fn hex(&mut self, b: &[u8]) {
+            let mut s = String::new();
+            hex_digits(&mut s, b);
+            self.put(J::from(s));
+        }
+        fn uint(&mut self, x: u64) {
+            self.put(J::from(x));
+        }
+        fn int(&mut self, x: i64) {
+            self.put(J::from(x));
+        }
+        fn float(&mut self, x: f64) {
+            // What a JSON reader makes of `{x}`.
+            let mut s = String::new();
+            float(&mut s, x);
+            self.put(serde_json::from_str(&s).expect("a number"));
+        }
+        fn fixed(&mut self, x: f64, decimals: usize) {
+            self.put(serde_json::from_str(&format!("{x:.decimals$}")).expect("a number"));
+        }
+        fn bool(&mut self, b: bool) {
+            self.put(J::from(b));
+        }
+        fn null(&mut self) {
+            self.put(J::Null);
+        }
     }
-    if let Some(p) = o.pair {
-        out.push_str(",\"pair\":");
-        uint(out, p);
-    }
-    if let Some(l) = o.latency_ns {
-        out.push_str(",\"latency_ms\":");
-        float(out, l as f64 / 1e6);
-    }
-    if o.interim {
-        out.push_str(",\"interim\":true");
-    }
-    out.push_str(",\"diag\":");
-    diags(out, f.diags().iter().copied());
-    out.push('}');
-}
 
-/// Append the JSON object of an Elliptec garbage record.
-pub fn ell_garbage(out: &mut String, n: u64, offset: u64, bytes: &[u8]) {
-    let _ = write!(out, "{{\"n\":{n},\"proto\":\"ell\",\"type\":\"garbage\",\"offset\":{offset},\"len\":{},\"raw\":", bytes.len());
-    hex(out, bytes);
-    out.push_str(",\"text\":");
-    string(out, &String::from_utf8_lossy(bytes));
-    out.push_str(",\"diag\":");
-    let d = Diag {
-        offset,
-        kind: DiagKind::Garbage {
-            len: bytes.len() as u32,
-        },
-    };
-    diags(out, std::iter::once(d));
-    out.push('}');
-}
-
-/// Append a diagnostic that refers to an earlier record (a command that got no reply).
-pub fn late_diag(out: &mut String, proto: &str, refers_to: u64, d: Diag) {
-    let _ = write!(
-        out,
-        "{{\"proto\":\"{proto}\",\"type\":\"diag\",\"ref\":{refers_to},\"diag\":"
-    );
-    diags(out, std::iter::once(d));
-    out.push('}');
+    /// Every record of a stream with every message form of the table (and garbage), APT and
+    /// Elliptec: built through the sink's structure calls it equals the NDJSON text read back.
+    #[test]
+    fn a_structured_sink_rebuilds_the_ndjson_object() {
+        let apt = crate::synth::stream(Table::global(), 7, 3000, true);
+        let ell = b"0in0E1140TESTSERIAL2019015001F4000001000\r\n0ma00001000\r\n0PO00001000\r\n\
+                    0gs\r\n0GS0C\r\nxyz\r\n0gp\r\n"
+            .to_vec();
+        let mut seen = [0usize; 2];
+        for (i, (proto, bytes)) in [(Proto::Apt, apt), (Proto::Elliptec, ell)]
+            .into_iter()
+            .enumerate()
+        {
+            let mut dec = Decoder::new(None);
+            let mut check = |r: &Record<'_>| -> Result<(), ()> {
+                let mut line = String::new();
+                record(&mut line, r, Some("a \"file\""));
+                let text: J = serde_json::from_str(&line).expect("NDJSON");
+                let mut t = Tree::default();
+                record(&mut t, r, Some("a \"file\""));
+                assert!(t.stack.is_empty());
+                assert_eq!(t.top.as_ref(), Some(&text), "{line}");
+                seen[i] += 1;
+                Ok(())
+            };
+            let ctx = Ctx {
+                ts_ns: Some(1_000),
+                ..Ctx::default()
+            };
+            dec.push(ctx, &bytes, &mut check).expect("records");
+            dec.finish(&mut check).expect("records");
+            assert_eq!(dec.proto(), Some(proto));
+        }
+        assert!(seen[0] > 3000 && seen[1] > 6, "{seen:?}");
+    }
 }

@@ -34,14 +34,11 @@ pub struct Pipeline {
 pub struct Renderer {
     fmt: Format,
     line: String,
-    jline: String,
     filter: Option<Filter>,
     /// The APT message ids whose frames can pass the filter (`None`: any).
     ids: Option<IdSet>,
     /// The input's name when records name it (several inputs).
     file: Option<String>,
-    /// `{"file":NAME,` when records name their input, else empty.
-    file_prefix: String,
     /// Streams seen (announced or carrying records): the timeline names a record's stream
     /// once there are two.
     streams: Vec<u32>,
@@ -68,11 +65,6 @@ impl Pipeline {
     /// files: numbers, offsets and pairs count within a file.
     pub fn set_file(&mut self, name: &str) {
         self.r.file = Some(name.to_string());
-        let p = &mut self.r.file_prefix;
-        p.clear();
-        p.push_str("{\"file\":");
-        json::string(p, name);
-        p.push(',');
     }
 
     /// Use one reply timeout for every request instead of the per-message defaults.
@@ -194,11 +186,9 @@ impl Renderer {
         Renderer {
             fmt,
             line: String::with_capacity(512),
-            jline: String::with_capacity(512),
             filter: None,
             ids: None,
             file: None,
-            file_prefix: String::new(),
             streams: vec![],
         }
     }
@@ -229,20 +219,7 @@ impl Renderer {
     /// The line of one record, as [`Pipeline`] would emit it (file name and filter aside).
     pub fn line(&mut self, rec: &Record<'_>) -> &str {
         let _ = self.render(rec, &mut |_: &str| Ok::<(), ()>(()));
-        if self.fmt == Format::Json
-            && !matches!(
-                rec,
-                Record::Detect { .. }
-                    | Record::Stream { .. }
-                    | Record::Input(_)
-                    | Record::FileDiag { .. }
-                    | Record::Units(_)
-            )
-        {
-            &self.jline
-        } else {
-            &self.line
-        }
+        &self.line
     }
 
     /// Render one record and emit it (frames and diagnostics through the filter).
@@ -261,167 +238,76 @@ impl Renderer {
         {
             return Ok(());
         }
-        let want_json = self.fmt == Format::Json;
-        let want_text = self.fmt == Format::Text;
+        if self.fmt == Format::Json {
+            self.line.clear();
+            json::record(&mut self.line, rec, self.file.as_deref());
+            return emit(&self.line);
+        }
         let stream_col = self.streams.len() > 1;
-        self.line.clear();
-        self.jline.clear();
-        let (line, jline) = (&mut self.line, &mut self.jline);
+        let line = &mut self.line;
+        line.clear();
         match rec {
             Record::Detect {
                 proto,
                 detection: d,
                 sample,
             } => {
-                match self.fmt {
-                    Format::Json => {
-                        let _ = write!(
-                            line,
-                            "{{\"type\":\"detect\",\"proto\":\"{}\",\"certain\":{},\"apt\":{:.3},\"ell\":{:.3}}}",
-                            proto.code(),
-                            d.proto.is_some(),
-                            d.apt,
-                            d.elliptec
-                        );
-                    }
-                    Format::Text => {
-                        let verdict = if d.proto.is_some() {
-                            "detected"
-                        } else {
-                            "mixed or unknown stream; best guess"
-                        };
-                        let _ = write!(
-                            line,
-                            "# protocol {}: {verdict} ({:.0}% of the first {sample} bytes frame as APT, {:.0}% as Elliptec; --proto to choose)",
-                            proto.name(),
-                            d.apt * 100.0,
-                            d.elliptec * 100.0
-                        );
-                    }
-                }
-                return self.emit_plain(emit);
+                let verdict = if d.proto.is_some() {
+                    "detected"
+                } else {
+                    "mixed or unknown stream; best guess"
+                };
+                let _ = write!(
+                    line,
+                    "# protocol {}: {verdict} ({:.0}% of the first {sample} bytes frame as APT, {:.0}% as Elliptec; --proto to choose)",
+                    proto.name(),
+                    d.apt * 100.0,
+                    d.elliptec * 100.0
+                );
+                return emit(line);
             }
             Record::Stream { id, name, settings } => {
                 if !self.streams.contains(id) {
                     self.streams.push(*id);
                 }
-                match self.fmt {
-                    Format::Json => {
-                        let _ = write!(
-                            line,
-                            "{{\"type\":\"stream\",\"stream\":{id},\"stream_name\":"
-                        );
-                        json::string(line, name);
-                        if let Some(x) = settings {
-                            line.push_str(",\"settings\":");
-                            json::string(line, x);
-                        }
-                        line.push('}');
-                    }
-                    Format::Text => {
-                        let _ = write!(line, "# stream {id}: {name}");
-                        if let Some(x) = settings {
-                            let _ = write!(line, " ({x})");
-                        }
-                    }
+                let _ = write!(line, "# stream {id}: {name}");
+                if let Some(x) = settings {
+                    let _ = write!(line, " ({x})");
                 }
-                return self.emit_plain(emit);
+                return emit(line);
             }
             Record::Input(d) => {
-                match self.fmt {
-                    Format::Json => {
-                        line.push_str("{\"type\":\"input\",\"diag\":");
-                        json::diags(line, std::iter::once(*d));
-                        line.push('}');
-                    }
-                    Format::Text => text::input_diag_line(line, d),
-                }
-                return self.emit_plain(emit);
+                text::input_diag_line(line, d);
+                return emit(line);
             }
             Record::FileDiag { offset, kind, msg } => {
-                match self.fmt {
-                    Format::Json => {
-                        line.push_str("{\"type\":\"input\",\"diag\":[{\"kind\":");
-                        json::string(line, kind);
-                        let _ = write!(line, ",\"offset\":{offset},\"msg\":");
-                        json::string(line, msg);
-                        line.push_str("}]}");
-                    }
-                    Format::Text => {
-                        let _ = write!(line, "     - {offset:>#10x}  !! file: {kind}: {msg}");
-                    }
-                }
-                return self.emit_plain(emit);
+                let _ = write!(line, "     - {offset:>#10x}  !! file: {kind}: {msg}");
+                return emit(line);
             }
+            // Not filtered: it explains what follows.
             Record::Units(nt) => {
-                // Not filtered: it explains what follows.
-                match self.fmt {
-                    Format::Json => json::units_notice(line, nt),
-                    Format::Text => text::units_notice_line(line, nt),
-                }
-                return self.emit_plain(emit);
+                text::units_notice_line(line, nt);
+                return emit(line);
             }
             Record::Apt(a) => {
                 let m = &a.meta;
-                if want_json {
-                    json::apt_frame_in(jline, m.n, a.frame, a.pair, a.scale);
-                    let dir = a.dir().map_or("unknown", |d| d.as_str());
-                    close_json(jline, m, Some(dir));
-                }
-                if want_text {
-                    text::apt_line_in(line, m.n, a.frame, m.rel_s, a.scale);
-                    text::pair_suffix(line, a.pair);
-                }
+                text::apt_line_in(line, m.n, a.frame, m.rel_s, a.scale);
+                text::pair_suffix(line, a.pair);
             }
             Record::Ell(e) => {
                 let m = &e.meta;
-                if want_json {
-                    json::ell_frame(jline, m.n, e.frame, e.obs);
-                    close_json(jline, m, None);
-                }
-                if want_text {
-                    text::ell_line(line, m.n, e.frame, e.obs, m.rel_s);
-                }
+                text::ell_line(line, m.n, e.frame, e.obs, m.rel_s);
             }
             Record::Garbage(g) => {
                 let m = &g.meta;
                 match g.kind {
-                    Some(kind) => {
-                        if want_json {
-                            json::apt_garbage(jline, m.n, g.offset, g.bytes, kind);
-                            let dir = m.cap_dir.map_or("unknown", |d| d.as_str());
-                            close_json(jline, m, Some(dir));
-                        }
-                        if want_text {
-                            text::garbage_line(line, m.n, g.offset, g.bytes, kind, m.rel_s);
-                        }
-                    }
-                    None => {
-                        if want_json {
-                            json::ell_garbage(jline, m.n, g.offset, g.bytes);
-                            close_json(jline, m, None);
-                        }
-                        if want_text {
-                            text::ell_garbage_line(line, m.n, g.offset, g.bytes, m.rel_s);
-                        }
-                    }
+                    Some(kind) => text::garbage_line(line, m.n, g.offset, g.bytes, kind, m.rel_s),
+                    None => text::ell_garbage_line(line, m.n, g.offset, g.bytes, m.rel_s),
                 }
             }
-            Record::NoReply(e) => {
-                let d = e.diag();
-                if want_json {
-                    json::late_diag(jline, e.proto.code(), e.n, d);
-                    if jline.ends_with('}') {
-                        jline.pop();
-                        let _ = write!(jline, ",\"stream\":{}}}", e.stream);
-                    }
-                }
-                if want_text {
-                    text::late_diag_line(line, e.n, &d);
-                }
-            }
+            Record::NoReply(e) => text::late_diag_line(line, e.n, &e.diag()),
         }
-        if stream_col && want_text {
+        if stream_col {
             // Several streams: each line says which (`# stream N: NAME` names them).
             let stream = rec.meta().map_or_else(
                 || match rec {
@@ -432,49 +318,7 @@ impl Renderer {
             );
             line.insert_str(0, &format!("s{stream} "));
         }
-        self.emit_record(emit)
-    }
-
-    /// Emit a record rendered in `self.line` (detect, stream, input diagnostics): not filtered.
-    fn emit_plain<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
-        if self.fmt == Format::Json && !self.file_prefix.is_empty() && self.line.starts_with('{') {
-            self.line.replace_range(..1, &self.file_prefix);
-        }
-        emit(&self.line)
-    }
-
-    /// Emit the record rendered in `self.jline` (JSON) or `self.line` (text).
-    fn emit_record<E>(&mut self, emit: &mut impl FnMut(&str) -> Result<(), E>) -> Result<(), E> {
-        if !self.file_prefix.is_empty() && self.jline.starts_with('{') {
-            self.jline.replace_range(..1, &self.file_prefix);
-        }
-        match self.fmt {
-            Format::Json => emit(&self.jline),
-            Format::Text => emit(&self.line),
-        }
-    }
-}
-
-/// Append the capture context to a JSON object (before its closing brace). `json::uint`, not
-/// `write!`: this runs for every record, and `write!` cost several times more (MCAP writing).
-fn close_json(line: &mut String, m: &crate::record::Meta, dir: Option<&str>) {
-    let (ts, stream) = (m.ts_ns, m.stream);
-    if line.ends_with('}') {
-        line.pop();
-        line.push_str(",\"cap_offset\":");
-        json::uint(line, m.cap_offset);
-        if let Some(d) = dir {
-            line.push_str(",\"dir\":\"");
-            line.push_str(d);
-            line.push('"');
-        }
-        if let Some(t) = ts {
-            line.push_str(",\"ts_ns\":");
-            json::uint(line, t);
-        }
-        line.push_str(",\"stream\":");
-        json::uint(line, u64::from(stream));
-        line.push('}');
+        emit(line)
     }
 }
 

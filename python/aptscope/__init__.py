@@ -23,7 +23,6 @@ diagnostic; damaged input is not an error: its problems are in each record's dia
 from __future__ import annotations
 
 import io
-import json
 import os
 from typing import Any, Dict, Iterator, Optional, Union
 
@@ -63,8 +62,8 @@ def decode(source: Source, proto: str = "auto") -> Iterator[Dict[str, Any]]:
     Raises ``FileNotFoundError`` for a missing file and :class:`AptscopeError` for an input it
     cannot open or a bad ``proto``.
     """
-    for line in _aptscope.Lines(_src(source), proto):
-        yield json.loads(line)
+    # The dicts are built in Rust from the decoded records: no JSON text in between.
+    yield from _aptscope.Records(_src(source), proto)
 
 
 def to_arrow(source: Source, proto: str = "auto", name: Optional[str] = None) -> Dict[str, Any]:

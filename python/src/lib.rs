@@ -1,24 +1,26 @@
 //! The native part of the `aptscope` Python package. The Python module `aptscope` wraps it
 //! (see `aptscope/__init__.py` for the documented API).
 //!
-//! Everything decodes through `record::Decoder` (directly or inside `Pipeline` and
-//! `aptscope_parquet::decode_file`): records as NDJSON lines (the documented shape, which the
-//! Python side turns into dicts), tables as Parquet bytes (the dataset's schema exactly).
+//! Everything decodes through `record::Decoder` (directly or inside
+//! `aptscope_parquet::decode_file`): records as dicts built by `json::record` straight into
+//! Python objects (the documented NDJSON shape, no text in between), tables as Parquet bytes
+//! (the dataset's schema exactly).
 
 use aptscope_capture::open::{open, OpenOptions};
 use aptscope_capture::{Event, Reader};
 use aptscope_dissector::apt::{encode_named, Addr, Named};
 use aptscope_dissector::detect::Proto;
-use aptscope_dissector::pipeline::{Format, Pipeline};
-use aptscope_dissector::record::{Ctx, Decoder};
+use aptscope_dissector::json;
+use aptscope_dissector::record::{Ctx, Decoder, Record};
 use aptscope_dissector::table::Dir;
 use aptscope_dissector::Table;
 use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, DirSink, MemSink, Options};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyFileNotFoundError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyDict};
-use std::collections::VecDeque;
+use pyo3::types::{PyBool, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString};
+use std::collections::{HashMap, VecDeque};
+use std::convert::Infallible;
 use std::io;
 use std::path::Path;
 
@@ -73,18 +75,19 @@ fn source(obj: &Bound<'_, PyAny>) -> PyResult<Source> {
     Ok(Source::Path(p.extract()?))
 }
 
-/// NDJSON lines of one source, produced as they are read.
+/// The records of one source as dicts, produced as they are read.
 #[pyclass(unsendable)]
-struct Lines {
+struct Records {
     reader: Option<Box<dyn Reader>>,
     bytes: Option<Vec<u8>>,
-    p: Pipeline,
-    queue: VecDeque<String>,
+    dec: Decoder,
+    queue: VecDeque<Py<PyAny>>,
     done: bool,
+    keys: Keys,
 }
 
 #[pymethods]
-impl Lines {
+impl Records {
     #[new]
     #[pyo3(signature = (source_obj, proto = "auto"))]
     fn new(source_obj: &Bound<'_, PyAny>, proto: &str) -> PyResult<Self> {
@@ -100,12 +103,13 @@ impl Lines {
             ),
             Source::Bytes(b) => (None, Some(b)),
         };
-        Ok(Lines {
+        Ok(Records {
             reader,
             bytes,
-            p: Pipeline::new(proto, Format::Json),
+            dec: Decoder::new(proto),
             queue: VecDeque::new(),
             done: false,
+            keys: Keys::default(),
         })
     }
 
@@ -113,25 +117,27 @@ impl Lines {
         slf
     }
 
-    fn __next__(&mut self) -> PyResult<Option<String>> {
+    fn __next__(&mut self, py: Python<'_>) -> PyResult<Option<Py<PyAny>>> {
         while self.queue.is_empty() && !self.done {
-            self.fill().map_err(err)?;
+            self.fill(py)?;
         }
         Ok(self.queue.pop_front())
     }
 }
 
-impl Lines {
+impl Records {
     /// Decode the next event (or all the bytes) into the queue.
-    fn fill(&mut self) -> io::Result<()> {
-        let q = &mut self.queue;
-        let mut emit = |l: &str| -> io::Result<()> {
-            q.push_back(l.to_string());
+    fn fill(&mut self, py: Python<'_>) -> PyResult<()> {
+        let (q, keys) = (&mut self.queue, &mut self.keys);
+        let mut emit = |r: &Record<'_>| -> PyResult<()> {
+            let mut sink = PySink::new(py, keys);
+            json::record(&mut sink, r, None);
+            q.push_back(sink.finish()?);
             Ok(())
         };
         if let Some(b) = self.bytes.take() {
-            self.p.push(&b, None, &mut emit)?;
-            self.p.finish(&mut emit)?;
+            self.dec.push(Ctx::default(), &b, &mut emit)?;
+            self.dec.finish(&mut emit)?;
             self.done = true;
             return Ok(());
         }
@@ -140,17 +146,174 @@ impl Lines {
             return Ok(());
         };
         match r.next_event() {
-            Some(Event::Chunk(c)) => self.p.push_chunk(c.ctx(), c.bytes, &mut emit),
-            Some(Event::Diag(d)) => self.p.file_diag(d.offset, d.kind(), &d.msg(), &mut emit),
+            Some(Event::Chunk(c)) => self.dec.push(c.ctx(), c.bytes, &mut emit),
+            Some(Event::Diag(d)) => self.dec.file_diag(d.offset, d.kind(), &d.msg(), &mut emit),
             Some(Event::Stream(s)) => {
-                self.p
+                self.dec
                     .stream_info(s.id, &s.name, s.settings.as_deref(), &mut emit)
             }
             None => {
                 self.done = true;
-                self.p.finish(&mut emit)
+                self.dec.finish(&mut emit)
             }
         }
+    }
+}
+
+/// A record's shape built straight as Python objects (dicts, lists, str, int, float, bool,
+/// None) by `json::record`: the dicts `json.loads` would make of the NDJSON line, without the
+/// line.
+struct PySink<'py, 'k> {
+    py: Python<'py>,
+    keys: &'k mut Keys,
+    /// Open dicts and lists, innermost last (each already placed in its parent).
+    stack: Vec<Open<'py>>,
+    /// The key of the next member of the innermost dict.
+    key: Option<Bound<'py, PyString>>,
+    /// The record, once its object is opened.
+    top: Option<Bound<'py, PyAny>>,
+    /// The first Python error met (the sink's methods cannot return one).
+    err: Option<PyErr>,
+}
+
+enum Open<'py> {
+    Dict(Bound<'py, PyDict>),
+    List(Bound<'py, PyList>),
+}
+
+/// The Python strings of keys that live as long as the program, by address and length: made
+/// once (with their hash computed once), not per record.
+#[derive(Default)]
+struct Keys(HashMap<(usize, usize), Py<PyString>>);
+
+impl<'py, 'k> PySink<'py, 'k> {
+    fn new(py: Python<'py>, keys: &'k mut Keys) -> Self {
+        PySink {
+            py,
+            keys,
+            stack: Vec::with_capacity(8),
+            key: None,
+            top: None,
+            err: None,
+        }
+    }
+
+    /// The record built, or the first error.
+    fn finish(self) -> PyResult<Py<PyAny>> {
+        if let Some(e) = self.err {
+            return Err(e);
+        }
+        self.top
+            .map(Bound::unbind)
+            .ok_or_else(|| AptscopeError::new_err("empty record"))
+    }
+
+    /// Place a value under the pending key, at the end of the open list, or as the record.
+    fn put(&mut self, v: Bound<'py, PyAny>) {
+        let r = match self.stack.last() {
+            None => {
+                self.top = Some(v);
+                Ok(())
+            }
+            Some(Open::Dict(d)) => match self.key.take() {
+                Some(k) => d.set_item(k, v),
+                None => Err(AptscopeError::new_err("a dict member without a key")),
+            },
+            Some(Open::List(l)) => l.append(v),
+        };
+        if let Err(e) = r {
+            self.err.get_or_insert(e);
+        }
+    }
+
+    fn put_int<T>(&mut self, x: T)
+    where
+        T: IntoPyObject<'py, Target = PyInt, Output = Bound<'py, PyInt>, Error = Infallible>,
+    {
+        let Ok(v) = x.into_pyobject(self.py);
+        self.put(v.into_any());
+    }
+}
+
+impl json::Sink for PySink<'_, '_> {
+    fn begin_obj(&mut self) {
+        let d = PyDict::new(self.py);
+        self.put(d.clone().into_any());
+        self.stack.push(Open::Dict(d));
+    }
+    fn end_obj(&mut self) {
+        self.stack.pop();
+    }
+    fn begin_list(&mut self) {
+        let l = PyList::empty(self.py);
+        self.put(l.clone().into_any());
+        self.stack.push(Open::List(l));
+    }
+    fn end_list(&mut self) {
+        self.stack.pop();
+    }
+    fn key(&mut self, k: &str) {
+        self.key = Some(PyString::new(self.py, k));
+    }
+    fn key_static(&mut self, k: &'static str) {
+        let py = self.py;
+        let s = self
+            .keys
+            .0
+            .entry((k.as_ptr() as usize, k.len()))
+            .or_insert_with(|| PyString::new(py, k).unbind());
+        self.key = Some(s.bind(py).clone());
+    }
+    fn key_lit(&mut self, k: &json::Lit) {
+        self.key_static(k.name);
+    }
+    fn str(&mut self, s: &str) {
+        self.put(PyString::new(self.py, s).into_any());
+    }
+    fn hex(&mut self, b: &[u8]) {
+        let mut s = String::with_capacity(b.len() * 2);
+        json::hex_digits(&mut s, b);
+        self.str(&s);
+    }
+    fn uint(&mut self, x: u64) {
+        self.put_int(x);
+    }
+    fn int(&mut self, x: i64) {
+        self.put_int(x);
+    }
+    fn float(&mut self, x: f64) {
+        if !x.is_finite() {
+            return self.null();
+        }
+        // NDJSON writes a whole float without a fraction, which `json.loads` reads as an int.
+        if x.fract() == 0.0 {
+            if x.abs() < 9.0e18 {
+                return self.put_int(x as i64);
+            }
+            // Beyond 64 bits: the int of the digits NDJSON writes (`{x}` pads with zeros).
+            let int = self
+                .py
+                .get_type::<PyInt>()
+                .call1((format!("{x}"),));
+            return match int {
+                Ok(v) => self.put(v),
+                Err(e) => {
+                    self.err.get_or_insert(e);
+                }
+            };
+        }
+        self.put(PyFloat::new(self.py, x).into_any());
+    }
+    fn fixed(&mut self, x: f64, decimals: usize) {
+        // The value of the digits written, as `json.loads` reads them (`1.000` is a float).
+        let v = format!("{x:.decimals$}").parse().unwrap_or(x);
+        self.put(PyFloat::new(self.py, v).into_any());
+    }
+    fn bool(&mut self, b: bool) {
+        self.put(PyBool::new(self.py, b).to_owned().into_any());
+    }
+    fn null(&mut self) {
+        self.put(self.py.None().into_bound(self.py));
     }
 }
 
@@ -310,7 +473,7 @@ fn encode<'py>(
 /// The native module.
 #[pymodule]
 fn _aptscope(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<Lines>()?;
+    m.add_class::<Records>()?;
     m.add_function(wrap_pyfunction!(parquet_tables, m)?)?;
     m.add_function(wrap_pyfunction!(write_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(prepare_dataset, m)?)?;

@@ -25,6 +25,45 @@ def test_decode_yields_the_ndjson_records(aptscope_bin, samples):
     assert "MOT_MOVE_HOME" in names
 
 
+def same(a, b):
+    """Equal and of the same types throughout (1 is not 1.0), with keys in the same order."""
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, dict):
+        return list(a) == list(b) and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, list):
+        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+    return a == b
+
+
+def test_every_sample_decodes_to_the_dicts_of_its_ndjson(aptscope_bin, samples):
+    """The dicts are built in Rust without JSON text; they are what json.loads makes of the
+    command's lines, record for record, on every sample (a file the command rejects, decode
+    rejects too)."""
+    files = sorted(
+        p
+        for d in (samples, samples / "sessions")
+        for p in d.iterdir()
+        if p.is_file() and p.suffix not in (".md", ".sh", ".py")
+    )
+    compared = 0
+    for path in files:
+        r = subprocess.run(
+            [str(aptscope_bin), "decode", "--json", str(path)], capture_output=True, text=True
+        )
+        if r.returncode != 0:
+            with pytest.raises((aptscope.AptscopeError, OSError)):
+                list(aptscope.decode(path))
+            continue
+        want = [json.loads(l) for l in r.stdout.splitlines()]
+        got = list(aptscope.decode(path))
+        assert len(got) == len(want), path
+        for g, w in zip(got, want):
+            assert same(g, w), (path, g, w)
+        compared += len(got)
+    assert compared > 1000, compared
+
+
 def test_decode_bytes_and_encode_round_trip():
     frame = aptscope.encode("MOT_MOVE_ABSOLUTE", chan_ident="CH1", absolute_position=4096)
     assert frame.hex() == "53040600d001" + "0100" + "00100000"

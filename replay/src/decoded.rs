@@ -3,9 +3,9 @@
 //! and the sender's address and sub-message. Built straight from the frames of the decode
 //! chain's records; JSON is only written from it (reports), never parsed back.
 
-use aptscope_dissector::apt::{text_of, Addr, AptFrame, Value as AptValue};
-use aptscope_dissector::ell::table::{status_name, Kind as EllKind};
-use aptscope_dissector::ell::{curve_points, EllFrame, EllValue};
+use aptscope_dissector::apt::AptFrame;
+use aptscope_dissector::ell::EllFrame;
+use aptscope_dissector::json::{self, Sink};
 use serde_json::{Number, Value};
 use std::borrow::Cow;
 
@@ -14,6 +14,8 @@ use std::borrow::Cow;
 pub enum FieldVal {
     /// No value (a non-finite float, a key one side lacks).
     Null,
+    /// A boolean.
+    Bool(bool),
     /// A whole number.
     Int(i128),
     /// A finite float.
@@ -23,29 +25,16 @@ pub enum FieldVal {
     /// A list: set flag names, array elements, curve points.
     List(Vec<FieldVal>),
     /// An object with named members (an address, a sub-message, a curve point).
-    Obj(Vec<(&'static str, FieldVal)>),
+    Obj(Vec<(Cow<'static, str>, FieldVal)>),
 }
 
 impl FieldVal {
-    fn float(x: f64) -> FieldVal {
-        if x.is_finite() {
-            FieldVal::Float(x)
-        } else {
-            FieldVal::Null
-        }
-    }
-
-    fn hex(b: &[u8]) -> FieldVal {
-        let mut s = String::with_capacity(b.len() * 2 + 2);
-        aptscope_dissector::json::hex(&mut s, b);
-        FieldVal::Text(Cow::Owned(s.trim_matches('"').to_string()))
-    }
-
     /// The value as JSON, for reports: what `decode --json` writes, read as a JSON reader
     /// reads it (whole floats are written without a fraction and so come out as integers).
     pub fn to_json(&self) -> Value {
         match self {
             FieldVal::Null => Value::Null,
+            FieldVal::Bool(b) => Value::Bool(*b),
             FieldVal::Int(i) => {
                 if let Ok(u) = u64::try_from(*i) {
                     Value::from(u)
@@ -111,115 +100,28 @@ impl Decoded {
         )
     }
 
-    /// An APT frame's meaning: enum fields by label, flag fields as the names of the set flags.
+    /// An APT frame's meaning: its `fields`, `src` and `sub` as `decode --json` gives them
+    /// (built by the same writer, [`json`]).
     pub fn apt(f: &AptFrame<'_, '_>) -> Decoded {
-        let t = f.table();
-        let fields = f
-            .fields()
-            .map(|(fd, v)| {
-                let label = |x: i64| fd.enumeration.and_then(|e| t.enum_def(e).label(x));
-                let val = match v {
-                    AptValue::U(x) => {
-                        if let Some(l) = label(x as i64) {
-                            FieldVal::Text(Cow::Borrowed(l))
-                        } else if let Some(fl) = fd.flags {
-                            FieldVal::List(
-                                t.flags_def(fl)
-                                    .items
-                                    .iter()
-                                    .filter(|(m, _)| x & m == *m)
-                                    .map(|(_, l)| FieldVal::Text(Cow::Borrowed(*l)))
-                                    .collect(),
-                            )
-                        } else {
-                            FieldVal::Int(i128::from(x))
-                        }
-                    }
-                    AptValue::I(x) => match label(x) {
-                        Some(l) => FieldVal::Text(Cow::Borrowed(l)),
-                        None => FieldVal::Int(i128::from(x)),
-                    },
-                    AptValue::F(x) => FieldVal::float(x),
-                    AptValue::Str(b) => FieldVal::Text(Cow::Owned(text_of(b).into_owned())),
-                    AptValue::Bytes(b) => FieldVal::hex(b),
-                    AptValue::Array(..) => FieldVal::List(
-                        v.elements()
-                            .map(|e| match e {
-                                AptValue::U(x) => FieldVal::Int(i128::from(x)),
-                                AptValue::I(x) => FieldVal::Int(i128::from(x)),
-                                AptValue::F(x) => FieldVal::float(x),
-                                _ => FieldVal::Null,
-                            })
-                            .collect(),
-                    ),
-                };
-                (Cow::Borrowed(fd.name), val)
-            })
-            .collect();
+        let fields = match Build::of(|b| json::apt_fields(b, f)) {
+            FieldVal::Obj(m) => m,
+            _ => vec![],
+        };
         Decoded {
             fields,
-            src: Some(addr(f.header().src())),
+            src: Some(Build::of(|b| json::addr(b, f.header().src()))),
             addr: None,
-            sub: f.sub.map(|s| {
-                FieldVal::Obj(vec![
-                    ("id", FieldVal::Int(i128::from(s.id))),
-                    ("name", FieldVal::Text(Cow::Borrowed(s.name))),
-                ])
-            }),
+            sub: f.sub.map(|s| Build::of(|b| json::sub(b, s))),
         }
     }
 
-    /// An Elliptec frame's meaning: status codes by name, and the keys derived beside a field.
+    /// An Elliptec frame's meaning: its `fields` (with the keys derived beside a field) and
+    /// the module address, as `decode --json` gives them.
     pub fn ell(f: &EllFrame<'_>) -> Decoded {
-        let mut fields = vec![];
-        for (fd, v) in f.fields() {
-            let val = match (fd.kind, v) {
-                (EllKind::Status, EllValue::U(c)) => {
-                    FieldVal::Text(Cow::Borrowed(status_name(c as u32)))
-                }
-                (_, EllValue::U(x)) => FieldVal::Int(i128::from(x)),
-                (_, EllValue::I(x)) => FieldVal::Int(i128::from(x)),
-                (_, EllValue::Char(c)) => FieldVal::Text(Cow::Owned(c.to_string())),
-                (_, EllValue::Digits(d)) => FieldVal::Text(Cow::Owned(d.to_string())),
-                (_, EllValue::Raw(b)) => FieldVal::hex(b),
-            };
-            fields.push((Cow::Borrowed(fd.name), val));
-            match (fd.kind, v) {
-                (EllKind::Raw, EllValue::Raw(b)) => {
-                    let points = curve_points(b)
-                        .map(|p| {
-                            FieldVal::Obj(vec![
-                                ("period", FieldVal::Int(i128::from(p.period))),
-                                ("current", FieldVal::Int(i128::from(p.current))),
-                                ("hz", FieldVal::float(p.hz().round())),
-                                (
-                                    "amps",
-                                    FieldVal::float(aptscope_dissector::apt::round_sig(p.amps())),
-                                ),
-                            ])
-                        })
-                        .collect();
-                    fields.push((Cow::Borrowed("curve_points"), FieldVal::List(points)));
-                }
-                (EllKind::Model, EllValue::U(x)) => fields.push((
-                    Cow::Owned(format!("{}_name", fd.name)),
-                    FieldVal::Text(Cow::Owned(format!("ELL{x}"))),
-                )),
-                (EllKind::Firmware, EllValue::U(x)) => fields.push((
-                    Cow::Owned(format!("{}_version", fd.name)),
-                    FieldVal::Text(Cow::Owned(format!("{}.{}", x >> 4, x & 15))),
-                )),
-                (EllKind::ThreadHw, EllValue::U(x)) => {
-                    let thread = if x & 0x80 != 0 { "imperial" } else { "metric" };
-                    fields.push((Cow::Borrowed("thread"), FieldVal::Text(thread.into())));
-                    fields.push((
-                        Cow::Borrowed("hw_release"),
-                        FieldVal::Int(i128::from(x & 0x7F)),
-                    ));
-                }
-                _ => {}
-            }
-        }
+        let fields = match Build::of(|b| json::ell_fields(b, f)) {
+            FieldVal::Obj(m) => m,
+            _ => vec![],
+        };
         Decoded {
             fields,
             src: None,
@@ -229,23 +131,91 @@ impl Decoded {
     }
 }
 
-/// An APT address as `decode --json` gives it: `{addr, name, bay}`.
-fn addr(a: Addr) -> FieldVal {
-    let name = match a {
-        Addr::Host => Cow::Borrowed("host"),
-        Addr::Rack => Cow::Borrowed("rack"),
-        Addr::Usb => Cow::Borrowed("usb"),
-        Addr::Bay(n) => Cow::Owned(format!("bay{n}")),
-        Addr::Unknown(x) => Cow::Owned(format!("0x{x:02X}")),
-    };
-    let mut m = vec![
-        ("addr", FieldVal::Int(i128::from(a.byte()))),
-        ("name", FieldVal::Text(name)),
-    ];
-    if let Some(b) = a.bay() {
-        m.push(("bay", FieldVal::Int(i128::from(b))));
+/// Builds owned [`FieldVal`]s from the record shape's writer.
+#[derive(Default)]
+struct Build {
+    /// Open objects and lists, innermost last, each with the key it goes under.
+    stack: Vec<(Option<Cow<'static, str>>, FieldVal)>,
+    /// The key of the next member.
+    key: Option<Cow<'static, str>>,
+    /// The value written, once complete.
+    top: Option<FieldVal>,
+}
+
+impl Build {
+    /// The one value `write` writes.
+    fn of(write: impl FnOnce(&mut Build)) -> FieldVal {
+        let mut b = Build::default();
+        write(&mut b);
+        b.top.unwrap_or(FieldVal::Null)
     }
-    FieldVal::Obj(m)
+
+    fn put(&mut self, v: FieldVal) {
+        match self.stack.last_mut() {
+            None => self.top = Some(v),
+            Some((_, FieldVal::Obj(m))) => m.push((self.key.take().unwrap_or_default(), v)),
+            Some((_, FieldVal::List(l))) => l.push(v),
+            Some(_) => {}
+        }
+    }
+
+    fn close(&mut self) {
+        if let Some((k, v)) = self.stack.pop() {
+            self.key = k;
+            self.put(v);
+        }
+    }
+}
+
+impl Sink for Build {
+    fn begin_obj(&mut self) {
+        self.stack.push((self.key.take(), FieldVal::Obj(vec![])));
+    }
+    fn end_obj(&mut self) {
+        self.close();
+    }
+    fn begin_list(&mut self) {
+        self.stack.push((self.key.take(), FieldVal::List(vec![])));
+    }
+    fn end_list(&mut self) {
+        self.close();
+    }
+    fn key(&mut self, k: &str) {
+        self.key = Some(Cow::Owned(k.to_string()));
+    }
+    fn key_lit(&mut self, k: &json::Lit) {
+        self.key = Some(Cow::Borrowed(k.name));
+    }
+    fn str(&mut self, s: &str) {
+        self.put(FieldVal::Text(Cow::Owned(s.to_string())));
+    }
+    fn hex(&mut self, b: &[u8]) {
+        let mut s = String::with_capacity(b.len() * 2);
+        json::hex_digits(&mut s, b);
+        self.put(FieldVal::Text(Cow::Owned(s)));
+    }
+    fn uint(&mut self, x: u64) {
+        self.put(FieldVal::Int(i128::from(x)));
+    }
+    fn int(&mut self, x: i64) {
+        self.put(FieldVal::Int(i128::from(x)));
+    }
+    fn float(&mut self, x: f64) {
+        self.put(if x.is_finite() {
+            FieldVal::Float(x)
+        } else {
+            FieldVal::Null
+        });
+    }
+    fn fixed(&mut self, x: f64, decimals: usize) {
+        self.float(format!("{x:.decimals$}").parse().unwrap_or(x));
+    }
+    fn bool(&mut self, b: bool) {
+        self.put(FieldVal::Bool(b));
+    }
+    fn null(&mut self) {
+        self.put(FieldVal::Null);
+    }
 }
 
 #[cfg(test)]
@@ -331,6 +301,6 @@ mod tests {
         assert!(float_json(-0.0).is_f64());
         assert!(float_json(1e20).is_f64());
         assert_eq!(float_json(f64::NAN), Value::Null);
-        assert_eq!(FieldVal::float(f64::INFINITY), FieldVal::Null);
+        assert_eq!(Build::of(|b| b.float(f64::INFINITY)), FieldVal::Null);
     }
 }
