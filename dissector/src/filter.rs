@@ -405,13 +405,10 @@ impl Expr {
             Expr::Test(Test::Diag(_)) => return out.extend(["proto", "diag", "type"]),
             Expr::Test(Test::Unpaired(_)) => return out.extend(["proto", "unpaired", "diag"]),
             Expr::Test(Test::Paired(_)) => return out.extend(["proto", "pair"]),
-            Expr::Test(
-                Test::Exists(f)
-                | Test::Cmp(f, ..)
-                | Test::Contains(f, _)
-                | Test::Matches(f, _)
-                | Test::In(f, _),
-            ) => f,
+            Expr::Test(t) => match t.field() {
+                Some(f) => f,
+                None => return,
+            },
         };
         if f.proto.is_some() {
             out.push("proto");
@@ -436,14 +433,7 @@ impl Expr {
             Expr::All | Expr::Not(_) => true,
             Expr::Or(xs) => xs.iter().any(|x| x.can_match(has)),
             Expr::And(xs) => xs.iter().all(|x| x.can_match(has)),
-            Expr::Test(
-                Test::Exists(f)
-                | Test::Cmp(f, ..)
-                | Test::Contains(f, _)
-                | Test::Matches(f, _)
-                | Test::In(f, _),
-            ) => f.can_have_value(has),
-            Expr::Test(_) => true,
+            Expr::Test(t) => t.field().is_none_or(|f| f.can_have_value(has)),
         }
     }
 
@@ -466,6 +456,18 @@ fn kind_path() -> &'static [String] {
 }
 
 impl Test {
+    /// The field a test on a field reads (every test but the record-level words).
+    fn field(&self) -> Option<&FieldRef> {
+        match self {
+            Test::Exists(f)
+            | Test::Cmp(f, ..)
+            | Test::Contains(f, _)
+            | Test::Matches(f, _)
+            | Test::In(f, _) => Some(f),
+            Test::Proto(_) | Test::Diag(_) | Test::Unpaired(_) | Test::Paired(_) => None,
+        }
+    }
+
     fn eval<F: Fields + ?Sized>(&self, rec: &F) -> bool {
         match self {
             Test::Proto(p) => proto_is(rec, Some(p)),

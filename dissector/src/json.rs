@@ -539,18 +539,7 @@ fn apt_members<S: Sink + ?Sized>(
     scale: Option<&Scale>,
 ) {
     let h = f.header();
-    key!(out, "n");
-    out.uint(n);
-    key!(out, "proto");
-    out.plain("apt");
-    key!(out, "type");
-    out.plain("frame");
-    key!(out, "offset");
-    out.uint(f.offset);
-    key!(out, "len");
-    out.uint(f.bytes.len() as u64);
-    key!(out, "raw");
-    out.hex(f.bytes);
+    frame_head(out, n, "apt", f.offset, f.bytes);
     key!(out, "msgid");
     out.uint(u64::from(h.msg_id()));
     key!(out, "msgid_hex");
@@ -860,19 +849,24 @@ pub fn ell_frame<S: Sink + ?Sized>(out: &mut S, n: u64, f: &EllFrame<'_>, o: &Ob
     out.end_obj();
 }
 
-fn ell_members<S: Sink + ?Sized>(out: &mut S, n: u64, f: &EllFrame<'_>, o: &Observation) {
+/// The keys every frame starts with: number, protocol, type, offset, length, raw bytes.
+fn frame_head<S: Sink + ?Sized>(out: &mut S, n: u64, proto: &str, offset: u64, bytes: &[u8]) {
     key!(out, "n");
     out.uint(n);
     key!(out, "proto");
-    out.plain("ell");
+    out.plain(proto);
     key!(out, "type");
     out.plain("frame");
     key!(out, "offset");
-    out.uint(f.offset);
+    out.uint(offset);
     key!(out, "len");
-    out.uint(f.bytes.len() as u64);
+    out.uint(bytes.len() as u64);
     key!(out, "raw");
-    out.hex(f.bytes);
+    out.hex(bytes);
+}
+
+fn ell_members<S: Sink + ?Sized>(out: &mut S, n: u64, f: &EllFrame<'_>, o: &Observation) {
+    frame_head(out, n, "ell", f.offset, f.bytes);
     key!(out, "text");
     out.str(&String::from_utf8_lossy(f.bytes));
     key!(out, "addr");
