@@ -220,6 +220,14 @@ pub trait Fields {
     /// the record has `key` at all (a key that is there but null, or a path below it that is
     /// not, still counts).
     fn visit(&self, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool;
+
+    /// The one number at top-level `key`, when the record has it at hand (`n`, `len` …):
+    /// `Some(x)` means [`Fields::visit`] would give exactly `Val::Num(Num::I(x))` once and
+    /// nothing else. `None`: ask `visit` (the default). Lets a filter compare such keys
+    /// without the visitor's indirection (an `i64`: returned in a register).
+    fn number(&self, _key: Key) -> Option<i64> {
+        None
+    }
 }
 
 impl<T: Fields + ?Sized> Fields for &T {
@@ -228,6 +236,9 @@ impl<T: Fields + ?Sized> Fields for &T {
     }
     fn visit(&self, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
         (**self).visit(key, rest, f)
+    }
+    fn number(&self, key: Key) -> Option<i64> {
+        (**self).number(key)
     }
 }
 

@@ -266,6 +266,20 @@ enum CmpOp {
     Ge,
 }
 
+impl CmpOp {
+    /// Whether the ordering of a value against the literal satisfies the comparison.
+    fn holds(self, o: Ordering) -> bool {
+        match self {
+            CmpOp::Eq => o == Ordering::Equal,
+            CmpOp::Ne => o != Ordering::Equal,
+            CmpOp::Lt => o == Ordering::Less,
+            CmpOp::Le => o != Ordering::Greater,
+            CmpOp::Gt => o == Ordering::Greater,
+            CmpOp::Ge => o != Ordering::Less,
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Op {
     Cmp(CmpOp),
@@ -456,6 +470,26 @@ fn kind_path() -> &'static [String] {
 }
 
 impl Test {
+    /// A comparison through the visitor: any value satisfies it (`!=`: some value compares
+    /// and none is equal).
+    fn eval_cmp<F: Fields + ?Sized>(&self, rec: &F, f: &FieldRef, op: CmpOp, lit: &Lit) -> bool {
+        match op {
+            CmpOp::Ne => {
+                let (mut comparable, mut equal) = (false, false);
+                f.each(rec, &mut |v, _| match f.compare(&v, lit, true) {
+                    Some(Ordering::Equal) => equal = true,
+                    Some(_) => comparable = true,
+                    None => {}
+                });
+                comparable && !equal
+            }
+            _ => f.any(rec, &mut |v, _| {
+                f.compare(v, lit, op == CmpOp::Eq)
+                    .is_some_and(|o| op.holds(o))
+            }),
+        }
+    }
+
     /// The field a test on a field reads (every test but the record-level words).
     fn field(&self) -> Option<&FieldRef> {
         match self {
@@ -494,29 +528,24 @@ impl Test {
             }
             Test::Paired(p) => proto_is(rec, *p) && any_at(rec, Key::Pair, &[], &mut |_, _| true),
             Test::Exists(f) => f.any(rec, &mut |v, r| r != Role::Code && truthy(v)),
-            Test::Cmp(f, op, lit) => match op {
-                CmpOp::Eq => f.any(rec, &mut |v, _| {
-                    f.compare(v, lit, true) == Some(Ordering::Equal)
-                }),
-                CmpOp::Ne => {
-                    // True when some value compares and none is equal.
-                    let (mut comparable, mut equal) = (false, false);
-                    f.each(rec, &mut |v, _| match f.compare(&v, lit, true) {
-                        Some(Ordering::Equal) => equal = true,
-                        Some(_) => comparable = true,
-                        None => {}
-                    });
-                    comparable && !equal
+            // A record-level number the record has at hand: its one value, compared as
+            // `eval_cmp` would, without the visitor.
+            Test::Cmp(f, op, lit)
+                if !f.ts_seconds && f.rest.is_empty() && proto_is(rec, f.proto) =>
+            {
+                match rec.number(f.key) {
+                    Some(x) => {
+                        let o = f.compare(
+                            &Val::Num(N::I(i128::from(x))),
+                            lit,
+                            matches!(op, CmpOp::Eq | CmpOp::Ne),
+                        );
+                        o.is_some_and(|o| op.holds(o))
+                    }
+                    None => self.eval_cmp(rec, f, *op, lit),
                 }
-                _ => f.any(rec, &mut |v, _| {
-                    f.compare(v, lit, false).is_some_and(|o| match op {
-                        CmpOp::Lt => o == Ordering::Less,
-                        CmpOp::Le => o != Ordering::Greater,
-                        CmpOp::Gt => o == Ordering::Greater,
-                        _ => o != Ordering::Less,
-                    })
-                }),
-            },
+            }
+            Test::Cmp(f, op, lit) => self.eval_cmp(rec, f, *op, lit),
             Test::Contains(f, lit) => f.any(rec, &mut |v, role| match role {
                 Role::Member => f.compare(v, lit, true) == Some(Ordering::Equal),
                 Role::Code => false,

@@ -272,6 +272,21 @@ impl Fields for View<'_> {
         Some(if self.r.has(F_ELL) { "ell" } else { "apt" })
     }
 
+    fn number(&self, key: Key) -> Option<i64> {
+        let r = self.r;
+        let x: u64 = match key {
+            Key::N => self.n,
+            Key::Offset => r.offset,
+            Key::CapOffset => r.cap_offset,
+            Key::Len => u64::from(r.len),
+            Key::Stream => u64::from(r.stream),
+            Key::TsNs => r.ts()?,
+            Key::Msgid if !r.has(F_ELL) && !r.has(F_GARBAGE) => u64::from(r.id),
+            _ => return None,
+        };
+        i64::try_from(x).ok()
+    }
+
     fn visit(&self, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
         let r = self.r;
         let (ell, garbage) = (r.has(F_ELL), r.has(F_GARBAGE));

@@ -4,7 +4,7 @@
 
 use aptscope_capture::model::Event;
 use aptscope_capture::open::OpenOptions;
-use aptscope_dissector::fields::{Fields, Key, Role, Val, KEYS};
+use aptscope_dissector::fields::{Fields, Key, Num, Role, Val, KEYS};
 use aptscope_dissector::filter::Filter;
 use aptscope_dissector::pipeline::{Format, Pipeline};
 use aptscope_dissector::stats::Stats;
@@ -239,7 +239,7 @@ fn the_compact_view_reads_like_the_decoded_record() {
         synth,
     ];
     let below = [vec![], vec!["name".to_string()], vec!["kind".to_string()]];
-    let mut compared = 0;
+    let (mut compared, mut numbers) = (0, 0);
     for path in paths {
         let shared = load(&path, OpenOptions::default()).expect("opens");
         let ix = shared.index.read().expect("lock");
@@ -254,6 +254,17 @@ fn the_compact_view_reads_like_the_decoded_record() {
             for def in KEYS {
                 if def.key == Key::Diag && r.has(F_NO_REPLY) {
                     continue;
+                }
+                // A number the view has at hand is the one value the visit gives.
+                if let Some(x) = view.number(def.key) {
+                    let one = vec![format!(
+                        "{:?} {:?}",
+                        Val::Num(Num::I(i128::from(x))),
+                        Role::Plain
+                    )];
+                    let want = with_record(&ix, n, |rec| visit_text(rec, def.key, &[]));
+                    assert_eq!(want, Some((true, one)), "{path} #{n} {}", def.name);
+                    numbers += 1;
                 }
                 for rest in &below {
                     let want = with_record(&ix, n, |rec| visit_text(rec, def.key, rest))
@@ -270,4 +281,5 @@ fn the_compact_view_reads_like_the_decoded_record() {
         }
     }
     assert!(compared > 10_000);
+    assert!(numbers > 1_000, "{numbers}");
 }
