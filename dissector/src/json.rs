@@ -603,20 +603,25 @@ fn apt_members<S: Sink + ?Sized>(
                 .filter_map(|(fd, v)| Some((fd.name, crate::fields::apt_code(fd, &v)?))),
         );
     }
-    if let Some(x) = p.pair {
-        key!(out, "pair");
-        out.uint(x);
-    }
-    if let Some(l) = p.latency_ns {
-        key!(out, "latency_ms");
-        out.float(l as f64 / 1e6);
-    }
+    pairing(out, p.pair, p.latency_ns);
     if p.other_address {
         key!(out, "pair_other_address");
         out.bool(true);
     }
     key!(out, "diag");
     diags(out, apt_diags(f, p));
+}
+
+/// `"pair"` and `"latency_ms"` of a reply, when paired.
+fn pairing<S: Sink + ?Sized>(out: &mut S, pair: Option<u64>, latency_ns: Option<u64>) {
+    if let Some(x) = pair {
+        key!(out, "pair");
+        out.uint(x);
+    }
+    if let Some(l) = latency_ns {
+        key!(out, "latency_ms");
+        out.float(l as f64 / 1e6);
+    }
 }
 
 /// `"phys":{name:{"value":…,"unit":…},…}` when any field converts.
@@ -908,14 +913,7 @@ fn ell_members<S: Sink + ?Sized>(out: &mut S, n: u64, f: &EllFrame<'_>, o: &Obse
         }
         out.end_obj();
     }
-    if let Some(p) = o.pair {
-        key!(out, "pair");
-        out.uint(p);
-    }
-    if let Some(l) = o.latency_ns {
-        key!(out, "latency_ms");
-        out.float(l as f64 / 1e6);
-    }
+    pairing(out, o.pair, o.latency_ns);
     if o.interim {
         key!(out, "interim");
         out.bool(true);
