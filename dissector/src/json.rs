@@ -230,23 +230,10 @@ pub fn float(out: &mut String, x: f64) {
     }
 }
 
-/// Append an unsigned integer (cheaper than `write!` on the hot path).
-pub fn uint(out: &mut String, mut x: u64) {
-    if x < 10 {
-        out.push(char::from(b'0' + x as u8));
-        return;
-    }
-    let mut buf = [0u8; 20];
-    let mut i = buf.len();
-    loop {
-        i -= 1;
-        buf[i] = b'0' + (x % 10) as u8;
-        x /= 10;
-        if x == 0 {
-            break;
-        }
-    }
-    out.push_str(std::str::from_utf8(&buf[i..]).unwrap_or_default());
+/// Append an unsigned integer (two digits a step, no `fmt` machinery: integers are most of
+/// a record's numbers).
+pub fn uint(out: &mut String, x: u64) {
+    out.push_str(itoa::Buffer::new().format(x));
 }
 
 /// Append a signed integer.
