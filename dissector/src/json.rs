@@ -526,7 +526,7 @@ fn apt_members<S: Sink + ?Sized>(
     scale: Option<&Scale>,
 ) {
     let h = f.header();
-    frame_head(out, n, "apt", f.offset, f.bytes);
+    record_head(out, "apt", "frame", n, f.offset, f.bytes);
     key!(out, "msgid");
     out.uint(u64::from(h.msg_id()));
     key!(out, "msgid_hex");
@@ -733,13 +733,22 @@ pub fn apt_garbage<S: Sink + ?Sized>(
     out.end_obj();
 }
 
-fn garbage_head<S: Sink + ?Sized>(out: &mut S, proto: &str, n: u64, offset: u64, bytes: &[u8]) {
+/// The keys every frame and garbage record starts with: number, protocol, type (`frame` or
+/// `garbage`), offset, length, raw bytes.
+fn record_head<S: Sink + ?Sized>(
+    out: &mut S,
+    proto: &str,
+    kind: &str,
+    n: u64,
+    offset: u64,
+    bytes: &[u8],
+) {
     key!(out, "n");
     out.uint(n);
     key!(out, "proto");
     out.plain(proto);
     key!(out, "type");
-    out.plain("garbage");
+    out.plain(kind);
     key!(out, "offset");
     out.uint(offset);
     key!(out, "len");
@@ -755,7 +764,7 @@ fn apt_garbage_members<S: Sink + ?Sized>(
     bytes: &[u8],
     kind: GarbageKind,
 ) {
-    garbage_head(out, "apt", n, offset, bytes);
+    record_head(out, "apt", "garbage", n, offset, bytes);
     key!(out, "diag");
     diags(
         out,
@@ -841,24 +850,8 @@ pub fn ell_frame<S: Sink + ?Sized>(out: &mut S, n: u64, f: &EllFrame<'_>, o: &Ob
     out.end_obj();
 }
 
-/// The keys every frame starts with: number, protocol, type, offset, length, raw bytes.
-fn frame_head<S: Sink + ?Sized>(out: &mut S, n: u64, proto: &str, offset: u64, bytes: &[u8]) {
-    key!(out, "n");
-    out.uint(n);
-    key!(out, "proto");
-    out.plain(proto);
-    key!(out, "type");
-    out.plain("frame");
-    key!(out, "offset");
-    out.uint(offset);
-    key!(out, "len");
-    out.uint(bytes.len() as u64);
-    key!(out, "raw");
-    out.hex(bytes);
-}
-
 fn ell_members<S: Sink + ?Sized>(out: &mut S, n: u64, f: &EllFrame<'_>, o: &Observation) {
-    frame_head(out, n, "ell", f.offset, f.bytes);
+    record_head(out, "ell", "frame", n, f.offset, f.bytes);
     key!(out, "text");
     out.str(&String::from_utf8_lossy(f.bytes));
     key!(out, "addr");
@@ -917,7 +910,7 @@ pub fn ell_garbage<S: Sink + ?Sized>(out: &mut S, n: u64, offset: u64, bytes: &[
 }
 
 fn ell_garbage_members<S: Sink + ?Sized>(out: &mut S, n: u64, offset: u64, bytes: &[u8]) {
-    garbage_head(out, "ell", n, offset, bytes);
+    record_head(out, "ell", "garbage", n, offset, bytes);
     key!(out, "text");
     out.str(&String::from_utf8_lossy(bytes));
     key!(out, "diag");
