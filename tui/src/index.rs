@@ -636,6 +636,20 @@ impl Sink {
         }
     }
 
+    /// A frame's own diagnostics: `F_DIAG` (and `F_TRUNCATED`) into `flags`, and the entry of
+    /// their kinds ([`Sink::diag_set`]).
+    fn frame_diags(&mut self, kinds: impl Iterator<Item = DiagKind>, flags: &mut u16) -> u16 {
+        self.kinds.clear();
+        for k in kinds {
+            *flags |= F_DIAG;
+            if matches!(k, DiagKind::Truncated { .. }) {
+                *flags |= F_TRUNCATED;
+            }
+            self.kinds.push(k.name());
+        }
+        self.diag_set()
+    }
+
     /// The entry (+ 1) of the diagnostic kinds in `self.kinds`; 0 when there are none, or too
     /// many lists (filters then decode the frame).
     fn diag_set(&mut self) -> u16 {
@@ -675,17 +689,9 @@ impl Sink {
         let (fr, p, m) = (a.frame, a.pair, &a.meta);
         let h = fr.header();
         let mut flags = 0;
-        self.kinds.clear();
-        if fr.has_diags() {
-            flags |= F_DIAG;
-            for d in fr.diags() {
-                if matches!(d.kind, DiagKind::Truncated { .. }) {
-                    flags |= F_TRUNCATED;
-                }
-                self.kinds.push(d.kind.name());
-            }
-        }
-        let diags = self.diag_set();
+        // A clean frame (the common case) does not walk its diagnostic bits.
+        let kinds = fr.has_diags().then(|| fr.diags()).into_iter().flatten();
+        let diags = self.frame_diags(kinds.map(|d| d.kind), &mut flags);
         if p.unsolicited {
             flags |= F_UNSOLICITED;
         }
@@ -780,16 +786,8 @@ impl Sink {
         let (fr, o, m) = (e.frame, e.obs, &e.meta);
         let mut flags = F_ELL;
         // The decoder adds the bus's `unsolicited` to the frame's diagnostics: a flag of its own.
-        self.kinds.clear();
-        for d in fr.diags() {
-            match d.kind {
-                DiagKind::Unsolicited => continue,
-                DiagKind::Truncated { .. } => flags |= F_DIAG | F_TRUNCATED,
-                _ => flags |= F_DIAG,
-            }
-            self.kinds.push(d.kind.name());
-        }
-        let diags = self.diag_set();
+        let kinds = fr.diags().iter().map(|d| d.kind);
+        let diags = self.frame_diags(kinds.filter(|k| *k != DiagKind::Unsolicited), &mut flags);
         if o.unsolicited {
             flags |= F_UNSOLICITED;
         }
