@@ -850,14 +850,10 @@ fn stats(
         Ok(())
     };
     while let Some(ev) = reader.next_event() {
-        match ev {
-            Event::Chunk(c) => dec.push(c.ctx(), c.bytes, &mut each)?,
-            Event::Diag(d) => {
-                fatal(&d)?;
-                dec.file_diag(d.offset, d.kind(), &d.msg(), &mut each)?
-            }
-            Event::Stream(s) => dec.stream_info(s.id, &s.name, s.settings.as_deref(), &mut each)?,
+        if let Event::Diag(d) = &ev {
+            fatal(d)?;
         }
+        ev.feed(&mut dec, &mut each)?;
     }
     dec.finish(&mut each)?;
     ticker.done();

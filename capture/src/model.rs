@@ -2,6 +2,7 @@
 //! stream (port or USB device) and bytes. Readers produce [`Event`]s; writers consume chunks.
 
 use aptscope_dissector::pipeline::Ctx;
+use aptscope_dissector::record::{Decoder, Record};
 use aptscope_dissector::table::Dir;
 use std::fmt;
 
@@ -409,6 +410,23 @@ pub enum Event<'a> {
     Chunk(Chunk<'a>),
     /// A problem in the file; reading carries on where the format allows.
     Diag(ReadDiag),
+}
+
+impl Event<'_> {
+    /// Pass the event to the decode chain: bytes to [`Decoder::push`], a problem to
+    /// [`Decoder::file_diag`], a stream to [`Decoder::stream_info`] (what every consumer of a
+    /// capture does with each event).
+    pub fn feed<E>(
+        &self,
+        dec: &mut Decoder,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        match self {
+            Event::Chunk(c) => dec.push(c.ctx(), c.bytes, emit),
+            Event::Diag(d) => dec.file_diag(d.offset, d.kind(), &d.msg(), emit),
+            Event::Stream(s) => dec.stream_info(s.id, &s.name, s.settings.as_deref(), emit),
+        }
+    }
 }
 
 /// A capture reader: a lending iterator of events (each borrows the reader until the next call).

@@ -69,17 +69,13 @@ pub fn decode_file<S: Sink>(
     };
     let mut k = 0u32;
     while let Some(ev) = reader.next_event() {
-        match ev {
-            Event::Chunk(c) => dec.push(c.ctx(), c.bytes, &mut emit)?,
-            Event::Diag(d) => {
-                // A USB capture without the device asked for has nothing to decode.
-                if d.kind() == aptscope_capture::usb::NOT_FOUND {
-                    return Err(io::Error::new(io::ErrorKind::InvalidInput, d.msg()));
-                }
-                dec.file_diag(d.offset, d.kind(), &d.msg(), &mut emit)?
+        // A USB capture without the device asked for has nothing to decode.
+        if let Event::Diag(d) = &ev {
+            if d.kind() == aptscope_capture::usb::NOT_FOUND {
+                return Err(io::Error::new(io::ErrorKind::InvalidInput, d.msg()));
             }
-            Event::Stream(s) => dec.stream_info(s.id, &s.name, s.settings.as_deref(), &mut emit)?,
         }
+        ev.feed(&mut dec, &mut emit)?;
         k = k.wrapping_add(1);
         if k.is_multiple_of(256) {
             tick(&progress);

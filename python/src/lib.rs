@@ -7,7 +7,7 @@
 //! (the dataset's schema exactly).
 
 use aptscope_capture::open::{open, OpenOptions};
-use aptscope_capture::{Event, Reader};
+use aptscope_capture::Reader;
 use aptscope_dissector::apt::{encode_named, Addr, Named};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::json;
@@ -146,12 +146,7 @@ impl Records {
             return Ok(());
         };
         match r.next_event() {
-            Some(Event::Chunk(c)) => self.dec.push(c.ctx(), c.bytes, &mut emit),
-            Some(Event::Diag(d)) => self.dec.file_diag(d.offset, d.kind(), &d.msg(), &mut emit),
-            Some(Event::Stream(s)) => {
-                self.dec
-                    .stream_info(s.id, &s.name, s.settings.as_deref(), &mut emit)
-            }
+            Some(ev) => ev.feed(&mut self.dec, &mut emit),
             None => {
                 self.done = true;
                 self.dec.finish(&mut emit)

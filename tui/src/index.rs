@@ -438,28 +438,17 @@ impl Indexer {
     /// Index one event of a capture reader.
     pub fn event(&mut self, ev: Event<'_>) {
         let sink = &mut self.sink;
-        let _ = match ev {
-            Event::Stream(s) => {
-                self.dec
-                    .stream_info(s.id, &s.name, s.settings.as_deref(), &mut |r| sink.on(r))
+        let _ = ev.feed(&mut self.dec, &mut |r| sink.on(r));
+        // Following a live capture, a host chunk is a host write (as the tap's own timeline
+        // assumes): an Elliptec command sent without terminator is framed now, not at the
+        // host's next write.
+        if let (Some(_), Event::Chunk(c)) = (&self.follow, &ev) {
+            if c.dir.dir() == Some(Dir::HostToDevice) {
+                let _ = self
+                    .dec
+                    .cut(c.stream, Dir::HostToDevice, &mut |r| sink.on(r));
             }
-            Event::Diag(d) => self
-                .dec
-                .file_diag(d.offset, d.kind(), &d.msg(), &mut |r| sink.on(r)),
-            Event::Chunk(c) => {
-                let ctx = c.ctx();
-                let r = self.dec.push(ctx, c.bytes, &mut |r| sink.on(r));
-                // Following a live capture, a host chunk is a host write (as the tap's own
-                // timeline assumes): an Elliptec command sent without terminator is framed
-                // now, not at the host's next write.
-                if let (Some(_), Some(Dir::HostToDevice)) = (&self.follow, ctx.dir) {
-                    let _ = self
-                        .dec
-                        .cut(ctx.stream, Dir::HostToDevice, &mut |r| sink.on(r));
-                }
-                r
-            }
-        };
+        }
     }
 
     /// Index one captured chunk.
