@@ -118,7 +118,7 @@ impl PairInfo {
 /// oldest is given up and every later reply would pair one request too late.
 const MAX_PENDING: usize = 4096;
 const RECENT: usize = 64;
-// `recent_ids` counts in a u8.
+// `recent_keys` counts in a u8.
 const _: () = assert!(RECENT < 256);
 
 /// How long a request waits for its reply: the table's `timeout=` (motion waits for the end of
@@ -132,6 +132,41 @@ pub fn default_timeout_ns(m: &MsgDef) -> u64 {
 /// and what a device sends on its own (the table's `class=status` / `class=spontaneous`).
 fn comes_unasked(m: &MsgDef) -> bool {
     m.class.has(Class::STATUS) || m.class.has(Class::SPONTANEOUS)
+}
+
+/// Take request `n` out of the list under `key` (dropping the list when it empties).
+fn drop_waiting<K: std::hash::Hash + Eq>(lists: &mut NumMap<K, VecDeque<Waiting>>, key: K, n: u64) {
+    if let Some(v) = lists.get_mut(&key) {
+        // Requests are mostly answered in order: at or near the front.
+        if let Some(i) = v.iter().position(|w| w.n == n) {
+            v.remove(i);
+        }
+        if v.is_empty() {
+            lists.remove(&key);
+        }
+    }
+}
+
+/// A channel as a key of `by_chan` (requests naming no channel under one that no channel
+/// number takes).
+fn chan_key(chan: Option<i64>) -> i64 {
+    chan.unwrap_or(i64::MIN)
+}
+
+/// In a list of waiting requests, oldest first: the oldest to `device` and the oldest of all,
+/// among the first [`SCAN`].
+fn oldest_in(list: Option<&VecDeque<Waiting>>, device: u8) -> (Option<u64>, Option<u64>) {
+    let Some(list) = list else {
+        return (None, None);
+    };
+    let to = list.iter().take(SCAN).find(|w| w.device == device);
+    (to.map(|w| w.n), list.front().map(|w| w.n))
+}
+
+/// The bucket of `recent_keys` for a reply id from a device (ids sharing a bucket only cost a
+/// look at `recent`).
+fn recent_key(id: u16, device: u8) -> usize {
+    usize::from(id ^ (u16::from(device) << 8))
 }
 
 /// A waiting request as a reply sees it.
@@ -160,14 +195,19 @@ pub struct AptPairer {
     /// The waiting requests that expect each message id, oldest first, with what a reply is
     /// matched on: a reply looks only at the requests it can answer, without map lookups.
     by_reply: NumMap<u16, VecDeque<Waiting>>,
+    /// The same requests by (reply id, [`chan_key`] of their channel): a reply naming a
+    /// channel looks only at the requests on it and those naming none, not at every other
+    /// channel's.
+    by_chan: NumMap<(u16, i64), VecDeque<Waiting>>,
     /// Waiting requests with a time, by the time they expire (the timeout fixed when they came).
     deadlines: BTreeSet<(u64, u64)>,
     recent: VecDeque<Answered>,
-    /// How many of `recent` each reply id has (by id): most replies nobody waited for have
-    /// none, and need no look at `recent`.
-    recent_ids: Vec<u8>,
-    /// What each device address (by its HW_GET_INFO) implements.
-    models: Vec<(u8, [u8; 8], Option<DeviceProfile>)>,
+    /// How many of `recent` each (reply id, device) bucket has ([`recent_key`]): most replies
+    /// nobody waited for have none, and need no look at `recent`.
+    recent_keys: Vec<u8>,
+    /// What each device address (by its HW_GET_INFO) implements, by address (empty until a
+    /// device names its model).
+    models: Vec<Option<([u8; 8], Option<DeviceProfile>)>>,
     /// Overrides the per-message default timeout.
     pub timeout_ns: Option<u64>,
     /// Scratch list of the other requests a reply also answers (reused, not allocated per reply).
@@ -189,6 +229,10 @@ impl AptPairer {
         };
         for id in p.expects.as_slice() {
             self.by_reply.entry(*id).or_default().push_back(w);
+            self.by_chan
+                .entry((*id, chan_key(p.chan)))
+                .or_default()
+                .push_back(w);
         }
         if let Some(d) = self.deadline(&p) {
             self.deadlines.insert((d, p.n));
@@ -206,16 +250,9 @@ impl AptPairer {
         if let Some(d) = self.deadline(&p) {
             self.deadlines.remove(&(d, n));
         }
-        for id in p.expects.as_slice() {
-            if let Some(v) = self.by_reply.get_mut(id) {
-                // Requests are mostly answered in order: at or near the front.
-                if let Some(i) = v.iter().position(|w| w.n == n) {
-                    v.remove(i);
-                }
-                if v.is_empty() {
-                    self.by_reply.remove(id);
-                }
-            }
+        for &id in p.expects.as_slice() {
+            drop_waiting(&mut self.by_reply, id, n);
+            drop_waiting(&mut self.by_chan, (id, chan_key(p.chan)), n);
         }
         Some(p)
     }
@@ -263,8 +300,29 @@ impl AptPairer {
         ts: Option<u64>,
     ) -> PairInfo {
         let mut info = PairInfo::default();
+        self.observe_into(table, n, f, dir, ts, &mut info);
+        info
+    }
+
+    /// [`AptPairer::observe`] into `info` (overwritten; its `expired` keeps its allocation):
+    /// a decoder reuses one for every frame.
+    pub fn observe_into(
+        &mut self,
+        table: &Table,
+        n: u64,
+        f: &AptFrame<'_, '_>,
+        dir: Option<Dir>,
+        ts: Option<u64>,
+        info: &mut PairInfo,
+    ) {
+        let mut expired = std::mem::take(&mut info.expired);
+        expired.clear();
+        *info = PairInfo {
+            expired,
+            ..PairInfo::default()
+        };
         self.expire(ts, &mut info.expired);
-        let Some(m) = f.msg else { return info };
+        let Some(m) = f.msg else { return };
         let h = f.header();
         let chan = f.channel();
         let from_host = match dir {
@@ -280,7 +338,7 @@ impl AptPairer {
             } else {
                 h.src_byte()
             },
-            &mut info,
+            info,
         );
         if from_host {
             let expects = table.reply_ids(m);
@@ -307,21 +365,24 @@ impl AptPairer {
                     timeout_ns: default_timeout_ns(m),
                 });
             }
-            return info;
+            return;
         }
         let src = h.src_byte();
         let chan_ok = |c: Option<i64>| c.is_none() || chan.is_none() || c == chan;
-        let empty = VecDeque::new();
-        let candidates = self.by_reply.get(&m.id).unwrap_or(&empty);
-        // The oldest usable request to the replying address, else the oldest usable one.
-        let (mut found, mut any) = (None, None);
-        for w in candidates.iter().take(SCAN).filter(|w| chan_ok(w.chan)) {
-            if w.device == src {
-                found = Some(w.n);
-                break;
+        // The oldest usable request (on the reply's channel, or naming none; any when the
+        // reply names none) to the replying address, else the oldest usable one.
+        let (found, any) = match chan {
+            None => oldest_in(self.by_reply.get(&m.id), src),
+            Some(c) => {
+                let (f1, a1) = oldest_in(self.by_chan.get(&(m.id, c)), src);
+                let (f2, a2) = oldest_in(self.by_chan.get(&(m.id, chan_key(None))), src);
+                let older = |a: Option<u64>, b: Option<u64>| match (a, b) {
+                    (Some(x), Some(y)) => Some(x.min(y)),
+                    (x, y) => x.or(y),
+                };
+                (older(f1, f2), older(a1, a2))
             }
-            any = any.or(Some(w.n));
-        }
+        };
         let found = found.or(any);
         match found.and_then(|k| self.remove(k)) {
             Some(p) => {
@@ -357,16 +418,16 @@ impl AptPairer {
                     (Some(a), Some(b)) => Some(b.saturating_sub(a)),
                     _ => None,
                 };
-                if self.recent_ids.is_empty() {
-                    self.recent_ids = vec![0; 1 << 16];
+                if self.recent_keys.is_empty() {
+                    self.recent_keys = vec![0; 1 << 16];
                 }
                 if self.recent.len() == RECENT {
                     if let Some(old) = self.recent.pop_front() {
-                        let c = &mut self.recent_ids[usize::from(old.reply_id)];
+                        let c = &mut self.recent_keys[recent_key(old.reply_id, old.device)];
                         *c = c.saturating_sub(1);
                     }
                 }
-                self.recent_ids[usize::from(m.id)] += 1;
+                self.recent_keys[recent_key(m.id, p.device)] += 1;
                 self.recent.push_back(Answered {
                     n: p.n,
                     reply_id: m.id,
@@ -376,11 +437,11 @@ impl AptPairer {
             }
             None => {
                 if comes_unasked(m) {
-                    return info;
+                    return;
                 }
                 let seen = self
-                    .recent_ids
-                    .get(usize::from(m.id))
+                    .recent_keys
+                    .get(recent_key(m.id, src))
                     .is_some_and(|&c| c > 0);
                 match seen
                     .then(|| {
@@ -399,7 +460,6 @@ impl AptPairer {
                 }
             }
         }
-        info
     }
 
     /// Learn a device's model from its HW_GET_INFO; flag messages its model does not implement.
@@ -426,15 +486,14 @@ impl AptPairer {
                 name[..end].copy_from_slice(&b[..end]);
                 let text = String::from_utf8_lossy(&name[..end]).into_owned();
                 let profile = table.device_profile(&text);
-                self.models.retain(|(a, _, _)| *a != device);
-                self.models.push((device, name, profile));
+                if self.models.is_empty() {
+                    self.models.resize(256, None);
+                }
+                self.models[usize::from(device)] = Some((name, profile));
             }
             return;
         }
-        if self.models.is_empty() {
-            return;
-        }
-        if let Some((_, name, Some(p))) = self.models.iter().find(|(a, _, _)| *a == device) {
+        if let Some(Some((name, Some(p)))) = self.models.get(usize::from(device)) {
             if !table.implements(p, m.id) {
                 info.not_for_model = Some(*name);
             }
@@ -444,6 +503,7 @@ impl AptPairer {
     /// End of stream: every request still waiting got no reply.
     pub fn finish(&mut self) -> Vec<Unanswered> {
         self.by_reply.clear();
+        self.by_chan.clear();
         self.deadlines.clear();
         self.order.clear();
         let mut left: Vec<Pending> = std::mem::take(&mut self.pending).into_values().collect();
@@ -606,6 +666,37 @@ mod tests {
 
     /// A host flooding requests (a thousand waiting at once) keeps every reply paired with its
     /// own request, in order.
+    #[test]
+    fn a_reply_finds_its_channel_behind_many_waiting_on_another() {
+        let t = Table::global();
+        let mut p = AptPairer::new();
+        let on = |chan: i64, name: &str, host: bool| {
+            let (dst, src) = if host { (0x50, 0x01) } else { (0x01, 0x50) };
+            frame(t, name, &[("chan_ident", chan)], dst, src, !host)
+        };
+        let (q1, q2) = (
+            on(1, "MOT_REQ_VELPARAMS", true),
+            on(2, "MOT_REQ_VELPARAMS", true),
+        );
+        let r2 = on(2, "MOT_GET_VELPARAMS", false);
+        let (q1, q2, r2) = (
+            AptFrame::decode(t, 0, &q1, false).expect("frame"),
+            AptFrame::decode(t, 0, &q2, false).expect("frame"),
+            AptFrame::decode(t, 0, &r2, false).expect("frame"),
+        );
+        // More unanswered requests on channel 1 than a reply looks through.
+        let many = SCAN as u64 + 50;
+        for i in 1..=many {
+            p.observe(t, i, &q1, Some(Dir::HostToDevice), None);
+        }
+        p.observe(t, many + 1, &q2, Some(Dir::HostToDevice), None);
+        let info = p.observe(t, many + 2, &r2, Some(Dir::DeviceToHost), None);
+        assert_eq!(info.pair, Some(many + 1));
+        assert!(!info.unsolicited);
+        // Channel 1's requests are still waiting: the reply took only its own.
+        assert_eq!(p.finish().len() as u64, many);
+    }
+
     #[test]
     fn a_burst_of_waiting_requests_pairs_in_order() {
         let t = Table::global();

@@ -250,6 +250,8 @@ pub struct Decoder {
     /// Models seen per device and the stage conversion of motion values.
     units: Tracker,
     expired: Vec<NoReply>,
+    /// Pairing of the current APT frame (one reused for every frame).
+    pinfo: PairInfo,
     /// The detector's verdict, once the protocol was detected.
     detection: Option<Detection>,
 }
@@ -271,6 +273,7 @@ impl Decoder {
             reply_timeout: None,
             units: Tracker::new(UnitsOpts::default()),
             expired: vec![],
+            pinfo: PairInfo::default(),
             detection: None,
         }
     }
@@ -630,7 +633,10 @@ impl Decoder {
                         let Some(f) = AptFrame::decode(t, offset, bytes, truncated) else {
                             continue;
                         };
-                        let pinfo = self.pairers[pi_idx].1.observe(t, n, &f, cap_dir, ts);
+                        let pinfo = &mut self.pinfo;
+                        self.pairers[pi_idx]
+                            .1
+                            .observe_into(t, n, &f, cap_dir, ts, pinfo);
                         self.expired.extend(pinfo.expired.iter().map(|u| NoReply {
                             proto: Proto::Apt,
                             stream,
@@ -647,7 +653,7 @@ impl Decoder {
                         emit(&Record::Apt(AptRec {
                             meta,
                             frame: &f,
-                            pair: &pinfo,
+                            pair: pinfo,
                             scale,
                         }))?;
                     }

@@ -351,7 +351,14 @@ pub fn model(s: &str) -> Option<&'static Model> {
     if n.is_empty() {
         return None;
     }
-    MODELS.iter().find(|m| fits(&norm(m.pattern, true), &n))
+    // Patterns normalised once: a capture may name models thousands of times.
+    static PATTERNS: std::sync::OnceLock<Vec<String>> = std::sync::OnceLock::new();
+    let pats = PATTERNS.get_or_init(|| MODELS.iter().map(|m| norm(m.pattern, true)).collect());
+    MODELS
+        .iter()
+        .zip(pats)
+        .find(|(_, p)| fits(p, &n))
+        .map(|(m, _)| m)
 }
 
 fn edit_distance(a: &str, b: &str) -> usize {
