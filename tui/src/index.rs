@@ -383,6 +383,15 @@ pub struct Indexer {
     last_flush: Instant,
     /// A followed (growing) file, to see when reading has caught up with it.
     follow: Option<std::fs::File>,
+    /// While [`Indexer::run`] reads a source: the thread that applies publications, and the
+    /// buffers it gives back.
+    publisher: Option<Publisher>,
+}
+
+/// The channels to the publishing thread.
+struct Publisher {
+    to: std::sync::mpsc::SyncSender<Publication>,
+    back: std::sync::mpsc::Receiver<(Vec<Rec>, Vec<u8>)>,
 }
 
 impl Indexer {
@@ -400,30 +409,59 @@ impl Indexer {
             sink: Sink::default(),
             last_flush: Instant::now(),
             follow: None,
+            publisher: None,
         }
     }
 
-    /// Read `reader` to its end (or until cancelled), then finish and publish.
+    /// Read `reader` to its end (or until cancelled), then finish and publish. Publications
+    /// are applied to the shared index by a second thread, so that copying the records there
+    /// overlaps with indexing the next ones; `run` returns once all are applied.
     pub fn run(mut self, mut reader: Box<dyn Reader>) {
-        while let Some(ev) = reader.next_event() {
-            if self.shared.cancel.load(Ordering::Relaxed) {
-                break;
+        let shared = self.shared.clone();
+        std::thread::scope(|s| {
+            // Two publications in flight at most: a slow publisher holds the indexer back
+            // rather than letting records pile up.
+            let (to, rx) = std::sync::mpsc::sync_channel::<Publication>(2);
+            let (back_tx, back) = std::sync::mpsc::channel();
+            let spawned = std::thread::Builder::new()
+                .name("aptscope-publish".into())
+                .spawn_scoped(s, move || {
+                    for p in rx {
+                        let Ok(mut ix) = shared.index.write() else {
+                            return;
+                        };
+                        let mut spare = p.apply(&mut ix);
+                        drop(ix);
+                        spare.0.clear();
+                        spare.1.clear();
+                        let _ = back_tx.send(spare);
+                    }
+                });
+            if spawned.is_ok() {
+                self.publisher = Some(Publisher { to, back });
             }
-            self.event(ev);
-            let caught_up = self.caught_up();
-            if caught_up {
-                // A followed file may stay short of the 4 KiB detection sample for long: a
-                // certain detection on what there is shows its traffic now.
-                let sink = &mut self.sink;
-                let _ = self.dec.detect_if_certain(&mut |r| sink.on(r));
+            while let Some(ev) = reader.next_event() {
+                if self.shared.cancel.load(Ordering::Relaxed) {
+                    break;
+                }
+                self.event(ev);
+                let caught_up = self.caught_up();
+                if caught_up {
+                    // A followed file may stay short of the 4 KiB detection sample for long: a
+                    // certain detection on what there is shows its traffic now.
+                    let sink = &mut self.sink;
+                    let _ = self.dec.detect_if_certain(&mut |r| sink.on(r));
+                }
+                // A live source's reader blocks until more comes: publish what it gave now.
+                let live = self.follow.is_none() && self.shared.live.load(Ordering::Relaxed);
+                if caught_up || live || self.last_flush.elapsed() > Duration::from_millis(50) {
+                    self.flush();
+                }
             }
-            // A live source's reader blocks until more comes: publish what it gave now.
-            let live = self.follow.is_none() && self.shared.live.load(Ordering::Relaxed);
-            if caught_up || live || self.last_flush.elapsed() > Duration::from_millis(50) {
-                self.flush();
-            }
-        }
-        self.finish();
+            self.end();
+            // Closing the channel ends the publisher; the scope waits for it.
+            self.publisher = None;
+        });
     }
 
     /// A followed file read to its current end: the reader may now wait long for the next
@@ -463,27 +501,43 @@ impl Indexer {
         let _ = self.dec.cut(stream, dir, &mut |r| sink.on(r));
     }
 
-    /// Publish what was indexed since the last call.
+    /// Publish what was indexed since the last call (inside [`Indexer::run`], handed to its
+    /// publishing thread; otherwise applied before this returns).
     pub fn flush(&mut self) {
         self.last_flush = Instant::now();
+        self.publish(false);
+    }
+
+    fn publish(&mut self, done: bool) {
         self.sink.first_ts = self.dec.first_ts();
+        let spare = self.publisher.as_ref().and_then(|p| p.back.try_recv().ok());
+        let mut p = self.sink.take(done, spare);
+        if done {
+            p.fallback_proto = self.dec.proto();
+        }
+        let p = match &self.publisher {
+            Some(publisher) => match publisher.to.send(p) {
+                Ok(()) => return,
+                // The publishing thread has gone: apply here.
+                Err(std::sync::mpsc::SendError(p)) => p,
+            },
+            None => p,
+        };
         if let Ok(mut ix) = self.shared.index.write() {
-            self.sink.publish(&mut ix, false);
+            p.apply(&mut ix);
         }
     }
 
     /// End of the source: requests without reply are marked, everything is published and the
     /// index is complete.
     pub fn finish(mut self) {
+        self.end();
+    }
+
+    fn end(&mut self) {
         let sink = &mut self.sink;
         let _ = self.dec.finish(&mut |r| sink.on(r));
-        self.sink.first_ts = self.dec.first_ts();
-        if let Ok(mut ix) = self.shared.index.write() {
-            self.sink.publish(&mut ix, true);
-            if ix.proto.is_none() {
-                ix.proto = self.dec.proto();
-            }
-        }
+        self.publish(true);
     }
 }
 
@@ -539,6 +593,8 @@ struct Sink {
     not_for_model: Vec<(u64, [u8; 8])>,
     first_ts: Option<u64>,
     streams: Vec<String>,
+    /// Whether `streams` changed since the last publication.
+    streams_changed: bool,
     streams_seen: u64,
     file_diags: Vec<(u64, String)>,
 }
@@ -555,6 +611,7 @@ impl Sink {
                     self.streams.resize(i + 1, String::new());
                 }
                 self.streams[i] = name.to_string();
+                self.streams_changed = true;
             }
             Record::Input(d) => self
                 .file_diags
@@ -876,21 +933,83 @@ impl Sink {
         self.add(m.n, rec, g.bytes);
     }
 
-    /// Move the batch into the shared index.
-    fn publish(&mut self, ix: &mut Index, done: bool) {
-        if let Some((p, certain)) = self.proto.take() {
+    /// Take what was indexed since the last publication (`done`: and the source has ended),
+    /// to be applied to the shared index ([`Publication::apply`]), here or in another thread.
+    /// `spare` is an emptied batch and arena to fill next (memory already touched).
+    fn take(&mut self, done: bool, spare: Option<(Vec<Rec>, Vec<u8>)>) -> Publication {
+        let (batch, arena) = spare.unwrap_or_default();
+        let recs = std::mem::replace(&mut self.batch, batch);
+        let arena = std::mem::replace(&mut self.arena, arena);
+        self.base += recs.len() as u64;
+        self.arena_base += arena.len() as u64;
+        let series = self
+            .series
+            .iter_mut()
+            .filter(|(_, pts)| !pts.is_empty())
+            .map(|(k, pts)| (k.clone(), std::mem::take(pts)))
+            .collect();
+        let scales = self.scales[self.scales_published..].to_vec();
+        self.scales_published = self.scales.len();
+        let diag_sets = self.diag_sets[self.diag_sets_published..].to_vec();
+        self.diag_sets_published = self.diag_sets.len();
+        self.modules_base += self.modules.len();
+        Publication {
+            proto: self.proto.take(),
+            recs,
+            arena,
+            modules: std::mem::take(&mut self.modules),
+            scales,
+            units_notes: std::mem::take(&mut self.units_notes),
+            patches: std::mem::take(&mut self.patches),
+            diag_sets,
+            not_for_model: std::mem::take(&mut self.not_for_model),
+            series,
+            first_ts: self.first_ts,
+            streams: std::mem::take(&mut self.streams_changed).then(|| self.streams.clone()),
+            streams_seen: self.streams_seen,
+            file_diags: std::mem::take(&mut self.file_diags),
+            done,
+            fallback_proto: None,
+        }
+    }
+}
+
+/// What the indexer publishes at once: the records and everything else indexed since the
+/// last publication. Applying it is mostly copying records into the shared index (and the
+/// page faults of its growth), which a separate thread can do while indexing goes on.
+struct Publication {
+    proto: Option<(Proto, bool)>,
+    recs: Vec<Rec>,
+    arena: Vec<u8>,
+    modules: Vec<Module>,
+    scales: Vec<Scale>,
+    units_notes: Vec<String>,
+    patches: Vec<(u64, u32, u16)>,
+    diag_sets: Vec<Vec<&'static str>>,
+    not_for_model: Vec<(u64, [u8; 8])>,
+    series: Vec<(String, Vec<Point>)>,
+    first_ts: Option<u64>,
+    streams: Option<Vec<String>>,
+    streams_seen: u64,
+    file_diags: Vec<(u64, String)>,
+    done: bool,
+    /// The protocol to show when detection never named one (set at the end).
+    fallback_proto: Option<Proto>,
+}
+
+impl Publication {
+    /// Add to the shared index; gives back the emptied record and arena buffers for reuse.
+    fn apply(mut self, ix: &mut Index) -> (Vec<Rec>, Vec<u8>) {
+        if let Some((p, certain)) = self.proto {
             ix.proto = Some(p);
             ix.proto_certain = certain;
         }
-        ix.recs.append(&mut self.batch);
+        ix.recs.append(&mut self.recs);
         ix.arena.append(&mut self.arena);
-        self.modules_base += self.modules.len();
         ix.modules.append(&mut self.modules);
-        ix.scales
-            .extend(self.scales[self.scales_published..].iter().cloned());
-        self.scales_published = self.scales.len();
+        ix.scales.append(&mut self.scales);
         ix.units_notes.append(&mut self.units_notes);
-        for (n, pair, flags) in self.patches.drain(..) {
+        for (n, pair, flags) in self.patches {
             if let Some(r) = (n as usize).checked_sub(1).and_then(|i| ix.recs.get_mut(i)) {
                 if r.pair == 0 {
                     r.pair = pair;
@@ -898,31 +1017,28 @@ impl Sink {
                 r.flags |= flags;
             }
         }
-        ix.diag_sets
-            .extend(self.diag_sets[self.diag_sets_published..].iter().cloned());
-        self.diag_sets_published = self.diag_sets.len();
-        ix.not_for_model.extend(self.not_for_model.drain(..));
-        for (k, pts) in self.series.iter_mut() {
-            if pts.is_empty() {
-                continue;
-            }
+        ix.diag_sets.append(&mut self.diag_sets);
+        ix.not_for_model.extend(self.not_for_model);
+        for (k, mut pts) in self.series {
             match ix.series.get_mut(k.as_str()) {
-                Some(v) => v.append(pts),
+                Some(v) => v.append(&mut pts),
                 None => {
-                    ix.series.insert(k.clone(), std::mem::take(pts));
+                    ix.series.insert(k, pts);
                 }
             }
         }
         ix.first_ts = self.first_ts;
-        if ix.streams != self.streams {
-            ix.streams.clone_from(&self.streams);
+        if let Some(st) = self.streams {
+            ix.streams = st;
         }
         ix.streams_seen |= self.streams_seen;
         ix.file_diags.append(&mut self.file_diags);
-        self.base = ix.recs.len() as u64;
-        self.arena_base = ix.arena.len() as u64;
-        if done {
+        if self.done {
+            if ix.proto.is_none() {
+                ix.proto = self.fallback_proto;
+            }
             ix.done = true;
         }
+        (self.recs, self.arena)
     }
 }
