@@ -937,7 +937,13 @@ impl Sink {
     /// to be applied to the shared index ([`Publication::apply`]), here or in another thread.
     /// `spare` is an emptied batch and arena to fill next (memory already touched).
     fn take(&mut self, done: bool, spare: Option<(Vec<Rec>, Vec<u8>)>) -> Publication {
-        let (batch, arena) = spare.unwrap_or_default();
+        // Without a spare, room for as much as this batch: no copies while it grows.
+        let (batch, arena) = spare.unwrap_or_else(|| {
+            (
+                Vec::with_capacity(self.batch.len()),
+                Vec::with_capacity(self.arena.len()),
+            )
+        });
         let recs = std::mem::replace(&mut self.batch, batch);
         let arena = std::mem::replace(&mut self.arena, arena);
         self.base += recs.len() as u64;

@@ -110,6 +110,33 @@ fn field_width(f: &Field, frame_len: usize) -> usize {
     }
 }
 
+/// The data length of a frame (its header's, or for a data packet the framer took without
+/// the 0x80 flag, the length bytes read as one).
+fn data_len(bytes: &[u8]) -> usize {
+    match Header::new(bytes) {
+        Some(h) if h.has_data() => h.data_len(),
+        _ if bytes.len() > HEADER_LEN => u16::from_le_bytes([bytes[2], bytes[3]]) as usize,
+        _ => 0,
+    }
+}
+
+/// The sub-message id a data packet starts with.
+fn data_sub_id(bytes: &[u8]) -> Option<u16> {
+    bytes.get(6..8).map(|b| u16::from_le_bytes([b[0], b[1]]))
+}
+
+/// The value of field `f` in the frame `bytes`.
+fn field_value<'a>(bytes: &'a [u8], f: &Field) -> Option<Value<'a>> {
+    let start = f.loc.frame_offset();
+    let b = bytes.get(start..start + field_width(f, bytes.len()))?;
+    Some(match f.ty {
+        Ty::Prim(p) => read_prim(p, b),
+        Ty::Array(p, _) => Value::Array(p, b),
+        Ty::Str(_) => Value::Str(b),
+        Ty::Bytes(_) | Ty::Pad(_) => Value::Bytes(b),
+    })
+}
+
 /// The text of a `str[N]` field: bytes up to the first NUL, lossy UTF-8.
 pub fn text_of(b: &[u8]) -> std::borrow::Cow<'_, str> {
     let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
@@ -119,77 +146,82 @@ pub fn text_of(b: &[u8]) -> std::borrow::Cow<'_, str> {
 impl<'a, 't> AptFrame<'a, 't> {
     /// Decode a frame (as produced by the framer: at least 6 bytes).
     pub fn decode(table: &'t Table, offset: u64, bytes: &'a [u8], truncated: bool) -> Option<Self> {
+        // Worked out in locals and the frame built once at the end: building it field by field
+        // stored its 16-bit diagnostic bits just before copying them out as part of a wider
+        // word, a store-forwarding stall costing about a sixth of the decode.
         let h = Header::new(bytes)?;
-        let mut f = AptFrame {
-            offset,
-            bytes,
-            msg: table.msg(h.msg_id()),
-            msg_form: None,
-            sub: None,
-            form: None,
-            diag_bits: 0,
-            table,
-            chan: None,
-        };
+        let msg = table.msg(h.msg_id());
+        let mut diag_bits = 0u16;
         if truncated {
-            f.diag_bits |= D_TRUNCATED;
+            diag_bits |= D_TRUNCATED;
         }
         if h.dst_byte() == 0 && h.src_byte() == 0 {
-            f.diag_bits |= D_ZERO_ADDRS;
+            diag_bits |= D_ZERO_ADDRS;
         } else {
             if !h.dst().is_known() {
-                f.diag_bits |= D_DST;
+                diag_bits |= D_DST;
             }
             if !h.src().is_known() {
-                f.diag_bits |= D_SRC;
+                diag_bits |= D_SRC;
             }
         }
-        let Some(m) = f.msg else {
-            f.diag_bits |= D_UNKNOWN_ID;
-            return Some(f);
+        let frame = |msg_form, sub, form, diag_bits, chan| AptFrame {
+            offset,
+            bytes,
+            msg,
+            msg_form,
+            sub,
+            form,
+            diag_bits,
+            table,
+            chan,
+        };
+        let Some(m) = msg else {
+            return Some(frame(None, None, None, diag_bits | D_UNKNOWN_ID, None));
         };
         // A data packet after a header without the 0x80 flag (the framer took it by length).
         let no_flag = !h.has_data() && bytes.len() > HEADER_LEN;
         if no_flag {
-            f.diag_bits |= D_NO_DATA_FLAG;
+            diag_bits |= D_NO_DATA_FLAG;
         }
         let has_data = h.has_data() || no_flag;
-        let len = f.data_len();
-        for form in &m.forms {
-            match form.kind {
+        let len = data_len(bytes);
+        let (mut msg_form, mut sub, mut form) = (None, None, None);
+        for fm in &m.forms {
+            match fm.kind {
                 FormKind::Header if !has_data => {
-                    f.msg_form = Some(form);
-                    f.form = Some(form);
+                    msg_form = Some(fm);
+                    form = Some(fm);
                     if let Some(g) = m.subs {
-                        if let Some(p1) = form.sub_field() {
-                            f.sub = table.sub_of(m, g, bytes[p1.loc.frame_offset()] as u16);
-                            if f.sub.is_none() {
-                                f.diag_bits |= D_SUB_HDR;
+                        if let Some(p1) = fm.sub_field() {
+                            sub = table.sub_of(m, g, bytes[p1.loc.frame_offset()] as u16);
+                            if sub.is_none() {
+                                diag_bits |= D_SUB_HDR;
                             }
                         }
                     }
                 }
                 FormKind::Data(n) if has_data && n as usize == len => {
-                    f.msg_form = Some(form);
-                    f.form = Some(form);
+                    msg_form = Some(fm);
+                    form = Some(fm);
                 }
-                FormKind::Open(_) if has_data && form.open_fits(len, table.max_data_len(m)) => {
-                    f.msg_form = Some(form);
-                    f.form = Some(form);
+                FormKind::Open(_) if has_data && fm.open_fits(len, table.max_data_len(m)) => {
+                    msg_form = Some(fm);
+                    form = Some(fm);
                 }
                 FormKind::Sub if has_data && len >= 2 => {
-                    let (Some(g), Some(id)) = (m.subs, f.data_sub_id()) else {
+                    let (Some(g), Some(id)) = (m.subs, data_sub_id(bytes)) else {
                         continue;
                     };
-                    f.msg_form = Some(form);
+                    msg_form = Some(fm);
                     match table.sub_of(m, g, id) {
-                        None => f.diag_bits |= D_SUB_DATA,
+                        None => diag_bits |= D_SUB_DATA,
                         Some(s) => {
-                            f.sub = Some(s);
+                            sub = Some(s);
                             let want = FormKind::Data(len as u16);
-                            f.form = s.forms.iter().find(|sf| sf.kind == want);
-                            if f.form.is_none() {
-                                f.diag_bits |= D_LENGTH;
+                            form = s.forms.iter().find(|sf| sf.kind == want);
+                            if form.is_none() {
+                                diag_bits |= D_LENGTH;
                             }
                         }
                     }
@@ -198,31 +230,24 @@ impl<'a, 't> AptFrame<'a, 't> {
             }
             break;
         }
-        if f.msg_form.is_none() {
+        if msg_form.is_none() {
             let hdr_only = m.forms.iter().all(|x| x.kind == FormKind::Header);
-            f.diag_bits |= if has_data && hdr_only {
+            diag_bits |= if has_data && hdr_only {
                 D_HDR_WITH_DATA
             } else {
                 D_LENGTH
             };
         }
-        f.chan = f
-            .form
+        let chan = form
             .and_then(|fm| fm.chan_field())
-            .and_then(|fd| f.value(fd))
+            .and_then(|fd| field_value(bytes, fd))
             .and_then(|v| v.as_i64())
             .map(|c| match c {
                 4 => 3,
                 8 => 4,
                 c => c,
             });
-        Some(f)
-    }
-
-    fn data_sub_id(&self) -> Option<u16> {
-        self.bytes
-            .get(6..8)
-            .map(|b| u16::from_le_bytes([b[0], b[1]]))
+        Some(frame(msg_form, sub, form, diag_bits, chan))
     }
 
     /// Whether anything is wrong with this frame.
@@ -283,7 +308,7 @@ impl<'a, 't> AptFrame<'a, 't> {
                 D_SUB_DATA => (
                     6,
                     DiagKind::UnknownSubId {
-                        sub_id: self.data_sub_id().unwrap_or(0),
+                        sub_id: data_sub_id(self.bytes).unwrap_or(0),
                     },
                 ),
                 D_LENGTH => (2, DiagKind::LengthMismatch { len, has_data }),
@@ -301,14 +326,7 @@ impl<'a, 't> AptFrame<'a, 't> {
     /// Length of the data packet: the header's length field, or for a packet sent without the
     /// 0x80 flag the bytes after the header (its param bytes hold the length).
     pub fn data_len(&self) -> usize {
-        let h = self.header();
-        if h.has_data() {
-            h.data_len()
-        } else if self.bytes.len() > HEADER_LEN {
-            u16::from_le_bytes([self.bytes[2], self.bytes[3]]) as usize
-        } else {
-            0
-        }
+        data_len(self.bytes)
     }
 
     /// The header view.
@@ -339,16 +357,7 @@ impl<'a, 't> AptFrame<'a, 't> {
 
     /// A field's value; `None` when the frame is too short to hold it.
     pub fn value(&self, f: &Field) -> Option<Value<'a>> {
-        let start = f.loc.frame_offset();
-        let b = self
-            .bytes
-            .get(start..start + field_width(f, self.bytes.len()))?;
-        Some(match f.ty {
-            Ty::Prim(p) => read_prim(p, b),
-            Ty::Array(p, _) => Value::Array(p, b),
-            Ty::Str(_) => Value::Str(b),
-            Ty::Bytes(_) | Ty::Pad(_) => Value::Bytes(b),
-        })
+        field_value(self.bytes, f)
     }
 
     /// The fields of the matched form with their values (reserved `pad` fields left out).
