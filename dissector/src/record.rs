@@ -630,13 +630,16 @@ impl Decoder {
                         bytes,
                         truncated,
                     } => {
-                        let Some(f) = AptFrame::decode(t, offset, bytes, truncated) else {
+                        // Used where it was returned: copying it out would read words just
+                        // stored by other widths (a store-forwarding stall per frame).
+                        let decoded = AptFrame::decode(t, offset, bytes, truncated);
+                        let Some(f) = decoded.as_ref() else {
                             continue;
                         };
                         let pinfo = &mut self.pinfo;
                         self.pairers[pi_idx]
                             .1
-                            .observe_into(t, n, &f, cap_dir, ts, pinfo);
+                            .observe_into(t, n, f, cap_dir, ts, pinfo);
                         self.expired.extend(pinfo.expired.iter().map(|u| NoReply {
                             proto: Proto::Apt,
                             stream,
@@ -644,7 +647,7 @@ impl Decoder {
                             offset: u.offset,
                             name: u.name,
                         }));
-                        let (scale, notice) = self.units.observe(stream, &f);
+                        let (scale, notice) = self.units.observe(stream, f);
                         if let Some(nt) = notice {
                             // Before the frame: what its values are converted with.
                             emit(&Record::Units(&nt))?;
@@ -652,7 +655,7 @@ impl Decoder {
                         let meta = meta(n, ts, cap_offset);
                         emit(&Record::Apt(AptRec {
                             meta,
-                            frame: &f,
+                            frame: f,
                             pair: pinfo,
                             scale,
                         }))?;

@@ -778,12 +778,13 @@ impl Tracker {
     /// Look at one frame of `stream`: learn the model from HW_GET_INFO. Returns the conversion
     /// for the frame's values (the device is the end that is not the host) and, when what
     /// applies to that device changed, a notice. Frames without motion values leave the state
-    /// alone unless they are HW_GET_INFO.
+    /// alone unless they are HW_GET_INFO. (The notice is boxed: rare, and a frame's return
+    /// stays two words.)
     pub fn observe(
         &mut self,
         stream: u32,
         f: &AptFrame<'_, '_>,
-    ) -> (Option<&Scale>, Option<Notice>) {
+    ) -> (Option<&Scale>, Option<Box<Notice>>) {
         let h = f.header();
         let info = h.msg_id() == HW_GET_INFO;
         let has_q = f.form.is_some_and(|fm| fm.has_units());
@@ -840,12 +841,12 @@ impl Tracker {
             d.resolved = true;
             let r = resolve(&self.opts, d.model.as_deref());
             if r != d.resolution {
-                notice = Some(Notice {
+                notice = Some(Box::new(Notice {
                     stream,
                     addr,
                     model: d.model.clone(),
                     resolution: r.clone(),
-                });
+                }));
                 d.resolution = r;
             }
         }

@@ -30,8 +30,10 @@ pub struct AptFrame<'a, 't> {
     pub sub: Option<&'t SubDef>,
     /// The form whose fields apply (the sub's form for sub-message data packets).
     pub form: Option<&'t Form>,
-    /// Problems found, as `D_*` bits (see [`diags`](Self::diags)).
-    diag_bits: u16,
+    /// Problems found, as `D_*` bits (see [`diags`](Self::diags)); a whole word, so that
+    /// copying a frame reads it as it was stored (a 16-bit store read back as part of a wider
+    /// word stalls the copy).
+    diag_bits: u64,
     table: &'t Table,
     /// [`channel`](Self::channel), read once (pairing, units, the index and the output all
     /// ask for it).
@@ -172,7 +174,7 @@ impl<'a, 't> AptFrame<'a, 't> {
             msg_form,
             sub,
             form,
-            diag_bits,
+            diag_bits: u64::from(diag_bits),
             table,
             chan,
         };
@@ -255,11 +257,15 @@ impl<'a, 't> AptFrame<'a, 't> {
         self.diag_bits != 0
     }
 
+    fn bits(&self) -> u16 {
+        self.diag_bits as u16
+    }
+
     /// The problems found, each with its stream offset. Derived from the frame on demand, so a
     /// clean frame costs nothing.
     pub fn diags(&self) -> impl Iterator<Item = Diag> + '_ {
         let h = self.header();
-        let no_flag = self.diag_bits & D_NO_DATA_FLAG != 0;
+        let no_flag = self.bits() & D_NO_DATA_FLAG != 0;
         let (has_data, len) = (h.has_data() || no_flag, self.data_len() as u32);
         [
             D_TRUNCATED,
@@ -274,7 +280,7 @@ impl<'a, 't> AptFrame<'a, 't> {
             D_ZERO_ADDRS,
         ]
         .into_iter()
-        .filter(move |bit| self.diag_bits & bit != 0)
+        .filter(move |bit| self.bits() & bit != 0)
         .map(move |bit| {
             let (at, kind) = match bit {
                 D_TRUNCATED => (
