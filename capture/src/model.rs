@@ -1,7 +1,7 @@
 //! The capture model: a capture is a sequence of chunks, each with a timestamp, a direction, a
 //! stream (port or USB device) and bytes. Readers produce [`Event`]s; writers consume chunks.
 
-use aptscope_dissector::pipeline::Ctx;
+use aptscope_dissector::pipeline::{Ctx, Pipeline};
 use aptscope_dissector::record::{Decoder, Record};
 use aptscope_dissector::table::Dir;
 use std::fmt;
@@ -413,19 +413,110 @@ pub enum Event<'a> {
 }
 
 impl Event<'_> {
-    /// Pass the event to the decode chain: bytes to [`Decoder::push`], a problem to
-    /// [`Decoder::file_diag`], a stream to [`Decoder::stream_info`] (what every consumer of a
-    /// capture does with each event).
-    pub fn feed<E>(
+    /// Pass the event to a decode chain ([`Decoder`], or a [`Pipeline`] that renders its
+    /// records): bytes to [`Decoder::push`], a problem to [`Decoder::file_diag`], a stream to
+    /// [`Decoder::stream_info`] (what every consumer of a capture does with each event).
+    pub fn feed<C: Chain, E>(
         &self,
-        dec: &mut Decoder,
-        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+        chain: &mut C,
+        emit: &mut impl FnMut(&C::Out<'_>) -> Result<(), E>,
     ) -> Result<(), E> {
         match self {
-            Event::Chunk(c) => dec.push(c.ctx(), c.bytes, emit),
-            Event::Diag(d) => dec.file_diag(d.offset, d.kind(), &d.msg(), emit),
-            Event::Stream(s) => dec.stream_info(s.id, &s.name, s.settings.as_deref(), emit),
+            Event::Chunk(c) => chain.chunk(c.ctx(), c.bytes, emit),
+            Event::Diag(d) => chain.diag(d.offset, d.kind(), &d.msg(), emit),
+            Event::Stream(s) => chain.stream(s.id, &s.name, s.settings.as_deref(), emit),
         }
+    }
+}
+
+/// What [`Event::feed`] feeds: the decode chain ([`Decoder`], which emits [`Record`]s) or a
+/// [`Pipeline`] (the chain and a renderer, which emits lines), so that the three kinds of event
+/// are spelled once for both.
+pub trait Chain {
+    /// What it emits: a `Record<'r>` or a line (`str`).
+    type Out<'r>: ?Sized;
+    /// Bytes of a chunk ([`Decoder::push`]).
+    fn chunk<E>(
+        &mut self,
+        ctx: Ctx,
+        bytes: &[u8],
+        emit: &mut impl FnMut(&Self::Out<'_>) -> Result<(), E>,
+    ) -> Result<(), E>;
+    /// A problem of the capture file ([`Decoder::file_diag`]).
+    fn diag<E>(
+        &mut self,
+        offset: u64,
+        kind: &str,
+        msg: &str,
+        emit: &mut impl FnMut(&Self::Out<'_>) -> Result<(), E>,
+    ) -> Result<(), E>;
+    /// A stream the capture announces ([`Decoder::stream_info`]).
+    fn stream<E>(
+        &mut self,
+        id: u32,
+        name: &str,
+        settings: Option<&str>,
+        emit: &mut impl FnMut(&Self::Out<'_>) -> Result<(), E>,
+    ) -> Result<(), E>;
+}
+
+impl Chain for Decoder {
+    type Out<'r> = Record<'r>;
+    fn chunk<E>(
+        &mut self,
+        ctx: Ctx,
+        bytes: &[u8],
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.push(ctx, bytes, emit)
+    }
+    fn diag<E>(
+        &mut self,
+        offset: u64,
+        kind: &str,
+        msg: &str,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.file_diag(offset, kind, msg, emit)
+    }
+    fn stream<E>(
+        &mut self,
+        id: u32,
+        name: &str,
+        settings: Option<&str>,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.stream_info(id, name, settings, emit)
+    }
+}
+
+impl Chain for Pipeline {
+    type Out<'r> = str;
+    fn chunk<E>(
+        &mut self,
+        ctx: Ctx,
+        bytes: &[u8],
+        emit: &mut impl FnMut(&str) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.push_chunk(ctx, bytes, emit)
+    }
+    fn diag<E>(
+        &mut self,
+        offset: u64,
+        kind: &str,
+        msg: &str,
+        emit: &mut impl FnMut(&str) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.file_diag(offset, kind, msg, emit)
+    }
+    fn stream<E>(
+        &mut self,
+        id: u32,
+        name: &str,
+        settings: Option<&str>,
+        emit: &mut impl FnMut(&str) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.stream_info(id, name, settings, emit)
     }
 }
 
