@@ -715,14 +715,27 @@ fn truncated_diag(out: &mut Vec<UsbOut>, off: u64, key: (u16, u16), ep: u8, cut:
     usb_diag(out, off, UsbProblem::TruncatedUrb { cut, bus, addr, ep });
 }
 
-/// A `format` record (`data`, `orig_len` bytes on the wire) shorter than its `header` bytes.
-fn too_short(format: UsbFormat, header: usize, data: &[u8], orig_len: u32) -> UsbProblem {
-    UsbProblem::RecordTooShort {
+/// Whether a `format` record (`data`, `orig_len` bytes on the wire) holds its `header` bytes;
+/// when it does not, says so (at file offset `off`).
+fn holds_header(
+    format: UsbFormat,
+    header: usize,
+    data: &[u8],
+    orig_len: u32,
+    off: u64,
+    out: &mut Vec<UsbOut>,
+) -> bool {
+    if data.len() >= header {
+        return true;
+    }
+    let problem = UsbProblem::RecordTooShort {
         format,
         expected: header,
         found: data.len(),
         original: orig_len,
-    }
+    };
+    usb_diag(out, off, problem);
+    false
 }
 
 fn usb_diag(out: &mut Vec<UsbOut>, offset: u64, problem: UsbProblem) {
