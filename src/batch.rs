@@ -331,16 +331,10 @@ fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<S
                 out.write_all(b"\n")
             };
             while let Some(ev) = reader.next_event() {
-                match ev {
-                    Event::Chunk(c) => p.push_chunk(c.ctx(), c.bytes, &mut emit)?,
-                    Event::Diag(d) => {
-                        fatal(&d)?;
-                        p.file_diag(d.offset, d.kind(), &d.msg(), &mut emit)?
-                    }
-                    Event::Stream(s) => {
-                        p.stream_info(s.id, &s.name, s.settings.as_deref(), &mut emit)?
-                    }
+                if let Event::Diag(d) = &ev {
+                    fatal(d)?;
                 }
+                ev.feed(&mut p, &mut emit)?;
                 if held.get() {
                     if let Some(d) = p.detection() {
                         if not_a_capture(format, d) {

@@ -136,7 +136,8 @@ struct LiveArgs {
     /// Baud rate (default 115200 for APT, 9600 for Elliptec).
     #[arg(long)]
     baud: Option<u32>,
-    /// Flow control: none, rtscts, xonxoff.
+    /// Flow control: none, rtscts, xonxoff (default: tap the protocol's, RTS/CTS for APT;
+    /// sniff none, as its adapters only receive).
     #[arg(long)]
     flow: Option<String>,
     /// Write the capture here: pcapng, or pcap when it ends in .pcap (another extension is
@@ -426,7 +427,11 @@ macro_rules! live_fields {
     ($o:ident, $live:ident, $proto:ident, $flow:ident) => {
         $o.proto = $proto;
         $o.baud = $live.baud;
-        $o.flow = $flow;
+        // Without --flow each keeps its own default: the tap the protocol's, the sniff none
+        // (its adapters only receive).
+        if $flow.is_some() {
+            $o.flow = $flow;
+        }
         $o.write = $live.write.clone();
         $o.write_format = write_format($live.write_format.as_deref())?;
         $o.force = $live.force;

@@ -3,7 +3,7 @@
 mod common;
 
 use arrow_array::cast::AsArray;
-use arrow_array::Array;
+use arrow_array::{Array, ArrayRef, RecordBatch};
 use common::aptscope;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use serde_json::Value;
@@ -23,8 +23,14 @@ fn tmp(name: &str) -> PathBuf {
     p
 }
 
+/// A batch's column of that name (the test fails without it).
+fn column<'b>(b: &'b RecordBatch, name: &str) -> &'b ArrayRef {
+    b.column_by_name(name)
+        .unwrap_or_else(|| panic!("no column {name}"))
+}
+
 /// Rows of every part file of one table, in file-name order.
-fn rows(dir: &Path) -> Vec<arrow_array::RecordBatch> {
+fn rows(dir: &Path) -> Vec<RecordBatch> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .expect("table dir")
         .map(|e| e.expect("entry").path())
@@ -86,16 +92,8 @@ fn parquet_dataset_has_every_record_with_its_file() {
         .collect();
     let mut got = vec![];
     for b in rows(&out.join("records")) {
-        let file = b
-            .column_by_name("file")
-            .expect("file")
-            .as_string::<i32>()
-            .clone();
-        let n = b
-            .column_by_name("n")
-            .expect("n")
-            .as_primitive::<arrow_array::types::UInt64Type>()
-            .clone();
+        let file = column(&b, "file").as_string::<i32>();
+        let n = column(&b, "n").as_primitive::<arrow_array::types::UInt64Type>();
         for i in 0..b.num_rows() {
             if !n.is_null(i) {
                 got.push((file.value(i).to_string(), n.value(i)));
@@ -106,21 +104,13 @@ fn parquet_dataset_has_every_record_with_its_file() {
     // A typed kind table: positions as integers, joinable on (file, n).
     let st = rows(&out.join("MOT_GET_DCSTATUSUPDATE"));
     assert!(!st.is_empty());
-    let pos = st[0].column_by_name("position").expect("position");
+    let pos = column(&st[0], "position");
     assert_eq!(pos.data_type(), &arrow_schema::DataType::Int32);
     // The damaged file's problems are in the diagnostics column.
     let mut damaged_diags = 0;
     for b in rows(&out.join("records")) {
-        let file = b
-            .column_by_name("file")
-            .expect("file")
-            .as_string::<i32>()
-            .clone();
-        let d = b
-            .column_by_name("diagnostics")
-            .expect("diagnostics")
-            .as_list::<i32>()
-            .clone();
+        let file = column(&b, "file").as_string::<i32>();
+        let d = column(&b, "diagnostics").as_list::<i32>();
         for i in 0..b.num_rows() {
             if file.value(i) == "samples/damaged.bin" {
                 damaged_diags += d.value(i).len();

@@ -14,7 +14,7 @@ use common::{apt_frames as frames, scratch};
 use nix::fcntl::OFlag;
 use nix::poll::PollFlags;
 use nix::sys::signal::{kill, Signal};
-use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
+use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, ControlFlags, SetArg};
 use nix::unistd::Pid;
 use std::fs::File;
 use std::io::{self, Read, Write};
@@ -650,6 +650,41 @@ fn a_simulator_on_a_serial_port_answers_and_ends_cleanly_on_sigint() {
     assert_eq!(&got[10..16], b"KDC101");
     sim.interrupt();
     drop(pty.slave);
+}
+
+/// A sniff's adapters only receive, so they are opened without flow control (RTS/CTS is APT's
+/// default for the tap, not for the sniff): the ports, the banner and the capture's stream
+/// agree on it, and `--flow rtscts` sets it on all three.
+#[test]
+fn the_sniff_opens_its_adapters_without_flow_control_unless_told_and_says_which() {
+    for (flow, settings) in [(None, "115200 8N1"), (Some("rtscts"), "115200 8N1 RTS/CTS")] {
+        let dir = scratch("sniff-flow");
+        let ptys = [(); 2].map(|_| nix::pty::openpty(None, None).expect("openpty"));
+        let [host_tx, device_tx] = ptys.each_ref().map(|p| {
+            let path = nix::unistd::ttyname(&p.slave).expect("ttyname");
+            path.to_str().expect("utf-8 path").to_string()
+        });
+        let cap = dir.join("y.pcapng");
+        let mut args = vec!["sniff", "--host-tx", &host_tx, "--device-tx", &device_tx];
+        args.extend(["--quiet", "-w", cap.to_str().expect("utf-8 path")]);
+        args.extend(flow.map(|f| ["--flow", f]).into_iter().flatten());
+        let mut sniff = Proc::aptscope(&args);
+        sniff.wait_stderr(&format!("({settings}), writing"));
+        // The banner comes once both ports are open; a pty master reads its slave's settings.
+        for p in &ptys {
+            let t = tcgetattr(&p.master).expect("tcgetattr");
+            let rtscts = t.control_flags.contains(ControlFlags::CRTSCTS);
+            assert_eq!(rtscts, flow.is_some(), "{}", sniff.both());
+        }
+        sniff.interrupt();
+        let stream = decode_json(&cap)
+            .into_iter()
+            .find(|r| r["type"] == "stream")
+            .expect("a stream record");
+        let want = format!("{settings} (receive-only Y-cable)");
+        assert_eq!(stream["settings"], want.as_str(), "{stream}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
 
 /// A real controller does not vanish when the host program closes the port: the simulator

@@ -22,8 +22,9 @@ pub mod usb;
 mod scratch;
 
 pub use model::{
-    Chunk, Damage, Direction, Event, LogField, LogProblem, OwnedChunk, ReadDiag, ReadProblem,
-    Reader, Skipped, StreamInfo, UrbCut, UsbFormat, UsbProblem, Writer,
+    Chain, Chunk, Damage, Direction, Event, LogField, LogProblem, McapProblem, OwnedChunk,
+    ReadDiag, ReadProblem, Reader, Skipped, StreamInfo, UrbCut, UsbDevice, UsbFormat, UsbNote,
+    UsbProblem, Writer,
 };
 pub use raw::{ByteSource, InputFormat, CHUNK};
 

@@ -1,7 +1,8 @@
 //! The capture model: a capture is a sequence of chunks, each with a timestamp, a direction, a
 //! stream (port or USB device) and bytes. Readers produce [`Event`]s; writers consume chunks.
 
-use aptscope_dissector::pipeline::Ctx;
+use crate::usb::FTDI_VID;
+use aptscope_dissector::pipeline::{Ctx, Pipeline};
 use aptscope_dissector::record::{Decoder, Record};
 use aptscope_dissector::table::Dir;
 use std::fmt;
@@ -142,18 +143,6 @@ impl ReadDiag {
         ReadDiag { offset, problem }
     }
 
-    /// A problem of a reader that does not report typed problems yet: its stable name and
-    /// text (see [`ReadProblem::Untyped`]).
-    pub fn untyped(offset: u64, kind: &'static str, msg: impl Into<String>) -> Self {
-        ReadDiag::new(
-            offset,
-            ReadProblem::Untyped {
-                kind,
-                msg: msg.into(),
-            },
-        )
-    }
-
     /// The problem's stable snake_case name (the `kind` of NDJSON `file_diag` records).
     pub fn kind(&self) -> &'static str {
         self.problem.kind()
@@ -250,15 +239,10 @@ pub enum ReadProblem {
     Log(LogProblem),
     /// A damaged record of a USB capture (usbmon, USBPcap).
     Usb(UsbProblem),
-    /// A problem of a reader not converted to typed problems yet (MCAP), or a note that is not
-    /// a damaged record (what a USB device was found to be, its line settings): its stable
-    /// name and text.
-    Untyped {
-        /// Stable snake_case name.
-        kind: &'static str,
-        /// Explanation.
-        msg: String,
-    },
+    /// A problem of an MCAP file.
+    Mcap(McapProblem),
+    /// What a USB device was found to be, its line settings (a note, not a damaged record).
+    UsbNote(UsbNote),
 }
 
 /// What was wrong with a damaged block ([`ReadProblem::Damaged`]).
@@ -326,7 +310,8 @@ impl ReadProblem {
             ReadProblem::Input(k) => k.name(),
             ReadProblem::Log(p) => p.kind(),
             ReadProblem::Usb(p) => p.kind(),
-            ReadProblem::Untyped { kind, .. } => kind,
+            ReadProblem::Mcap(p) => p.kind(),
+            ReadProblem::UsbNote(n) => n.kind(),
         }
     }
 }
@@ -342,10 +327,7 @@ impl fmt::Display for ReadProblem {
             ),
             ReadProblem::BadMagic { found } => {
                 f.write_str("not a pcap or pcapng file (starts ")?;
-                for (i, b) in found.iter().enumerate() {
-                    let sep = if i == 0 { "" } else { " " };
-                    write!(f, "{sep}{b:02x}")?;
-                }
+                hex_bytes(f, found)?;
                 f.write_str(")")
             }
             ReadProblem::BadFileHeader { error, .. } => f.write_str(error),
@@ -396,7 +378,8 @@ impl fmt::Display for ReadProblem {
             ReadProblem::Input(k) => write!(f, "{k}"),
             ReadProblem::Log(p) => write!(f, "{p}"),
             ReadProblem::Usb(p) => write!(f, "{p}"),
-            ReadProblem::Untyped { msg, .. } => f.write_str(msg),
+            ReadProblem::Mcap(p) => write!(f, "{p}"),
+            ReadProblem::UsbNote(n) => write!(f, "{n}"),
         }
     }
 }
@@ -413,19 +396,110 @@ pub enum Event<'a> {
 }
 
 impl Event<'_> {
-    /// Pass the event to the decode chain: bytes to [`Decoder::push`], a problem to
-    /// [`Decoder::file_diag`], a stream to [`Decoder::stream_info`] (what every consumer of a
-    /// capture does with each event).
-    pub fn feed<E>(
+    /// Pass the event to a decode chain ([`Decoder`], or a [`Pipeline`] that renders its
+    /// records): bytes to [`Decoder::push`], a problem to [`Decoder::file_diag`], a stream to
+    /// [`Decoder::stream_info`] (what every consumer of a capture does with each event).
+    pub fn feed<C: Chain, E>(
         &self,
-        dec: &mut Decoder,
-        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+        chain: &mut C,
+        emit: &mut impl FnMut(&C::Out<'_>) -> Result<(), E>,
     ) -> Result<(), E> {
         match self {
-            Event::Chunk(c) => dec.push(c.ctx(), c.bytes, emit),
-            Event::Diag(d) => dec.file_diag(d.offset, d.kind(), &d.msg(), emit),
-            Event::Stream(s) => dec.stream_info(s.id, &s.name, s.settings.as_deref(), emit),
+            Event::Chunk(c) => chain.chunk(c.ctx(), c.bytes, emit),
+            Event::Diag(d) => chain.diag(d.offset, d.kind(), &d.msg(), emit),
+            Event::Stream(s) => chain.stream(s.id, &s.name, s.settings.as_deref(), emit),
         }
+    }
+}
+
+/// What [`Event::feed`] feeds: the decode chain ([`Decoder`], which emits [`Record`]s) or a
+/// [`Pipeline`] (the chain and a renderer, which emits lines), so that the three kinds of event
+/// are spelled once for both.
+pub trait Chain {
+    /// What it emits: a `Record<'r>` or a line (`str`).
+    type Out<'r>: ?Sized;
+    /// Bytes of a chunk ([`Decoder::push`]).
+    fn chunk<E>(
+        &mut self,
+        ctx: Ctx,
+        bytes: &[u8],
+        emit: &mut impl FnMut(&Self::Out<'_>) -> Result<(), E>,
+    ) -> Result<(), E>;
+    /// A problem of the capture file ([`Decoder::file_diag`]).
+    fn diag<E>(
+        &mut self,
+        offset: u64,
+        kind: &str,
+        msg: &str,
+        emit: &mut impl FnMut(&Self::Out<'_>) -> Result<(), E>,
+    ) -> Result<(), E>;
+    /// A stream the capture announces ([`Decoder::stream_info`]).
+    fn stream<E>(
+        &mut self,
+        id: u32,
+        name: &str,
+        settings: Option<&str>,
+        emit: &mut impl FnMut(&Self::Out<'_>) -> Result<(), E>,
+    ) -> Result<(), E>;
+}
+
+impl Chain for Decoder {
+    type Out<'r> = Record<'r>;
+    fn chunk<E>(
+        &mut self,
+        ctx: Ctx,
+        bytes: &[u8],
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.push(ctx, bytes, emit)
+    }
+    fn diag<E>(
+        &mut self,
+        offset: u64,
+        kind: &str,
+        msg: &str,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.file_diag(offset, kind, msg, emit)
+    }
+    fn stream<E>(
+        &mut self,
+        id: u32,
+        name: &str,
+        settings: Option<&str>,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.stream_info(id, name, settings, emit)
+    }
+}
+
+impl Chain for Pipeline {
+    type Out<'r> = str;
+    fn chunk<E>(
+        &mut self,
+        ctx: Ctx,
+        bytes: &[u8],
+        emit: &mut impl FnMut(&str) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.push_chunk(ctx, bytes, emit)
+    }
+    fn diag<E>(
+        &mut self,
+        offset: u64,
+        kind: &str,
+        msg: &str,
+        emit: &mut impl FnMut(&str) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.file_diag(offset, kind, msg, emit)
+    }
+    fn stream<E>(
+        &mut self,
+        id: u32,
+        name: &str,
+        settings: Option<&str>,
+        emit: &mut impl FnMut(&str) -> Result<(), E>,
+    ) -> Result<(), E> {
+        self.stream_info(id, name, settings, emit)
     }
 }
 
@@ -904,6 +978,482 @@ impl fmt::Display for UsbProblem {
                 f,
                 "{cut} (usb {bus}:{addr} endpoint 0x{ep:02x}): the bytes present are shown"
             ),
+        }
+    }
+}
+
+/// Bytes in hex, separated by spaces (`89 4d 43`).
+fn hex_bytes(f: &mut fmt::Formatter<'_>, bytes: &[u8]) -> fmt::Result {
+    for (i, b) in bytes.iter().enumerate() {
+        let sep = if i == 0 { "" } else { " " };
+        write!(f, "{sep}{b:02x}")?;
+    }
+    Ok(())
+}
+
+/// What the MCAP reader found wrong ([`ReadProblem::Mcap`]); reading carries on at the next
+/// plausible record where it can.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum McapProblem {
+    /// The file does not start with the MCAP magic (records are looked for all the same).
+    BadMagic {
+        /// Its first bytes (up to 8); empty: the file is empty.
+        found: Vec<u8>,
+    },
+    /// Bytes after the end magic.
+    TrailingBytes,
+    /// The footer is not followed by the end magic.
+    BadEndMagic {
+        /// The bytes left after the footer.
+        left: usize,
+    },
+    /// The file ends without a footer (a recording cut short).
+    MissingFooter {
+        /// Whether the data section's end was seen.
+        data_end: bool,
+    },
+    /// The file ends inside a record header.
+    TruncatedHeader {
+        /// The header's bytes there (of 9).
+        found: usize,
+    },
+    /// A record whose length runs past the end of the file: records inside it are looked for.
+    PastEnd {
+        /// The record's kind (`message`, `chunk` …).
+        record: &'static str,
+        /// Its declared length.
+        len: u64,
+        /// The bytes left after its header.
+        left: u64,
+    },
+    /// The file ends inside a record's body.
+    TruncatedBody {
+        /// The record's kind.
+        record: &'static str,
+        /// Its declared length (or what was left of a chunk to skip).
+        len: u64,
+        /// The bytes there.
+        got: u64,
+    },
+    /// The file ends inside a chunk whose messages up to there were read.
+    CutChunk {
+        /// Where the file ends.
+        end: u64,
+    },
+    /// An opcode MCAP reserves: not a record (a damaged one).
+    BadOpcode {
+        /// The opcode.
+        opcode: u8,
+    },
+    /// A record longer than the reader accepts.
+    TooLong {
+        /// The record's kind.
+        record: &'static str,
+        /// Its declared length.
+        len: u64,
+        /// The largest record read.
+        limit: usize,
+    },
+    /// A record that does not parse.
+    Unparsable {
+        /// The record's kind.
+        record: &'static str,
+        /// Whether it sits inside a chunk.
+        in_chunk: bool,
+        /// The parser's complaint.
+        error: String,
+    },
+    /// A record with an application-defined opcode, skipped (said once per opcode).
+    PrivateRecord {
+        /// The opcode.
+        opcode: u8,
+        /// Its length.
+        len: u64,
+    },
+    /// The data section's CRC does not match (said only when nothing else was found wrong).
+    BadDataCrc {
+        /// The CRC of the bytes read.
+        calculated: u32,
+        /// The CRC the data end record holds.
+        saved: u32,
+        /// The data end record's offset.
+        before: u64,
+    },
+    /// A message on a channel no channel record defined (said once per channel).
+    UnknownChannel {
+        /// The channel id.
+        channel: u16,
+    },
+    /// A chunk header inconsistent with the record's length.
+    BadChunkHeader,
+    /// A chunk whose CRC does not match.
+    BadChunkCrc {
+        /// The CRC of its data.
+        calculated: u32,
+        /// The CRC it holds.
+        saved: u32,
+    },
+    /// A chunk compressed with something this reader lacks: skipped.
+    UnsupportedCompression {
+        /// The compression's name.
+        compression: String,
+    },
+    /// A chunk that cannot be read further.
+    BadChunk {
+        /// The reader's complaint.
+        error: String,
+    },
+    /// Bytes skipped looking for the next record.
+    Skipped {
+        /// How many.
+        bytes: u64,
+        /// The next record's offset; `None`: none up to the end of the file.
+        next: Option<u64>,
+    },
+}
+
+impl McapProblem {
+    /// The stable snake_case name.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            McapProblem::BadMagic { .. } => "bad_magic",
+            McapProblem::TrailingBytes => "trailing_bytes",
+            McapProblem::BadEndMagic { .. } => "bad_end_magic",
+            McapProblem::MissingFooter { .. } => "missing_footer",
+            McapProblem::TruncatedHeader { .. }
+            | McapProblem::PastEnd { .. }
+            | McapProblem::TruncatedBody { .. }
+            | McapProblem::CutChunk { .. } => "truncated_record",
+            McapProblem::BadOpcode { .. }
+            | McapProblem::TooLong { .. }
+            | McapProblem::Unparsable { .. } => "bad_record",
+            McapProblem::PrivateRecord { .. } => "private_record",
+            McapProblem::BadDataCrc { .. } => "bad_data_crc",
+            McapProblem::UnknownChannel { .. } => "unknown_channel",
+            McapProblem::BadChunkHeader | McapProblem::BadChunk { .. } => "bad_chunk",
+            McapProblem::BadChunkCrc { .. } => "bad_chunk_crc",
+            McapProblem::UnsupportedCompression { .. } => "unsupported_compression",
+            McapProblem::Skipped { .. } => "skipped_bytes",
+        }
+    }
+}
+
+impl fmt::Display for McapProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            McapProblem::BadMagic { found } if found.is_empty() => {
+                f.write_str("the file is empty, not MCAP")
+            }
+            McapProblem::BadMagic { found } => {
+                f.write_str("the file starts with ")?;
+                hex_bytes(f, found)?;
+                f.write_str(", not the MCAP magic 89 4d 43 41 50 30 0d 0a; looking for records")
+            }
+            McapProblem::TrailingBytes => f.write_str("bytes after the MCAP end magic (ignored)"),
+            McapProblem::BadEndMagic { left } => write!(
+                f,
+                "the footer is not followed by the MCAP magic ({left} byte(s) left)"
+            ),
+            McapProblem::MissingFooter { data_end } => {
+                let what = if *data_end {
+                    "after the data section, without summary footer"
+                } else {
+                    "without data end, summary or footer"
+                };
+                write!(
+                    f,
+                    "the file ends {what}: the recording was probably cut short; everything \
+                     before was read"
+                )
+            }
+            McapProblem::TruncatedHeader { found } => write!(
+                f,
+                "the file ends {found} byte(s) into a record header (9 bytes)"
+            ),
+            McapProblem::PastEnd { record, len, left } => write!(
+                f,
+                "{record} record of {len} bytes runs past the end of the file ({left} bytes \
+                 left); looking for records inside it"
+            ),
+            McapProblem::TruncatedBody { record, len, got } => write!(
+                f,
+                "{record} record of {len} bytes: the file ends after {got} of them"
+            ),
+            McapProblem::CutChunk { end } => write!(
+                f,
+                "the file ends at offset {end}, inside this chunk; its messages up to there \
+                 were read"
+            ),
+            McapProblem::BadOpcode { opcode } => write!(
+                f,
+                "opcode 0x{opcode:02x} is not an MCAP record; looking for the next record"
+            ),
+            McapProblem::TooLong { record, len, limit } => write!(
+                f,
+                "{record} record claims {len} bytes (limit {limit}); looking for the next record"
+            ),
+            McapProblem::Unparsable {
+                record,
+                in_chunk,
+                error,
+            } => {
+                let within = if *in_chunk { " in the chunk" } else { "" };
+                write!(f, "{record} record{within} does not parse: {error}")
+            }
+            McapProblem::PrivateRecord { opcode, len } => write!(
+                f,
+                "record with private opcode 0x{opcode:02x} ({len} bytes) skipped (reported once \
+                 per opcode)"
+            ),
+            McapProblem::BadDataCrc {
+                calculated,
+                saved,
+                before,
+            } => write!(
+                f,
+                "the data section's CRC is {calculated:08x}, the file says {saved:08x}: some \
+                 bytes before offset {before} are damaged"
+            ),
+            McapProblem::UnknownChannel { channel } => write!(
+                f,
+                "message on channel {channel} which no channel record defined (skipped)"
+            ),
+            McapProblem::BadChunkHeader => f.write_str(
+                "chunk header is inconsistent with the record length; looking for the next record",
+            ),
+            McapProblem::BadChunkCrc { calculated, saved } => write!(
+                f,
+                "chunk CRC is {calculated:08x}, the chunk says {saved:08x}: its messages (read \
+                 above) may be damaged"
+            ),
+            McapProblem::UnsupportedCompression { compression } => write!(
+                f,
+                "chunk compressed with {compression:?}, which this reader lacks: skipped"
+            ),
+            McapProblem::BadChunk { error } => {
+                write!(f, "chunk cannot be read further: {error}")
+            }
+            McapProblem::Skipped { bytes, next: None } => write!(
+                f,
+                "{bytes} byte(s) skipped: no MCAP record found up to the end of the file"
+            ),
+            McapProblem::Skipped {
+                bytes,
+                next: Some(at),
+            } => write!(
+                f,
+                "{bytes} byte(s) skipped up to the next record at offset {at}"
+            ),
+        }
+    }
+}
+
+/// A device of a USB capture ([`UsbNote::DeviceNotFound`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub struct UsbDevice {
+    /// Its bus.
+    pub bus: u16,
+    /// Its address.
+    pub addr: u16,
+    /// Its vendor and product ids, when a device descriptor is in the capture.
+    pub ids: Option<(u16, u16)>,
+}
+
+/// What the USB demultiplexer found out about a device or a port, and which of its traffic it
+/// shows ([`ReadProblem::UsbNote`]): notes, not damage.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum UsbNote {
+    /// `--usb-device` named a device that sent no serial data (the command line makes it an
+    /// error): which devices the capture has.
+    DeviceNotFound {
+        /// The device's bus.
+        bus: u16,
+        /// The device's address.
+        addr: u16,
+        /// Whether it is in the capture at all.
+        in_capture: bool,
+        /// The devices present, in order.
+        present: Vec<UsbDevice>,
+    },
+    /// More devices than the demultiplexer follows: this one and later new ones are ignored.
+    TooManyDevices {
+        /// The most it follows.
+        max: usize,
+        /// The device's bus.
+        bus: u16,
+        /// The device's address.
+        addr: u16,
+    },
+    /// A device with no descriptor and no bulk IN data whose bulk OUT data is shown as FTDI.
+    Unconfirmed {
+        /// The device's bus.
+        bus: u16,
+        /// The device's address.
+        addr: u16,
+        /// The bytes OUT after which it was decided; `None`: at the end of the capture.
+        after: Option<usize>,
+    },
+    /// A device whose descriptor changed (another device at the same address).
+    DeviceChanged {
+        /// The device's bus.
+        bus: u16,
+        /// The device's address.
+        addr: u16,
+        /// Vendor and product ids before.
+        was: (u16, u16),
+        /// Vendor and product ids now.
+        now: (u16, u16),
+    },
+    /// A device already shown whose descriptor came late and confirms it.
+    Identified {
+        /// The device's bus.
+        bus: u16,
+        /// The device's address.
+        addr: u16,
+        /// Its vendor and product ids.
+        ids: (u16, u16),
+    },
+    /// A device already shown whose descriptor came late and says it is not FTDI: no longer
+    /// shown.
+    NotFtdi {
+        /// The device's bus.
+        bus: u16,
+        /// The device's address.
+        addr: u16,
+        /// Its vendor and product ids.
+        ids: (u16, u16),
+    },
+    /// A device without descriptor whose bulk IN data lacks FTDI status bytes: not shown.
+    NoStatusBytes {
+        /// The device's bus.
+        bus: u16,
+        /// The device's address.
+        addr: u16,
+        /// The data's first byte.
+        first: u8,
+    },
+    /// No endpoint descriptor and no status bytes every 64 bytes: 512-byte packets assumed.
+    MaxPacketInferred {
+        /// The device's bus.
+        bus: u16,
+        /// The device's address.
+        addr: u16,
+        /// The endpoint.
+        ep: u8,
+    },
+    /// A port's line settings, now (set by vendor requests).
+    LineSettings {
+        /// The stream's name.
+        stream: String,
+        /// The settings (`115200 8N1 RTS/CTS`); `None`: unknown.
+        settings: Option<String>,
+    },
+}
+
+impl UsbNote {
+    /// The stable snake_case name.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            UsbNote::DeviceNotFound { .. } => crate::usb::NOT_FOUND,
+            UsbNote::TooManyDevices { .. } => "usb_too_many_devices",
+            UsbNote::Unconfirmed { .. } => "usb_unconfirmed_device",
+            UsbNote::DeviceChanged { .. } => "usb_device_changed",
+            UsbNote::Identified { .. } => "usb_device_identified",
+            UsbNote::NotFtdi { .. } | UsbNote::NoStatusBytes { .. } => "usb_not_ftdi",
+            UsbNote::MaxPacketInferred { .. } => "usb_max_packet_inferred",
+            UsbNote::LineSettings { .. } => "line_settings",
+        }
+    }
+}
+
+impl fmt::Display for UsbNote {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            UsbNote::DeviceNotFound {
+                bus,
+                addr,
+                in_capture,
+                present,
+            } => {
+                let why = if *in_capture {
+                    "is in the capture but sent no serial data"
+                } else {
+                    "is not in the capture"
+                };
+                write!(f, "--usb-device {bus}:{addr}: usb {bus}:{addr} {why}; ")?;
+                if present.is_empty() {
+                    return f.write_str("the capture has no USB bulk or control transfers");
+                }
+                f.write_str("devices present: ")?;
+                for (i, UsbDevice { bus, addr, ids }) in present.iter().enumerate() {
+                    let sep = if i == 0 { "" } else { ", " };
+                    write!(f, "{sep}{bus}:{addr} (")?;
+                    match ids {
+                        Some((FTDI_VID, pid)) => write!(f, "{FTDI_VID:04x}:{pid:04x}, FTDI)")?,
+                        Some((vid, pid)) => write!(f, "{vid:04x}:{pid:04x})")?,
+                        None => f.write_str("no descriptor in the capture)")?,
+                    }
+                }
+                Ok(())
+            }
+            UsbNote::TooManyDevices { max, bus, addr } => write!(
+                f,
+                "more than {max} USB devices: usb {bus}:{addr} and later new devices are ignored"
+            ),
+            UsbNote::Unconfirmed {
+                bus,
+                addr,
+                after: None,
+            } => write!(
+                f,
+                "usb {bus}:{addr} has no device descriptor and no bulk IN data in the capture: \
+                 its bulk OUT data is shown as if it were an FTDI device"
+            ),
+            UsbNote::Unconfirmed {
+                bus,
+                addr,
+                after: Some(n),
+            } => write!(
+                f,
+                "usb {bus}:{addr} has no device descriptor and no bulk IN data after {n} bytes \
+                 OUT: shown as if it were an FTDI device"
+            ),
+            UsbNote::DeviceChanged {
+                bus,
+                addr,
+                was,
+                now,
+            } => write!(
+                f,
+                "usb {bus}:{addr} was {:04x}:{:04x}, is now {:04x}:{:04x}",
+                was.0, was.1, now.0, now.1
+            ),
+            UsbNote::Identified { bus, addr, ids } => write!(
+                f,
+                "usb {bus}:{addr} is {:04x}:{:04x}: its stream continues",
+                ids.0, ids.1
+            ),
+            UsbNote::NotFtdi { bus, addr, ids } => write!(
+                f,
+                "usb {bus}:{addr} is {:04x}:{:04x}: not an FTDI device: its traffic is no \
+                 longer shown",
+                ids.0, ids.1
+            ),
+            UsbNote::NoStatusBytes { bus, addr, first } => write!(
+                f,
+                "usb {bus}:{addr} (no device descriptor in the capture) sends bulk IN data that \
+                 does not start with FTDI status bytes (0x{first:02x}): not shown"
+            ),
+            UsbNote::MaxPacketInferred { bus, addr, ep } => write!(
+                f,
+                "usb {bus}:{addr} endpoint 0x{ep:02x}: no endpoint descriptor in the capture and \
+                 no FTDI status bytes every 64 bytes: assuming 512-byte (high-speed) packets"
+            ),
+            UsbNote::LineSettings { stream, settings } => {
+                write!(f, "{stream}: {}", settings.as_deref().unwrap_or("unknown"))
+            }
         }
     }
 }

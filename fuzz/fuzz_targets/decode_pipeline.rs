@@ -12,9 +12,9 @@
 
 use aptscope_capture::open::{sniff, ByteReader, Format};
 use aptscope_capture::textlog;
-use aptscope_capture::{mcap, pcap, Direction, Event, Reader};
+use aptscope_capture::{mcap, pcap, Event, Reader};
 use aptscope_dissector::detect::Proto;
-use aptscope_dissector::pipeline::{Ctx, Format as PFormat, Pipeline};
+use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
 use aptscope_dissector::table::Dir;
 use aptscope_fuzz::{expansion_limit, split_ctl, strict};
 use libfuzzer_sys::fuzz_target;
@@ -51,33 +51,21 @@ fn run(
     while let Some(ev) = r.next_event() {
         events += 1;
         assert!(events <= 64 + 8 * file.len(), "endless reader");
-        match ev {
-            Event::Chunk(c) => {
-                let dir = match c.dir {
-                    Direction::HostToDevice => Some(Dir::HostToDevice),
-                    Direction::DeviceToHost => Some(Dir::DeviceToHost),
-                    Direction::Unknown => None,
-                };
-                if !c.bytes.is_empty() && !lanes.contains(&(c.stream, dir)) {
-                    lanes.push((c.stream, dir));
-                }
-                bytes += c.bytes.len() as u64;
-                // A hexdump `*` can expand a few bytes into gigabytes (see fuzz/artifacts-found):
-                // stop feeding there, unless strict.
-                let expanded = bytes > expansion_limit(file.len()) as u64;
-                assert!(!(expanded && strict()), "expansion beyond the limit");
-                let ctx = Ctx {
-                    stream: c.stream,
-                    dir,
-                    ts_ns: c.ts_ns,
-                };
-                p.push_chunk(ctx, c.bytes, &mut emit).unwrap();
-                if expanded {
-                    break;
-                }
+        let mut expanded = false;
+        if let Event::Chunk(c) = &ev {
+            let lane = (c.stream, c.dir.dir());
+            if !c.bytes.is_empty() && !lanes.contains(&lane) {
+                lanes.push(lane);
             }
-            Event::Diag(d) => p.file_diag(d.offset, d.kind(), &d.msg(), &mut emit).unwrap(),
-            Event::Stream(_) => {}
+            bytes += c.bytes.len() as u64;
+            // A hexdump `*` can expand a few bytes into gigabytes (see fuzz/artifacts-found):
+            // stop feeding there, unless strict.
+            expanded = bytes > expansion_limit(file.len()) as u64;
+            assert!(!(expanded && strict()), "expansion beyond the limit");
+        }
+        ev.feed(&mut p, &mut emit).unwrap();
+        if expanded {
+            break;
         }
     }
     p.finish(&mut emit).unwrap();
@@ -128,7 +116,7 @@ fuzz_target!(|data: &[u8]| {
                     "late diag refers to a record not yet seen: {l}"
                 );
             }
-            "detect" | "input" => {}
+            "detect" | "input" | "stream" => {}
             other => panic!("unknown record type {other}: {l}"),
         }
         if let Some(ds) = v["diag"].as_array() {

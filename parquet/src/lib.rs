@@ -435,12 +435,7 @@ impl<S: Sink> CaptureWriter<S> {
         self.summary.records += 1;
         self.records.buf.push(&row);
         if self.records.buf.rows() >= self.opts.rows_per_group {
-            Self::flush(
-                &mut self.sink,
-                RECORDS,
-                &mut self.records,
-                &mut self.summary,
-            )?;
+            self.flush_records()?;
         }
         if let (Some(k), Some(m)) = (kind, rec.meta()) {
             let keys = [s(&file), V::U(m.n), V::U(m.stream as u64), opt_u(m.ts_ns)];
@@ -511,6 +506,15 @@ impl<S: Sink> CaptureWriter<S> {
         Ok(())
     }
 
+    fn flush_records(&mut self) -> io::Result<()> {
+        Self::flush(
+            &mut self.sink,
+            RECORDS,
+            &mut self.records,
+            &mut self.summary,
+        )
+    }
+
     fn flush(sink: &mut S, table: &str, o: &mut Open, summary: &mut Summary) -> io::Result<()> {
         if o.buf.rows() == 0 {
             return Ok(());
@@ -524,12 +528,7 @@ impl<S: Sink> CaptureWriter<S> {
 
     /// Write what is buffered; returns the sink and what was written.
     pub fn finish(mut self) -> io::Result<(S, Summary)> {
-        Self::flush(
-            &mut self.sink,
-            RECORDS,
-            &mut self.records,
-            &mut self.summary,
-        )?;
+        self.flush_records()?;
         let mut names: Vec<String> = self.kinds.keys().cloned().collect();
         names.sort();
         for n in names {

@@ -222,7 +222,6 @@ impl Sink for Build {
 mod tests {
     use super::*;
     use aptscope_capture::open::{open, OpenOptions};
-    use aptscope_capture::Event;
     use aptscope_dissector::pipeline::{Format, Renderer};
     use aptscope_dissector::record::{Decoder, Record};
 
@@ -279,11 +278,7 @@ mod tests {
                 Ok(())
             };
             while let Some(ev) = reader.next_event() {
-                let _ = match ev {
-                    Event::Chunk(ch) => dec.push(ch.ctx(), ch.bytes, &mut emit),
-                    Event::Diag(d) => dec.file_diag(d.offset, d.kind(), &d.msg(), &mut emit),
-                    Event::Stream(_) => Ok(()),
-                };
+                let _ = ev.feed(&mut dec, &mut emit);
             }
             let _ = dec.finish(&mut emit);
             assert!(bad.is_empty(), "{name}:\n{}", bad.join("\n"));

@@ -9,7 +9,6 @@
 
 use crate::decoded::Decoded;
 use aptscope_capture::open::{open, OpenOptions};
-use aptscope_capture::Event;
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::ell::table::Cmd;
 use aptscope_dissector::filter::Filter;
@@ -343,11 +342,7 @@ impl Script {
             Ok(())
         };
         while let Some(ev) = reader.next_event() {
-            let _ = match ev {
-                Event::Chunk(ch) => dec.push(ch.ctx(), ch.bytes, &mut emit),
-                Event::Diag(d) => dec.file_diag(d.offset, d.kind(), &d.msg(), &mut emit),
-                Event::Stream(_) => Ok(()),
-            };
+            let _ = ev.feed(&mut dec, &mut emit);
         }
         let _ = dec.finish(&mut emit);
         let proto = c.proto.or(dec.proto()).unwrap_or(Proto::Apt);

@@ -2,12 +2,13 @@
 //! after damage; and the decoded channels as written.
 
 use super::MAGIC;
-use crate::model::{Chunk, Direction, Event, ReadDiag, Reader, StreamInfo};
+use crate::model::{
+    Chunk, Direction, Event, McapProblem, ReadDiag, ReadProblem, Reader, StreamInfo,
+};
 use ::mcap::records::{op, MessageHeader};
 use ::mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use ::mcap::McapError;
 use std::collections::{HashMap, HashSet, VecDeque};
-use std::fmt::Write as _;
 use std::io::{self, Read};
 
 /// A message of a decoded channel: the JSON line of one record.
@@ -475,15 +476,19 @@ impl McapReader {
         self
     }
 
-    fn diag(&mut self, offset: u64, kind: &'static str, msg: String) {
+    fn diag(&mut self, offset: u64, problem: McapProblem) {
+        self.problem(offset, ReadProblem::Mcap(problem));
+    }
+
+    fn problem(&mut self, offset: u64, problem: ReadProblem) {
         self.damaged = true;
         self.queue
-            .push_back(Event::Diag(ReadDiag::untyped(offset, kind, msg)));
+            .push_back(Event::Diag(ReadDiag::new(offset, problem)));
     }
 
     fn io_fail(&mut self, e: io::Error) {
         let at = self.src.off;
-        self.diag(at, "io_error", e.to_string());
+        self.problem(at, ReadProblem::io(&e));
         self.st = St::Done;
         self.chunk = None;
     }
@@ -505,7 +510,7 @@ impl McapReader {
     fn read_magic(&mut self) -> io::Result<()> {
         let n = self.src.fill(MAGIC.len())?;
         if n == 0 {
-            self.diag(0, "bad_magic", "the file is empty, not MCAP".into());
+            self.diag(0, McapProblem::BadMagic { found: vec![] });
             self.st = St::Done;
             return Ok(());
         }
@@ -514,12 +519,8 @@ impl McapReader {
             self.st = St::Records;
             return Ok(());
         }
-        let shown = hex_prefix(self.src.avail(), 8);
-        self.diag(
-            0,
-            "bad_magic",
-            format!("the file starts with {shown}, not the MCAP magic 89 4d 43 41 50 30 0d 0a; looking for records"),
-        );
+        let found = self.src.avail().iter().take(8).copied().collect();
+        self.diag(0, McapProblem::BadMagic { found });
         self.st = St::Records;
         self.resync(false)
     }
@@ -532,21 +533,10 @@ impl McapReader {
             let more = self.src.fill(1)?;
             if more > 0 {
                 let at = self.src.off;
-                self.diag(
-                    at,
-                    "trailing_bytes",
-                    "bytes after the MCAP end magic (ignored)".into(),
-                );
+                self.diag(at, McapProblem::TrailingBytes);
             }
         } else {
-            self.diag(
-                at,
-                "bad_end_magic",
-                format!(
-                    "the footer is not followed by the MCAP magic ({} byte(s) left)",
-                    n
-                ),
-            );
+            self.diag(at, McapProblem::BadEndMagic { left: n });
         }
         self.st = St::Done;
         Ok(())
@@ -556,16 +546,8 @@ impl McapReader {
     fn at_eof(&mut self) {
         let at = self.src.off;
         if !self.seen_footer {
-            let what = if self.seen_data_end {
-                "after the data section, without summary footer"
-            } else {
-                "without data end, summary or footer"
-            };
-            self.diag(
-                at,
-                "missing_footer",
-                format!("the file ends {what}: the recording was probably cut short; everything before was read"),
-            );
+            let data_end = self.seen_data_end;
+            self.diag(at, McapProblem::MissingFooter { data_end });
         }
         self.st = St::Done;
     }
@@ -578,11 +560,7 @@ impl McapReader {
             return Ok(());
         }
         if n < 9 {
-            self.diag(
-                at,
-                "truncated_record",
-                format!("the file ends {n} byte(s) into a record header (9 bytes)"),
-            );
+            self.diag(at, McapProblem::TruncatedHeader { found: n });
             self.st = St::Done;
             return Ok(());
         }
@@ -591,22 +569,19 @@ impl McapReader {
         let len = u64le(&b[1..9]);
         let name = op_name(opcode);
         if opcode == 0 || (0x10..0x80).contains(&opcode) {
-            self.diag(
-                at,
-                "bad_record",
-                format!("opcode 0x{opcode:02x} is not an MCAP record; looking for the next record"),
-            );
+            self.diag(at, McapProblem::BadOpcode { opcode });
             return self.resync(true);
         }
         let end = at.saturating_add(9).saturating_add(len);
         if let Some(fl) = self.file_len.filter(|&fl| end > fl) {
+            let left = fl.saturating_sub(at + 9);
             self.diag(
                 at,
-                "truncated_record",
-                format!(
-                    "{name} record of {len} bytes runs past the end of the file ({} bytes left); looking for records inside it",
-                    fl.saturating_sub(at + 9)
-                ),
+                McapProblem::PastEnd {
+                    record: name,
+                    len,
+                    left,
+                },
             );
             return self.resync(true);
         }
@@ -624,20 +599,20 @@ impl McapReader {
             0x80..=0xFF => {
                 // Application-defined; legal, but a damaged opcode looks like one too.
                 if self.private.insert(opcode) {
-                    self.diag(
-                        at,
-                        "private_record",
-                        format!("record with private opcode 0x{opcode:02x} ({len} bytes) skipped (reported once per opcode)"),
-                    );
+                    self.diag(at, McapProblem::PrivateRecord { opcode, len });
                 }
                 self.src.consume(9);
                 self.skip_body(at, name, len)
             }
             _ if big => {
+                let limit = MAX_RECORD;
                 self.diag(
                     at,
-                    "bad_record",
-                    format!("{name} record claims {len} bytes (limit {MAX_RECORD}); looking for the next record"),
+                    McapProblem::TooLong {
+                        record: name,
+                        len,
+                        limit,
+                    },
                 );
                 self.resync(true)
             }
@@ -668,16 +643,22 @@ impl McapReader {
         }
     }
 
-    fn truncated(&mut self, at: u64, name: &str, len: u64, got: u64) {
-        self.diag(
-            at,
-            "truncated_record",
-            format!("{name} record of {len} bytes: the file ends after {got} of them"),
-        );
+    fn truncated(&mut self, at: u64, name: &'static str, len: u64, got: u64) {
+        let record = name;
+        self.diag(at, McapProblem::TruncatedBody { record, len, got });
         self.st = St::Done;
     }
 
-    fn skip_body(&mut self, at: u64, name: &str, len: u64) -> io::Result<()> {
+    fn unparsable(&mut self, at: u64, opcode: u8, in_chunk: bool, error: String) {
+        let problem = McapProblem::Unparsable {
+            record: op_name(opcode),
+            in_chunk,
+            error,
+        };
+        self.diag(at, problem);
+    }
+
+    fn skip_body(&mut self, at: u64, name: &'static str, len: u64) -> io::Result<()> {
         let got = self.src.skip(len)?;
         if got < len {
             self.truncated(at, name, len, got);
@@ -699,19 +680,18 @@ impl McapReader {
                     if !self.damaged {
                         self.diag(
                             at,
-                            "bad_data_crc",
-                            format!("the data section's CRC is {calc:08x}, the file says {saved:08x}: some bytes before offset {at} are damaged"),
+                            McapProblem::BadDataCrc {
+                                calculated: calc,
+                                saved,
+                                before: at,
+                            },
                         );
                     }
                 }
             }
             op::MESSAGE | op::CHANNEL | op::METADATA | op::HEADER => match parse(opcode, body) {
                 Ok(r) => self.parsed(at, r),
-                Err(e) => self.diag(
-                    at,
-                    "bad_record",
-                    format!("{} record does not parse: {e}", op_name(opcode)),
-                ),
+                Err(e) => self.unparsable(at, opcode, false, e),
             },
             _ => {}
         }
@@ -821,14 +801,8 @@ impl McapReader {
         match self.channels.get(&h.channel_id).copied() {
             None => {
                 if self.bad_channels.insert(h.channel_id) {
-                    self.diag(
-                        at,
-                        "unknown_channel",
-                        format!(
-                            "message on channel {} which no channel record defined (skipped)",
-                            h.channel_id
-                        ),
-                    );
+                    let channel = h.channel_id;
+                    self.diag(at, McapProblem::UnknownChannel { channel });
                 }
             }
             Some(Chan::Skip) => {}
@@ -863,12 +837,7 @@ impl McapReader {
         let hdr = chunk_header(&self.src.avail()[9..n]);
         let Some((hlen, csize, _)) = hdr.filter(|h| h.0 as u64 <= len && h.1 <= len - h.0 as u64)
         else {
-            self.diag(
-                at,
-                "bad_chunk",
-                "chunk header is inconsistent with the record length; looking for the next record"
-                    .into(),
-            );
+            self.diag(at, McapProblem::BadChunkHeader);
             return self.resync(true);
         };
         let mut lr = LinearReader::new_with_options(
@@ -927,40 +896,29 @@ impl McapReader {
             Some(Ok(LinearReadEvent::Record { data, opcode })) => match opcode {
                 op::MESSAGE | op::CHANNEL => match parse(opcode, data) {
                     Ok(r) => self.parsed(at, r),
-                    Err(e) => self.diag(
-                        at,
-                        "bad_record",
-                        format!(
-                            "{} record in the chunk does not parse: {e}",
-                            op_name(opcode)
-                        ),
-                    ),
+                    Err(e) => self.unparsable(at, opcode, true, e),
                 },
                 _ => {}
             },
             Some(Err(e)) => {
                 if ch.cut {
                     let end = self.src.off;
-                    self.diag(
-                        at,
-                        "truncated_record",
-                        format!("the file ends at offset {end}, inside this chunk; its messages up to there were read"),
-                    );
+                    self.diag(at, McapProblem::CutChunk { end });
                     self.st = St::Done;
                     return Ok(());
                 }
-                let (kind, msg) = match e {
-                    McapError::BadChunkCrc { saved, calculated } => (
-                        "bad_chunk_crc",
-                        format!("chunk CRC is {calculated:08x}, the chunk says {saved:08x}: its messages (read above) may be damaged"),
-                    ),
-                    McapError::UnsupportedCompression(c) => (
-                        "unsupported_compression",
-                        format!("chunk compressed with {c:?}, which this reader lacks: skipped"),
-                    ),
-                    e => ("bad_chunk", format!("chunk cannot be read further: {e}")),
+                let problem = match e {
+                    McapError::BadChunkCrc { saved, calculated } => {
+                        McapProblem::BadChunkCrc { calculated, saved }
+                    }
+                    McapError::UnsupportedCompression(compression) => {
+                        McapProblem::UnsupportedCompression { compression }
+                    }
+                    e => McapProblem::BadChunk {
+                        error: e.to_string(),
+                    },
                 };
-                self.diag(at, kind, msg);
+                self.diag(at, problem);
                 let rest = ch.to_feed + ch.padding;
                 let got = self.src.skip(rest)?;
                 if got < rest {
@@ -1029,14 +987,8 @@ impl McapReader {
         loop {
             let n = self.src.fill(64)?;
             if n == 0 {
-                let skipped = self.src.off - start;
-                self.diag(
-                    start,
-                    "skipped_bytes",
-                    format!(
-                        "{skipped} byte(s) skipped: no MCAP record found up to the end of the file"
-                    ),
-                );
+                let bytes = self.src.off - start;
+                self.diag(start, McapProblem::Skipped { bytes, next: None });
                 self.at_eof();
                 return Ok(());
             }
@@ -1069,14 +1021,8 @@ impl McapReader {
                 let at = self.src.off;
                 if self.plausible(&self.src.avail()[..n], at) {
                     if at > start {
-                        self.diag(
-                            start,
-                            "skipped_bytes",
-                            format!(
-                                "{} byte(s) skipped up to the next record at offset {at}",
-                                at - start
-                            ),
-                        );
+                        let (bytes, next) = (at - start, Some(at));
+                        self.diag(start, McapProblem::Skipped { bytes, next });
                     }
                     return Ok(());
                 }
@@ -1084,17 +1030,6 @@ impl McapReader {
             self.src.consume(1);
         }
     }
-}
-
-fn hex_prefix(b: &[u8], n: usize) -> String {
-    let mut s = String::new();
-    for (i, x) in b.iter().take(n).enumerate() {
-        if i > 0 {
-            s.push(' ');
-        }
-        let _ = write!(s, "{x:02x}");
-    }
-    s
 }
 
 impl Reader for McapReader {

@@ -3,7 +3,9 @@
 use super::reader::{crc32_update, lengths_ok, u32le, u64le};
 use super::schema::{apt_unknown_schema, garbage_schema, late_diag_schema};
 use super::*;
-use crate::model::{Direction, Event, OwnedChunk, ReadDiag, Reader, StreamInfo, Writer};
+use crate::model::{
+    Direction, Event, McapProblem, OwnedChunk, ReadDiag, ReadProblem, Reader, StreamInfo, Writer,
+};
 use ::mcap::records::{op, MessageHeader};
 use aptscope_dissector::apt::AptFramer;
 use aptscope_dissector::detect::Proto;
@@ -980,6 +982,14 @@ fn bad_chunk_crc_is_reported_and_reading_goes_on() {
     let got = read(&bytes);
     assert_eq!(got.diags.len(), 1, "{:?}", got.diags);
     assert_eq!(got.diags[0].kind(), "bad_chunk_crc");
+    assert!(
+        matches!(
+            got.diags[0].problem,
+            ReadProblem::Mcap(McapProblem::BadChunkCrc { .. })
+        ),
+        "{:?}",
+        got.diags[0]
+    );
     assert_eq!(got.diags[0].offset, at as u64);
     // Every raw chunk is still produced (the damaged byte is in a decoded message here or
     // in raw data; either way the count and the chunks of other MCAP chunks are intact).

@@ -34,7 +34,8 @@
 use std::collections::{HashMap, VecDeque};
 
 use crate::model::{
-    Direction, OwnedChunk, ReadDiag, ReadProblem, StreamInfo, UrbCut, UsbFormat, UsbProblem,
+    Direction, OwnedChunk, ReadDiag, ReadProblem, StreamInfo, UrbCut, UsbDevice, UsbFormat,
+    UsbNote, UsbProblem,
 };
 
 mod ftdi;
@@ -75,7 +76,7 @@ pub enum UsbOut {
     Diag(ReadDiag),
 }
 
-const FTDI_VID: u16 = 0x0403;
+pub(crate) const FTDI_VID: u16 = 0x0403;
 const USBMON_HDR: usize = 48;
 const USBMON_MMAP_HDR: usize = 64;
 const USBPCAP_HDR: usize = 27;
@@ -276,15 +277,9 @@ impl UsbDemux {
                 continue;
             };
             dev.verdict = Verdict::Ftdi;
-            diag(
-                out,
-                *last_offset,
-                "usb_unconfirmed_device",
-                format!(
-                    "usb {}:{} has no device descriptor and no bulk IN data in the capture: its bulk OUT data is shown as if it were an FTDI device",
-                    key.0, key.1
-                ),
-            );
+            let (bus, addr) = key;
+            let after = None;
+            note(out, *last_offset, UsbNote::Unconfirmed { bus, addr, after });
             flush_pending(dev, key, next_stream, out);
         }
         self.report_absent_filter(out);
@@ -304,36 +299,23 @@ impl UsbDemux {
         if has_data {
             return;
         }
-        let mut keys: Vec<&(u16, u16)> = self.devices.keys().collect();
-        keys.sort_unstable();
-        let present: Vec<String> = keys
+        let mut present: Vec<_> = self
+            .devices
             .iter()
-            .map(|k| {
-                let d = &self.devices[k];
-                let what = match d.ident {
-                    Some((FTDI_VID, pid)) => format!("{FTDI_VID:04x}:{pid:04x}, FTDI"),
-                    Some((vid, pid)) => format!("{vid:04x}:{pid:04x}"),
-                    None => "no descriptor in the capture".into(),
-                };
-                format!("{}:{} ({what})", k.0, k.1)
+            .map(|(&(bus, addr), d)| UsbDevice {
+                bus,
+                addr,
+                ids: d.ident,
             })
             .collect();
-        let why = if self.devices.contains_key(&key) {
-            "is in the capture but sent no serial data"
-        } else {
-            "is not in the capture"
+        present.sort_unstable();
+        let problem = UsbNote::DeviceNotFound {
+            bus,
+            addr: key.1,
+            in_capture: self.devices.contains_key(&key),
+            present,
         };
-        let list = if present.is_empty() {
-            "the capture has no USB bulk or control transfers".to_string()
-        } else {
-            format!("devices present: {}", present.join(", "))
-        };
-        diag(
-            out,
-            self.last_offset,
-            NOT_FOUND,
-            format!("--usb-device {bus}:{addr}: usb {bus}:{addr} {why}; {list}"),
-        );
+        note(out, self.last_offset, problem);
     }
 
     fn ensure_device(&mut self, key: (u16, u16), off: u64, out: &mut Vec<UsbOut>) -> bool {
@@ -343,12 +325,9 @@ impl UsbDemux {
         if self.devices.len() >= MAX_DEVICES {
             if !self.too_many_reported {
                 self.too_many_reported = true;
-                diag(
-                    out,
-                    off,
-                    "usb_too_many_devices",
-                    format!("more than {MAX_DEVICES} USB devices: usb {}:{} and later new devices are ignored", key.0, key.1),
-                );
+                let (bus, addr) = key;
+                let max = MAX_DEVICES;
+                note(out, off, UsbNote::TooManyDevices { max, bus, addr });
             }
             return false;
         }
@@ -430,14 +409,17 @@ impl UsbDemux {
                     bcd,
                     ..Device::default()
                 };
-                diag(
+                let (bus, addr) = key;
+                let (was, now) = (old, ident);
+                note(
                     out,
                     off,
-                    "usb_device_changed",
-                    format!(
-                        "usb {}:{} was {:04x}:{:04x}, is now {:04x}:{:04x}",
-                        key.0, key.1, old.0, old.1, ident.0, ident.1
-                    ),
+                    UsbNote::DeviceChanged {
+                        bus,
+                        addr,
+                        was,
+                        now,
+                    },
                 );
             }
             None => {
@@ -445,23 +427,13 @@ impl UsbDemux {
                 let announced = dev.ports.iter().any(|p| p.stream.is_some());
                 let selected = filter.is_some() || ident.0 == FTDI_VID;
                 if announced {
-                    let (kind, msg) = if selected {
-                        ("usb_device_identified", "its stream continues")
+                    let (bus, addr, ids) = (key.0, key.1, ident);
+                    let n = if selected {
+                        UsbNote::Identified { bus, addr, ids }
                     } else {
-                        (
-                            "usb_not_ftdi",
-                            "not an FTDI device: its traffic is no longer shown",
-                        )
+                        UsbNote::NotFtdi { bus, addr, ids }
                     };
-                    diag(
-                        out,
-                        off,
-                        kind,
-                        format!(
-                            "usb {}:{} is {:04x}:{:04x}: {msg}",
-                            key.0, key.1, ident.0, ident.1
-                        ),
-                    );
+                    note(out, off, n);
                 }
                 if selected {
                     dev.verdict = Verdict::Ftdi;
@@ -518,11 +490,14 @@ impl UsbDemux {
         let p = &mut dev.ports[port];
         let now = p.settings();
         if p.stream.is_some() && now != p.shown {
-            diag(
+            let settings = now.clone();
+            note(
                 out,
                 off,
-                "line_settings",
-                format!("{name}: {}", now.as_deref().unwrap_or("unknown")),
+                UsbNote::LineSettings {
+                    stream: name,
+                    settings,
+                },
             );
             p.shown = now;
         }
@@ -581,15 +556,8 @@ impl UsbDemux {
                             dev.verdict = Verdict::NotFtdi;
                             dev.pending.clear();
                             dev.pending_bytes = 0;
-                            diag(
-                                out,
-                                off,
-                                "usb_not_ftdi",
-                                format!(
-                                    "usb {}:{} (no device descriptor in the capture) sends bulk IN data that does not start with FTDI status bytes (0x{first:02x}): not shown",
-                                    key.0, key.1
-                                ),
-                            );
+                            let (bus, addr) = key;
+                            note(out, off, UsbNote::NoStatusBytes { bus, addr, first });
                             return;
                         }
                         dev.verdict = Verdict::Ftdi;
@@ -610,15 +578,9 @@ impl UsbDemux {
                         }
                         if dev.pending_bytes > PENDING_LIMIT {
                             dev.verdict = Verdict::Ftdi;
-                            diag(
-                                out,
-                                off,
-                                "usb_unconfirmed_device",
-                                format!(
-                                    "usb {}:{} has no device descriptor and no bulk IN data after {PENDING_LIMIT} bytes OUT: shown as if it were an FTDI device",
-                                    key.0, key.1
-                                ),
-                            );
+                            let (bus, addr) = key;
+                            let after = Some(PENDING_LIMIT);
+                            note(out, off, UsbNote::Unconfirmed { bus, addr, after });
                             flush_pending(dev, key, next_stream, out);
                         }
                         return;
@@ -741,15 +703,8 @@ fn in_max_packet(
     }
     if data.len() > 64 && !pieces_look_ftdi(data, 64) && pieces_look_ftdi(data, 512) {
         dev.guess_mps = Some(512);
-        diag(
-            out,
-            off,
-            "usb_max_packet_inferred",
-            format!(
-                "usb {}:{} endpoint 0x{ep:02x}: no endpoint descriptor in the capture and no FTDI status bytes every 64 bytes: assuming 512-byte (high-speed) packets",
-                key.0, key.1
-            ),
-        );
+        let (bus, addr) = key;
+        note(out, off, UsbNote::MaxPacketInferred { bus, addr, ep });
         return 512;
     }
     64
@@ -760,14 +715,27 @@ fn truncated_diag(out: &mut Vec<UsbOut>, off: u64, key: (u16, u16), ep: u8, cut:
     usb_diag(out, off, UsbProblem::TruncatedUrb { cut, bus, addr, ep });
 }
 
-/// A `format` record (`data`, `orig_len` bytes on the wire) shorter than its `header` bytes.
-fn too_short(format: UsbFormat, header: usize, data: &[u8], orig_len: u32) -> UsbProblem {
-    UsbProblem::RecordTooShort {
+/// Whether a `format` record (`data`, `orig_len` bytes on the wire) holds its `header` bytes;
+/// when it does not, says so (at file offset `off`).
+fn holds_header(
+    format: UsbFormat,
+    header: usize,
+    data: &[u8],
+    orig_len: u32,
+    off: u64,
+    out: &mut Vec<UsbOut>,
+) -> bool {
+    if data.len() >= header {
+        return true;
+    }
+    let problem = UsbProblem::RecordTooShort {
         format,
         expected: header,
         found: data.len(),
         original: orig_len,
-    }
+    };
+    usb_diag(out, off, problem);
+    false
 }
 
 fn usb_diag(out: &mut Vec<UsbOut>, offset: u64, problem: UsbProblem) {
@@ -777,8 +745,11 @@ fn usb_diag(out: &mut Vec<UsbOut>, offset: u64, problem: UsbProblem) {
     )));
 }
 
-fn diag(out: &mut Vec<UsbOut>, offset: u64, kind: &'static str, msg: String) {
-    out.push(UsbOut::Diag(ReadDiag::untyped(offset, kind, msg)));
+fn note(out: &mut Vec<UsbOut>, offset: u64, note: UsbNote) {
+    out.push(UsbOut::Diag(ReadDiag::new(
+        offset,
+        ReadProblem::UsbNote(note),
+    )));
 }
 
 fn rd16(d: &[u8], at: usize, be: bool) -> u16 {

@@ -578,6 +578,20 @@ fn devices_filter_and_non_ftdi() {
         assert_eq!(d.len(), 1, "{d:?}");
         assert_eq!(d[0].kind(), NOT_FOUND);
         assert!(d[0].msg().contains(why), "{}", d[0].msg());
+        let ReadProblem::UsbNote(UsbNote::DeviceNotFound { present, .. }) = &d[0].problem else {
+            panic!("{:?}", d[0]);
+        };
+        let ftdi = Some((0x0403, 0xfaf0));
+        let (bus, addr) = (1, 7);
+        assert_eq!(present.len(), 4, "{present:?}");
+        assert_eq!(
+            present[1],
+            UsbDevice {
+                bus,
+                addr,
+                ids: ftdi
+            }
+        );
         assert!(
             d[0].msg().contains(
                 "devices present: 1:4 (no descriptor in the capture), 1:7 (0403:faf0, FTDI), \

@@ -33,12 +33,7 @@ impl UsbDemux {
         off: u64,
         out: &mut Vec<UsbOut>,
     ) -> Option<Urb<'a>> {
-        if data.len() < hdr_len {
-            usb_diag(
-                out,
-                off,
-                too_short(UsbFormat::Usbmon, hdr_len, data, orig_len),
-            );
+        if !holds_header(UsbFormat::Usbmon, hdr_len, data, orig_len, off, out) {
             return None;
         }
         let be = self.usbmon_big_endian(data);

@@ -8,12 +8,7 @@ pub(super) fn parse_usbpcap<'a>(
     off: u64,
     out: &mut Vec<UsbOut>,
 ) -> Option<Urb<'a>> {
-    if data.len() < USBPCAP_HDR {
-        usb_diag(
-            out,
-            off,
-            too_short(UsbFormat::UsbPcap, USBPCAP_HDR, data, orig_len),
-        );
+    if !holds_header(UsbFormat::UsbPcap, USBPCAP_HDR, data, orig_len, off, out) {
         return None;
     }
     let hlen = usize::from(le16(data, 0));
@@ -27,12 +22,7 @@ pub(super) fn parse_usbpcap<'a>(
         usb_diag(out, off, UsbProblem::HeaderTooShort { min, found: hlen });
         return None;
     }
-    if hlen > data.len() {
-        usb_diag(
-            out,
-            off,
-            too_short(UsbFormat::UsbPcap, hlen, data, orig_len),
-        );
+    if !holds_header(UsbFormat::UsbPcap, hlen, data, orig_len, off, out) {
         return None;
     }
     let id = le64(data, 2);
