@@ -267,7 +267,9 @@ impl<'a, 't> AptFrame<'a, 't> {
         let h = self.header();
         let no_flag = self.bits() & D_NO_DATA_FLAG != 0;
         let (has_data, len) = (h.has_data() || no_flag, self.data_len() as u32);
-        [
+        // A constant list: an array built here would be stored and then copied into the
+        // iterator by wider loads (a store-forwarding stall), for clean frames too.
+        const BITS: [u16; 10] = [
             D_TRUNCATED,
             D_DST,
             D_SRC,
@@ -278,55 +280,56 @@ impl<'a, 't> AptFrame<'a, 't> {
             D_HDR_WITH_DATA,
             D_NO_DATA_FLAG,
             D_ZERO_ADDRS,
-        ]
-        .into_iter()
-        .filter(move |bit| self.bits() & bit != 0)
-        .map(move |bit| {
-            let (at, kind) = match bit {
-                D_TRUNCATED => (
-                    self.bytes.len(),
-                    DiagKind::Truncated {
-                        expected: HEADER_LEN as u32 + len,
-                        got: self.bytes.len() as u32,
-                    },
-                ),
-                D_DST => (
-                    4,
-                    DiagKind::UnknownAddress {
-                        which: Which::Destination,
-                        value: h.dst_byte(),
-                    },
-                ),
-                D_SRC => (
-                    5,
-                    DiagKind::UnknownAddress {
-                        which: Which::Source,
-                        value: h.src_byte(),
-                    },
-                ),
-                D_UNKNOWN_ID => (0, DiagKind::UnknownId { msg_id: h.msg_id() }),
-                D_SUB_HDR => (
-                    2,
-                    DiagKind::UnknownSubId {
-                        sub_id: h.param1() as u16,
-                    },
-                ),
-                D_SUB_DATA => (
-                    6,
-                    DiagKind::UnknownSubId {
-                        sub_id: data_sub_id(self.bytes).unwrap_or(0),
-                    },
-                ),
-                D_LENGTH => (2, DiagKind::LengthMismatch { len, has_data }),
-                D_NO_DATA_FLAG => (4, DiagKind::MissingDataFlag { len }),
-                D_ZERO_ADDRS => (4, DiagKind::ZeroAddresses),
-                _ => (4, DiagKind::HeaderOnlyWithData { len }),
-            };
-            Diag {
-                offset: self.offset + at as u64,
-                kind,
-            }
-        })
+        ];
+        BITS.iter()
+            .copied()
+            .filter(move |bit| self.bits() & bit != 0)
+            .map(move |bit| {
+                let (at, kind) = match bit {
+                    D_TRUNCATED => (
+                        self.bytes.len(),
+                        DiagKind::Truncated {
+                            expected: HEADER_LEN as u32 + len,
+                            got: self.bytes.len() as u32,
+                        },
+                    ),
+                    D_DST => (
+                        4,
+                        DiagKind::UnknownAddress {
+                            which: Which::Destination,
+                            value: h.dst_byte(),
+                        },
+                    ),
+                    D_SRC => (
+                        5,
+                        DiagKind::UnknownAddress {
+                            which: Which::Source,
+                            value: h.src_byte(),
+                        },
+                    ),
+                    D_UNKNOWN_ID => (0, DiagKind::UnknownId { msg_id: h.msg_id() }),
+                    D_SUB_HDR => (
+                        2,
+                        DiagKind::UnknownSubId {
+                            sub_id: h.param1() as u16,
+                        },
+                    ),
+                    D_SUB_DATA => (
+                        6,
+                        DiagKind::UnknownSubId {
+                            sub_id: data_sub_id(self.bytes).unwrap_or(0),
+                        },
+                    ),
+                    D_LENGTH => (2, DiagKind::LengthMismatch { len, has_data }),
+                    D_NO_DATA_FLAG => (4, DiagKind::MissingDataFlag { len }),
+                    D_ZERO_ADDRS => (4, DiagKind::ZeroAddresses),
+                    _ => (4, DiagKind::HeaderOnlyWithData { len }),
+                };
+                Diag {
+                    offset: self.offset + at as u64,
+                    kind,
+                }
+            })
     }
 
     /// Length of the data packet: the header's length field, or for a packet sent without the
