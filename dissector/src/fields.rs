@@ -228,6 +228,13 @@ pub trait Fields {
     fn number(&self, _key: Key) -> Option<i64> {
         None
     }
+
+    /// The one word at top-level `key`, when the record has it at hand (`dir`, `type` …):
+    /// `Some(s)` means [`Fields::visit`] would give exactly `Val::Str(s)` once and nothing
+    /// else. `None`: ask `visit` (the default).
+    fn word(&self, _key: Key) -> Option<&'static str> {
+        None
+    }
 }
 
 impl<T: Fields + ?Sized> Fields for &T {
@@ -239,6 +246,9 @@ impl<T: Fields + ?Sized> Fields for &T {
     }
     fn number(&self, key: Key) -> Option<i64> {
         (**self).number(key)
+    }
+    fn word(&self, key: Key) -> Option<&'static str> {
+        (**self).word(key)
     }
 }
 

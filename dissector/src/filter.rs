@@ -66,6 +66,94 @@ pub struct Filter {
     text: String,
 }
 
+/// A filter compiled into closures for scans over millions of records: each comparison of a
+/// record-level value with a literal becomes a closure specialised for its operator and
+/// literal, so a record costs a few calls instead of a walk of the expression tree. Gives the
+/// same answers as [`Filter::matches`] (anything it does not specialise, it asks that of).
+pub struct Matcher {
+    root: Node,
+}
+
+type Node = Box<dyn Fn(&dyn Fields) -> bool + Send + Sync>;
+
+impl fmt::Debug for Matcher {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("Matcher")
+    }
+}
+
+impl Matcher {
+    /// Does `rec` pass the filter?
+    pub fn matches(&self, rec: &dyn Fields) -> bool {
+        (self.root)(rec)
+    }
+}
+
+/// The closure of one expression.
+fn node(e: &Expr) -> Node {
+    match e {
+        Expr::All => Box::new(|_| true),
+        Expr::Or(xs) => {
+            let xs: Vec<Node> = xs.iter().map(node).collect();
+            Box::new(move |r| xs.iter().any(|x| x(r)))
+        }
+        Expr::And(xs) => {
+            let xs: Vec<Node> = xs.iter().map(node).collect();
+            Box::new(move |r| xs.iter().all(|x| x(r)))
+        }
+        Expr::Not(x) => {
+            let x = node(x);
+            Box::new(move |r| !x(r))
+        }
+        Expr::Test(Test::Cmp(f, op, lit)) => cmp_node(f, *op, lit),
+        Expr::Test(t) => {
+            let t = t.clone();
+            Box::new(move |r| t.eval(r))
+        }
+    }
+}
+
+/// A comparison: specialised when it is of a record-level number with an integer, or a
+/// record-level word with a text (`==`/`!=`, ignoring case); when the record does not have the
+/// value at hand, [`Test::cmp`] decides.
+fn cmp_node(f: &FieldRef, op: CmpOp, lit: &Lit) -> Node {
+    let (key, proto) = (f.key, f.proto);
+    let general = {
+        let (f, lit) = (f.clone(), lit.clone());
+        move |r: &dyn Fields| Test::cmp(r, &f, op, &lit)
+    };
+    if f.ts_seconds || !f.rest.is_empty() {
+        return Box::new(general);
+    }
+    let here = move |r: &dyn Fields| proto.is_none() || r.proto() == proto;
+    match lit.kind {
+        LitKind::Num(N::I(l)) => {
+            let holds: fn(i128, i128) -> bool = match op {
+                CmpOp::Eq => |a, b| a == b,
+                CmpOp::Ne => |a, b| a != b,
+                CmpOp::Lt => |a, b| a < b,
+                CmpOp::Le => |a, b| a <= b,
+                CmpOp::Gt => |a, b| a > b,
+                CmpOp::Ge => |a, b| a >= b,
+            };
+            Box::new(move |r| match r.number(key).filter(|_| here(r)) {
+                Some(x) => holds(i128::from(x), l),
+                None => general(r),
+            })
+        }
+        LitKind::Str | LitKind::Word
+            if matches!(op, CmpOp::Eq | CmpOp::Ne) && !f.case_sensitive =>
+        {
+            let (text, ne) = (lit.text.clone(), op == CmpOp::Ne);
+            Box::new(move |r| match r.word(key).filter(|_| here(r)) {
+                Some(w) => w.eq_ignore_ascii_case(&text) != ne,
+                None => general(r),
+            })
+        }
+        _ => Box::new(general),
+    }
+}
+
 /// Why a filter does not compile, and where.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FilterError {
@@ -143,6 +231,13 @@ impl Filter {
     /// [`crate::fields::InFile`]), or one NDJSON object of `decode --json`: both read alike.
     pub fn matches<F: Fields + ?Sized>(&self, rec: &F) -> bool {
         self.expr.eval(rec)
+    }
+
+    /// The filter compiled for scans ([`Matcher`]).
+    pub fn matcher(&self) -> Matcher {
+        Matcher {
+            root: node(&self.expr),
+        }
     }
 
     /// The APT message ids whose frames can match, worked out from the table before a scan:
@@ -457,6 +552,9 @@ impl Expr {
             Expr::Or(xs) => xs.iter().any(|x| x.eval(rec)),
             Expr::And(xs) => xs.iter().all(|x| x.eval(rec)),
             Expr::Not(x) => !x.eval(rec),
+            // The commonest test, kept apart from the others: their code would make every
+            // test pay for a large frame.
+            Expr::Test(Test::Cmp(f, op, lit)) => Test::cmp(rec, f, *op, lit),
             Expr::Test(t) => t.eval(rec),
         }
     }
@@ -470,9 +568,37 @@ fn kind_path() -> &'static [String] {
 }
 
 impl Test {
+    /// A comparison. A record-level value the record has at hand ([`Fields::number`],
+    /// [`Fields::word`]) is compared as [`FieldRef::compare`] would, the common literals
+    /// without building values; anything else goes through the visitor.
+    #[inline]
+    fn cmp<F: Fields + ?Sized>(rec: &F, f: &FieldRef, op: CmpOp, lit: &Lit) -> bool {
+        if f.ts_seconds || !f.rest.is_empty() || !proto_is(rec, f.proto) {
+            return Self::eval_cmp(rec, f, op, lit);
+        }
+        let eq = matches!(op, CmpOp::Eq | CmpOp::Ne);
+        let o = if let Some(x) = rec.number(f.key) {
+            match lit.kind {
+                LitKind::Num(N::I(l)) => Some(i128::from(x).cmp(&l)),
+                _ => f.compare(&Val::Num(N::I(i128::from(x))), lit, eq),
+            }
+        } else if let Some(w) = rec.word(f.key) {
+            match lit.kind {
+                LitKind::Str | LitKind::Word => {
+                    Some(text_cmp(w, &lit.text, eq && !f.case_sensitive))
+                }
+                _ => f.compare(&Val::Str(Cow::Borrowed(w)), lit, eq),
+            }
+        } else {
+            return Self::eval_cmp(rec, f, op, lit);
+        };
+        o.is_some_and(|o| op.holds(o))
+    }
+
     /// A comparison through the visitor: any value satisfies it (`!=`: some value compares
     /// and none is equal).
-    fn eval_cmp<F: Fields + ?Sized>(&self, rec: &F, f: &FieldRef, op: CmpOp, lit: &Lit) -> bool {
+    #[inline(never)]
+    fn eval_cmp<F: Fields + ?Sized>(rec: &F, f: &FieldRef, op: CmpOp, lit: &Lit) -> bool {
         match op {
             CmpOp::Ne => {
                 let (mut comparable, mut equal) = (false, false);
@@ -502,6 +628,7 @@ impl Test {
         }
     }
 
+    #[inline(never)]
     fn eval<F: Fields + ?Sized>(&self, rec: &F) -> bool {
         match self {
             Test::Proto(p) => proto_is(rec, Some(p)),
@@ -528,24 +655,7 @@ impl Test {
             }
             Test::Paired(p) => proto_is(rec, *p) && any_at(rec, Key::Pair, &[], &mut |_, _| true),
             Test::Exists(f) => f.any(rec, &mut |v, r| r != Role::Code && truthy(v)),
-            // A record-level number the record has at hand: its one value, compared as
-            // `eval_cmp` would, without the visitor.
-            Test::Cmp(f, op, lit)
-                if !f.ts_seconds && f.rest.is_empty() && proto_is(rec, f.proto) =>
-            {
-                match rec.number(f.key) {
-                    Some(x) => {
-                        let o = f.compare(
-                            &Val::Num(N::I(i128::from(x))),
-                            lit,
-                            matches!(op, CmpOp::Eq | CmpOp::Ne),
-                        );
-                        o.is_some_and(|o| op.holds(o))
-                    }
-                    None => self.eval_cmp(rec, f, *op, lit),
-                }
-            }
-            Test::Cmp(f, op, lit) => self.eval_cmp(rec, f, *op, lit),
+            Test::Cmp(f, op, lit) => Self::cmp(rec, f, *op, lit),
             Test::Contains(f, lit) => f.any(rec, &mut |v, role| match role {
                 Role::Member => f.compare(v, lit, true) == Some(Ordering::Equal),
                 Role::Code => false,

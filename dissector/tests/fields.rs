@@ -172,6 +172,7 @@ fn sample(name: &str) -> Vec<u8> {
 fn check(bytes: &[u8], proto: Option<Proto>, filters: &[Filter]) -> (usize, Vec<usize>) {
     let mut seen = 0usize;
     let mut hits = vec![0usize; filters.len()];
+    let matchers: Vec<_> = filters.iter().map(Filter::matcher).collect();
     for layout in 0..2 {
         let mut dec = Decoder::new(proto);
         let mut r = Renderer::new(Format::Json);
@@ -180,10 +181,13 @@ fn check(bytes: &[u8], proto: Option<Proto>, filters: &[Filter]) -> (usize, Vec<
             let v: serde_json::Value =
                 serde_json::from_str(&line).map_err(|e| format!("{e}: {line}"))?;
             seen += 1;
-            for (f, h) in filters.iter().zip(hits.iter_mut()) {
+            for ((f, m), h) in filters.iter().zip(&matchers).zip(hits.iter_mut()) {
                 let typed = f.matches(rec);
                 if typed != f.matches(&v) {
                     return Err(format!("`{f}`: typed {typed}, JSON {}: {line}", !typed));
+                }
+                if typed != m.matches(rec) {
+                    return Err(format!("`{f}`: typed {typed}, matcher {}: {line}", !typed));
                 }
                 *h += usize::from(typed);
             }

@@ -282,9 +282,24 @@ impl Fields for View<'_> {
             Key::Stream => u64::from(r.stream),
             Key::TsNs => r.ts()?,
             Key::Msgid if !r.has(F_ELL) && !r.has(F_GARBAGE) => u64::from(r.id),
+            Key::Channel if !r.has(F_ELL) && !r.has(F_GARBAGE) => match r.chan() {
+                KeptChan::Chan(c) => return Some(c),
+                KeptChan::None | KeptChan::InFrame => return None,
+            },
             _ => return None,
         };
         i64::try_from(x).ok()
+    }
+
+    fn word(&self, key: Key) -> Option<&'static str> {
+        let r = self.r;
+        match key {
+            Key::Dir => self.dir(),
+            Key::Name if !r.has(F_ELL) && !r.has(F_GARBAGE) => {
+                Table::global().msg(r.id).map(|m| m.name)
+            }
+            _ => None,
+        }
     }
 
     fn visit(&self, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {

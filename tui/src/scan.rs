@@ -7,7 +7,7 @@
 
 use crate::fields::{self, View, DIRS};
 use crate::index::{Index, Rec, Shared, F_ELL, F_GARBAGE, F_IS_REPLY};
-use aptscope_dissector::filter::{Filter, IdSet};
+use aptscope_dissector::filter::{Filter, IdSet, Matcher};
 use aptscope_dissector::stats::{self, Latencies, Stats, StreamStat, Tally};
 use aptscope_dissector::Table;
 use std::collections::{BTreeMap, VecDeque};
@@ -73,7 +73,7 @@ impl Default for Scan {
 #[derive(Debug)]
 struct Work {
     gen: u64,
-    filter: Option<Filter>,
+    filter: Option<Matcher>,
     /// The APT message ids whose frames can pass the filter (`None`: any).
     ids: Option<IdSet>,
     /// Next record to scan.
@@ -89,7 +89,7 @@ impl Work {
         Work {
             gen,
             ids: filter.as_ref().and_then(|f| f.apt_ids(Table::global())),
-            filter,
+            filter: filter.as_ref().map(Filter::matcher),
             next: 1,
             counts: Counts::default(),
             shown: Instant::now(),

@@ -40,6 +40,10 @@ const FILTERS: &[&str] = &[
     "ell",
     "apt",
     "offset < 200",
+    // Every operator of the scan's specialised comparisons (numbers and words at hand).
+    "len >= 14 && n <= 5000 && apt.chan != 2",
+    "dir != d2h && apt.name != \"MOT_MOVE_ABSOLUTE\"",
+    "dir == H2D || len < 8 || offset > 1.5",
 ];
 
 fn sample(name: &str) -> String {
@@ -239,7 +243,7 @@ fn the_compact_view_reads_like_the_decoded_record() {
         synth,
     ];
     let below = [vec![], vec!["name".to_string()], vec!["kind".to_string()]];
-    let (mut compared, mut numbers) = (0, 0);
+    let (mut compared, mut numbers, mut words) = (0, 0, 0);
     for path in paths {
         let shared = load(&path, OpenOptions::default()).expect("opens");
         let ix = shared.index.read().expect("lock");
@@ -266,6 +270,13 @@ fn the_compact_view_reads_like_the_decoded_record() {
                     assert_eq!(want, Some((true, one)), "{path} #{n} {}", def.name);
                     numbers += 1;
                 }
+                // Likewise a word.
+                if let Some(w) = view.word(def.key) {
+                    let one = vec![format!("{:?} {:?}", Val::Str(w.into()), Role::Plain)];
+                    let want = with_record(&ix, n, |rec| visit_text(rec, def.key, &[]));
+                    assert_eq!(want, Some((true, one)), "{path} #{n} {}", def.name);
+                    words += 1;
+                }
                 for rest in &below {
                     let want = with_record(&ix, n, |rec| visit_text(rec, def.key, rest))
                         .expect("record decodes");
@@ -282,4 +293,5 @@ fn the_compact_view_reads_like_the_decoded_record() {
     }
     assert!(compared > 10_000);
     assert!(numbers > 1_000, "{numbers}");
+    assert!(words > 1_000, "{words}");
 }
