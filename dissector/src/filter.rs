@@ -93,14 +93,27 @@ impl Matcher {
 fn node(e: &Expr) -> Node {
     match e {
         Expr::All => Box::new(|_| true),
-        Expr::Or(xs) => {
-            let xs: Vec<Node> = xs.iter().map(node).collect();
-            Box::new(move |r| xs.iter().any(|x| x(r)))
-        }
-        Expr::And(xs) => {
-            let xs: Vec<Node> = xs.iter().map(node).collect();
-            Box::new(move |r| xs.iter().all(|x| x(r)))
-        }
+        // Two terms (the common case) without a loop.
+        Expr::Or(xs) => match &xs[..] {
+            [a, b] => {
+                let (a, b) = (node(a), node(b));
+                Box::new(move |r| a(r) || b(r))
+            }
+            _ => {
+                let xs: Vec<Node> = xs.iter().map(node).collect();
+                Box::new(move |r| xs.iter().any(|x| x(r)))
+            }
+        },
+        Expr::And(xs) => match &xs[..] {
+            [a, b] => {
+                let (a, b) = (node(a), node(b));
+                Box::new(move |r| a(r) && b(r))
+            }
+            _ => {
+                let xs: Vec<Node> = xs.iter().map(node).collect();
+                Box::new(move |r| xs.iter().all(|x| x(r)))
+            }
+        },
         Expr::Not(x) => {
             let x = node(x);
             Box::new(move |r| !x(r))
@@ -118,40 +131,50 @@ fn node(e: &Expr) -> Node {
 /// value at hand, [`Test::cmp`] decides.
 fn cmp_node(f: &FieldRef, op: CmpOp, lit: &Lit) -> Node {
     let (key, proto) = (f.key, f.proto);
-    let general = {
+    // Out of line (boxed): the specialised closures stay small.
+    let general: Node = {
         let (f, lit) = (f.clone(), lit.clone());
-        move |r: &dyn Fields| Test::cmp(r, &f, op, &lit)
+        Box::new(move |r: &dyn Fields| Test::cmp(r, &f, op, &lit))
     };
     if f.ts_seconds || !f.rest.is_empty() {
-        return Box::new(general);
+        return general;
     }
-    let here = move |r: &dyn Fields| proto.is_none() || r.proto() == proto;
     match lit.kind {
-        LitKind::Num(N::I(l)) => {
-            let holds: fn(i128, i128) -> bool = match op {
-                CmpOp::Eq => |a, b| a == b,
-                CmpOp::Ne => |a, b| a != b,
-                CmpOp::Lt => |a, b| a < b,
-                CmpOp::Le => |a, b| a <= b,
-                CmpOp::Gt => |a, b| a > b,
-                CmpOp::Ge => |a, b| a >= b,
-            };
-            Box::new(move |r| match r.number(key).filter(|_| here(r)) {
-                Some(x) => holds(i128::from(x), l),
-                None => general(r),
-            })
-        }
+        LitKind::Num(N::I(l)) => match op {
+            CmpOp::Eq => num_node(key, proto, general, move |x| i128::from(x) == l),
+            CmpOp::Ne => num_node(key, proto, general, move |x| i128::from(x) != l),
+            CmpOp::Lt => num_node(key, proto, general, move |x| i128::from(x) < l),
+            CmpOp::Le => num_node(key, proto, general, move |x| i128::from(x) <= l),
+            CmpOp::Gt => num_node(key, proto, general, move |x| i128::from(x) > l),
+            CmpOp::Ge => num_node(key, proto, general, move |x| i128::from(x) >= l),
+        },
         LitKind::Str | LitKind::Word
             if matches!(op, CmpOp::Eq | CmpOp::Ne) && !f.case_sensitive =>
         {
             let (text, ne) = (lit.text.clone(), op == CmpOp::Ne);
-            Box::new(move |r| match r.word(key).filter(|_| here(r)) {
+            Box::new(move |r| match r.word(key).filter(|_| proto_is(r, proto)) {
                 Some(w) => w.eq_ignore_ascii_case(&text) != ne,
                 None => general(r),
             })
         }
-        _ => Box::new(general),
+        _ => general,
     }
+}
+
+/// A comparison of a record-level number: `test` on the number the record has at hand,
+/// else `general`.
+fn num_node(
+    key: Key,
+    proto: Option<&'static str>,
+    general: Node,
+    test: impl Fn(i64) -> bool + Send + Sync + 'static,
+) -> Node {
+    Box::new(
+        move |r| match r.number(key).filter(|_| proto_is(r, proto)) {
+            Some(x) => test(x),
+            None => general(r),
+        },
+    )
 }
 
 /// Why a filter does not compile, and where.
