@@ -189,29 +189,31 @@ impl<'a, 't> AptFrame<'a, 't> {
         let has_data = h.has_data() || no_flag;
         let len = data_len(bytes);
         let (mut msg_form, mut sub, mut form) = (None, None, None);
-        for fm in &m.forms {
-            match fm.kind {
-                FormKind::Header if !has_data => {
-                    msg_form = Some(fm);
-                    form = Some(fm);
-                    if let Some(g) = m.subs {
-                        if let Some(p1) = fm.sub_field() {
-                            sub = table.sub_of(m, g, bytes[p1.loc.frame_offset()] as u16);
-                            if sub.is_none() {
-                                diag_bits |= D_SUB_HDR;
-                            }
-                        }
+        // Without a data packet: the first header-only form (found when the table was built).
+        let header = m.hdr_form.and_then(|i| m.forms.get(usize::from(i)));
+        if let Some(fm) = header.filter(|_| !has_data) {
+            msg_form = Some(fm);
+            form = Some(fm);
+            if let Some(g) = m.subs {
+                if let Some(p1) = fm.sub_field() {
+                    sub = table.sub_of(m, g, bytes[p1.loc.frame_offset()] as u16);
+                    if sub.is_none() {
+                        diag_bits |= D_SUB_HDR;
                     }
                 }
-                FormKind::Data(n) if has_data && n as usize == len => {
+            }
+        }
+        for fm in m.forms.iter().filter(|_| has_data) {
+            match fm.kind {
+                FormKind::Data(n) if n as usize == len => {
                     msg_form = Some(fm);
                     form = Some(fm);
                 }
-                FormKind::Open(_) if has_data && fm.open_fits(len, table.max_data_len(m)) => {
+                FormKind::Open(_) if fm.open_fits(len, table.max_data_len(m)) => {
                     msg_form = Some(fm);
                     form = Some(fm);
                 }
-                FormKind::Sub if has_data && len >= 2 => {
+                FormKind::Sub if len >= 2 => {
                     let (Some(g), Some(id)) = (m.subs, data_sub_id(bytes)) else {
                         continue;
                     };

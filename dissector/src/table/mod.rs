@@ -134,6 +134,10 @@ impl Table {
         let msg_forms = data.msgs.iter_mut().flat_map(|m| m.forms.iter_mut());
         let sub_forms = data.subs.iter_mut().flat_map(|s| s.forms.iter_mut());
         msg_forms.chain(sub_forms).for_each(Form::index);
+        for m in data.msgs.iter_mut() {
+            let first = m.forms.iter().position(|f| f.kind == FormKind::Header);
+            m.hdr_form = first.and_then(|i| u8::try_from(i).ok());
+        }
         let mut by_id = vec![u16::MAX; 65536].into_boxed_slice();
         for (i, m) in data.msgs.iter().enumerate() {
             by_id[m.id as usize] = i as u16;

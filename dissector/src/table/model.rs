@@ -430,6 +430,9 @@ pub struct MsgDef {
     pub doc: &'static str,
     /// Every length the message exists in.
     pub forms: Vec<Form>,
+    /// Position in `forms` of the first header-only form (what a frame without data packet
+    /// decodes as), set when the table is built.
+    pub(crate) hdr_form: Option<u8>,
     /// Spec examples.
     pub examples: Vec<Example>,
     /// Table file it is defined in.

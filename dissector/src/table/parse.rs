@@ -391,6 +391,7 @@ impl Parser {
             timeout_ms: None,
             doc: "",
             forms: vec![],
+            hdr_form: None,
             examples: vec![],
             file,
             line: ln,
