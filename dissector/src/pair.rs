@@ -290,23 +290,10 @@ impl AptPairer {
         }
     }
 
-    /// Observe frame `n` (time of its last byte `ts`; `dir` when the capture records it).
+    /// Observe frame `n` (time of its last byte `ts`; `dir` when the capture records it): what
+    /// pairing made of it goes into `info` (overwritten; its `expired` keeps its allocation, so
+    /// a decoder reuses one for every frame).
     pub fn observe(
-        &mut self,
-        table: &Table,
-        n: u64,
-        f: &AptFrame<'_, '_>,
-        dir: Option<Dir>,
-        ts: Option<u64>,
-    ) -> PairInfo {
-        let mut info = PairInfo::default();
-        self.observe_into(table, n, f, dir, ts, &mut info);
-        info
-    }
-
-    /// [`AptPairer::observe`] into `info` (overwritten; its `expired` keeps its allocation):
-    /// a decoder reuses one for every frame.
-    pub fn observe_into(
         &mut self,
         table: &Table,
         n: u64,
@@ -521,6 +508,19 @@ impl AptPairer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn observe(
+        p: &mut AptPairer,
+        t: &Table,
+        n: u64,
+        f: &AptFrame<'_, '_>,
+        dir: Option<Dir>,
+        ts: Option<u64>,
+    ) -> PairInfo {
+        let mut info = PairInfo::default();
+        p.observe(t, n, f, dir, ts, &mut info);
+        info
+    }
     use crate::apt::{encode, FieldValue};
 
     fn frame(
@@ -619,7 +619,14 @@ mod tests {
             .enumerate()
             .map(|(i, b)| {
                 let f = AptFrame::decode(t, 0, b, false).expect("frame");
-                p.observe(t, i as u64 + 1, &f, None, Some(i as u64 * 1_000_000))
+                observe(
+                    &mut p,
+                    t,
+                    i as u64 + 1,
+                    &f,
+                    None,
+                    Some(i as u64 * 1_000_000),
+                )
             })
             .collect();
         assert_eq!(
@@ -652,11 +659,11 @@ mod tests {
         let mut p = AptPairer::new();
         let req = frame(t, "HW_REQ_INFO", &[], 0x50, 0x01, false);
         let f = AptFrame::decode(t, 0, &req, false).expect("frame");
-        p.observe(t, 1, &f, None, Some(0));
-        p.observe(t, 2, &f, None, Some(1_000_000_000));
+        observe(&mut p, t, 1, &f, None, Some(0));
+        observe(&mut p, t, 2, &f, None, Some(1_000_000_000));
         let later = frame(t, "MOD_IDENTIFY", &[], 0x50, 0x01, false);
         let g = AptFrame::decode(t, 12, &later, false).expect("frame");
-        let info = p.observe(t, 3, &g, None, Some(2_500_000_000));
+        let info = observe(&mut p, t, 3, &g, None, Some(2_500_000_000));
         assert_eq!(info.expired.iter().map(|u| u.n).collect::<Vec<_>>(), [1]);
         assert_eq!(
             p.finish().iter().map(|u| (u.n, u.name)).collect::<Vec<_>>(),
@@ -687,10 +694,10 @@ mod tests {
         // More unanswered requests on channel 1 than a reply looks through.
         let many = SCAN as u64 + 50;
         for i in 1..=many {
-            p.observe(t, i, &q1, Some(Dir::HostToDevice), None);
+            observe(&mut p, t, i, &q1, Some(Dir::HostToDevice), None);
         }
-        p.observe(t, many + 1, &q2, Some(Dir::HostToDevice), None);
-        let info = p.observe(t, many + 2, &r2, Some(Dir::DeviceToHost), None);
+        observe(&mut p, t, many + 1, &q2, Some(Dir::HostToDevice), None);
+        let info = observe(&mut p, t, many + 2, &r2, Some(Dir::DeviceToHost), None);
         assert_eq!(info.pair, Some(many + 1));
         assert!(!info.unsolicited);
         // Channel 1's requests are still waiting: the reply took only its own.
@@ -723,11 +730,11 @@ mod tests {
         );
         let n = 1000u64;
         for i in 1..=n {
-            let info = p.observe(t, i, &fq, Some(Dir::HostToDevice), Some(i));
+            let info = observe(&mut p, t, i, &fq, Some(Dir::HostToDevice), Some(i));
             assert!(info.expired.is_empty());
         }
         for i in 1..=n {
-            let info = p.observe(t, n + i, &fr, Some(Dir::DeviceToHost), Some(n + i));
+            let info = observe(&mut p, t, n + i, &fr, Some(Dir::DeviceToHost), Some(n + i));
             assert_eq!(info.pair, Some(i));
             assert!(!info.duplicate && !info.unsolicited && info.expired.is_empty());
         }

@@ -637,9 +637,7 @@ impl Decoder {
                             continue;
                         };
                         let pinfo = &mut self.pinfo;
-                        self.pairers[pi_idx]
-                            .1
-                            .observe_into(t, n, f, cap_dir, ts, pinfo);
+                        self.pairers[pi_idx].1.observe(t, n, f, cap_dir, ts, pinfo);
                         self.expired.extend(pinfo.expired.iter().map(|u| NoReply {
                             proto: Proto::Apt,
                             stream,
