@@ -11,7 +11,7 @@
 use aptscope_dissector::apt::{
     fmt_value, summary, AptFrame, AptFramer, GarbageKind, Item, HEADER_LEN, MAX_GARBAGE_RUN,
 };
-use aptscope_dissector::pair::AptPairer;
+use aptscope_dissector::pair::{AptPairer, PairInfo};
 use aptscope_dissector::{json, text, Table};
 use aptscope_fuzz::{cuts, split_ctl, Times};
 use libfuzzer_sys::fuzz_target;
@@ -108,7 +108,8 @@ fuzz_target!(|data: &[u8]| {
                 let _ = f.channel();
                 // Pairing, with times that may be anywhere in the u64 range.
                 let ts = times.next_time();
-                let p = pairer.observe(t, n, &f, None, ts);
+                let mut p = PairInfo::default();
+                pairer.observe(t, n, &f, None, ts, &mut p);
                 s.clear();
                 json::apt_frame_paired(&mut s, n, &f, &p);
                 if let Err(e) = serde_json::from_str::<serde_json::Value>(&s) {
