@@ -141,11 +141,14 @@ fn drop_waiting<K: std::hash::Hash + Eq>(lists: &mut NumMap<K, VecDeque<Waiting>
         if let Some(i) = v.iter().position(|w| w.n == n) {
             v.remove(i);
         }
-        if v.is_empty() {
-            lists.remove(&key);
-        }
+        // An emptied list is kept (its key usually comes back: no allocation per request);
+        // `insert` sweeps them when there are many.
     }
 }
+
+/// Lists of `by_chan` kept, empty ones included, before the empty ones are swept: twice the
+/// most that can hold requests, so that a sweep frees at least half (sweeps stay rare).
+const LISTS_KEPT: usize = 2 * MAX_REPLIES * MAX_PENDING;
 
 /// A channel as a key of `by_chan` (requests naming no channel under one that no channel
 /// number takes).
@@ -229,6 +232,9 @@ impl AptPairer {
         };
         for id in p.expects.as_slice() {
             self.by_reply.entry(*id).or_default().push_back(w);
+            if self.by_chan.len() >= LISTS_KEPT {
+                self.by_chan.retain(|_, v| !v.is_empty());
+            }
             self.by_chan
                 .entry((*id, chan_key(p.chan)))
                 .or_default()
