@@ -500,6 +500,47 @@ impl Fields for Record<'_> {
         Record::proto(self)
     }
 
+    // What `visit` gives as one plain number or word for the commonest keys of frames and
+    // garbage (statistics and filters read them for every record).
+    fn number(&self, key: Key) -> Option<i64> {
+        let (m, offset, len, pair) = match self {
+            Record::Apt(a) => (&a.meta, a.frame.offset, a.frame.bytes.len(), a.pair.pair),
+            Record::Ell(e) => (&e.meta, e.frame.offset, e.frame.bytes.len(), e.obs.pair),
+            Record::Garbage(g) => (&g.meta, g.offset, g.bytes.len(), None),
+            _ => return None,
+        };
+        let frame = !matches!(self, Record::Garbage(_));
+        let x: u64 = match key {
+            Key::N => m.n,
+            Key::Offset => offset,
+            Key::CapOffset => m.cap_offset,
+            Key::Len => len as u64,
+            Key::Stream => u64::from(m.stream),
+            Key::TsNs => m.ts_ns?,
+            Key::Pair if frame => pair?,
+            Key::Msgid => match self {
+                Record::Apt(a) => u64::from(a.frame.header().msg_id()),
+                _ => return None,
+            },
+            Key::Channel => match self {
+                Record::Apt(a) => return a.frame.channel(),
+                _ => return None,
+            },
+            _ => return None,
+        };
+        i64::try_from(x).ok()
+    }
+
+    fn word(&self, key: Key) -> Option<&'static str> {
+        match (self, key) {
+            (Record::Apt(_) | Record::Ell(_), Key::Type) => Some("frame"),
+            (Record::Garbage(_), Key::Type) => Some("garbage"),
+            (Record::Apt(a), Key::Dir) => Some(a.dir().map_or("unknown", |d| d.as_str())),
+            (Record::Apt(a), Key::Name) => a.frame.msg.map(|m| m.name),
+            _ => None,
+        }
+    }
+
     fn visit(&self, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
         match self {
             Record::Apt(a) => apt_visit(a, key, rest, f),

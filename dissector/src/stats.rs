@@ -128,6 +128,10 @@ const MAX_REQUESTS: usize = 1 << 16;
 
 /// Append the text at `key`/`rest` of `rec` to `out`; false when there is none.
 fn push_str<F: Fields + ?Sized>(rec: &F, key: Key, rest: &[String], out: &mut String) -> bool {
+    if let Some(w) = rest.is_empty().then(|| rec.word(key)).flatten() {
+        out.push_str(w);
+        return true;
+    }
     let mut found = false;
     rec.visit(key, rest, &mut |v, r| {
         if let (Val::Str(s), false, Role::Plain) = (v, found, r) {
@@ -184,6 +188,9 @@ pub fn address_key<F: Fields + ?Sized>(rec: &F, out: &mut String) {
 
 /// The number at `key` of `rec`.
 fn number<F: Fields + ?Sized>(rec: &F, key: Key) -> Option<Num> {
+    if let Some(x) = rec.number(key) {
+        return Some(Num::I(i128::from(x)));
+    }
     let mut n = None;
     rec.visit(key, &[], &mut |v, _| {
         if let Val::Num(x) = v {
@@ -195,6 +202,9 @@ fn number<F: Fields + ?Sized>(rec: &F, key: Key) -> Option<Num> {
 
 /// Whether the text at `key` of `rec` is `want`.
 fn text_is<F: Fields + ?Sized>(rec: &F, key: Key, want: &str) -> bool {
+    if let Some(w) = rec.word(key) {
+        return w == want;
+    }
     let mut yes = false;
     rec.visit(key, &[], &mut |v, _| {
         if let Val::Str(s) = v {

@@ -3,6 +3,7 @@
 //! sample, for every key, operator and kind of value.
 
 use aptscope_dissector::detect::Proto;
+use aptscope_dissector::fields::{Fields, Num, Role, Val, KEYS};
 use aptscope_dissector::filter::Filter;
 use aptscope_dissector::pipeline::{Format, Renderer};
 use aptscope_dissector::record::{Ctx, Decoder, Record};
@@ -166,6 +167,27 @@ fn sample(name: &str) -> Vec<u8> {
     std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
+/// A number or word a record has at hand ([`Fields::number`], [`Fields::word`]) is exactly
+/// the one plain value its visit gives.
+fn at_hand_is_what_visit_gives(rec: &Record<'_>) -> Result<(), String> {
+    for def in KEYS {
+        let want = match (rec.number(def.key), rec.word(def.key)) {
+            (Some(x), _) => format!("{:?}", Val::Num(Num::I(i128::from(x)))),
+            (None, Some(w)) => format!("{:?}", Val::Str(w.into())),
+            (None, None) => continue,
+        };
+        let mut got = vec![];
+        let there = rec.visit(def.key, &[], &mut |v, r| got.push(format!("{v:?} {r:?}")));
+        if !there || got != [format!("{want} {:?}", Role::Plain)] {
+            return Err(format!(
+                "{}: at hand {want}, visit {there} {got:?}",
+                def.name
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Decode `bytes` as one timed stream, and as two streams (the bytes on each, interleaved;
 /// the second one captured device→host), checking every filter on every record both ways.
 /// Returns the records seen and how many each filter matched.
@@ -181,6 +203,7 @@ fn check(bytes: &[u8], proto: Option<Proto>, filters: &[Filter]) -> (usize, Vec<
             let v: serde_json::Value =
                 serde_json::from_str(&line).map_err(|e| format!("{e}: {line}"))?;
             seen += 1;
+            at_hand_is_what_visit_gives(rec).map_err(|e| format!("{e}: {line}"))?;
             for ((f, m), h) in filters.iter().zip(&matchers).zip(hits.iter_mut()) {
                 let typed = f.matches(rec);
                 if typed != f.matches(&v) {
