@@ -127,6 +127,17 @@ fn data_sub_id(bytes: &[u8]) -> Option<u16> {
     bytes.get(6..8).map(|b| u16::from_le_bytes([b[0], b[1]]))
 }
 
+/// The value of an integer field `f` in the frame `bytes` (what [`field_value`] and
+/// [`Value::as_i64`] give, without their general cases: every frame's channel is read so).
+#[inline]
+fn int_value(bytes: &[u8], f: &Field) -> Option<i64> {
+    let Ty::Prim(p) = f.ty else {
+        return field_value(bytes, f)?.as_i64();
+    };
+    let start = f.loc.frame_offset();
+    read_prim(p, bytes.get(start..start + p.width())?).as_i64()
+}
+
 /// The value of field `f` in the frame `bytes`.
 fn field_value<'a>(bytes: &'a [u8], f: &Field) -> Option<Value<'a>> {
     let start = f.loc.frame_offset();
@@ -244,8 +255,7 @@ impl<'a, 't> AptFrame<'a, 't> {
         }
         let chan = form
             .and_then(|fm| fm.chan_field())
-            .and_then(|fd| field_value(bytes, fd))
-            .and_then(|v| v.as_i64())
+            .and_then(|fd| int_value(bytes, fd))
             .map(|c| match c {
                 4 => 3,
                 8 => 4,
@@ -389,9 +399,13 @@ impl<'a, 't> AptFrame<'a, 't> {
         })
     }
 
-    /// A field by name.
+    /// A field by name (as [`AptFrame::fields`] gives it; only its value is read).
     pub fn field(&self, name: &str) -> Option<(&'t Field, Value<'a>)> {
-        self.fields().find(|(f, _)| f.name == name)
+        let fields: &'t [Field] = self.form.map_or(&[], |f| f.fields.as_slice());
+        fields
+            .iter()
+            .filter(|f| f.name == name && !matches!(f.ty, Ty::Pad(_)))
+            .find_map(|f| Some((f, field_value(self.bytes, f)?)))
     }
 
     /// The channel number (1-based), from the `chan_ident` field: idents 0x01, 0x02, 0x04, 0x08
