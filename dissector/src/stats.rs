@@ -214,12 +214,15 @@ fn text_is<F: Fields + ?Sized>(rec: &F, key: Key, want: &str) -> bool {
     yes
 }
 
-/// The entry of `k` in `map`, created only when missing (no key allocation for a known one).
-fn entry<'m, T: Default>(map: &'m mut BTreeMap<String, T>, k: &str) -> Option<&'m mut T> {
-    if !map.contains_key(k) {
-        map.insert(k.to_string(), T::default());
+/// Update the entry of `k` in `map` with `f`, creating it when missing: one lookup for a
+/// known key, and no key allocation.
+fn bump<T: Default>(map: &mut BTreeMap<String, T>, k: &str, f: impl FnOnce(&mut T)) {
+    if let Some(v) = map.get_mut(k) {
+        return f(v);
     }
-    map.get_mut(k)
+    let mut v = T::default();
+    f(&mut v);
+    map.insert(k.to_string(), v);
 }
 
 /// The value at fraction `q` of sorted data (nearest rank).
@@ -262,9 +265,7 @@ impl Stats {
                 Val::Str(s) => s.as_ref(),
                 _ => "?",
             };
-            if let Some(c) = entry(diags, k) {
-                *c += 1;
-            }
+            bump(diags, k, |c| *c += 1);
         });
         let len = number(rec, Key::Len).and_then(Num::u64).unwrap_or(0);
         let stream = number(rec, Key::Stream).and_then(Num::u64);
@@ -290,10 +291,10 @@ impl Stats {
         self.frames.bytes += len;
         self.scratch.clear();
         message_key(rec, &mut self.scratch);
-        if let Some(m) = entry(&mut self.messages, &self.scratch) {
+        bump(&mut self.messages, &self.scratch, |m| {
             m.tally.count += 1;
             m.tally.bytes += len;
-        }
+        });
         let pair = number(rec, Key::Pair).and_then(Num::u64);
         let mut from_device = false;
         let mut has_dir = false;
@@ -324,10 +325,10 @@ impl Stats {
         }
         self.scratch.clear();
         address_key(rec, &mut self.scratch);
-        if let Some(a) = entry(&mut self.addresses, &self.scratch) {
+        bump(&mut self.addresses, &self.scratch, |a| {
             a.count += 1;
             a.bytes += len;
-        }
+        });
         if let Some(id) = stream {
             let st = &mut self.streams.entry(id).or_default().tally;
             st.count += 1;
@@ -341,10 +342,10 @@ impl Stats {
         if !push_str(rec, Key::Dir, &[], &mut self.scratch) {
             self.scratch.push_str("unknown");
         }
-        if let Some(d) = entry(&mut self.directions, &self.scratch) {
+        bump(&mut self.directions, &self.scratch, |d| {
             d.count += 1;
             d.bytes += len;
-        }
+        });
         if let Some(ts) = number(rec, Key::TsNs).and_then(Num::u64) {
             let first = *self.first_ts.get_or_insert(ts);
             let bin = ts.saturating_sub(first) / self.bin_ns * self.bin_ns;
