@@ -862,24 +862,25 @@ fn stats(
     }
     dec.finish(&mut each)?;
     ticker.done();
+    // Written, not printed: a closed pipe (`| head`) ends the command quietly.
+    let mut out = io::stdout().lock();
     if as_json {
-        println!("{}", st.to_json());
+        writeln!(out, "{}", st.to_json())
     } else {
-        print!("{}", st.to_text());
+        write!(out, "{}", st.to_text())
     }
-    Ok(())
 }
 
 fn info(file: &str, opts: OpenOptions, as_json: bool, proto: ProtoArg) -> io::Result<()> {
     let (mut reader, _) = open(file, opts)?;
     let i = summarize(reader.as_mut(), proto_of(proto));
     i.file_diags.iter().try_for_each(fatal)?;
+    let mut out = io::stdout().lock();
     if as_json {
-        println!("{}", i.to_json(file));
+        writeln!(out, "{}", i.to_json(file))
     } else {
-        print!("{}", i.to_text(file));
+        write!(out, "{}", i.to_text(file))
     }
-    Ok(())
 }
 
 fn convert(
@@ -1055,8 +1056,7 @@ fn ell_encode(addr: &str, args: &[String]) -> io::Result<()> {
     let bytes = encode::assignments(values)
         .and_then(|v| encode::encode(addr, cmd, &v))
         .map_err(|e| bad(e.to_string()))?;
-    println!("{}", encode::display(&bytes));
-    Ok(())
+    writeln!(io::stdout(), "{}", encode::display(&bytes))
 }
 
 /// A progress line on stderr for long jobs, only when stderr is a terminal.
@@ -1235,6 +1235,5 @@ fn encode_cmd(
         eprintln!("fields not given, set to 0: {}", zero.join(", "));
     }
     let hex: Vec<String> = bytes.iter().map(|b| format!("{b:02X}")).collect();
-    println!("{}", hex.join(" "));
-    Ok(())
+    writeln!(io::stdout(), "{}", hex.join(" "))
 }

@@ -556,3 +556,42 @@ fn records_of_several_files_name_their_file() {
         "{out}"
     );
 }
+
+#[test]
+fn a_reader_that_has_gone_ends_every_command_quietly() {
+    // `aptscope … | head`: stdout is a pipe whose reading end is already closed, so the
+    // first write fails; the command must end with success and no panic.
+    let s = "samples/kdc101-session.pcapng";
+    let runs: [&[&str]; 10] = [
+        &["decode", s],
+        &["decode", "--json", s],
+        &["stats", s],
+        &["stats", "--json", s],
+        &["info", s],
+        &["info", "--json", s],
+        &["messages"],
+        &["messages", "--json"],
+        &["messages", "MOT_MOVE_ABSOLUTE"],
+        &[
+            "encode",
+            "MOT_MOVE_ABSOLUTE",
+            "chan_ident=1",
+            "absolute_position=100",
+        ],
+    ];
+    for args in runs {
+        let (reader, writer) = std::io::pipe().expect("pipe");
+        drop(reader);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_aptscope"))
+            .args(args)
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .stdin(std::process::Stdio::null())
+            .stdout(writer)
+            .stderr(std::process::Stdio::piped())
+            .output()
+            .expect("run aptscope");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert!(o.status.success(), "{args:?}: {:?} {err}", o.status);
+    }
+}
