@@ -24,7 +24,8 @@ pub trait Sink {
     /// Close the innermost list.
     fn end_list(&mut self);
     /// The key of the next member of the innermost object. Keys are identifiers (names from
-    /// this module and the message tables): NDJSON writes them without escaping.
+    /// this module and the message tables, which the APT table's parser and an Elliptec table
+    /// test keep to letters, digits and `_`): NDJSON writes them without escaping.
     fn key(&mut self, k: &str);
     /// A key that lives as long as the program (a table's field name): a sink may keep what
     /// it makes of it.

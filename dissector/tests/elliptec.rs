@@ -1105,3 +1105,18 @@ proptest::proptest! {
         }
     }
 }
+
+#[test]
+fn field_names_are_identifiers_json_keys_need_no_escaping() {
+    // NDJSON writes field names (and `<name>_name`, `<name>_version`) as keys without
+    // escaping; the APT table's parser refuses other names, this table is checked here.
+    for c in COMMANDS {
+        for f in c.fields {
+            let ok = !f.name.is_empty()
+                && f.name
+                    .bytes()
+                    .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_');
+            assert!(ok, "{} field `{}`", c.code, f.name);
+        }
+    }
+}
