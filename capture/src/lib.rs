@@ -11,6 +11,7 @@ pub mod mcap;
 pub mod model;
 pub mod open;
 pub mod pcap;
+pub mod problem;
 pub mod raw;
 pub mod textlog;
 pub mod tools;
