@@ -738,6 +738,35 @@ fn holds_header(
     false
 }
 
+/// Whether a `format` URB of transfer type `xfer` (device `bus`:`addr`) carries what is shown:
+/// control and bulk. Isochronous, interrupt and the format's own `ignored` types are passed
+/// over; any other type is reported (at file offset `off`).
+fn shown_transfer(
+    format: UsbFormat,
+    xfer: u8,
+    ignored: &[u8],
+    (bus, addr): (u16, u16),
+    off: u64,
+    out: &mut Vec<UsbOut>,
+) -> bool {
+    match xfer {
+        XFER_CONTROL | XFER_BULK => true,
+        // Not used by FTDI serial converters.
+        XFER_ISO | XFER_INTERRUPT => false,
+        x if ignored.contains(&x) => false,
+        found => {
+            let problem = UsbProblem::UnknownTransferType {
+                format,
+                found,
+                bus,
+                addr,
+            };
+            usb_diag(out, off, problem);
+            false
+        }
+    }
+}
+
 fn usb_diag(out: &mut Vec<UsbOut>, offset: u64, problem: UsbProblem) {
     out.push(UsbOut::Diag(ReadDiag::new(
         offset,

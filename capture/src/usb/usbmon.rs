@@ -57,20 +57,8 @@ impl UsbDemux {
                 return None;
             }
         };
-        match xfer {
-            XFER_CONTROL | XFER_BULK => {}
-            // Not used by FTDI serial converters.
-            XFER_ISO | XFER_INTERRUPT => return None,
-            other => {
-                let problem = UsbProblem::UnknownTransferType {
-                    format: UsbFormat::Usbmon,
-                    found: other,
-                    bus,
-                    addr,
-                };
-                usb_diag(out, off, problem);
-                return None;
-            }
+        if !shown_transfer(UsbFormat::Usbmon, xfer, &[], (bus, addr), off, out) {
+            return None;
         }
         let setup = if submit && xfer == XFER_CONTROL && flag_setup == 0 {
             let mut s = [0u8; 8];

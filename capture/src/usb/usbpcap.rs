@@ -31,19 +31,16 @@ pub(super) fn parse_usbpcap<'a>(
     let addr = le16(data, 19);
     let ep = data[21];
     let data_len = le32(data, 23);
-    match transfer {
-        XFER_CONTROL | XFER_BULK => {}
-        XFER_ISO | XFER_INTERRUPT | USBPCAP_IRP_INFO | USBPCAP_UNKNOWN => return None,
-        other => {
-            let problem = UsbProblem::UnknownTransferType {
-                format: UsbFormat::UsbPcap,
-                found: other,
-                bus,
-                addr,
-            };
-            usb_diag(out, off, problem);
-            return None;
-        }
+    let ignored = [USBPCAP_IRP_INFO, USBPCAP_UNKNOWN];
+    if !shown_transfer(
+        UsbFormat::UsbPcap,
+        transfer,
+        &ignored,
+        (bus, addr),
+        off,
+        out,
+    ) {
+        return None;
     }
     let avail = &data[hlen..];
     let (mut payload, truncated) = match usize::try_from(data_len) {
