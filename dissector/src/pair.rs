@@ -134,7 +134,7 @@ fn comes_unasked(m: &MsgDef) -> bool {
     m.class.has(Class::STATUS) || m.class.has(Class::SPONTANEOUS)
 }
 
-/// Take request `n` out of the list under `key` (dropping the list when it empties).
+/// Take request `n` out of the list under `key`.
 fn drop_waiting<K: std::hash::Hash + Eq>(lists: &mut NumMap<K, VecDeque<Waiting>>, key: K, n: u64) {
     if let Some(v) = lists.get_mut(&key) {
         // Requests are mostly answered in order: at or near the front.
@@ -230,11 +230,11 @@ impl AptPairer {
             chan: p.chan,
             id: p.id,
         };
+        if self.by_chan.len() >= LISTS_KEPT {
+            self.by_chan.retain(|_, v| !v.is_empty());
+        }
         for id in p.expects.as_slice() {
             self.by_reply.entry(*id).or_default().push_back(w);
-            if self.by_chan.len() >= LISTS_KEPT {
-                self.by_chan.retain(|_, v| !v.is_empty());
-            }
             self.by_chan
                 .entry((*id, chan_key(p.chan)))
                 .or_default()
@@ -466,13 +466,10 @@ impl AptPairer {
     ) {
         // HW_GET_INFO names the device's model.
         if m.id == 0x0006 {
-            let model = f
-                .fields()
-                .find(|(fd, _)| fd.name == "model_number")
-                .and_then(|(_, v)| match v {
-                    Value::Str(b) => Some(b),
-                    _ => None,
-                });
+            let model = f.field("model_number").and_then(|(_, v)| match v {
+                Value::Str(b) => Some(b),
+                _ => None,
+            });
             if let Some(b) = model {
                 let mut name = [0u8; 8];
                 let end = b.iter().position(|&c| c == 0).unwrap_or(b.len()).min(8);
