@@ -116,6 +116,8 @@ pub struct Stats {
     requests: BTreeMap<(u64, u64), String>,
     /// Reused to build keys without an allocation per record.
     scratch: String,
+    /// Reused for the direction of the record being counted.
+    dir_scratch: String,
     /// Paths read below keys, built once.
     p_kind: Vec<String>,
 }
@@ -251,6 +253,7 @@ impl Stats {
             first_ts: None,
             requests: BTreeMap::new(),
             scratch: String::new(),
+            dir_scratch: String::new(),
             p_kind: vec!["kind".to_string()],
         }
     }
@@ -296,17 +299,15 @@ impl Stats {
             m.tally.bytes += len;
         });
         let pair = number(rec, Key::Pair).and_then(Num::u64);
-        let mut from_device = false;
-        let mut has_dir = false;
-        rec.visit(Key::Dir, &[], &mut |v, _| {
-            if let Val::Str(s) = v {
-                has_dir = true;
-                from_device = s == "d2h";
-            }
-        });
-        if !has_dir {
-            from_device = text_is(rec, Key::MsgDir, "d2h");
-        }
+        // The direction, read once: it decides what can be a request and keys `directions`.
+        let mut dir = std::mem::take(&mut self.dir_scratch);
+        dir.clear();
+        let has_dir = push_str(rec, Key::Dir, &[], &mut dir);
+        let from_device = if has_dir {
+            dir == "d2h"
+        } else {
+            text_is(rec, Key::MsgDir, "d2h")
+        };
         let s = stream.unwrap_or(0);
         // Only what can be a request is remembered (a reply names its request in `pair`).
         if let (Some(n), None, false) = (number(rec, Key::N).and_then(Num::u64), pair, from_device)
@@ -338,14 +339,14 @@ impl Stats {
             a.count += 1;
             a.bytes += len;
         }
-        self.scratch.clear();
-        if !push_str(rec, Key::Dir, &[], &mut self.scratch) {
-            self.scratch.push_str("unknown");
+        if !has_dir {
+            dir.push_str("unknown");
         }
-        bump(&mut self.directions, &self.scratch, |d| {
+        bump(&mut self.directions, &dir, |d| {
             d.count += 1;
             d.bytes += len;
         });
+        self.dir_scratch = dir;
         if let Some(ts) = number(rec, Key::TsNs).and_then(Num::u64) {
             let first = *self.first_ts.get_or_insert(ts);
             let bin = ts.saturating_sub(first) / self.bin_ns * self.bin_ns;
