@@ -139,6 +139,7 @@ fn int_value(bytes: &[u8], f: &Field) -> Option<i64> {
 }
 
 /// The value of field `f` in the frame `bytes`.
+#[inline]
 fn field_value<'a>(bytes: &'a [u8], f: &Field) -> Option<Value<'a>> {
     let start = f.loc.frame_offset();
     let b = bytes.get(start..start + field_width(f, bytes.len()))?;
@@ -385,18 +386,10 @@ impl<'a, 't> AptFrame<'a, 't> {
     pub fn fields(&self) -> impl Iterator<Item = (&'t Field, Value<'a>)> + '_ {
         let fields: &'t [Field] = self.form.map_or(&[], |f| f.fields.as_slice());
         let bytes = self.bytes;
-        fields.iter().filter_map(move |f| {
-            let start = f.loc.frame_offset();
-            let b = bytes.get(start..start + field_width(f, bytes.len()))?;
-            let v = match f.ty {
-                Ty::Prim(p) => read_prim(p, b),
-                Ty::Array(p, _) => Value::Array(p, b),
-                Ty::Str(_) => Value::Str(b),
-                Ty::Bytes(_) => Value::Bytes(b),
-                Ty::Pad(_) => return None,
-            };
-            Some((f, v))
-        })
+        fields
+            .iter()
+            .filter(|f| !matches!(f.ty, Ty::Pad(_)))
+            .filter_map(move |f| Some((f, field_value(bytes, f)?)))
     }
 
     /// A field by name (as [`AptFrame::fields`] gives it; only its value is read).
