@@ -430,10 +430,9 @@ impl Indexer {
                         let Ok(mut ix) = shared.index.write() else {
                             return;
                         };
-                        let mut spare = p.apply(&mut ix);
+                        // Emptied by `apply` (their contents appended to the index).
+                        let spare = p.apply(&mut ix);
                         drop(ix);
-                        spare.0.clear();
-                        spare.1.clear();
                         let _ = back_tx.send(spare);
                     }
                 });
