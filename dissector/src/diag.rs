@@ -240,7 +240,7 @@ impl fmt::Display for DiagKind {
                 let m = String::from_utf8_lossy(&model[..end]);
                 write!(
                     f,
-                    "the spec does not list this message for {} (the device's HW_GET_INFO model)",
+                    "the spec does not name this message for {} (the device's HW_GET_INFO model; read: the \"Messages Applicable to\" lists and the message's own section, Issue 23 and 2025)",
                     m.trim()
                 )
             }

@@ -24,6 +24,8 @@ struct Pending {
     device: u8,
     chan: Option<i64>,
     timeout_ns: u64,
+    /// `class=stop` (see [`Waiting::stop`]).
+    stop: bool,
 }
 
 /// Most replies a request can have (the table's `reply=` lists name at most two, plus GET_x for
@@ -180,6 +182,9 @@ struct Waiting {
     chan: Option<i64>,
     /// The request's message id.
     id: u16,
+    /// The request stops a move (`class=stop`): each stop is answered by its own end-of-move
+    /// reply, not swept up by another's.
+    stop: bool,
 }
 
 /// How many of the oldest waiting requests a reply looks at: replies come in order, so its
@@ -229,6 +234,7 @@ impl AptPairer {
             device: p.device,
             chan: p.chan,
             id: p.id,
+            stop: p.stop,
         };
         if self.by_chan.len() >= LISTS_KEPT {
             self.by_chan.retain(|_, v| !v.is_empty());
@@ -296,7 +302,7 @@ impl AptPairer {
         }
     }
 
-    /// Observe frame `n` (time of its last byte `ts`; `dir` when the capture records it): what
+    /// Observe frame `n` (time of its first byte `ts`; `dir` when the capture records it): what
     /// pairing made of it goes into `info` (overwritten; its `expired` keeps its allocation, so
     /// a decoder reuses one for every frame).
     pub fn observe(
@@ -356,6 +362,7 @@ impl AptPairer {
                     device: h.dst_byte(),
                     chan,
                     timeout_ns: default_timeout_ns(m),
+                    stop: m.class.has(Class::STOP),
                 });
             }
             return;
@@ -379,27 +386,38 @@ impl AptPairer {
         let found = found.or(any);
         match found.and_then(|k| self.remove(k)) {
             Some(p) => {
-                // The same message also answers other waiting requests to that device and
-                // channel (MOVE_STOPPED completes a move and the stop that ended it; one
-                // MOVE_COMPLETED ends a move and the moves it superseded: `class=end_of_move`
-                // in the table). Any other reply (a GET) answers one request: repeated
-                // requests wait for their own replies.
-                let one_to_one = !m.class.has(Class::END_OF_MOVE);
+                // Requests are answered first in, first out per (device, channel, reply). An
+                // end-of-move reply (`class=end_of_move`) also ends what the move it reports
+                // superseded: the other moves waiting on that device and channel (one
+                // MOVE_COMPLETED ends a move and the moves sent over it) and, when it answers a
+                // move, the oldest stop that ended it (MOVE_STOPPED completes a move and its
+                // stop). A stop is never swept by another stop's reply: a host that stops twice
+                // (thorlabs-apt-device's `close()` does) gets a MOVE_STOPPED for each. Any other
+                // reply (a GET) answers one request: repeated requests wait for their own.
+                let end_of_move = m.class.has(Class::END_OF_MOVE);
                 let mut also = std::mem::take(&mut self.also);
                 also.clear();
                 // A reply only one kind of request expects answers one request of that kind.
-                let several = !one_to_one || table.requesters(m) > 1;
+                let several = end_of_move || table.requesters(m) > 1;
                 if let Some(v) = self.by_reply.get(&m.id).filter(|_| several) {
-                    also.extend(
-                        v.iter()
-                            .take(SCAN)
-                            .filter(|q| {
-                                q.device == p.device
-                                    && q.chan == p.chan
-                                    && !(one_to_one && q.id == p.id)
-                            })
-                            .map(|q| q.n),
-                    );
+                    let mut stop_taken = p.stop;
+                    for q in v.iter().take(SCAN) {
+                        if q.device != p.device || q.chan != p.chan || q.n == p.n {
+                            continue;
+                        }
+                        let take = if !end_of_move {
+                            q.id != p.id
+                        } else if p.stop {
+                            false
+                        } else if q.stop {
+                            !std::mem::replace(&mut stop_taken, true)
+                        } else {
+                            true
+                        };
+                        if take {
+                            also.push(q.n);
+                        }
+                    }
                 }
                 for &k in &also {
                     self.remove(k);

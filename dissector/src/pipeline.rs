@@ -125,6 +125,17 @@ impl Pipeline {
         self.dec.push(ctx, chunk, &mut |rec| r.render(rec, emit))
     }
 
+    /// Decide the protocol now when the bytes held so far make it certain (see
+    /// [`Decoder::detect_if_certain`]): a live input shows its records at once instead of after
+    /// the 4 KiB detection sample. Returns whether the protocol is known.
+    pub fn detect_if_certain<E>(
+        &mut self,
+        emit: &mut impl FnMut(&str) -> Result<(), E>,
+    ) -> Result<bool, E> {
+        let r = &mut self.r;
+        self.dec.detect_if_certain(&mut |rec| r.render(rec, emit))
+    }
+
     /// Say that the sender of `dir` on `stream` has paused (see [`Decoder::cut`]).
     pub fn cut<E>(
         &mut self,

@@ -41,7 +41,9 @@ pub struct Meta {
     pub stream: u32,
     /// Direction as the capture recorded it.
     pub cap_dir: Option<Dir>,
-    /// Capture time in ns (a frame: when its last byte arrived; garbage: its first byte).
+    /// Capture time in ns: when the record's first byte arrived (a framer that waits for the
+    /// next byte to know a frame has ended does not move its time), so records of a stream come
+    /// in time order.
     pub ts_ns: Option<u64>,
     /// Seconds since the first timed chunk of the capture.
     pub rel_s: Option<f64>,
@@ -590,8 +592,7 @@ impl Decoder {
         let t = Table::global();
         let first = self.first_ts;
         let (ts, stream, cap_dir) = (self.lanes[i].ts, self.lanes[i].stream, self.lanes[i].dir);
-        // A record's context: frames get the time of the chunk that completed them, garbage
-        // the time of its first byte.
+        // A record's context: the time of its first byte.
         let meta = |n: u64, ts: Option<u64>, cap_offset: u64| Meta {
             n,
             stream,
@@ -637,7 +638,7 @@ impl Decoder {
                             continue;
                         };
                         let pinfo = &mut self.pinfo;
-                        self.pairers[pi_idx].1.observe(t, n, f, cap_dir, ts, pinfo);
+                        self.pairers[pi_idx].1.observe(t, n, f, cap_dir, first_ts, pinfo);
                         self.expired.extend(pinfo.expired.iter().map(|u| NoReply {
                             proto: Proto::Apt,
                             stream,
@@ -650,7 +651,7 @@ impl Decoder {
                             // Before the frame: what its values are converted with.
                             emit(&Record::Units(&nt))?;
                         }
-                        let meta = meta(n, ts, cap_offset);
+                        let meta = meta(n, first_ts, cap_offset);
                         emit(&Record::Apt(AptRec {
                             meta,
                             frame: f,
@@ -705,7 +706,7 @@ impl Decoder {
                     let Some(mut f) = EllFrame::decode(offset, bytes, truncated) else {
                         continue;
                     };
-                    let o = self.buses[bus_idx].1.observe(n, &f, ts);
+                    let o = self.buses[bus_idx].1.observe(n, &f, first_ts);
                     if o.unsolicited {
                         f.push_diag(Diag {
                             offset,
@@ -714,7 +715,7 @@ impl Decoder {
                     }
                     self.expired
                         .extend(o.expired.iter().map(|e| ell_no_reply(stream, e)));
-                    let meta = meta(n, ts, cap_offset);
+                    let meta = meta(n, first_ts, cap_offset);
                     emit(&Record::Ell(EllRec {
                         meta,
                         frame: &f,

@@ -2,7 +2,7 @@
 //! `IN` replies) across address changes (`ca`, `ga`), and pairs each host command with its reply.
 
 use super::decode::{EllFrame, EllValue};
-use super::table::{model, Answer, Class, Cmd};
+use super::table::{model, Answer, Class, Cmd, UNKNOWN_COMMAND};
 use crate::table::Dir;
 use std::collections::VecDeque;
 
@@ -79,7 +79,7 @@ struct Pending {
 pub struct Observation {
     /// Record number of the command this reply answers.
     pub pair: Option<u64>,
-    /// Time from the end of the command to the end of the reply.
+    /// Time from the command's first byte to the reply's.
     pub latency_ns: Option<u64>,
     /// A reply no pending command expected (button messages `BS`/`BO` excepted).
     pub unsolicited: bool,
@@ -179,13 +179,16 @@ impl Bus {
         });
     }
 
-    /// Observe frame number `n` (with the time of its last byte, when known).
+    /// Observe frame number `n` (with the time of its first byte, when known).
     pub fn observe(&mut self, n: u64, f: &EllFrame<'_>, ts: Option<u64>) -> Observation {
         let mut o = Observation::default();
         self.expire(ts, &mut o.expired);
         let addr = f.addr & 15;
-        let Some(cmd) = f.cmd else {
-            return o;
+        let cmd = match f.cmd {
+            Some(c) => c,
+            // An unknown host command is still a command: a module answers it (`GS` 03).
+            None if f.dir() == Dir::HostToDevice => &UNKNOWN_COMMAND,
+            None => return o,
         };
         if f.dir() == Dir::HostToDevice {
             self.command(n, f, cmd, ts, &mut o);

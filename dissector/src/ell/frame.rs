@@ -167,7 +167,10 @@ fn step(b: &[u8], eof: bool, cut: bool) -> Step {
         Some(Ok(h)) => h,
     };
     let Some(cmd) = h.cmd else {
-        // Unknown command: only a whole terminated line of data characters is a frame.
+        if b[h.cmd_at].is_ascii_lowercase() {
+            return unknown_host(b, h.data_at, eof, cut);
+        }
+        // Unknown reply: only a whole terminated line of data characters is a frame.
         let rest = &b[h.data_at..];
         return match rest.iter().take(MAX_UNKNOWN).position(|&c| is_term(c)) {
             Some(p)
@@ -278,6 +281,47 @@ fn host_command(b: &[u8], h: &Head, n: usize, eof: bool, cut: bool) -> Step {
     match term_len(&data[n..], eof || cut) {
         Some(t) => Step::Frame(h.data_at + n + t, false),
         None => Step::NeedMore,
+    }
+}
+
+/// A host command the table does not know (pylablib asks `0i3`): an address, a lower-case letter
+/// and a letter or digit are a host command whatever the table says (the manual's own mix
+/// letters and digits: `i1`, `f1`, `b2`). Its data, as text, runs to a terminator, to where the
+/// next frame visibly starts, to a character that cannot be data, or to where the bytes end once
+/// the module has answered (`cut`) or the stream has ended.
+fn unknown_host(b: &[u8], data_at: usize, eof: bool, cut: bool) -> Step {
+    let end = b.len().min(data_at + MAX_UNKNOWN);
+    for p in data_at..end {
+        let c = b[p];
+        if is_term(c) {
+            return match term_len(&b[p..], eof || cut) {
+                Some(t) => Step::Frame(p + t, false),
+                None => Step::NeedMore,
+            };
+        }
+        if !(is_data_char(c) || c.is_ascii_alphanumeric()) || starts_frame(&b[p..]) {
+            return Step::Frame(p, false);
+        }
+        // Too few bytes left to tell whether a frame starts here.
+        if b.len() - p < 3 && c.is_ascii_alphanumeric() && !(eof || cut) {
+            return Step::NeedMore;
+        }
+    }
+    if end < b.len() || eof || cut || end - data_at >= MAX_UNKNOWN {
+        Step::Frame(end, false)
+    } else {
+        Step::NeedMore
+    }
+}
+
+/// Whether a frame visibly starts at `b`: a known command, or a host command's shape (an
+/// address digit or upper-case letter, a lower-case letter, a letter or digit). Lower-case
+/// address letters are left out: they are also lower-case hex data.
+fn starts_frame(b: &[u8]) -> bool {
+    match head(b) {
+        Some(Ok(h)) if h.cmd.is_some() => true,
+        _ => matches!(b, [a, c, d, ..] if (a.is_ascii_digit() || (b'A'..=b'F').contains(a))
+            && c.is_ascii_lowercase() && d.is_ascii_alphanumeric()),
     }
 }
 

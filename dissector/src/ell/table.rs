@@ -455,6 +455,25 @@ commands! {
         "Also answer at another address until the next motion ends, to move a group together (p.43)";
 }
 
+/// A host command the manual does not list (pylablib's `get_full_info` asks `0i3`, motor 3's
+/// parameters): a module answers it with `GS` and status 3, "command error or not supported"
+/// (manual p.10). Pairing reads this row for every unknown host command, the simulators answer
+/// as it says.
+pub static UNKNOWN_COMMAND: Cmd = Cmd {
+    code: "??",
+    name: "UNKNOWN_COMMAND",
+    dir: Dir::HostToDevice,
+    class: Class::Query,
+    timeout_ms: 2000,
+    fields: &[],
+    replies: &["GS"],
+    doc: "A host command the manual does not list: answered with GS status 3, command error or not supported (p.10)",
+};
+
+/// Status code of `GS` a module answers an unknown command with: "command error or not
+/// supported" (p.10).
+pub const STATUS_COMMAND_ERROR: u32 = 3;
+
 /// Status code of `GS`/`BS` that means the module is busy (a motion is running).
 pub const STATUS_BUSY: u32 = 9;
 

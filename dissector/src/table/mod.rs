@@ -57,19 +57,18 @@ impl Table {
         &self.data.devices
     }
 
-    /// The models (as the spec names them) that implement `m`: their lists name it or a message
-    /// it answers, in table order.
+    /// The models (as the spec names them) that take `m`: their lists or a section of the spec
+    /// name it, a message it answers, or a reply it asks for (as in `device_profile`), in table
+    /// order.
     pub fn models_of(&self, m: &MsgDef) -> Vec<&'static str> {
         let mut out: Vec<&'static str> = vec![];
         for g in &self.data.devices {
-            // Listed, or the reply of a listed message (as in `device_profile`).
-            let listed = g.msgs.iter().any(|n| {
-                *n == m.name
-                    || self
-                        .msg_by_name(n)
-                        .is_some_and(|q| self.reply_ids(q).contains(&m.id))
-            });
-            if listed {
+            let named = g
+                .msgs
+                .iter()
+                .filter_map(|n| self.msg_by_name(n))
+                .any(|q| q.id == m.id || self.exchange(q, m));
+            if named {
                 for x in &g.models {
                     if !out.contains(x) {
                         out.push(x);
@@ -80,9 +79,22 @@ impl Table {
         out
     }
 
-    /// What a model (as an HW_GET_INFO reply names it) implements: the messages its `devices`
-    /// blocks list and their replies; `None` when no block names the model (nothing can be said
-    /// of it then).
+    /// Whether `b` is the other half of `a`'s exchange: `a`'s reply (REQ_x → GET_x, `reply=`),
+    /// or a query `a` answers (not a move or stop: MOVE_COMPLETED does not make every move a
+    /// model's).
+    fn exchange(&self, a: &MsgDef, b: &MsgDef) -> bool {
+        let query = |m: &MsgDef| !m.class.has(Class::MOTION) && !m.class.has(Class::STOP);
+        self.reply_ids(a).contains(&b.id) || (query(b) && self.reply_ids(b).contains(&a.id))
+    }
+
+    /// What a model (as an HW_GET_INFO reply names it) implements: the messages its lists
+    /// (`devices` blocks) name, those the spec's message sections say apply to it (`section`
+    /// blocks: the lists often leave them out, KDC101's MOT_REQ_KCUBETRIGIOCONFIG), and for each
+    /// the other half of its exchange: a device that takes a request sends its reply (TTC001's
+    /// list names REQ_STATUSUPDATE without GET_STATUSUPDATE), and one that sends a reply answers
+    /// its request (KPZ101's lists name PZ_GET_PZSTATUSUPDATE without its REQ, which pylablib's
+    /// KinesisPiezoController polls). `None` when no list names the model: nothing can be said
+    /// of it then.
     pub fn device_profile(&self, model: &str) -> Option<DeviceProfile> {
         let groups: Vec<&DeviceGroup> = self
             .data
@@ -90,7 +102,7 @@ impl Table {
             .iter()
             .filter(|g| g.matches(model))
             .collect();
-        if groups.is_empty() {
+        if !groups.iter().any(|g| g.source == DeviceSource::List) {
             return None;
         }
         let mut msgs = vec![false; self.data.msgs.len()];
@@ -100,11 +112,10 @@ impl Table {
                     continue;
                 };
                 msgs[i] = true;
-                // The lists often name a request without its reply (TTC001: REQ_STATUSUPDATE
-                // but not GET_STATUSUPDATE): a device that takes a request sends its reply.
-                for r in self.reply_ids(&self.data.msgs[i]) {
-                    if let Some(&j) = self.by_id.get(*r as usize).filter(|&&j| j != u16::MAX) {
-                        msgs[j as usize] = true;
+                let listed = &self.data.msgs[i];
+                for (j, q) in self.data.msgs.iter().enumerate() {
+                    if self.exchange(listed, q) {
+                        msgs[j] = true;
                     }
                 }
             }

@@ -600,12 +600,24 @@ pub struct DeviceGroup {
     /// Model names as the spec writes them; a lower-case `x` stands for any character
     /// (`BSC20x`, `KLSxxx`).
     pub models: Vec<&'static str>,
+    /// Which part of the spec says so.
+    pub source: DeviceSource,
     /// Message names.
     pub msgs: Vec<&'static str>,
     /// Table file.
     pub file: &'static str,
     /// Line.
     pub line: usize,
+}
+
+/// Where the spec says which models take a message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DeviceSource {
+    /// A "Messages Applicable to …" list (`devices` block): what a model implements.
+    List,
+    /// A message section's own "applicable only to …" sentence (`section` block): adds to the
+    /// lists of the models it names (the lists often leave such messages out).
+    Section,
 }
 
 impl DeviceGroup {

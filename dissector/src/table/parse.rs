@@ -239,13 +239,19 @@ impl Parser {
                     ),
                 },
                 "msg" => self.msg(file, ln, rest),
-                "devices" => {
+                "devices" | "section" => {
                     let models: Vec<&'static str> = tokens(rest);
                     if models.is_empty() || !models.iter().all(|m| is_ident(m)) {
-                        self.err(file, ln, "devices needs: MODEL [MODEL ...]");
+                        self.err(file, ln, &format!("{kw} needs: MODEL [MODEL ...]"));
                     }
+                    let source = if kw == "devices" {
+                        DeviceSource::List
+                    } else {
+                        DeviceSource::Section
+                    };
                     self.data.devices.push(DeviceGroup {
                         models,
+                        source,
                         msgs: vec![],
                         file,
                         line: ln,
