@@ -15,7 +15,7 @@ use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
 use aptscope_dissector::units::UnitsOpts;
 use aptscope_parquet::{decode_file, not_a_capture, not_a_capture_error, CaptureWriter, DirSink};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 use std::io::{self, IsTerminal, Write};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -111,9 +111,10 @@ impl Bar {
     }
 }
 
-/// Output of one file's worker: blocks of bytes, then its result.
+/// Output of one file's worker: blocks of bytes (with whether to flush them out now: a live
+/// input's records as they come), then its result.
 enum Msg {
-    Data(Vec<u8>),
+    Data(Vec<u8>, bool),
     Done(io::Result<Stats>),
 }
 
@@ -135,13 +136,14 @@ struct ChanWriter<'a> {
 const BLOCK: usize = 1 << 16;
 
 impl ChanWriter<'_> {
-    fn send(&mut self) -> io::Result<()> {
+    /// Send the block; `now`: and have it written out at once.
+    fn send(&mut self, now: bool) -> io::Result<()> {
         if self.held.get() || self.buf.is_empty() {
             return Ok(());
         }
         let b = std::mem::replace(&mut self.buf, Vec::with_capacity(BLOCK));
         self.tx
-            .send(Msg::Data(b))
+            .send(Msg::Data(b, now))
             .map_err(|_| io::Error::from(io::ErrorKind::BrokenPipe))
     }
 }
@@ -150,12 +152,12 @@ impl Write for ChanWriter<'_> {
     fn write(&mut self, b: &[u8]) -> io::Result<usize> {
         self.buf.extend_from_slice(b);
         if self.buf.len() >= BLOCK {
-            self.send()?;
+            self.send(false)?;
         }
         Ok(b.len())
     }
     fn flush(&mut self) -> io::Result<()> {
-        self.send()
+        self.send(true)
     }
 }
 
@@ -218,8 +220,11 @@ fn collect(job: &Job<'_>, rxs: Vec<Receiver<Msg>>, bar: &Bar, stop: &AtomicBool)
         let file = &job.files[i];
         loop {
             match rx.recv() {
-                Ok(Msg::Data(b)) => {
-                    if let Err(e) = out.write_all(&b) {
+                Ok(Msg::Data(b, now)) => {
+                    let w = out
+                        .write_all(&b)
+                        .and_then(|_| if now { out.flush() } else { Ok(()) });
+                    if let Err(e) = w {
                         stop.store(true, Ordering::Relaxed);
                         return Err(e);
                     }
@@ -326,9 +331,12 @@ fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<S
                 p.set_filter(f);
             }
             let mut k = 0u32;
+            // Shared by `emit` and the flushes of a live input.
+            let out = RefCell::new(out);
             let mut emit = |line: &str| -> io::Result<()> {
-                out.write_all(line.as_bytes())?;
-                out.write_all(b"\n")
+                let mut o = out.borrow_mut();
+                o.write_all(line.as_bytes())?;
+                o.write_all(b"\n")
             };
             while let Some(ev) = reader.next_event() {
                 if let Event::Diag(d) = &ev {
@@ -343,6 +351,12 @@ fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<S
                         held.set(false);
                     }
                 }
+                // The input had nothing more just now (a pipe a live capture writes, a followed
+                // file): what it gave is shown now, each record as its bytes arrive.
+                if progress.idle() && !held.get() {
+                    p.detect_if_certain(&mut emit)?;
+                    out.borrow_mut().flush()?;
+                }
                 k = k.wrapping_add(1);
                 if k.is_multiple_of(256) {
                     bar.tick(&progress, &mut seen);
@@ -356,7 +370,7 @@ fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<S
             }
             held.set(false);
             bar.tick(&progress, &mut seen);
-            out.flush()?;
+            out.borrow_mut().flush()?;
             Ok(Stats::default())
         }
     }

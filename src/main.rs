@@ -234,6 +234,11 @@ enum Cmd {
         /// Reply timeout for every request (`500ms`, `2s`) instead of the per-message defaults.
         #[arg(long, value_parser = parse_duration)]
         timeout: Option<u64>,
+        /// Follow a capture another program is still writing, like `tail -f`: each record is
+        /// printed as its bytes arrive, until interrupted (Ctrl-C). Standard input from a pipe
+        /// is followed without it (`dumpcap -w - | aptscope decode -`).
+        #[arg(long)]
+        follow: bool,
         #[command(flatten)]
         units: UnitsArgs,
     },
@@ -465,9 +470,24 @@ fn main() -> ExitCode {
             usb_device,
             filter,
             timeout,
+            follow,
             units,
-        } => open_opts(format.as_deref(), hex, usb_device.as_deref()).and_then(|o| {
+        } => open_opts(format.as_deref(), hex, usb_device.as_deref()).and_then(|mut o| {
             let u = units.opts()?;
+            if follow {
+                if files.len() != 1 || files[0] == "-" {
+                    return Err(bad(
+                        "--follow follows one capture file (standard input from a pipe is \
+                         followed without it)"
+                            .into(),
+                    ));
+                }
+                if to == Some(ToArg::Parquet) {
+                    return Err(bad("--follow prints records as they come: not with --to parquet".into()));
+                }
+                // Nothing says when another program's writing ends: followed until interrupted.
+                o.follow = Some(FollowStop::new());
+            }
             let out = match (to, json, output) {
                 (Some(ToArg::Parquet), _, Some(dir)) => {
                     aptscope_parquet::prepare_dir(&dir, force)?;
@@ -515,10 +535,9 @@ fn main() -> ExitCode {
             follow,
             units,
         } => open_opts(format.as_deref(), false, usb_device.as_deref()).and_then(|mut o| {
-            if follow {
-                if file == "-" {
-                    return Err(bad("--follow follows a file, not standard input".into()));
-                }
+            // Standard input is followed as it comes, with or without --follow (a pipe ends
+            // when its writer does: `dumpcap -w - | aptscope view --follow -`).
+            if follow && file != "-" {
                 // Nothing says when another program's writing ends: followed until `q`.
                 o.follow = Some(FollowStop::new());
             }

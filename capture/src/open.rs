@@ -1,12 +1,13 @@
 //! Opening any capture: format detection from content, readers and writers by format.
 
-use crate::follow::{Follow, FollowStop};
+use crate::follow::{Follow, FollowStop, HEAD_WAIT};
 use crate::model::{Chunk, Direction, Event, ReadDiag, ReadProblem, Reader, Writer};
 use crate::raw::{ByteSource, InputFormat};
 use crate::{mcap, pcap, textlog};
+use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use std::fs::File;
 use std::io::{self, BufReader, Cursor, Read};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 
 /// A capture file format.
@@ -332,9 +333,21 @@ pub struct Progress {
     pub read: Arc<AtomicU64>,
     /// Size of the file (`None` for standard input).
     pub total: Option<u64>,
+    /// The input is live: a pipe or terminal on standard input, or a followed file. Its
+    /// records are worth showing as its bytes arrive.
+    pub live: bool,
+    /// The last read returned less than it asked for: the input has nothing more just now.
+    pub drained: Arc<AtomicBool>,
 }
 
 impl Progress {
+    /// Whether a live input had nothing more at its last read: output made since is worth
+    /// flushing now (`dumpcap -w - | aptscope decode -` prints each record as its bytes
+    /// arrive), not when a buffer fills. Always `false` for a file read whole.
+    pub fn idle(&self) -> bool {
+        self.live && self.drained.load(Ordering::Relaxed)
+    }
+
     /// Fraction read, 0..=1, when the size is known.
     pub fn fraction(&self) -> Option<f64> {
         let t = self.total.filter(|t| *t > 0)?;
@@ -342,18 +355,62 @@ impl Progress {
     }
 }
 
-/// A reader that counts what passes through it.
+/// A reader that counts what passes through it, and says when a read came back short.
 struct Counted<R> {
     inner: R,
     read: Arc<AtomicU64>,
+    drained: Arc<AtomicBool>,
 }
 
 impl<R: Read> Read for Counted<R> {
     fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
         let n = self.inner.read(buf)?;
         self.read.fetch_add(n as u64, Ordering::Relaxed);
+        self.drained.store(n < buf.len(), Ordering::Relaxed);
         Ok(n)
     }
+}
+
+/// Whether standard input is a regular file (`decode - < capture.pcap`).
+fn stdin_is_file() -> bool {
+    use std::os::fd::AsFd;
+    nix::sys::stat::fstat(io::stdin().as_fd())
+        .is_ok_and(|st| (st.st_mode & nix::libc::S_IFMT) == nix::libc::S_IFREG)
+}
+
+/// Whether the first bytes name a container format (no more needed to detect it).
+fn names_container(head: &[u8]) -> bool {
+    matches!(sniff(head), Format::Pcap | Format::PcapNg | Format::Mcap)
+}
+
+/// The first bytes of standard input, for format detection, without waiting for more than a
+/// live source has sent (`dumpcap -w - | aptscope decode -`): as soon as they name a container,
+/// or [`SNIFF_LEN`] bytes are there, or the input ended, or nothing more came for
+/// [`HEAD_WAIT`] after a short read (a quiet raw or text stream).
+fn stdin_head(input: &mut dyn Read) -> io::Result<Vec<u8>> {
+    use std::os::fd::AsFd;
+    let mut head = vec![0u8; SNIFF_LEN];
+    let mut len = 0;
+    loop {
+        let n = match input.read(&mut head[len..]) {
+            Ok(n) => n,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        };
+        len += n;
+        if n == 0 || len == SNIFF_LEN || names_container(&head[..len]) {
+            break;
+        }
+        let stdin = io::stdin();
+        let mut fds = [PollFd::new(stdin.as_fd(), PollFlags::POLLIN)];
+        let ms = u16::try_from(HEAD_WAIT.as_millis()).unwrap_or(u16::MAX);
+        // Readable, hung up or failed: the next read says which. Nothing: judge what came.
+        if matches!(poll(&mut fds, PollTimeout::from(ms)), Ok(0)) {
+            break;
+        }
+    }
+    head.truncate(len);
+    Ok(head)
 }
 
 /// Open a capture (`-` = standard input), detecting its format from its first bytes unless
@@ -367,11 +424,14 @@ pub fn open_with_progress(
     path: &str,
     opts: OpenOptions,
 ) -> Result<(Box<dyn Reader>, Format, Progress), OpenError> {
-    let progress = Progress::default();
+    let mut progress = Progress::default();
     let mut input: Box<dyn Read> = if path == "-" {
+        // A file redirected to standard input is read whole like any file.
+        progress.live = !stdin_is_file();
         Box::new(Counted {
             inner: io::stdin(),
             read: progress.read.clone(),
+            drained: progress.drained.clone(),
         })
     } else {
         let f = File::open(path).map_err(|source| OpenError::File {
@@ -388,17 +448,20 @@ pub fn open_with_progress(
         let total = meta.map(|m| m.len()).filter(|_| opts.follow.is_none());
         let p = Progress {
             total,
+            live: opts.follow.is_some(),
             ..progress.clone()
         };
         let (inner, head): (Box<dyn Read>, _) = match opts.follow {
             Some(stop) => {
                 let mut f = Follow::new(f, stop);
-                let head = f.head(SNIFF_LEN, |h| {
-                    matches!(sniff(h), Format::Pcap | Format::PcapNg | Format::Mcap)
-                })?;
+                let head = f.head(SNIFF_LEN, names_container)?;
                 progress
                     .read
                     .fetch_add(head.len() as u64, Ordering::Relaxed);
+                // All the file had (so far): what it holds is shown before waiting for more.
+                progress
+                    .drained
+                    .store(head.len() < SNIFF_LEN, Ordering::Relaxed);
                 (Box::new(f), Some(head))
             }
             None => (Box::new(f), None),
@@ -406,6 +469,7 @@ pub fn open_with_progress(
         let input = Box::new(Counted {
             inner,
             read: progress.read.clone(),
+            drained: progress.drained.clone(),
         });
         let (reader, format, p) = finish_open(input, head, opts, p)?;
         // A name that promises a container the content is not: say so, rather than silently
@@ -433,8 +497,8 @@ pub fn open_with_progress(
         };
         return Ok((reader, format, p));
     };
-    let head_input = std::mem::replace(&mut input, Box::new(io::empty()));
-    finish_open(head_input, None, opts, progress)
+    let head = stdin_head(&mut *input)?;
+    finish_open(input, Some(head), opts, progress)
 }
 
 /// A reader that reports one diagnostic before the events of another.

@@ -56,6 +56,26 @@ pub fn sniff_pcapng(head: &[u8]) -> bool {
     head.get(..4) == Some(&[0x0a, 0x0d, 0x0d, 0x0a])
 }
 
+/// How many bytes the file header of a capture starting with `head` takes: a pcap's 24, a
+/// pcapng's section header block as its length field says (12 bytes tell it).
+fn file_header_len(head: &[u8]) -> usize {
+    if !sniff_pcapng(head) {
+        return 24;
+    }
+    match (head.get(4..8), head.get(8..12)) {
+        (Some(l), Some(bom)) => {
+            let l = [l[0], l[1], l[2], l[3]];
+            let len = if bom == [0x4d, 0x3c, 0x2b, 0x1a] {
+                u32::from_le_bytes(l)
+            } else {
+                u32::from_be_bytes(l)
+            };
+            (len as usize).clamp(28, MAX_RECORD)
+        }
+        _ => 12,
+    }
+}
+
 enum Owned {
     Stream(StreamInfo),
     Chunk(OwnedChunk),
@@ -311,7 +331,11 @@ impl<R: Read> PcapReader<R> {
     }
 
     fn start_parser(&mut self) -> bool {
-        while self.buf.len() - self.start < 64 && self.fill() {}
+        // Only the file header: a live pipe (`dumpcap -w - | aptscope decode -`) may send
+        // nothing more for long, and its first packets are to be shown at once.
+        while self.buf.len() - self.start < file_header_len(&self.buf[self.start..]) && self.fill()
+        {
+        }
         let head = &self.buf[self.start..];
         if sniff_pcapng(head) {
             match PcapNgParser::new(head) {

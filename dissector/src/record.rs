@@ -638,7 +638,9 @@ impl Decoder {
                             continue;
                         };
                         let pinfo = &mut self.pinfo;
-                        self.pairers[pi_idx].1.observe(t, n, f, cap_dir, first_ts, pinfo);
+                        self.pairers[pi_idx]
+                            .1
+                            .observe(t, n, f, cap_dir, first_ts, pinfo);
                         self.expired.extend(pinfo.expired.iter().map(|u| NoReply {
                             proto: Proto::Apt,
                             stream,

@@ -75,10 +75,17 @@ fn a_stop_sent_twice_gets_two_replies_paired_in_order() {
 #[test]
 fn two_stops_to_each_of_three_bays_pair_per_bay() {
     let bays = [0x21u8, 0x22, 0x23];
-    // Request frame indexes of bay i: (first, second) in each sending order.
-    let orders: [(Vec<u8>, [(usize, usize); 3]); 2] = [
-        (vec![0x21, 0x22, 0x23, 0x21, 0x22, 0x23], [(0, 3), (1, 4), (2, 5)]),
-        (vec![0x21, 0x21, 0x22, 0x22, 0x23, 0x23], [(0, 1), (2, 3), (4, 5)]),
+    // The bays in sending order, and the frame indexes of bay i's (first, second) request.
+    type Order = (Vec<u8>, [(usize, usize); 3]);
+    let orders: [Order; 2] = [
+        (
+            vec![0x21, 0x22, 0x23, 0x21, 0x22, 0x23],
+            [(0, 3), (1, 4), (2, 5)],
+        ),
+        (
+            vec![0x21, 0x21, 0x22, 0x22, 0x23, 0x23],
+            [(0, 1), (2, 3), (4, 5)],
+        ),
     ];
     for (sent, at) in orders {
         let mut s: Vec<u8> = sent.iter().flat_map(|b| stop(*b, "1")).collect();
@@ -170,9 +177,16 @@ fn decode_timed(chunks: &[(Dir, u64, &[u8])]) -> (Vec<Rec>, Vec<u64>) {
             Record::Ell(e) => recs.push(Rec {
                 n: e.meta.n,
                 ts: e.meta.ts_ns,
-                what: String::from_utf8_lossy(e.frame.bytes).trim_end().to_string(),
+                what: String::from_utf8_lossy(e.frame.bytes)
+                    .trim_end()
+                    .to_string(),
                 pair: e.obs.pair,
-                diags: e.frame.diags().iter().map(|d| d.kind.name().to_string()).collect(),
+                diags: e
+                    .frame
+                    .diags()
+                    .iter()
+                    .map(|d| d.kind.name().to_string())
+                    .collect(),
             }),
             Record::Garbage(g) => recs.push(Rec {
                 n: g.meta.n,
@@ -263,7 +277,10 @@ fn records_after_an_unanswered_unknown_command_keep_their_times_and_order() {
         (D, 13_010, b"0PO00000000\r\n"),
     ];
     let (recs, no_reply) = decode_timed(chunks);
-    let times: Vec<u64> = recs.iter().map(|r| r.ts.expect("timed") / 1_000_000).collect();
+    let times: Vec<u64> = recs
+        .iter()
+        .map(|r| r.ts.expect("timed") / 1_000_000)
+        .collect();
     let what: Vec<&str> = recs.iter().map(|r| r.what.as_str()).collect();
     assert_eq!(
         what,

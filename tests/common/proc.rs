@@ -4,7 +4,7 @@
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 use std::io::Read;
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Child, ChildStdin, Command, ExitStatus, Stdio};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
@@ -59,8 +59,21 @@ fn collect(mut pipe: impl Read + Send + 'static, sink: Arc<Mutex<String>>) -> Jo
 impl Proc {
     /// Start `cmd` (standard input empty), called `name` in failure messages.
     pub fn spawn(mut cmd: Command, name: &str) -> Proc {
+        cmd.stdin(Stdio::null());
+        Proc::start(cmd, name)
+    }
+
+    /// Start `aptscope ARGS` reading a pipe the test writes: the process and the pipe's end.
+    pub fn aptscope_piped(args: &[&str]) -> (Proc, ChildStdin) {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_aptscope"));
+        c.args(args).stdin(Stdio::piped());
+        let mut p = Proc::start(c, &format!("aptscope {}", args.join(" ")));
+        let stdin = p.child.stdin.take().expect("stdin");
+        (p, stdin)
+    }
+
+    fn start(mut cmd: Command, name: &str) -> Proc {
         let mut child = cmd
-            .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()

@@ -291,8 +291,9 @@ pub fn spawn_with(
     let iopts = IndexOpts {
         proto,
         units,
-        // A file another process is still writing (`view --follow`, a tap's live view).
-        live: opts.follow.is_some(),
+        // A file another process is still writing (`view --follow`, a tap's live view), or
+        // standard input (a pipe a live capture writes: its reader blocks until more comes).
+        live: opts.follow.is_some() || path == "-",
         follow: opts.follow.is_some().then(|| path.clone()),
         ..IndexOpts::default()
     };
@@ -320,10 +321,12 @@ where
         .name("aptscope-index".into())
         .spawn(move || match open() {
             Ok((reader, progress)) => {
+                let input = progress.clone();
                 let shared = shared_for(reader.as_ref(), progress, &opts);
                 let _ = tx.send(Ok(shared.clone()));
                 let mut ix = Indexer::new(shared, opts.proto, opts.units);
                 ix.follow = opts.follow.and_then(|p| std::fs::File::open(p).ok());
+                ix.input = input;
                 ix.run(reader);
             }
             Err(e) => {
@@ -383,6 +386,9 @@ pub struct Indexer {
     last_flush: Instant,
     /// A followed (growing) file, to see when reading has caught up with it.
     follow: Option<std::fs::File>,
+    /// How reading goes: a live input (a pipe on standard input) says when it has nothing
+    /// more for now.
+    input: Option<aptscope_capture::open::Progress>,
     /// While [`Indexer::run`] reads a source: the thread that applies publications, and the
     /// buffers it gives back.
     publisher: Option<Publisher>,
@@ -409,6 +415,7 @@ impl Indexer {
             sink: Sink::default(),
             last_flush: Instant::now(),
             follow: None,
+            input: None,
             publisher: None,
         }
     }
@@ -463,13 +470,15 @@ impl Indexer {
         });
     }
 
-    /// A followed file read to its current end: the reader may now wait long for the next
-    /// event, so what has been read is published at once (not at the next event).
+    /// A followed file read to its current end, or a live input that had nothing more at its
+    /// last read: the reader may now wait long for the next event, so what has been read is
+    /// published at once (not at the next event).
     fn caught_up(&self) -> bool {
-        self.follow.as_ref().is_some_and(|f| {
-            f.metadata()
-                .is_ok_and(|m| self.shared.read.load(Ordering::Relaxed) >= m.len())
-        })
+        self.input.as_ref().is_some_and(|p| p.idle())
+            || self.follow.as_ref().is_some_and(|f| {
+                f.metadata()
+                    .is_ok_and(|m| self.shared.read.load(Ordering::Relaxed) >= m.len())
+            })
     }
 
     /// Index one event of a capture reader.

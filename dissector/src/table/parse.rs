@@ -242,7 +242,7 @@ impl Parser {
                 "devices" | "section" => {
                     let models: Vec<&'static str> = tokens(rest);
                     if models.is_empty() || !models.iter().all(|m| is_ident(m)) {
-                        self.err(file, ln, &format!("{kw} needs: MODEL [MODEL ...]"));
+                        self.err(file, ln, format!("{kw} needs: MODEL [MODEL ...]"));
                     }
                     let source = if kw == "devices" {
                         DeviceSource::List
