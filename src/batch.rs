@@ -8,12 +8,15 @@
 //! of their own (named by the file's index), so nothing is ordered or merged.
 
 use crate::{compile_filter, fatal, proto_of, ProtoArg};
+use aptscope_capture::judge::{not_a_capture, not_a_capture_error, not_traffic, Seen};
 use aptscope_capture::open::{open_with_progress, OpenOptions, Progress};
 use aptscope_capture::Event;
+use aptscope_capture::{Chunk, Direction};
+use aptscope_dissector::detect::{detect, Proto, SAMPLE};
 use aptscope_dissector::json;
 use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
 use aptscope_dissector::units::UnitsOpts;
-use aptscope_parquet::{decode_file, not_a_capture, not_a_capture_error, CaptureWriter, DirSink};
+use aptscope_parquet::{decode_file, CaptureWriter, DirSink};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::cell::{Cell, RefCell};
 use std::io::{self, IsTerminal, Write};
@@ -274,8 +277,9 @@ fn collect(job: &Job<'_>, rxs: Vec<Receiver<Msg>>, bar: &Bar, stop: &AtomicBool)
 fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<Stats> {
     let file = job.files[i].as_str();
     let mut seen = 0u64;
-    // One input decodes whatever it holds (as before); among several, junk is skipped.
-    let judge = job.files.len() > 1 || matches!(job.out, Output::Parquet(_));
+    // What is not a capture is refused (one input: the run fails; among several, it is
+    // skipped), unless the protocol is forced.
+    let judge = true;
     match &job.out {
         Output::Parquet(root) => {
             let opts = aptscope_parquet::Options::default();
@@ -338,11 +342,26 @@ fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<S
                 o.write_all(line.as_bytes())?;
                 o.write_all(b"\n")
             };
+            let mut file_problems = 0u64;
+            // A forced protocol is checked against what detection would say of the input.
+            let mut probing = job.proto != ProtoArg::Auto;
+            let mut probe = Probe::default();
             while let Some(ev) = reader.next_event() {
-                if let Event::Diag(d) = &ev {
-                    fatal(d)?;
+                match &ev {
+                    Event::Diag(d) => {
+                        fatal(d)?;
+                        file_problems += 1;
+                    }
+                    Event::Chunk(c) if probing => probing = probe.add(c),
+                    _ => {}
                 }
                 ev.feed(&mut p, &mut emit)?;
+                // The input had nothing more just now (a pipe a live capture writes, a followed
+                // file): what it gave is shown now, each record as its bytes arrive.
+                let idle = progress.idle();
+                if idle {
+                    p.detect_if_certain(&mut emit)?;
+                }
                 if held.get() {
                     if let Some(d) = p.detection() {
                         if not_a_capture(format, d) {
@@ -351,10 +370,7 @@ fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<S
                         held.set(false);
                     }
                 }
-                // The input had nothing more just now (a pipe a live capture writes, a followed
-                // file): what it gave is shown now, each record as its bytes arrive.
-                if progress.idle() && !held.get() {
-                    p.detect_if_certain(&mut emit)?;
+                if idle && !held.get() {
                     out.borrow_mut().flush()?;
                 }
                 k = k.wrapping_add(1);
@@ -369,9 +385,62 @@ fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<S
                 }
             }
             held.set(false);
+            if let Some(forced) = proto_of(job.proto) {
+                if let Some(note) = forced_note(forced, &probe.sample) {
+                    bar.note(&format!("aptscope: {file}: {note}"));
+                }
+            }
+            let judged = Seen {
+                bytes: p.decoder().bytes(),
+                frames: p.decoder().frames(),
+                file_problems,
+            };
+            if let Some(e) = not_traffic(judged) {
+                out.borrow_mut().flush()?;
+                return Err(e);
+            }
             bar.tick(&progress, &mut seen);
             out.borrow_mut().flush()?;
             Ok(Stats::default())
         }
     }
+}
+
+/// The first [`SAMPLE`] bytes of the first chunk's stream and direction (detection judges one
+/// lane), to check a forced protocol against.
+#[derive(Default)]
+struct Probe {
+    lane: Option<(u32, Direction)>,
+    sample: Vec<u8>,
+}
+
+impl Probe {
+    /// Keep what the sample still lacks of `c`; whether more is wanted.
+    fn add(&mut self, c: &Chunk<'_>) -> bool {
+        if *self.lane.get_or_insert((c.stream, c.dir)) == (c.stream, c.dir) {
+            let take = (SAMPLE - self.sample.len()).min(c.bytes.len());
+            self.sample.extend_from_slice(&c.bytes[..take]);
+        }
+        self.sample.len() < SAMPLE
+    }
+}
+
+/// What to say of a protocol forced on an input that detection reads otherwise: which protocol
+/// detection sees, and how much of the input the forced one frames.
+fn forced_note(forced: Proto, sample: &[u8]) -> Option<String> {
+    let d = detect(sample);
+    let share = |p: Proto| match p {
+        Proto::Apt => d.apt,
+        Proto::Elliptec => d.elliptec,
+    };
+    let seen = d.proto.filter(|p| *p != forced)?;
+    Some(format!(
+        "detection reads this input as {} ({:.0}% of the first {} bytes frame cleanly); the \
+         forced protocol, {}, frames {:.0}%",
+        seen.name(),
+        share(seen) * 100.0,
+        sample.len(),
+        forced.name(),
+        share(forced) * 100.0
+    ))
 }

@@ -850,7 +850,7 @@ fn stats(
     units: UnitsOpts,
 ) -> io::Result<()> {
     let f = filter.map(compile_filter).transpose()?;
-    let (mut reader, _, progress) = open_with_progress(file, opts)?;
+    let (mut reader, format, progress) = open_with_progress(file, opts)?;
     let mut ticker = Ticker::new(progress);
     let mut st = Stats::new(bin);
     let mut dec = Decoder::new(proto_of(proto));
@@ -864,6 +864,9 @@ fn stats(
         ticker.tick();
         match rec {
             Record::Stream { .. } => st.add(rec),
+            // Problems of the file itself count whatever the filter says: they are not records.
+            Record::Input(d) => st.add_file_problem(d.offset, d.kind.name(), &d.to_string()),
+            Record::FileDiag { offset, kind, msg } => st.add_file_problem(*offset, kind, msg),
             Record::Apt(_) | Record::Ell(_) | Record::Garbage(_) | Record::NoReply(_)
                 if f.as_ref().is_none_or(|f| f.matches(rec)) =>
             {
@@ -884,10 +887,26 @@ fn stats(
     // Written, not printed: a closed pipe (`| head`) ends the command quietly.
     let mut out = io::stdout().lock();
     if as_json {
-        writeln!(out, "{}", st.to_json())
+        writeln!(out, "{}", st.to_json())?;
     } else {
-        write!(out, "{}", st.to_text())
+        write!(out, "{}", st.to_text())?;
     }
+    refuse_non_traffic(&dec, format, st.file_problems.values().sum())
+}
+
+/// The input was not traffic of these protocols (nothing framed, or a raw file that is not a
+/// capture): the command fails with the reason (its output, if any, already written).
+fn refuse_non_traffic(dec: &Decoder, format: Format, file_problems: u64) -> io::Result<()> {
+    use aptscope_capture::judge::{not_a_capture, not_a_capture_error, not_traffic, Seen};
+    if let Some(d) = dec.detection().filter(|d| not_a_capture(format, d)) {
+        return Err(not_a_capture_error(d));
+    }
+    let seen = Seen {
+        bytes: dec.bytes(),
+        frames: dec.frames(),
+        file_problems,
+    };
+    not_traffic(seen).map_or(Ok(()), Err)
 }
 
 fn info(file: &str, opts: OpenOptions, as_json: bool, proto: ProtoArg) -> io::Result<()> {

@@ -338,3 +338,96 @@ fn garbage_is_hex_at_the_time_of_its_first_byte() {
         .expect("a frame");
     assert_eq!(ts(garbage), ts(first_frame), "{garbage}");
 }
+
+/// Inputs that are not what they seem: random bytes and an image are refused by `decode` and
+/// `stats` with the reason on stderr (no page of garbage records, no success); a forced
+/// protocol that detection reads otherwise is decoded, with a note saying so.
+#[test]
+fn inputs_that_are_not_captures_are_refused_with_the_reason() {
+    let dir = scratch("not-captures");
+    let rand = dir.join("rand.bin");
+    // Deterministic noise (an LCG): frames as neither protocol.
+    let mut x: u32 = 12345;
+    let bytes: Vec<u8> = (0..6000)
+        .map(|_| {
+            x = x.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+            (x >> 16) as u8
+        })
+        .collect();
+    std::fs::write(&rand, &bytes).expect("write");
+    let jpg = dir.join("pic.jpg");
+    let mut img = vec![
+        0xFF, 0xD8, 0xFF, 0xE0, 0x00, 0x10, b'J', b'F', b'I', b'F', 0x00,
+    ];
+    img.extend(bytes.iter().rev());
+    std::fs::write(&jpg, &img).expect("write");
+    for f in [&rand, &jpg] {
+        for cmd in ["decode", "stats"] {
+            let (out, err, ok) = run(&[cmd, s(f)]);
+            assert!(!ok, "{cmd} {}: succeeded\n{out}", f.display());
+            assert!(err.contains("not a capture"), "{cmd}: {err}");
+            if cmd == "decode" {
+                assert!(out.is_empty(), "no garbage records: {out}");
+            }
+        }
+    }
+    // Forced: decoded anyway (the user said so).
+    let (out, _, ok) = run(&["decode", "--proto", "apt", s(&rand)]);
+    assert!(ok && out.lines().count() > 10, "{out}");
+
+    let (out, err, ok) = run(&[
+        "decode",
+        "--proto",
+        "elliptec",
+        "samples/kdc101-session.pcapng",
+    ]);
+    assert!(ok, "{err}");
+    assert!(!out.is_empty());
+    assert!(
+        err.contains("detection reads this input as apt (100%")
+            && err.contains("the forced protocol, elliptec, frames 0%"),
+        "{err}"
+    );
+}
+
+/// A capture of another link type (Ethernet) has no serial traffic: `stats` says what
+/// `decode` says (the file's problem, in text and JSON) and both fail; a capture cut in half
+/// has its `truncated_record` in `stats` too (and, having frames, succeeds).
+#[test]
+fn stats_reports_the_problems_of_the_file() {
+    let eth = "tests/bad-input/unknown-linktype.pcap";
+    let (out, err, ok) = run(&["stats", eth]);
+    assert!(!ok, "{out}");
+    assert!(
+        out.contains("File problems") && out.contains("unknown_linktype"),
+        "{out}"
+    );
+    assert!(err.contains("no serial traffic"), "{err}");
+    let (out, _, ok) = run(&["stats", "--json", eth]);
+    assert!(!ok);
+    let v: serde_json::Value = serde_json::from_str(out.trim()).expect("JSON");
+    assert_eq!(v["file_problems"]["unknown_linktype"], 1, "{v}");
+    assert_eq!(v["file_examples"][0]["offset"], 24, "{v}");
+    let (out, err, ok) = run(&["decode", eth]);
+    assert!(!ok && err.contains("no serial traffic"), "{out}{err}");
+
+    let cut = "tests/bad-input/truncated-block.pcapng";
+    let (out, err, ok) = run(&["stats", "--json", cut]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).expect("JSON");
+    assert_eq!(v["file_problems"]["truncated_record"], 1, "{v}");
+}
+
+/// A container format forced on bytes that are not one is refused like one container forced
+/// on another (both used to differ: a `bad_magic` line and success for raw bytes).
+#[test]
+fn a_forced_container_on_raw_bytes_is_refused() {
+    for f in ["pcapng", "pcap", "mcap"] {
+        let (out, err, ok) = run(&["decode", "--format", f, "samples/kdc101-session.bin"]);
+        assert!(!ok, "{out}");
+        assert!(
+            err.contains(&format!("--format {f} but the content is raw")),
+            "{err}"
+        );
+    }
+}

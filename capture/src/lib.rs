@@ -6,6 +6,7 @@
 
 pub mod follow;
 pub mod info;
+pub mod judge;
 pub mod live;
 pub mod mcap;
 pub mod model;

@@ -538,8 +538,9 @@ fn finish_open(
     let sniffed = sniff(&head);
     let format = opts.format.unwrap_or(sniffed);
     let container = |f: Format| matches!(f, Format::Pcap | Format::PcapNg | Format::Mcap);
-    if container(format) && container(sniffed) && format != sniffed {
-        // Reading one container as another cannot work: say what the file is.
+    if container(format) && format != sniffed {
+        // Reading one container as another, or bytes that are none as one, cannot work: say
+        // what the file is (a text log or raw bytes read as pcapng would be one bad magic).
         return Err(OpenError::ContainerMismatch {
             forced: format.name(),
             found: sniffed.name(),

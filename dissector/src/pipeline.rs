@@ -95,6 +95,11 @@ impl Pipeline {
         self.dec.records()
     }
 
+    /// The decoder under the pipeline (frames and bytes so far, detection).
+    pub fn decoder(&self) -> &Decoder {
+        &self.dec
+    }
+
     /// The output format.
     pub fn format(&self) -> Format {
         self.fmt

@@ -248,6 +248,8 @@ pub struct Decoder {
     n: u64,
     /// Bytes fed so far, all lanes.
     cap_pushed: u64,
+    /// Frames emitted so far (APT and Elliptec).
+    frames: u64,
     reply_timeout: Option<u64>,
     /// Models seen per device and the stage conversion of motion values.
     units: Tracker,
@@ -272,6 +274,7 @@ impl Decoder {
             first_ts: None,
             n: 0,
             cap_pushed: 0,
+            frames: 0,
             reply_timeout: None,
             units: Tracker::new(UnitsOpts::default()),
             expired: vec![],
@@ -304,6 +307,16 @@ impl Decoder {
     /// Frames and garbage runs numbered so far.
     pub fn records(&self) -> u64 {
         self.n
+    }
+
+    /// Frames emitted so far (a capture in which none frames is not one of these protocols).
+    pub fn frames(&self) -> u64 {
+        self.frames
+    }
+
+    /// Captured bytes fed so far, every stream and direction.
+    pub fn bytes(&self) -> u64 {
+        self.cap_pushed
     }
 
     /// Time of the first timed chunk.
@@ -654,6 +667,7 @@ impl Decoder {
                             emit(&Record::Units(&nt))?;
                         }
                         let meta = meta(n, first_ts, cap_offset);
+                        self.frames += 1;
                         emit(&Record::Apt(AptRec {
                             meta,
                             frame: f,
@@ -718,6 +732,7 @@ impl Decoder {
                     self.expired
                         .extend(o.expired.iter().map(|e| ell_no_reply(stream, e)));
                     let meta = meta(n, first_ts, cap_offset);
+                    self.frames += 1;
                     emit(&Record::Ell(EllRec {
                         meta,
                         frame: &f,

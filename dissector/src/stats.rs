@@ -102,6 +102,11 @@ pub struct Stats {
     pub directions: BTreeMap<String, Tally>,
     /// Diagnostics by kind.
     pub diags: BTreeMap<String, u64>,
+    /// Problems of the capture file itself (damaged or cut records, unknown link types), by
+    /// kind: what `decode` and `info` report before any frame.
+    pub file_problems: BTreeMap<String, u64>,
+    /// The first [`FILE_EXAMPLES`] of them: (file offset, kind, text).
+    pub file_examples: Vec<(u64, String, String)>,
     /// Frames per time bin (bin start in ns since the first frame).
     pub bins: BTreeMap<u64, u64>,
     /// Bin width in ns.
@@ -121,6 +126,9 @@ pub struct Stats {
     /// Paths read below keys, built once.
     p_kind: Vec<String>,
 }
+
+/// File problems listed one by one (all are counted).
+pub const FILE_EXAMPLES: usize = 20;
 
 /// At most this many rate bins are shown (text and JSON): a longer capture gets wider bins.
 pub const MAX_RATE_BINS: u64 = 200;
@@ -246,6 +254,8 @@ impl Stats {
             addresses: BTreeMap::new(),
             directions: BTreeMap::new(),
             diags: BTreeMap::new(),
+            file_problems: BTreeMap::new(),
+            file_examples: vec![],
             bins: BTreeMap::new(),
             bin_ns: bin_ns.max(1),
             streams: BTreeMap::new(),
@@ -255,6 +265,15 @@ impl Stats {
             scratch: String::new(),
             dir_scratch: String::new(),
             p_kind: vec!["kind".to_string()],
+        }
+    }
+
+    /// Count a problem of the capture file itself at file `offset`.
+    pub fn add_file_problem(&mut self, offset: u64, kind: &str, msg: &str) {
+        bump(&mut self.file_problems, kind, |c| *c += 1);
+        if self.file_examples.len() < FILE_EXAMPLES {
+            self.file_examples
+                .push((offset, kind.to_string(), msg.to_string()));
         }
     }
 
@@ -410,6 +429,15 @@ impl Stats {
             "Frames: {} ({} bytes); garbage: {} records ({} bytes)",
             self.frames.count, self.frames.bytes, self.garbage.count, self.garbage.bytes
         );
+        if !self.file_problems.is_empty() {
+            let _ = writeln!(s, "\nFile problems{:>39}", "count");
+            for (k, n) in &self.file_problems {
+                let _ = writeln!(s, "  {k:<48}{n:>6}");
+            }
+            for (offset, _, msg) in &self.file_examples {
+                let _ = writeln!(s, "  at byte {offset}: {msg}");
+            }
+        }
         let _ = writeln!(
             s,
             "\nMessages{:>44}{:>10}   latency ms (n, min / median / p99 / max)",
@@ -543,8 +571,23 @@ impl Stats {
         for (i, (k, n)) in self.diags.iter().enumerate() {
             let _ = write!(s, "{}\"{k}\":{n}", if i > 0 { "," } else { "" });
         }
+        s.push_str("},\"file_problems\":{");
+        for (i, (k, n)) in self.file_problems.iter().enumerate() {
+            let _ = write!(s, "{}\"{k}\":{n}", if i > 0 { "," } else { "" });
+        }
+        s.push_str("},\"file_examples\":[");
+        for (i, (offset, kind, msg)) in self.file_examples.iter().enumerate() {
+            let _ = write!(
+                s,
+                "{}{{\"offset\":{offset},\"kind\":\"{kind}\",\"msg\":",
+                if i > 0 { "," } else { "" }
+            );
+            crate::json::string(&mut s, msg);
+            s.push('}');
+        }
+        s.push(']');
         let (width, rate) = self.rate();
-        let _ = write!(s, "}},\"bin_s\":{}", width as f64 / 1e9);
+        let _ = write!(s, ",\"bin_s\":{}", width as f64 / 1e9);
         if width != self.bin_ns {
             let _ = write!(s, ",\"bin_s_asked\":{}", self.bin_ns as f64 / 1e9);
         }

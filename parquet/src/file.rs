@@ -2,9 +2,9 @@
 //! Python package share.
 
 use crate::{CaptureWriter, Sink, Summary};
-use aptscope_capture::open::{open_with_progress, Format, OpenOptions, Progress};
+use aptscope_capture::open::{open_with_progress, OpenOptions, Progress};
 use aptscope_capture::Event;
-use aptscope_dissector::detect::{Detection, Proto};
+use aptscope_dissector::detect::Proto;
 use aptscope_dissector::record::{Decoder, Record};
 use aptscope_dissector::units::UnitsOpts;
 use std::io;
@@ -24,24 +24,7 @@ pub struct DecodeOpts {
     pub judge: bool,
 }
 
-/// A raw byte file (no known container or log format) whose first 4 KiB frame as neither
-/// protocol: not a capture (an image, a program), skipped rather than decoded as garbage.
-pub fn not_a_capture(format: Format, d: &Detection) -> bool {
-    matches!(format, Format::Raw) && d.proto.is_none() && d.apt.max(d.elliptec) < 0.1
-}
-
-/// The error that says so.
-pub fn not_a_capture_error(d: &Detection) -> io::Error {
-    io::Error::new(
-        io::ErrorKind::InvalidData,
-        format!(
-            "not a capture: no known file format, and {:.0}% of the first 4 KiB frame as APT, \
-             {:.0}% as Elliptec (--proto or --format decode it anyway)",
-            d.apt * 100.0,
-            d.elliptec * 100.0
-        ),
-    )
-}
+pub use aptscope_capture::judge::{not_a_capture, not_a_capture_error};
 
 /// Decode capture `path` (`-`: standard input) into `w`. `tick` is called now and then with
 /// the reader's progress. A file that is not a capture (with `judge`) fails before any row
