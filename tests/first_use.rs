@@ -431,3 +431,15 @@ fn a_forced_container_on_raw_bytes_is_refused() {
         );
     }
 }
+
+/// `view` without a terminal says it needs one and names `decode` (it used to fail with
+/// "No such device or address (os error 6)").
+#[test]
+fn view_without_a_terminal_names_decode() {
+    let (out, err, ok) = run(&["view", "samples/kdc101-session.bin"]);
+    assert!(!ok, "{out}");
+    assert!(
+        err.contains("needs a terminal") && err.contains("aptscope decode"),
+        "{err}"
+    );
+}

@@ -198,6 +198,10 @@ pub struct Index {
     pub diag_sets: Vec<Vec<&'static str>>,
     /// For records flagged [`F_NOT_FOR_MODEL`]: the device's model, by record number.
     pub not_for_model: BTreeMap<u64, [u8; 8]>,
+    /// Records that got [`F_NO_REPLY`] after they were published (their request's timeout
+    /// passed later), in the order it happened: a scan that has counted them already counts
+    /// the diagnostic now.
+    pub late_no_reply: Vec<u64>,
     /// Whether the whole file has been read.
     pub done: bool,
     /// Error that stopped reading.
@@ -1032,6 +1036,9 @@ impl Publication {
             if let Some(r) = (n as usize).checked_sub(1).and_then(|i| ix.recs.get_mut(i)) {
                 if r.pair == 0 {
                     r.pair = pair;
+                }
+                if flags & !r.flags & F_NO_REPLY != 0 {
+                    ix.late_no_reply.push(n);
                 }
                 r.flags |= flags;
             }

@@ -139,9 +139,24 @@ pub fn run_app(app: app::App) -> io::Result<()> {
     run_loop(app, None)
 }
 
+/// The terminal UI draws on standard output and reads keys from the terminal: without one it
+/// cannot run (a pipe, a file, a job with no controlling terminal). Say so, and what to use.
+fn needs_terminal() -> io::Result<()> {
+    use std::io::IsTerminal;
+    let tty = std::fs::File::open("/dev/tty");
+    if io::stdout().is_terminal() && tty.is_ok() {
+        return Ok(());
+    }
+    Err(io::Error::other(
+        "the terminal UI needs a terminal (standard output and a controlling terminal); \
+         without one, `aptscope decode FILE` prints the timeline (`--json` for NDJSON)",
+    ))
+}
+
 /// [`run_app`], closing also when `quit` is set.
 fn run_loop(mut app: app::App, quit: Option<&AtomicBool>) -> io::Result<()> {
     let shared = app.shared.clone();
+    needs_terminal()?;
     let hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
         restore_terminal();

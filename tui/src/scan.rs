@@ -9,6 +9,7 @@ use crate::fields::{self, View, DIRS};
 use crate::index::{Index, Rec, Shared, F_ELL, F_GARBAGE, F_IS_REPLY};
 use aptscope_dissector::filter::{Filter, IdSet, Matcher};
 use aptscope_dissector::stats::{self, Latencies, Stats, StreamStat, Tally};
+use aptscope_dissector::DiagKind;
 use aptscope_dissector::Table;
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -78,6 +79,8 @@ struct Work {
     ids: Option<IdSet>,
     /// Next record to scan.
     next: u64,
+    /// How many of the index's [`Index::late_no_reply`] were looked at.
+    late_seen: usize,
     counts: Counts,
     /// When the statistics shown were last rebuilt.
     shown: Instant,
@@ -91,6 +94,7 @@ impl Work {
             ids: filter.as_ref().and_then(|f| f.apt_ids(Table::global())),
             filter: filter.as_ref().map(Filter::matcher),
             next: 1,
+            late_seen: 0,
             counts: Counts::default(),
             shown: Instant::now(),
             found: vec![],
@@ -190,13 +194,51 @@ impl Scan {
             }
             w.counts.add(&ix, n, r);
         }
+        // Records scanned before they got their `no_reply` (the timeline shows it on the row
+        // now): counted now, with whether the filter takes them now.
+        let mut late = vec![];
+        for &n in ix.late_no_reply.get(w.late_seen..).unwrap_or(&[]) {
+            if n >= from {
+                continue; // scanned in this batch, or later: with the flag.
+            }
+            let now = ix.rec(n).is_some_and(|r| {
+                w.filter
+                    .as_ref()
+                    .is_none_or(|f| f.matches(&View { ix: &ix, n, r }))
+            });
+            late.push((n, now));
+        }
+        w.late_seen = ix.late_no_reply.len();
         w.next = end;
         let caught_up = end > len;
         let finished = ix.done && caught_up;
         // The statistics: rebuilt now and then, and at the end.
         let due = w.shown.elapsed() > STATS_EVERY;
-        let stats =
-            (finished || due || (caught_up && from < end && sync)).then(|| w.counts.stats(&ix));
+        // Matches of the filter, to tell a late record that was shown from one that is shown
+        // only now (which is counted whole, and inserted among the matches in order).
+        let shown: Vec<(u64, bool)> = match &w.filter {
+            None => late.iter().map(|&(n, _)| (n, true)).collect(),
+            Some(_) => self.state.lock().map_or(vec![], |s| {
+                late.iter()
+                    .map(|&(n, _)| (n, s.matches.binary_search(&n).is_ok()))
+                    .collect()
+            }),
+        };
+        let mut newly = vec![];
+        for (&(n, now), &(_, was)) in late.iter().zip(&shown) {
+            match (was, now) {
+                (true, _) => w.counts.bump_diag(DiagKind::NoReply { cmd: n }.name()),
+                (false, true) => {
+                    if let Some(r) = ix.rec(n) {
+                        w.counts.add(&ix, n, r);
+                    }
+                    newly.push(n);
+                }
+                (false, false) => {}
+            }
+        }
+        let stats = (finished || due || (caught_up && (from < end || !late.is_empty()) && sync))
+            .then(|| w.counts.stats(&ix));
         drop(ix);
         if stats.is_some() {
             w.shown = Instant::now();
@@ -204,6 +246,11 @@ impl Scan {
         if let Ok(mut s) = self.state.lock() {
             if s.gen != gen {
                 return Step::Stale;
+            }
+            for n in newly {
+                if let Err(at) = s.matches.binary_search(&n) {
+                    s.matches.insert(at, n);
+                }
             }
             s.matches.extend_from_slice(&w.found);
             if let Some(st) = stats {
@@ -281,19 +328,22 @@ fn add_to<K: Ord>(map: &mut BTreeMap<K, Tally>, k: K, c: &Class) {
 }
 
 impl Counts {
+    /// Count one diagnostic of kind `k`.
+    fn bump_diag(&mut self, k: &'static str) {
+        // Kinds are static names: found by address (one comparison) in a short list.
+        match self
+            .diags
+            .iter_mut()
+            .find(|(x, _)| std::ptr::eq(*x, k) || *x == k)
+        {
+            Some((_, c)) => *c += 1,
+            None => self.diags.push((k, 1)),
+        }
+    }
+
     fn add(&mut self, ix: &Index, n: u64, r: &Rec) {
         let v = View { ix, n, r };
-        let diags = &mut self.diags;
-        fields::diag_kinds(ix, n, r, &mut |k| {
-            // Kinds are static names: found by address (one comparison) in a short list.
-            match diags
-                .iter_mut()
-                .find(|(x, _)| std::ptr::eq(*x, k) || *x == k)
-            {
-                Some((_, c)) => *c += 1,
-                None => diags.push((k, 1)),
-            }
-        });
+        fields::diag_kinds(ix, n, r, &mut |k| self.bump_diag(k));
         let len = r.len as u64;
         if r.has(F_GARBAGE) {
             self.garbage.count += 1;

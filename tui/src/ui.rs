@@ -214,20 +214,25 @@ fn draw_title(f: &mut Frame<'_>, app: &App, area: Rect) {
         s.push_str(&format!(" · {format}"));
     }
     if !done {
-        s.push_str(&format!(
-            "  [indexing {:.0}%]",
-            app.shared.progress() * 100.0
-        ));
+        // A live source (a tap, a pipe, a growing file) has no end to count towards.
+        if app.live || app.shared.total.is_none() {
+            s.push_str(" · LIVE");
+        } else {
+            s.push_str(&format!(
+                "  [indexing {:.0}%]",
+                app.shared.progress() * 100.0
+            ));
+        }
     }
     if !app.filter_text.is_empty() {
-        let (m, sdone) = app
-            .scan
-            .state
-            .lock()
-            .map_or((0, true), |st| (st.matches.len(), st.done));
+        // Filtering until the scan has caught up with the records there are (a live scan is
+        // never "done": more may come).
+        let (m, behind) = app.scan.state.lock().map_or((0, false), |st| {
+            (st.matches.len(), !st.done && (st.scanned as usize) < count)
+        });
         s.push_str(&format!(
             " · {m} shown{}",
-            if sdone { "" } else { " (filtering…)" }
+            if behind { " (filtering…)" } else { "" }
         ));
     }
     if app.follow && !app.live {

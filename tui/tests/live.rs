@@ -179,3 +179,53 @@ fn filters_statistics_and_plot_extend_as_records_arrive() {
         .map(|(_, v)| v.len());
     assert_eq!(pts, Some(7), "{:?}", ix.series.keys());
 }
+
+/// A request that is never answered shows `!! no reply` on its row once its timeout passes: the
+/// statistics count it then too (it used to show "Diagnostics: none" until a filter was applied
+/// and cleared), with no filter and with a filter that showed the row before.
+#[test]
+fn statistics_count_a_no_reply_that_comes_after_its_row() {
+    for filter in [None, Some("apt.name ~ \"REQ\"")] {
+        let shared = Arc::new(Shared::default());
+        let mut src = Source::new(&shared);
+        let mut app = App::new(shared.clone(), "live", false);
+        app.set_live(true);
+        let mut t = Terminal::new(TestBackend::new(100, 30)).expect("terminal");
+        if let Some(f) = filter {
+            app.apply_filter(f);
+        }
+        // An unanswered request, then traffic for a while (its 2 s timeout passes).
+        let req = frame("HW_REQ_INFO", &[], 0x50, 0x01);
+        src.chunk(Dir::HostToDevice, &req);
+        src.ix.flush();
+        let _ = screen(&mut app, &mut t);
+        let count = |app: &App| {
+            let st = app.scan.state.lock().expect("lock");
+            st.stats.diags.get("no_reply").copied()
+        };
+        assert_eq!(count(&app), None);
+        for _ in 0..30 {
+            src.exchanges(5);
+            let _ = screen(&mut app, &mut t);
+        }
+        let ix = shared.index.read().expect("lock");
+        assert!(
+            ix.rec(1)
+                .is_some_and(|r| r.flags & aptscope_tui::index::F_NO_REPLY != 0),
+            "the row shows no reply"
+        );
+        drop(ix);
+        // The viewer without background threads scans, and rebuilds the statistics, as it
+        // draws.
+        assert_eq!(count(&app), Some(1), "filter {filter:?}");
+        // The title says LIVE (not "[indexing 0%]" forever), and a filter that has caught up
+        // is not "filtering…".
+        let sc = screen(&mut app, &mut t);
+        let title = sc.lines().next().unwrap_or("");
+        assert!(
+            title.contains("LIVE") && !title.contains("indexing"),
+            "{title}"
+        );
+        assert!(!title.contains("filtering"), "{title}");
+    }
+}
