@@ -1247,9 +1247,12 @@ fn encode_cmd(
     let addr = |s: Option<&str>, default: Addr| -> io::Result<u8> {
         match s {
             None => Ok(default.byte()),
-            Some(t) => Addr::parse(t)
-                .map(Addr::byte)
-                .ok_or_else(|| bad(format!("bad address {t}"))),
+            Some(t) => Addr::parse(t).map(Addr::byte).ok_or_else(|| {
+                bad(format!(
+                    "bad address {t}: give host, rack, usb, bay0…bay9 or a byte value \
+                     (0x00–0xFF, e.g. 0x50)"
+                ))
+            }),
         }
     };
     let (dd, ds) = if to_host {

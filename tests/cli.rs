@@ -245,6 +245,40 @@ fn encode_rejects_bad_values_with_a_reason() {
     let (_, err, ok) = aptscope(&["encode", "MOD_IDENTIFY", "chan_ident=300"], None);
     assert!(!ok);
     assert!(err.contains("does not fit"), "{err}");
+    // Out of range names the field's range, also for a number too long to read.
+    for v in ["2147483648", "99999999999999999999999"] {
+        let pos = format!("absolute_position={v}");
+        let (_, err, ok) = aptscope(&["encode", "MOT_MOVE_ABSOLUTE", "chan_ident=1", &pos], None);
+        assert!(!ok);
+        assert!(
+            err.contains("does not fit") && err.contains("-2147483648..2147483647 (i32)"),
+            "{err}"
+        );
+    }
+    // A bad address lists the good ones.
+    let (_, err, ok) = aptscope(&["encode", "MOD_IDENTIFY", "--dest", "bay99"], None);
+    assert!(!ok);
+    assert!(err.contains("bay0…bay9") && err.contains("0x50"), "{err}");
+}
+
+/// `encode` takes a message id as `messages` does.
+#[test]
+fn encode_takes_a_message_id() {
+    let by_id = aptscope(
+        &["encode", "0x0453", "chan_ident=1", "absolute_position=5"],
+        None,
+    );
+    let by_name = aptscope(
+        &[
+            "encode",
+            "MOT_MOVE_ABSOLUTE",
+            "chan_ident=1",
+            "absolute_position=5",
+        ],
+        None,
+    );
+    assert!(by_id.2, "{}", by_id.1);
+    assert_eq!(by_id.0, by_name.0);
 }
 
 #[test]

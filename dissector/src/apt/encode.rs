@@ -53,6 +53,8 @@ pub enum EncodeError {
         field: String,
         /// What was given.
         value: String,
+        /// What the field takes (`an integer -2147483648..2147483647 (i32)`).
+        range: String,
     },
     /// The text could not be read as a value for this field.
     BadValue {
@@ -111,8 +113,15 @@ impl fmt::Display for EncodeError {
                 "{msg} carries a sub-message: name one with --sub ({})",
                 subs.join(", ")
             ),
-            EncodeError::OutOfRange { field, value } => {
-                write!(f, "{field}: {value} does not fit the field")
+            EncodeError::OutOfRange {
+                field,
+                value,
+                range,
+            } => {
+                write!(
+                    f,
+                    "{field}: {value} does not fit the field: it takes {range}"
+                )
             }
             EncodeError::BadValue {
                 field,
@@ -223,6 +232,19 @@ impl FieldValue {
         if let Some(v) = parse_int(s) {
             return Ok(FieldValue::Int(v));
         }
+        // An integer too long for any field: out of range, not unreadable.
+        let digits = s.strip_prefix('-').unwrap_or(s);
+        if let (Ty::Prim(p), false, true) = (
+            field.ty,
+            digits.is_empty(),
+            digits.bytes().all(|c| c.is_ascii_digit()),
+        ) {
+            return Err(EncodeError::OutOfRange {
+                field: field.name.to_string(),
+                value: s.to_string(),
+                range: prim_range(p),
+            });
+        }
         if field.ty == Ty::Prim(Prim::F32) {
             if let Some(v) = parse_num(s) {
                 return Ok(FieldValue::Float(v));
@@ -263,10 +285,26 @@ fn parse_num(s: &str) -> Option<f64> {
         .or_else(|| s.parse::<f64>().ok().filter(|v| v.is_finite()))
 }
 
+/// What a field of type `p` takes, for errors.
+fn prim_range(p: Prim) -> String {
+    let (lo, hi): (i64, i64) = match p {
+        Prim::U8 => (0, u8::MAX.into()),
+        Prim::I8 => (i8::MIN.into(), i8::MAX.into()),
+        Prim::U16 => (0, u16::MAX.into()),
+        Prim::I16 => (i16::MIN.into(), i16::MAX.into()),
+        // Status words are often written as signed masks: the i32 range is taken too.
+        Prim::U32 => (i32::MIN.into(), u32::MAX.into()),
+        Prim::I32 => (i32::MIN.into(), i32::MAX.into()),
+        Prim::F32 => return "a number (f32)".to_string(),
+    };
+    format!("an integer {lo}..{hi} ({})", Ty::Prim(p).name())
+}
+
 fn put_prim(p: Prim, field: &str, v: f64, out: &mut [u8]) -> Result<(), EncodeError> {
     let oor = || EncodeError::OutOfRange {
         field: field.to_string(),
         value: v.to_string(),
+        range: prim_range(p),
     };
     let int = || -> Result<i64, EncodeError> {
         if v.fract() != 0.0 {
@@ -350,6 +388,7 @@ pub fn encode(
                     return Err(EncodeError::OutOfRange {
                         field: f.name.to_string(),
                         value: t.clone(),
+                        range: format!("text of at most {n} bytes"),
                     });
                 }
                 slot[..t.len()].copy_from_slice(t.as_bytes());

@@ -224,6 +224,12 @@ impl Table {
 
     /// The message with this name (case-insensitive, `MGMSG_` prefix optional).
     pub fn msg_by_name(&self, name: &str) -> Option<&MsgDef> {
+        // Its id, as `messages 0x0453` takes it.
+        if let Some(hex) = name.strip_prefix("0x").or_else(|| name.strip_prefix("0X")) {
+            return u16::from_str_radix(hex, 16)
+                .ok()
+                .and_then(|id| self.msg(id));
+        }
         let n = name
             .strip_prefix("MGMSG_")
             .or_else(|| name.strip_prefix("mgmsg_"))
