@@ -187,6 +187,11 @@ fn host_and_device_replays_of_one_capture_agree() {
         out.contains("7 from the host, 7 answered from the capture"),
         "{out}"
     );
+    // Its link is gone with it (a pseudo-terminal number is reused by other programs).
+    assert!(
+        std::fs::symlink_metadata(&link).is_err(),
+        "link left behind"
+    );
     // The recording decodes to the captured conversation.
     let d = run(&["decode", rec.to_str().unwrap(), "--json"]);
     let frames = text(&d.stdout)
@@ -376,4 +381,32 @@ fn a_file_that_is_not_a_capture_is_not_replayed() {
     );
     assert!(!text(&o.stdout).contains("to send"), "{}", text(&o.stdout));
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A device replay stopped by SIGINT or SIGTERM removes the link it made for the host.
+#[test]
+fn a_device_replay_removes_its_link_on_a_signal() {
+    for sig in [
+        nix::sys::signal::Signal::SIGINT,
+        nix::sys::signal::Signal::SIGTERM,
+    ] {
+        let dir = scratch("device-link");
+        let link = dir.join("ttyAPT");
+        let args = [
+            "replay",
+            SAMPLE,
+            "--as",
+            "device",
+            "--pty",
+            link.to_str().unwrap(),
+            "--quiet",
+        ];
+        let dev = start_with_link(&args, &link);
+        nix::sys::signal::kill(nix::unistd::Pid::from_raw(dev.id() as i32), sig).unwrap();
+        let _ = dev.wait_with_output_bounded();
+        assert!(
+            std::fs::symlink_metadata(&link).is_err(),
+            "{sig}: link left behind"
+        );
+    }
 }

@@ -153,6 +153,10 @@ pub struct Link {
     reader: Option<JoinHandle<()>>,
     /// The port's name (or the pseudo-terminal's path).
     pub name: String,
+    /// The symlink made for the host program and the pseudo-terminal it points at: removed
+    /// when the link closes (host gone, SIGINT, SIGTERM), as the tap and the simulators remove
+    /// theirs, unless it has been pointed elsewhere since.
+    symlink: Option<(PathBuf, PathBuf)>,
 }
 
 fn reader(mut io: Io, clock: Clock, tx: Sender<RxEvent>, stop: Arc<AtomicBool>) {
@@ -198,6 +202,7 @@ impl Link {
             stop,
             reader,
             name,
+            symlink: None,
         }
     }
 
@@ -232,18 +237,17 @@ impl Link {
         let rfile = File::from(master);
         let wfile = rfile.try_clone()?;
         let name = link.unwrap_or(&path).to_string_lossy().into_owned();
-        Ok((
-            Link::start(
-                Io {
-                    f: wfile,
-                    slave: None,
-                },
-                Io { f: rfile, slave },
-                None,
-                name,
-            ),
-            path,
-        ))
+        let mut l = Link::start(
+            Io {
+                f: wfile,
+                slave: None,
+            },
+            Io { f: rfile, slave },
+            None,
+            name,
+        );
+        l.symlink = link.map(|l| (l.to_path_buf(), path.clone()));
+        Ok((l, path))
     }
 
     /// Write `bytes` now.
@@ -254,6 +258,13 @@ impl Link {
 
 impl Drop for Link {
     fn drop(&mut self) {
+        if let Some((link, target)) = &self.symlink {
+            // A pseudo-terminal's number is reused: a link left behind would point at another
+            // program's terminal.
+            if std::fs::read_link(link).is_ok_and(|t| &t == target) {
+                let _ = std::fs::remove_file(link);
+            }
+        }
         self.stop.store(true, Ordering::Relaxed);
         if let Some(h) = self.reader.take() {
             let _ = h.join();
