@@ -410,3 +410,37 @@ fn a_device_replay_removes_its_link_on_a_signal() {
         );
     }
 }
+
+/// A long wait for replies says what it waits for and for how long, once (it used to wait up to
+/// 120 s in silence for a MOT_MOVE_HOMED that did not come); `--quiet` keeps it quiet.
+#[test]
+fn a_long_wait_for_replies_says_what_it_waits_for() {
+    let dir = scratch("waiting");
+    let (_sim, link) = sim(&dir);
+    // A request the simulated KDC101 does not answer (a piezo message), and the reply captured.
+    let capture = dir.join("unanswered.hex");
+    std::fs::write(
+        &capture,
+        "81 06 01 00 50 01\n82 06 06 00 81 50 01 00 EE 02 00 00\n",
+    )
+    .unwrap();
+    for quiet in [false, true] {
+        let mut args = vec![
+            "replay",
+            capture.to_str().unwrap(),
+            "--port",
+            link.to_str().unwrap(),
+            "--check",
+            "--reply-timeout",
+            "4s",
+        ];
+        if quiet {
+            args.push("--quiet");
+        }
+        let o = run(&args);
+        assert!(!o.status.success(), "the reply is missing");
+        let err = text(&o.stderr);
+        let said = "replay: waiting up to 4 s for PZ_GET_OUTPUTMAXVOLTS ch1 (1 reply outstanding)";
+        assert_eq!(err.matches(said).count(), usize::from(!quiet), "{err}");
+    }
+}

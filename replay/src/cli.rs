@@ -427,6 +427,7 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
                 ignore: o.args.ignore.clone(),
                 display,
                 json: o.args.json,
+                say_waits: !o.args.quiet,
             };
             let r = run_host(&script, &sel, &opts, &mut link, rec, &mut show, &mut abort)?;
             drop(link);

@@ -35,6 +35,9 @@ pub struct HostOptions {
     pub display: bool,
     /// … as NDJSON.
     pub json: bool,
+    /// Say on standard error what a long wait for replies waits for (and, on a terminal, how
+    /// long it has waited), instead of waiting in silence.
+    pub say_waits: bool,
 }
 
 impl Default for HostOptions {
@@ -48,6 +51,7 @@ impl Default for HostOptions {
             ignore: vec![],
             display: false,
             json: false,
+            say_waits: false,
         }
     }
 }
@@ -119,6 +123,66 @@ fn expectation(script: &Script, idx: usize, fixed: Option<u64>) -> Expect {
         }
     }
     e
+}
+
+/// Saying what a long wait for replies waits for: once, when more than [`Waiting::QUIET_NS`] of
+/// it is left, then (on a terminal) a line counting the seconds.
+struct Waiting {
+    limit: u64,
+    said: bool,
+    terminal: bool,
+    /// Seconds shown on the progress line.
+    shown: Option<u64>,
+    started: Option<u64>,
+}
+
+impl Waiting {
+    /// A wait this short goes unsaid.
+    const QUIET_NS: u64 = 3_000_000_000;
+
+    fn new(limit: u64) -> Waiting {
+        use std::io::IsTerminal;
+        Waiting {
+            limit,
+            said: false,
+            terminal: std::io::stderr().is_terminal(),
+            shown: None,
+            started: None,
+        }
+    }
+
+    fn say(&mut self, now: u64, e: &Expect, outstanding: usize) {
+        let left = self.limit.saturating_sub(now);
+        if !self.said {
+            if left <= Self::QUIET_NS {
+                return;
+            }
+            let (name, chan) = &e.want[0];
+            let chan = chan.map_or(String::new(), |c| format!(" ch{c}"));
+            eprintln!(
+                "replay: waiting up to {} s for {name}{chan} ({outstanding} repl{} outstanding)",
+                left.div_ceil(1_000_000_000),
+                if outstanding == 1 { "y" } else { "ies" }
+            );
+            self.said = true;
+            self.started = Some(now);
+        }
+        let waited = now.saturating_sub(self.started.unwrap_or(now)) / 1_000_000_000;
+        if self.terminal && self.shown != Some(waited) {
+            eprint!(
+                "\r  waited {waited} s of {} s\x1b[K",
+                self.limit.saturating_sub(self.started.unwrap_or(now)) / 1_000_000_000
+            );
+            self.shown = Some(waited);
+        }
+    }
+
+    /// The wait is over: the progress line goes.
+    fn end(self) {
+        if self.terminal && self.shown.is_some() {
+            eprint!("\r\x1b[K");
+        }
+    }
 }
 
 /// Whether every wanted reply has been observed for the observed request `obs_req`; the time of
@@ -231,6 +295,7 @@ pub fn run_host<'a>(
             }
             let limit = t.saturating_add(e.captured_ns).saturating_add(e.allow_ns);
             let mut got: Option<u64> = None;
+            let mut waiting = opts.say_waits.then(|| Waiting::new(limit));
             let w = wait_until(
                 &clock,
                 limit,
@@ -240,10 +305,16 @@ pub fn run_host<'a>(
                         sess.event(ev, Side::Device);
                     }
                     got = answered(&sess, obs_idx, &e);
+                    if let (Some(w), None) = (waiting.as_mut(), got) {
+                        w.say(clock.now_ns(), &e, e.want.len());
+                    }
                     got.is_some() || sess.gone.is_some()
                 },
                 abort,
             );
+            if let Some(w) = waiting {
+                w.end();
+            }
             if let Waited::Aborted(why) = w {
                 o.aborted = Some(why);
                 break;
@@ -291,6 +362,7 @@ pub fn run_host<'a>(
             .unwrap_or(0)
             .max(tail);
         let mut pending: Vec<usize> = (0..expects.len()).collect();
+        let mut waiting = opts.say_waits.then(|| Waiting::new(limit));
         let w = wait_until(
             &clock,
             limit,
@@ -300,10 +372,17 @@ pub fn run_host<'a>(
                     sess.event(ev, Side::Device);
                 }
                 pending.retain(|&k| answered(&sess, expects[k].0, &expects[k].1).is_none());
-                (pending.is_empty() && clock.now_ns() >= tail) || sess.gone.is_some()
+                let now = clock.now_ns();
+                if let (Some(w), Some(&k)) = (waiting.as_mut(), pending.first()) {
+                    w.say(now, &expects[k].1, pending.len());
+                }
+                (pending.is_empty() && now >= tail) || sess.gone.is_some()
             },
             abort,
         );
+        if let Some(w) = waiting {
+            w.end();
+        }
         if let Waited::Aborted(why) = w {
             o.aborted = Some(why);
         }
