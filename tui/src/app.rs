@@ -303,6 +303,8 @@ impl App {
             }
             self.seen = len;
         } else {
+            // The window may have shrunk since the last frame: keep the selected row on it.
+            self.scroll_into_view();
             let shown = (self.top + self.list_rows.max(1)).min(len);
             self.seen = self.seen.max(shown).min(len);
         }

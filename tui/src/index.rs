@@ -180,6 +180,9 @@ pub struct Index {
     pub proto: Option<Proto>,
     /// Whether detection was certain.
     pub proto_certain: bool,
+    /// The share of the detection sample that framed cleanly as the protocol chosen (when
+    /// detected): an uncertain guess says how little framed.
+    pub proto_share: Option<f64>,
     /// Time of the first record.
     pub first_ts: Option<u64>,
     /// Stream names by index.
@@ -573,7 +576,7 @@ struct Sink {
     arena_base: u64,
     /// Records already published.
     base: u64,
-    proto: Option<(Proto, bool)>,
+    proto: Option<(Proto, bool, f64)>,
     modules: Vec<Module>,
     modules_base: usize,
     /// Per stream, the module entry last given to each bus address.
@@ -616,7 +619,13 @@ impl Sink {
         match rec {
             Record::Detect {
                 proto, detection, ..
-            } => self.proto = Some((*proto, detection.proto.is_some())),
+            } => {
+                let share = match proto {
+                    Proto::Apt => detection.apt,
+                    Proto::Elliptec => detection.elliptec,
+                };
+                self.proto = Some((*proto, detection.proto.is_some(), share))
+            }
             Record::Stream { id, name, .. } => {
                 let i = *id as usize;
                 if self.streams.len() <= i {
@@ -1001,7 +1010,7 @@ impl Sink {
 /// last publication. Applying it is mostly copying records into the shared index (and the
 /// page faults of its growth), which a separate thread can do while indexing goes on.
 struct Publication {
-    proto: Option<(Proto, bool)>,
+    proto: Option<(Proto, bool, f64)>,
     recs: Vec<Rec>,
     arena: Vec<u8>,
     modules: Vec<Module>,
@@ -1023,9 +1032,10 @@ struct Publication {
 impl Publication {
     /// Add to the shared index; gives back the emptied record and arena buffers for reuse.
     fn apply(mut self, ix: &mut Index) -> (Vec<Rec>, Vec<u8>) {
-        if let Some((p, certain)) = self.proto {
+        if let Some((p, certain, share)) = self.proto {
             ix.proto = Some(p);
             ix.proto_certain = certain;
+            ix.proto_share = Some(share);
         }
         ix.recs.append(&mut self.recs);
         ix.arena.append(&mut self.arena);

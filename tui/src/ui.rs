@@ -197,19 +197,32 @@ pub fn draw(f: &mut Frame<'_>, app: &mut App) {
 }
 
 fn draw_title(f: &mut Frame<'_>, app: &App, area: Rect) {
-    let (count, done, proto, format) =
+    let (count, done, proto, format, problems) =
         app.shared
             .index
             .read()
-            .map_or((0, true, String::new(), String::new()), |ix| {
+            .map_or((0, true, String::new(), String::new(), 0), |ix| {
+                let name = ix.proto.map_or("?", |p| p.name());
+                // A guess says so, and how little of the input framed (random bytes: 0%).
+                let proto = match (ix.proto_certain, ix.proto_share) {
+                    (false, Some(share)) => format!("{name}? ({:.0}% frames)", share * 100.0),
+                    _ => name.to_string(),
+                };
                 (
                     ix.recs.len(),
                     ix.done,
-                    ix.proto.map_or("?", |p| p.name()).to_string(),
+                    proto,
                     ix.format.clone(),
+                    ix.file_diags.len(),
                 )
             });
     let mut s = format!(" aptscope  {} · {proto} · {count} records", app.title);
+    if problems > 0 {
+        s.push_str(&format!(
+            " · {problems} file problem{} (2: stats)",
+            if problems == 1 { "" } else { "s" }
+        ));
+    }
     if area.width >= 120 {
         s.push_str(&format!(" · {format}"));
     }
@@ -503,7 +516,12 @@ fn draw_list(f: &mut Frame<'_>, app: &App, area: Rect) {
         lines.push(line);
     }
     if lines.is_empty() {
-        let msg = if app.shared.index.read().is_ok_and(|ix| ix.done) {
+        let (done, problems) = app
+            .shared
+            .index
+            .read()
+            .map_or((false, vec![]), |ix| (ix.done, ix.file_diags.clone()));
+        let msg = if done {
             if app.filter_text.is_empty() {
                 "(no records)"
             } else {
@@ -513,6 +531,13 @@ fn draw_list(f: &mut Frame<'_>, app: &App, area: Rect) {
             "(reading…)"
         };
         lines.push(Line::styled(msg, Style::new().fg(Color::DarkGray)));
+        // A capture with nothing to show says why (another link type, a damaged file).
+        for (o, d) in problems.iter().take(body.height.saturating_sub(1) as usize) {
+            lines.push(Line::styled(
+                format!("file problem at byte {o}: {d}"),
+                Style::new().fg(Color::Red),
+            ));
+        }
     }
     f.render_widget(Paragraph::new(lines), body);
 }
@@ -734,12 +759,17 @@ fn draw_plot(f: &mut Frame<'_>, app: &mut App, area: Rect) {
     } else {
         "record"
     };
-    let ds = Dataset::default()
-        .name(key.clone())
-        .marker(Marker::Braille)
-        .graph_type(GraphType::Line)
-        .style(Style::new().fg(Color::Cyan))
-        .data(&data);
+    // One line per stretch of data: a gap of many update periods is not drawn as a slow ramp.
+    let datasets: Vec<Dataset<'_>> = segments(&data)
+        .into_iter()
+        .map(|seg| {
+            Dataset::default()
+                .marker(Marker::Braille)
+                .graph_type(GraphType::Line)
+                .style(Style::new().fg(Color::Cyan))
+                .data(seg)
+        })
+        .collect();
     let fmt = |v: f64| format!("{}", aptscope_dissector::apt::round_sig(v));
     let title = format!(
         " Plot {}/{}: {key} ({} points)  j/k: series, q: back ",
@@ -747,7 +777,9 @@ fn draw_plot(f: &mut Frame<'_>, app: &mut App, area: Rect) {
         keys.len(),
         pts.len()
     );
-    let chart = Chart::new(vec![ds])
+    // The title names the series: no legend box over the data.
+    let chart = Chart::new(datasets)
+        .legend_position(None)
         .block(pane_block(title, true))
         .x_axis(
             Axis::default()
@@ -762,6 +794,31 @@ fn draw_plot(f: &mut Frame<'_>, app: &mut App, area: Rect) {
         );
     f.render_widget(chart, area);
 }
+
+/// A series cut where it has no data for longer than [`GAP_PERIODS`] times its usual spacing
+/// (the median step between points): each stretch is drawn as its own line.
+pub fn segments(data: &[(f64, f64)]) -> Vec<&[(f64, f64)]> {
+    let mut steps: Vec<f64> = data.windows(2).map(|w| w[1].0 - w[0].0).collect();
+    if steps.is_empty() {
+        return vec![data];
+    }
+    steps.sort_by(f64::total_cmp);
+    let usual = steps[steps.len() / 2];
+    let gap = GAP_PERIODS * usual;
+    let mut out = vec![];
+    let mut start = 0;
+    for i in 1..data.len() {
+        if usual > 0.0 && data[i].0 - data[i - 1].0 > gap {
+            out.push(&data[start..i]);
+            start = i;
+        }
+    }
+    out.push(&data[start..]);
+    out
+}
+
+/// How many usual update periods without data break a plotted line.
+pub const GAP_PERIODS: f64 = 5.0;
 
 fn draw_status(f: &mut Frame<'_>, app: &App, area: Rect) {
     let (prompt, text) = match &app.input {
@@ -793,18 +850,19 @@ fn draw_status(f: &mut Frame<'_>, app: &App, area: Rect) {
         Some(m) => m.clone(),
         None => {
             // As many hints as fit, the most useful first.
+            // The other views come early: at 80 columns they used to be cut off.
             const HINTS: &[&str] = &[
                 "?:help",
                 "/:filter",
+                "2:stats",
+                "3:plot",
+                "q:quit",
                 "a,A:as filter",
                 "s,n,N:search",
                 "p:pair",
                 "Tab:pane",
-                "q:quit",
                 "::goto",
                 "t:time",
-                "2:stats",
-                "3:plot",
             ];
             let mut s = String::new();
             for h in HINTS {
@@ -976,4 +1034,26 @@ fn draw_help(f: &mut Frame<'_>, app: &mut App, area: Rect) {
     let shown: Vec<Line> = lines.into_iter().skip(top).take(rows).collect();
     f.render_widget(Clear, r);
     f.render_widget(Paragraph::new(shown).block(block), r);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::segments;
+
+    /// Status updates every 0.1 s, then nothing for 130 s, then more: two lines, not one with
+    /// a ramp across the gap.
+    #[test]
+    fn a_gap_in_a_series_breaks_its_line() {
+        let mut pts: Vec<(f64, f64)> = (0..50).map(|i| (i as f64 * 0.1, i as f64)).collect();
+        pts.extend((0..50).map(|i| (135.0 + i as f64 * 0.1, 1000.0 + i as f64)));
+        let segs = segments(&pts);
+        assert_eq!(segs.len(), 2);
+        assert_eq!((segs[0].len(), segs[1].len()), (50, 50));
+        // Evenly spaced, or jittery within a few periods: one line.
+        let jitter: Vec<(f64, f64)> = (0..50)
+            .map(|i| (i as f64 * 0.1 + if i % 7 == 0 { 0.2 } else { 0.0 }, 0.0))
+            .collect();
+        assert_eq!(segments(&jitter).len(), 1);
+        assert_eq!(segments(&[(1.0, 1.0)]).len(), 1);
+    }
 }

@@ -480,3 +480,69 @@ fn help_scrolls_and_closes() {
     assert!(!a.help);
     assert!(!a.quit, "q closes the help only");
 }
+
+/// Shrinking the window (120×32 → 80×24) keeps the selected row on screen at the next frame,
+/// without a key press.
+#[test]
+fn the_selected_row_stays_visible_when_the_window_shrinks() {
+    use ratatui::backend::TestBackend;
+    use ratatui::Terminal;
+    let mut a = app("kdc101-session.pcapng");
+    let mut big = Terminal::new(TestBackend::new(120, 32)).expect("terminal");
+    big.draw(|f| aptscope_tui::ui::draw(f, &mut a))
+        .expect("draw");
+    // The last row that fits the big window.
+    let last = a.top + a.list_rows - 1;
+    a.select(last);
+    big.draw(|f| aptscope_tui::ui::draw(f, &mut a))
+        .expect("draw");
+    let mut small = Terminal::new(TestBackend::new(80, 24)).expect("terminal");
+    small
+        .draw(|f| aptscope_tui::ui::draw(f, &mut a))
+        .expect("draw");
+    assert!(a.list_rows < last + 1, "the small window shows fewer rows");
+    assert!(
+        a.top <= a.sel && a.sel < a.top + a.list_rows,
+        "row {} visible in {}..{}",
+        a.sel,
+        a.top,
+        a.top + a.list_rows
+    );
+    let screen = format!("{}", small.backend());
+    assert!(screen.contains("2:stats 3:plot"), "{screen}");
+}
+
+/// What the first screen says of inputs that are not what they seem: a capture of another link
+/// type lists its file problem where the records would be (it showed only "(no records)"), and
+/// random bytes are a guess that says how little framed (the title said "apt").
+#[test]
+fn the_first_screen_says_what_is_wrong_with_the_input() {
+    use ratatui::backend::TestBackend;
+    use ratatui::Terminal;
+    let screen = |path: &str| {
+        let shared = load(path, OpenOptions::default()).expect("opens");
+        let mut a = App::new(shared, "x", false);
+        let mut t = Terminal::new(TestBackend::new(100, 30)).expect("terminal");
+        t.draw(|f| aptscope_tui::ui::draw(f, &mut a)).expect("draw");
+        format!("{}", t.backend())
+    };
+    let root = env!("CARGO_MANIFEST_DIR");
+    let eth = screen(&format!("{root}/../tests/bad-input/unknown-linktype.pcap"));
+    assert!(eth.contains("1 file problem (2: stats)"), "{eth}");
+    assert!(
+        eth.contains("file problem at byte 24: unknown_linktype"),
+        "{eth}"
+    );
+    let rand = screen(&format!("{root}/../tests/bad-input/random.bin"));
+    let title = rand.lines().next().unwrap_or("");
+    assert!(
+        title.contains("apt? (") && title.contains("% frames)"),
+        "{title}"
+    );
+    let ok = screen(&sample("kdc101-session.pcapng"));
+    let title = ok.lines().next().unwrap_or("");
+    assert!(
+        title.contains("· apt ·") && !title.contains("file problem"),
+        "{title}"
+    );
+}
