@@ -30,7 +30,8 @@ mod extcap;
 #[derive(Parser)]
 #[command(
     name = "aptscope",
-    version,
+    // The commit too, from build.rs: `0.1.0 (a94ef7b 2026-12-02)`.
+    version = env!("APTSCOPE_VERSION"),
     about = "Protocol analyser for Thorlabs APT and Elliptec serial traffic"
 )]
 struct Cli {
