@@ -26,6 +26,7 @@ use std::process::ExitCode;
 
 mod batch;
 mod extcap;
+mod shell;
 
 #[derive(Parser)]
 #[command(
@@ -425,6 +426,18 @@ enum Cmd {
         #[arg(long)]
         sub: Option<String>,
     },
+    /// Print a shell completion script (`source <(aptscope completions bash)`, or save it where
+    /// the shell loads completions from).
+    Completions {
+        /// The shell.
+        #[arg(value_enum)]
+        shell: clap_complete::Shell,
+    },
+    /// Print a man page in roff (`aptscope man decode > aptscope-decode.1`; `man -l` shows it).
+    Man {
+        /// The command it documents (`decode`, `sim apt`); none: aptscope itself.
+        command: Vec<String>,
+    },
 }
 
 /// Copies the options `tap` and `sniff` share into their options struct (two types with the
@@ -725,6 +738,8 @@ fn main() -> ExitCode {
             form.as_deref(),
             sub.as_deref(),
         ),
+        Cmd::Completions { shell } => shell::completions(shell),
+        Cmd::Man { command } => shell::man(&command),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,
