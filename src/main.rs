@@ -26,11 +26,13 @@ use std::process::ExitCode;
 
 mod batch;
 mod extcap;
+mod shell;
 
 #[derive(Parser)]
 #[command(
     name = "aptscope",
-    version,
+    // The commit too, from build.rs: `0.1.0 (a94ef7b 2026-12-02)`.
+    version = env!("APTSCOPE_VERSION"),
     about = "Protocol analyser for Thorlabs APT and Elliptec serial traffic"
 )]
 struct Cli {
@@ -424,6 +426,18 @@ enum Cmd {
         #[arg(long)]
         sub: Option<String>,
     },
+    /// Print a shell completion script (`source <(aptscope completions bash)`, or save it where
+    /// the shell loads completions from).
+    Completions {
+        /// The shell.
+        #[arg(value_enum)]
+        shell: clap_complete::Shell,
+    },
+    /// Print a man page in roff (`aptscope man decode > aptscope-decode.1`; `man -l` shows it).
+    Man {
+        /// The command it documents (`decode`, `sim apt`); none: aptscope itself.
+        command: Vec<String>,
+    },
 }
 
 /// Copies the options `tap` and `sniff` share into their options struct (two types with the
@@ -724,6 +738,8 @@ fn main() -> ExitCode {
             form.as_deref(),
             sub.as_deref(),
         ),
+        Cmd::Completions { shell } => shell::completions(shell),
+        Cmd::Man { command } => shell::man(&command),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,
