@@ -395,7 +395,9 @@ fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<S
                 frames: p.decoder().frames(),
                 file_problems,
             };
-            if let Some(e) = not_traffic(judged) {
+            // A forced protocol decodes whatever the input holds (the note above says what
+            // detection thinks of it).
+            if let Some(e) = not_traffic(judged).filter(|_| job.proto == ProtoArg::Auto) {
                 out.borrow_mut().flush()?;
                 return Err(e);
             }

@@ -149,7 +149,7 @@ pub fn extcap_main(a: ExtcapArgs) -> io::Result<()> {
     }
     Err(bad(
         "aptscope extcap: give --extcap-interfaces, --extcap-dlts, --extcap-config or --capture \
-         (Wireshark does; see `aptscope extcap --help` and the README's Wireshark section)"
+         (Wireshark does; see `aptscope extcap --help` and docs/wireshark.md)"
             .into(),
     ))
 }

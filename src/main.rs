@@ -212,7 +212,7 @@ enum Cmd {
         #[arg(long)]
         json: bool,
         /// Output: text (default), json (NDJSON), or parquet (a dataset directory, -o; see
-        /// the README's "Parquet output").
+        /// docs/parquet.md).
         #[arg(long, value_enum)]
         to: Option<ToArg>,
         /// The Parquet dataset directory (--to parquet).
@@ -386,7 +386,7 @@ enum Cmd {
     },
     /// Wireshark capture source (extcap): Wireshark runs it, through a symlink named
     /// `aptscope-extcap` in its personal extcap folder, to list the interfaces and options and
-    /// to capture a tap into its FIFO (see the README's Wireshark section).
+    /// to capture a tap into its FIFO (see docs/wireshark.md).
     Extcap(extcap::ExtcapArgs),
     /// List the message table, or show one message (`messages MOT_MOVE_HOME`, `messages 0x0443`).
     Messages {
@@ -906,6 +906,10 @@ fn stats(
         writeln!(out, "{}", st.to_json())?;
     } else {
         write!(out, "{}", st.to_text())?;
+    }
+    if proto != ProtoArg::Auto {
+        // Forced: counted whatever the input holds.
+        return Ok(());
     }
     refuse_non_traffic(&dec, format, st.file_problems.values().sum())
 }

@@ -169,9 +169,14 @@ fn bad_inputs_are_named_and_skipped() {
         txt.contains("MOT_MOVE_HOME") && !txt.contains("# file 2"),
         "{txt}"
     );
-    // Alone, a file is decoded whatever it holds (as before).
-    let (_, _, ok) = aptscope(&["decode", j], None);
-    assert!(ok);
+    // Alone, it is refused too, with the reason; a forced protocol decodes it anyway.
+    let (txt, err, ok) = aptscope(&["decode", j], None);
+    assert!(
+        !ok && err.contains("not a capture") && txt.is_empty(),
+        "{err}"
+    );
+    let (txt, _, ok) = aptscope(&["decode", "--proto", "apt", j], None);
+    assert!(ok && !txt.is_empty());
     // No directory: said so.
     let (_, err, ok) = aptscope(
         &["decode", "--to", "parquet", "samples/kdc101-session.bin"],

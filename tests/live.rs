@@ -852,6 +852,16 @@ fn tap_view_shows_the_traffic_live_and_q_leaves_a_complete_capture() {
     ask_info(&host, || term.stderr());
     let screen = term.wait("the new reply in the filter", |s| s.contains("2 shown"));
     assert!(!screen.contains("HW_REQ_INFO"), "{screen}");
+    // The title says LIVE (not "[indexing 0%]" forever), and a filter that has caught up is
+    // not "filtering…".
+    let screen = term.wait("LIVE in the title", |s| {
+        s.lines().next().is_some_and(|t| t.contains("LIVE"))
+    });
+    let title_line = screen.lines().next().unwrap_or("");
+    assert!(
+        !title_line.contains("indexing") && !title_line.contains("filtering"),
+        "{title_line}"
+    );
 
     // q stops the tap: a valid capture, the byte check, where the file is.
     term.keys(&["q"]);

@@ -1,4 +1,4 @@
-//! The README's example outputs are the binary's: a fenced block after
+//! The README's and docs/'s example outputs are the binary's: a fenced block after
 //! `<!-- output: COMMAND -->` is what COMMAND prints, and in a block after `<!-- output -->`
 //! each `$ COMMAND` line is followed by what it prints. Each COMMAND runs in `sh` from the
 //! repository root with this build's `aptscope` first on PATH; trailing blanks are not compared
@@ -34,7 +34,7 @@ fn blocks(lines: &[&str]) -> Vec<Block> {
         };
         assert!(
             lines.get(i + 1).is_some_and(|f| f.starts_with("```")),
-            "README.md:{}: a fenced block must follow the output marker",
+            "line {}: a fenced block must follow the output marker",
             i + 1
         );
         let start = i + 2;
@@ -42,7 +42,7 @@ fn blocks(lines: &[&str]) -> Vec<Block> {
             + lines[start..]
                 .iter()
                 .position(|f| f.starts_with("```"))
-                .unwrap_or_else(|| panic!("README.md:{}: the block is not closed", i + 2));
+                .unwrap_or_else(|| panic!("line {}: the block is not closed", i + 2));
         let content = &lines[start..end];
         let cmd = marker.trim().strip_prefix(':');
         let runs = match cmd {
@@ -56,7 +56,7 @@ fn blocks(lines: &[&str]) -> Vec<Block> {
                 assert!(
                     marker.trim().is_empty()
                         && content.first().is_some_and(|c| c.starts_with("$ ")),
-                    "README.md:{}: `<!-- output -->` blocks start with a `$ COMMAND` line",
+                    "line {}: `<!-- output -->` blocks start with a `$ COMMAND` line",
                     i + 1
                 );
                 let mut runs: Vec<(String, Vec<String>)> = vec![];
@@ -111,48 +111,69 @@ fn trimmed(lines: &[String]) -> Vec<&str> {
     lines.iter().map(|l| l.trim_end()).collect()
 }
 
+/// README.md and the chapters of docs/: the pages whose marked outputs are checked.
+fn pages(root: &Path) -> Vec<String> {
+    let mut v = vec!["README.md".to_string()];
+    let mut docs: Vec<String> = std::fs::read_dir(root.join("docs"))
+        .expect("docs/")
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.ends_with(".md"))
+        .map(|n| format!("docs/{n}"))
+        .collect();
+    docs.sort();
+    v.extend(docs);
+    v
+}
+
 #[test]
 fn the_readme_shows_what_the_binary_prints() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let readme = std::fs::read_to_string(root.join("README.md")).expect("README.md");
-    let lines: Vec<&str> = readme.lines().collect();
-    let blocks = blocks(&lines);
-    assert!(blocks.len() >= 4, "the README's marked outputs are gone");
     let mut failures = vec![];
-    let mut updated: Vec<String> = lines.iter().map(|s| s.to_string()).collect();
-    // From the end, so that a block that changes length moves none still to do.
-    for b in blocks.iter().rev() {
-        let mut new = vec![];
-        for (cmd, want) in &b.runs {
-            let got = run(root, cmd);
-            if trimmed(&got) != trimmed(want) {
-                failures.push(format!(
-                    "README.md:{}: `{cmd}` now prints:\n{}\n",
-                    b.start + 1,
-                    got.join("\n")
-                ));
+    let mut marked = 0;
+    for page in pages(root) {
+        let text = std::fs::read_to_string(root.join(&page)).expect("page");
+        let lines: Vec<&str> = text.lines().collect();
+        let blocks = blocks(&lines);
+        marked += blocks.len();
+        let mut page_failures = vec![];
+        let mut updated: Vec<String> = lines.iter().map(|s| s.to_string()).collect();
+        // From the end, so that a block that changes length moves none still to do.
+        for b in blocks.iter().rev() {
+            let mut new = vec![];
+            for (cmd, want) in &b.runs {
+                let got = run(root, cmd);
+                if trimmed(&got) != trimmed(want) {
+                    page_failures.push(format!(
+                        "{page}:{}: `{cmd}` now prints:\n{}\n",
+                        b.start + 1,
+                        got.join("\n")
+                    ));
+                }
+                if b.transcript {
+                    new.push(format!("$ {cmd}"));
+                }
+                new.extend(got.iter().map(|l| l.trim_end().to_owned()));
             }
-            if b.transcript {
-                new.push(format!("$ {cmd}"));
-            }
-            new.extend(got.iter().map(|l| l.trim_end().to_owned()));
+            updated.splice(b.start..b.end, new);
         }
-        updated.splice(b.start..b.end, new);
+        if page_failures.is_empty() {
+            continue;
+        }
+        page_failures.reverse();
+        if std::env::var("APTSCOPE_UPDATE_README").as_deref() == Ok("1") {
+            let mut text = updated.join("\n");
+            text.push('\n');
+            std::fs::write(root.join(&page), text).expect("write the page");
+            eprintln!("{page} updated:\n{}", page_failures.join("\n"));
+            continue;
+        }
+        failures.extend(page_failures);
     }
-    if failures.is_empty() {
-        return;
-    }
-    failures.reverse();
-    if std::env::var("APTSCOPE_UPDATE_README").as_deref() == Ok("1") {
-        let mut text = updated.join("\n");
-        text.push('\n');
-        std::fs::write(root.join("README.md"), text).expect("write README.md");
-        eprintln!("README.md updated:\n{}", failures.join("\n"));
-        return;
-    }
-    panic!(
-        "the README's example outputs differ from the binary's (APTSCOPE_UPDATE_README=1 \
-         writes these into README.md):\n\n{}",
+    assert!(marked >= 4, "the marked outputs are gone");
+    assert!(
+        failures.is_empty(),
+        "the example outputs differ from the binary's (APTSCOPE_UPDATE_README=1 writes these \
+         into the pages):\n\n{}",
         failures.join("\n")
     );
 }

@@ -38,7 +38,8 @@ pub struct Seen {
 
 /// Why a whole input is not traffic of these protocols, when it is not: it had bytes and none
 /// framed, or it had no traffic at all but problems (a pcap of an Ethernet link). An empty
-/// capture is not refused: nothing was there to decode.
+/// capture is not refused: nothing was there to decode. Callers ask only when the protocol was
+/// detected: a forced one decodes whatever the input holds.
 pub fn not_traffic(seen: Seen) -> Option<io::Error> {
     let why = if seen.frames == 0 && seen.bytes > 0 {
         format!(

@@ -2,7 +2,7 @@
 //! ([`crate::stats`]) read of a record, straight from the typed [`Record`] — no JSON rendered
 //! and parsed back.
 //!
-//! Names are the NDJSON keys (see the README's NDJSON section), listed once in [`KEYS`]: the
+//! Names are the NDJSON keys (see docs/ndjson.md), listed once in [`KEYS`]: the
 //! filter's name check, its suggestions and the accessors below all read that list. A field is
 //! read as a [`Key`] (the top-level key, resolved once when a filter is compiled) and the rest
 //! of its dotted path. The same trait is implemented on `serde_json::Value` (one NDJSON object),

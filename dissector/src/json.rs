@@ -1,4 +1,4 @@
-//! The shape of decoded records (documented in the README, "NDJSON output"), written once
+//! The shape of decoded records (documented in docs/ndjson.md), written once
 //! through a [`Sink`]: NDJSON text (`String`, one object per line, no allocation per value),
 //! the Python package's dicts, the replay's owned values. Every view that gives a record's
 //! fields takes them from here, so the shape rules live in one place.

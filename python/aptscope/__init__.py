@@ -3,7 +3,7 @@
 aptscope's Rust decoder, as a package:
 
 * :func:`decode` yields every record of a capture as a dict (the NDJSON shape of
-  ``aptscope decode --json``, documented in the README's "NDJSON output");
+  ``aptscope decode --json``, documented in docs/ndjson.md);
 * :func:`to_arrow` returns pyarrow tables with exactly the schema of
   ``aptscope decode --to parquet`` (README "Parquet output"): ``records`` and one table per
   message kind, typed from the message tables;

@@ -361,7 +361,7 @@ impl Script {
             frames: dec.frames(),
             file_problems,
         };
-        if let Some(e) = not_traffic(seen) {
+        if let Some(e) = not_traffic(seen).filter(|_| proto.is_none()) {
             return Err(e);
         }
         let proto = c.proto.or(dec.proto()).unwrap_or(Proto::Apt);

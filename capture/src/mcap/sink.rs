@@ -51,7 +51,7 @@ impl Default for McapOptions {
 
 /// zstd level of the default options: 13–15 % fewer instructions than zstd's default (3), and
 /// on [`DEFAULT_CHUNK_SIZE`] chunks the file is about as small (+0.3 %) as level 3 made it on
-/// the 1 MiB chunks written before (the README's Performance table has the figures).
+/// the 1 MiB chunks written before (docs/performance.md has the figures).
 pub const DEFAULT_ZSTD_LEVEL: i32 = 1;
 /// Uncompressed size after which a chunk is closed, by default. The writer holds a few chunks
 /// at once (the open one, one queued, one per compression thread, and the compressed ones
