@@ -43,7 +43,7 @@ fn resynchronisation_rebases_after_reading_more() {
         }
     }
     let path = format!(
-        "{}/../fuzz/artifacts-found/pcap-resync-rebase.fuzz",
+        "{}/../fuzz/artifacts-found/pcap_reader/pcap-resync-rebase.fuzz",
         env!("CARGO_MANIFEST_DIR")
     );
     let data = std::fs::read(path).expect("reproducer");
