@@ -1,18 +1,21 @@
 //! APT framer + decoder on any bytes, pushed in chunks derived from the input.
 //!
-//! Input: `[max_chunk, seed, times, stream...]` (times: see `Times`). Checks: every input byte is in exactly one
-//! frame or garbage record, in order, with contiguous offsets and the input's own bytes; the
-//! records do not depend on the chunking; frames are at least a header long and, unless
-//! truncated (only at the end), exactly as long as their header says; garbage runs are cut at
-//! `MAX_GARBAGE_RUN`; every frame decodes, its diagnostics point inside it (or just past it for
-//! `truncated`), its JSON parses; pairing and text rendering do not panic.
+//! Input: `[max_chunk, seed, times, stream...]` (times: see `Times`). Checks: every input byte
+//! is in exactly one frame or garbage record, in order, with contiguous offsets and the input's
+//! own bytes; the records do not depend on the chunking; every frame keeps the framer's length
+//! rules as the dissector states them (`apt::check_frame`: flagged data as the header says,
+//! unflagged data recognised by its message's forms, header-only forms, open forms up to
+//! `maxlen=`), and only the last is truncated; garbage runs are cut at `MAX_GARBAGE_RUN`; every
+//! frame decodes, its diagnostics point inside it (or just past it for `truncated`), its JSON
+//! parses; pairing and text rendering do not panic.
 
+use crate::util::{cuts, split_ctl, Times};
 use aptscope_dissector::apt::{
-    fmt_value, summary, AptFrame, AptFramer, GarbageKind, Item, HEADER_LEN, MAX_GARBAGE_RUN,
+    check_frame, fmt_value, summary, AptFrame, AptFramer, GarbageKind, Item, HEADER_LEN,
+    MAX_GARBAGE_RUN,
 };
 use aptscope_dissector::pair::{AptPairer, PairInfo};
 use aptscope_dissector::{json, text, Table};
-use crate::util::{cuts, split_ctl, Times};
 
 #[derive(Debug, Clone, PartialEq)]
 enum Rec {
@@ -74,17 +77,12 @@ pub fn fuzz(data: &[u8]) {
             Rec::Frame(off, b, truncated) => {
                 assert_eq!(*off, at, "records are contiguous");
                 assert_eq!(&input[*off as usize..*off as usize + b.len()], &b[..]);
-                assert!(b.len() >= HEADER_LEN, "a frame holds a header");
-                let len = if b[4] & 0x80 != 0 {
-                    HEADER_LEN + u16::from_le_bytes([b[2], b[3]]) as usize
-                } else {
-                    HEADER_LEN
-                };
+                // The framer's length rules, as the dissector states them.
+                if let Err(e) = check_frame(t, b, *truncated) {
+                    panic!("frame at {off} ({b:02x?}): {e}");
+                }
                 if *truncated {
                     assert_eq!(i, last, "only the last record can be truncated");
-                    assert!(b.len() < len);
-                } else {
-                    assert_eq!(b.len(), len, "frame length as its header says");
                 }
                 let f = AptFrame::decode(t, *off, b, *truncated).expect("every frame decodes");
                 for d in f.diags() {

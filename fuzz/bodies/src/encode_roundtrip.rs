@@ -5,7 +5,9 @@
 //! (message, form, sub-message) of the table; each field takes the next bytes of the input as a
 //! value of a kind chosen by one byte (an integer, a float, text, bytes, a list — matching the
 //! field's type or not, in range or not, text through `FieldValue::from_text` too). Checks: the
-//! encoder either refuses or builds a frame of the form's length that frames as one frame,
+//! encoder either refuses or builds a frame of a length the form's rules give
+//! (`Form::encoded_len`, `Form::accepts_len`: open forms hold as many elements as given, up to
+//! the message's `maxlen=`) that frames as one frame,
 //! decodes as the same message and form, and gives back every value it was given (as the
 //! encoder documents: integers exactly, f32 rounding, u32 fields also from negative i32 masks,
 //! text up to its first NUL, fields not given read 0).
@@ -14,7 +16,7 @@ use aptscope_dissector::apt::{
     encode, read_prim, AptFrame, AptFramer, FieldValue, Item, Value, HEADER_LEN,
 };
 use aptscope_dissector::synth::all_forms;
-use aptscope_dissector::table::{Field, Form, FormKind, MsgDef, Prim, Ty};
+use aptscope_dissector::table::{Field, Form, MsgDef, Prim, Ty};
 use aptscope_dissector::Table;
 use std::sync::OnceLock;
 
@@ -118,6 +120,12 @@ fn value_for(t: &Table, f: &Field, inp: &mut Bytes<'_>) -> FieldValue {
             )
             .collect(),
         ),
+        // An open array (`TYPE[*]`) takes any number of elements, past its message's largest
+        // packet too (MOT_SET_MOVESYNCHARRAY: 1024 i32 with `maxlen=4104`).
+        (6, Ty::Array(p, 0)) => {
+            let k = usize::from(u16::from_le_bytes([inp.byte(), inp.byte()])) % 1100;
+            FieldValue::List((0..k).map(|_| inp.num(p)).collect())
+        }
         (6, Ty::Array(p, n)) => {
             let k = inp.byte() as usize % (n as usize + 2);
             FieldValue::List((0..k).map(|_| inp.num(p)).collect())
@@ -167,11 +175,14 @@ fn check(f: &Field, got: Value<'_>, given: &FieldValue) -> bool {
             true
         }
         (Ty::Array(p, n), FieldValue::List(xs)) => {
-            if xs.len() > n as usize {
+            // A closed array holds `n` elements (the ones not given read 0), an open one as
+            // many as given.
+            let want_len = if n == 0 { xs.len() } else { n as usize };
+            if xs.len() > want_len {
                 return false;
             }
             let elems: Vec<Value<'_>> = got.elements().collect();
-            assert_eq!(elems.len(), n as usize, "{}", f.name);
+            assert_eq!(elems.len(), want_len, "{}", f.name);
             for (i, e) in elems.iter().enumerate() {
                 let want = match xs.get(i) {
                     Some(x) => match expect_prim(p, *x) {
@@ -216,15 +227,29 @@ pub fn fuzz(data: &[u8]) {
     let Ok(bytes) = encode(form, &vals, m.id, dst, src) else {
         return;
     };
-    let data_len = match form.kind {
-        FormKind::Data(n) => n as usize,
-        _ => 0,
-    };
+    // The form's length rules, as the dissector states them: the length `encoded_len` gives
+    // for the elements of the open array (if any), one the form (so the decoder) accepts.
+    let elems = vals.iter().find_map(|(k, v)| match (v, form.open_elem()) {
+        (FieldValue::List(xs), Some(_)) if form.fields.last().is_some_and(|f| f.name == *k) => {
+            Some(xs.len())
+        }
+        _ => None,
+    });
+    let data_len = bytes.len() - HEADER_LEN;
     assert_eq!(
-        bytes.len(),
-        HEADER_LEN + data_len,
-        "{}: frame length",
-        m.name
+        form.encoded_len(elems.unwrap_or(0)),
+        Some(data_len),
+        "{} {}: frame length",
+        m.name,
+        form.label()
+    );
+    let flagged = bytes[4] & 0x80 != 0;
+    assert_eq!(flagged, data_len > 0, "{}: data flag", m.name);
+    assert!(
+        form.accepts_len(flagged, data_len),
+        "{} {}: {data_len} data bytes, a length the form does not accept",
+        m.name,
+        form.label()
     );
     let f = AptFrame::decode(t, 0, &bytes, false).expect("a frame");
     assert_eq!(f.msg.map(|x| x.id), Some(m.id), "{}", m.name);
