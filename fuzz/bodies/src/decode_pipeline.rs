@@ -9,13 +9,13 @@
 //! single-lane capture their offsets are contiguous; late diagnostics refer to earlier records;
 //! the text output has as many lines as the NDJSON.
 
+use crate::util::{expansion_limit, split_ctl, strict};
 use aptscope_capture::open::{sniff, ByteReader, Format};
 use aptscope_capture::textlog;
 use aptscope_capture::{mcap, pcap, Event, Reader};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
 use aptscope_dissector::table::Dir;
-use crate::util::{expansion_limit, split_ctl, strict};
 use std::io::{BufReader, Cursor};
 
 fn reader(file: &[u8], format: Format) -> Box<dyn Reader> {

@@ -7,9 +7,9 @@
 //! point inside their frame (or just past it); the bus, JSON and text rendering do not panic, and
 //! the JSON parses. Times fed to the bus may be anywhere in the u64 range.
 
+use crate::util::{cuts, split_ctl, Times};
 use aptscope_dissector::ell::{fmt_value, Bus, EllFrame, EllFramer, GarbageKind, Item};
 use aptscope_dissector::{apt::MAX_GARBAGE_RUN, json, text};
-use crate::util::{cuts, split_ctl, Times};
 
 #[derive(Debug, Clone, PartialEq)]
 enum Rec {

@@ -7,8 +7,8 @@
 //! chunks; and the events (chunks, streams, diagnostics' kinds and offsets) do not depend on how
 //! the file is read.
 
-use aptscope_capture::mcap::McapReader;
 use crate::util::{drain_reader, event_keys, split_ctl, ShortReads};
+use aptscope_capture::mcap::McapReader;
 
 fn reader(file: &[u8], max: u8, seed: u8, with_len: bool) -> McapReader {
     let r = McapReader::new(ShortReads::new(file.to_vec(), max, seed));

@@ -6,9 +6,9 @@
 //! `max_read` bytes. Checks (see `drain_reader`): the reader ends, diagnostics have snake_case
 //! kinds and offsets within the file, streams are announced once before their chunks.
 
+use crate::util::{drain_reader, split_ctl, ShortReads};
 use aptscope_capture::open::sniff;
 use aptscope_capture::textlog::{self, TextFormat};
-use crate::util::{drain_reader, split_ctl, ShortReads};
 use std::io::BufReader;
 
 const KINDS: [TextFormat; 6] = TextFormat::ALL;
