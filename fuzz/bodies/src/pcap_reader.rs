@@ -5,7 +5,8 @@
 //! `1:(flags >> 1)`. Checks (see `drain_reader`): the reader ends, diagnostics have snake_case
 //! kinds and offsets within the file, streams are announced once before their chunks, and the
 //! events do not depend on how the file is read (they once did after a corrupt block:
-//! `fuzz/artifacts-found/pcap_reader/pcap-resync-short-reads.fuzz`; `APTSCOPE_FUZZ_LENIENT=1` skips this).
+//! `fuzz/artifacts-found/pcap_reader/pcap-resync-short-reads.fuzz`;
+//! `APTSCOPE_FUZZ_LENIENT=1` skips this).
 
 use crate::util::{drain_reader, event_keys, split_ctl, strict, ShortReads};
 use aptscope_capture::pcap::PcapReader;

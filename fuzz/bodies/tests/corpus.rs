@@ -84,12 +84,16 @@ macro_rules! corpus_tests {
 corpus_tests!(
     apt_framer,
     decode_pipeline,
+    ell_encode,
     ell_framer,
     encode_roundtrip,
     filter_parse,
+    follow_reader,
     mcap_reader,
     pcap_reader,
     textlog_reader,
+    units,
+    usb_unwrap,
 );
 
 /// Targets, corpus folders, found-input folders and cargo-fuzz binaries name the same set: a new
@@ -104,7 +108,10 @@ fn every_target_is_tested_and_every_input_belongs_to_one() {
     assert_eq!(tested, names, "a target without its corpus test");
     assert_eq!(folders(&dir.join("corpus")), names, "corpus folders");
     for f in folders(&dir.join("artifacts-found")) {
-        assert!(names.contains(&f.as_str()), "artifacts-found/{f}: no such target");
+        assert!(
+            names.contains(&f.as_str()),
+            "artifacts-found/{f}: no such target"
+        );
     }
     for p in files(&dir.join("artifacts-found")) {
         assert!(
