@@ -49,17 +49,25 @@ fn run_target(name: &str) {
     let found = files(&dir.join("artifacts-found").join(name));
     let start = Instant::now();
     let mut failed = vec![];
+    let mut slowest = (std::time::Duration::ZERO, String::new());
     for p in seeds.iter().chain(&found) {
         let data = std::fs::read(p).expect("read input");
+        let t = Instant::now();
         if std::panic::catch_unwind(|| body(&data)).is_err() {
             failed.push(p.display().to_string());
         }
+        if t.elapsed() > slowest.0 {
+            slowest = (t.elapsed(), p.display().to_string());
+        }
     }
+    // Seen with --nocapture: where the time goes, to keep the test short.
     eprintln!(
-        "{name}: {} seeds, {} found inputs, {:.2?}",
+        "{name}: {} seeds, {} found inputs, {:.2?} (slowest {:.2?}: {})",
         seeds.len(),
         found.len(),
-        start.elapsed()
+        start.elapsed(),
+        slowest.0,
+        slowest.1
     );
     assert!(
         failed.is_empty(),
