@@ -10,6 +10,7 @@ B=tests/bad-input
 C=fuzz/corpus
 rm -f "$C"/*/seed-*
 mkdir -p "$C"/{apt_framer,ell_framer,pcap_reader,mcap_reader,textlog_reader,decode_pipeline,filter_parse,encode_roundtrip}
+mkdir -p "$C"/{ell_encode,units,usb_unwrap,follow_reader}
 
 # seed TARGET NAME PREFIX_HEX FILE
 seed() { { printf '%s' "$3" | xxd -r -p; cat "$4"; } > "$C/$1/seed-$2"; }
@@ -48,6 +49,7 @@ seed textlog_reader hexcols 050000 "$S/kdc101-session.hex"
 
 # decode_pipeline: flags byte (proto auto/apt/elliptec, hex, raw) then a file of any format.
 for f in "$S"/*; do
+  [ -f "$f" ] || continue
   case "$f" in *.sh|*.py|*.interceptty.log) continue ;; esac
   seed decode_pipeline "$(basename "$f")" 00 "$f"
 done
@@ -94,4 +96,77 @@ seed encode_roundtrip move-absolute 01005001 /dev/null
 printf '\x00\x10\x50\x01\x00\x01\x00\x00\x00\x00\x00\x00\x00\x81\x40\x0d\x03\x00\x00\x00\x00\x00' > "$C/encode_roundtrip/seed-values"
 printf '\x00\x20\x21\x01\x03\x05CH1xx\x83\x04-100\x03\x0a0x7fffffff' > "$C/encode_roundtrip/seed-text"
 head -c 200 "$S/kdc101-session.bin" > "$C/encode_roundtrip/seed-bytes"
+
+# ell_encode: command row, address, then per field: how (2: given), kind (0: decimal), 8 bytes.
+for row in 0 5 12 20 31 40; do
+  printf "$(printf '\\x%02x' "$row")"'\x02\x02\x00\x05\x00\x00\x00\x00\x00\x00\x00\x02\x01\x10\x00\x00\x00\x00\x00\x00\x00' \
+    > "$C/ell_encode/seed-row-$row"
+done
+printf '\x07\x8a\x02\x03\x00\x02\x03\x01ma' > "$C/ell_encode/seed-by-name"
+printf '\x09\x03\x02\x04\x00\x02\x06\x05hello\x01\x03\x02' > "$C/ell_encode/seed-names"
+
+# units: flags (1 stage, 2 scale, 4 controller), counts and raw (f64 bits), then NUL-separated
+# stage, scale, controller, model.
+f64() { python3 -c "import struct,sys; sys.stdout.buffer.write(struct.pack('<d', float('$1')))"; }
+useed() { { printf "$2"; f64 "$3"; f64 "$4"; printf '%s\0%s\0%s\0%s' "$5" "$6" "$7" "$8"; } > "$C/units/seed-$1"; }
+useed stage '\x01' 34554.96 20000 MTS25-Z8 "" "" KDC101
+useed scale '\x26' 1919.64 -4500 "" 1919.64/deg KBD101 ""
+useed controller '\x45' 0 772981 "" "" BSC203 BSC203
+useed fixed '\x00' 1e-300 1e300 "" "" "" K10CR1/M
+useed zst '\x05' nan inf ZST213 "" TDC001 TDC001
+
+# usb_unwrap: mode 0/1 (serial chunks [dir, len, bytes] through synth_usbmon, 1: then flips),
+# mode 2 (packets [linktype, len, cut, bytes] from the usbmon and USBPcap samples).
+chunks() { python3 - "$1" <<'PY'
+import sys
+data = open(sys.argv[1], 'rb').read()[:1200]
+out, i, d = bytearray(), 0, 0
+while i < len(data):
+    n = min(len(data) - i, 7 + (i * 13) % 90)
+    out += bytes([d | 2 | (i % 7) << 2, n]) + data[i:i + n]
+    i, d = i + n, d ^ 1
+sys.stdout.buffer.write(out)
+PY
+}
+{ printf '\x00\x00\x08'; chunks "$S/kdc101-session.bin"; } > "$C/usb_unwrap/seed-synth"
+{ printf '\x00\x05\x40'; chunks "$S/kdc101-session.bin"; } > "$C/usb_unwrap/seed-synth-device"
+{ printf '\x01\x00\x08'; chunks "$S/kdc101-session.bin"; printf '\x00\x00\x20\x01\x55\x90\x03\x07\x01\x02\x10'; } > "$C/usb_unwrap/seed-flips"
+packets() { python3 - "$1" "$2" <<'PY'
+import struct, sys
+data, sel = open(sys.argv[1], 'rb').read(), int(sys.argv[2])
+out, at = bytearray(), 24
+while at + 16 <= len(data) and len(out) < 12000:
+    incl, orig = struct.unpack_from('<II', data, at + 8)
+    rec = data[at + 16:at + 16 + incl][:511]
+    out += bytes([sel]) + struct.pack('<H', len(rec)) + bytes([min(255, orig - len(rec))]) + rec
+    at += 16 + incl
+sys.stdout.buffer.write(out)
+PY
+}
+{ printf '\x02\x00\x00'; packets "$S/kdc101-session.usbmon.pcap" 1; } > "$C/usb_unwrap/seed-usbmon"
+{ printf '\x02\x00\x00'; packets "$S/kdc101-session.usbpcap.pcap" 2; } > "$C/usb_unwrap/seed-usbpcap"
+
+# follow_reader: flags (1: head first), head limit, then pieces [len/4, read_max, bytes].
+pieces() { python3 - "$1" <<'PY'
+import sys
+data = open(sys.argv[1], 'rb').read()[:6000]
+out, i = bytearray(), 0
+while i < len(data):
+    n = min(len(data) - i, 4 * (1 + (i * 7) % 60))
+    out += bytes([n // 4, 1 + (i * 11) % 200]) + data[i:i + n - n % 4 if n >= 4 else i + n]
+    i += n - n % 4 if n >= 4 else n
+sys.stdout.buffer.write(out)
+PY
+}
+for f in kdc101-session.pcap kdc101-session.mcap kdc101-session.socat.log elliptec-bus.txt; do
+  { printf '\x01\x40'; pieces "$S/$f"; } > "$C/follow_reader/seed-$f"
+done
+{ printf '\x02\x00'; pieces "$S/kdc101-session.bin"; } > "$C/follow_reader/seed-raw"
+# Inputs that once made a target fail (fuzz/artifacts-found/<target>/) are seeds of it too.
+for d in fuzz/artifacts-found/*/; do
+  t=$(basename "$d")
+  for f in "$d"*; do
+    cp "$f" "$C/$t/seed-found-$(basename "$f" .fuzz)"
+  done
+done
 du -sh "$C"

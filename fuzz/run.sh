@@ -24,10 +24,12 @@ if ! cargo fuzz build; then
 fi
 bin=target/x86_64-unknown-linux-gnu/release
 failed=()
+rows=()
 for t in "${targets[@]}"; do
   mkdir -p "work/$t" "artifacts/$t"
   case "$t" in
-    apt_framer | ell_framer | filter_parse | encode_roundtrip) max_len=16384 ;;
+    apt_framer | ell_framer | filter_parse | encode_roundtrip | ell_encode) max_len=16384 ;;
+    units) max_len=1024 ;;
     *) max_len=65536 ;;
   esac
   start=$(date +%s)
@@ -42,13 +44,23 @@ for t in "${targets[@]}"; do
     status=FAILED
     failed+=("$t")
   fi
-  runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "work/$t.log" | grep -o '[0-9]*$' || echo '?')
-  cov=$(grep -o 'cov: [0-9]*' "work/$t.log" | tail -1 || true)
-  printf '%-18s %-6s %4ss  %s runs  %s\n' "$t" "$status" "$(($(date +%s) - start))" "$runs" "$cov"
+  took=$(($(date +%s) - start))
+  # A crashed run prints no final stats: take the last progress line's count then.
+  runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "work/$t.log" | grep -o '[0-9]*$')
+  [ -n "$runs" ] || runs=$(grep -oE '^#[0-9]+' "work/$t.log" | tail -1 | tr -d '#')
+  cov=$(grep -o 'cov: [0-9]*' "work/$t.log" | tail -1 | grep -o '[0-9]*$')
+  printf '%-18s %-6s %5ss  %s runs  cov %s\n' "$t" "$status" "$took" "${runs:-?}" "${cov:-?}"
   if [ "$status" = FAILED ]; then
     grep -E 'panicked at|ERROR: libFuzzer|SUMMARY|Test unit written' "work/$t.log" | head -5 | sed 's/^/    /'
   fi
+  rows+=("$(printf '| `%s` | %s | %s | %s | %s |' "$t" "$status" "$took" "${runs:-?}" "${cov:-?}")")
 done
+# The summary as a Markdown table (for the README's record of runs).
+echo
+echo "| target | status | seconds | executions | coverage |"
+echo "|---|---|---:|---:|---:|"
+printf '%s\n' "${rows[@]}"
+echo
 if [ ${#failed[@]} -gt 0 ]; then
   echo "fuzz/run.sh: failed: ${failed[*]} (logs in fuzz/work/, inputs in fuzz/artifacts/)" >&2
   exit 1

@@ -387,7 +387,8 @@ pub fn nearest_stage_names(name: &str) -> Vec<&'static str> {
             names.push(s.name);
         }
     }
-    names.sort_by_key(|s| edit_distance(&n, &norm(s, false)));
+    // Cached: the key (a normalisation and an edit distance) once per name, not per comparison.
+    names.sort_by_cached_key(|s| edit_distance(&n, &norm(s, false)));
     names
 }
 

@@ -217,11 +217,7 @@ impl<'a, 't> AptFrame<'a, 't> {
         }
         for fm in m.forms.iter().filter(|_| has_data) {
             match fm.kind {
-                FormKind::Data(n) if n as usize == len => {
-                    msg_form = Some(fm);
-                    form = Some(fm);
-                }
-                FormKind::Open(_) if fm.open_fits(len, table.max_data_len(m)) => {
+                FormKind::Data(_) | FormKind::Open(_) if fm.accepts_len(true, len) => {
                     msg_form = Some(fm);
                     form = Some(fm);
                 }
@@ -234,8 +230,7 @@ impl<'a, 't> AptFrame<'a, 't> {
                         None => diag_bits |= D_SUB_DATA,
                         Some(s) => {
                             sub = Some(s);
-                            let want = FormKind::Data(len as u16);
-                            form = s.forms.iter().find(|sf| sf.kind == want);
+                            form = s.forms.iter().find(|sf| sf.accepts_len(true, len));
                             if form.is_none() {
                                 diag_bits |= D_LENGTH;
                             }

@@ -346,22 +346,32 @@ pub fn encode(
     dst: u8,
     src: u8,
 ) -> Result<Vec<u8>, EncodeError> {
-    let data_len = match form.kind {
-        FormKind::Header => 0,
-        FormKind::Data(n) => n as usize,
-        FormKind::Sub => return Err(EncodeError::SubFormNeedsSub),
-        // The fixed fields, then as many elements of the open array as given.
-        FormKind::Open(n) => {
-            let elems = values
-                .iter()
-                .find_map(|(k, v)| match (form.fields.last(), v) {
-                    (Some(f), FieldValue::List(xs)) if f.name == *k => Some(xs.len()),
-                    _ => None,
-                })
-                .unwrap_or(0);
-            n as usize + elems * form.open_elem().unwrap_or(0)
-        }
-    };
+    if form.kind == FormKind::Sub {
+        return Err(EncodeError::SubFormNeedsSub);
+    }
+    // An open form: the fixed fields, then as many elements of the open array as given.
+    let open = form.open_elem().and(form.fields.last());
+    let elems = values.iter().find_map(|(k, v)| match (open, v) {
+        (Some(f), FieldValue::List(xs)) if f.name == *k => Some((f, xs.len())),
+        _ => None,
+    });
+    // The length rule of forms (`Form::encoded_len`): more elements than the message's
+    // largest packet holds do not fit.
+    let data_len = form
+        .encoded_len(elems.map_or(0, |(_, n)| n))
+        .ok_or_else(|| match elems {
+            Some((f, n)) => EncodeError::OutOfRange {
+                field: f.name.to_string(),
+                value: format!(
+                    "{n} elements (at most {} bytes of data)",
+                    form.max_data_len()
+                ),
+            },
+            None => EncodeError::OutOfRange {
+                field: form.label(),
+                value: "no data length fits the form".into(),
+            },
+        })?;
     let mut out = vec![0u8; HEADER_LEN + data_len];
     for (name, v) in values {
         let f = form
@@ -400,7 +410,9 @@ pub fn encode(
                 slot.copy_from_slice(b);
             }
             (Ty::Array(p, n), FieldValue::List(xs)) => {
-                if *n != 0 && xs.len() > *n as usize {
+                // The open array's slot was sized by the first list given for it.
+                let open_len = (*n == 0).then(|| xs.len() * p.width());
+                if (*n != 0 && xs.len() > *n as usize) || open_len.is_some_and(|l| l != w) {
                     return Err(mismatch());
                 }
                 for (i, x) in xs.iter().enumerate() {
@@ -675,5 +687,36 @@ mod tests {
             ..stop
         };
         assert!(e(&hdr).contains("a form is hdr or a length"));
+    }
+
+    /// An open form holds as many rows as given, up to its message's `maxlen=`: the length
+    /// `Form::encoded_len` states and `Form::accepts_len` (the decoder's rule) accepts.
+    #[test]
+    fn open_forms_take_rows_up_to_the_messages_largest_packet() {
+        let t = Table::global();
+        let m = t
+            .msg_by_name("MOT_SET_MOVESYNCHARRAY")
+            .expect("in the table");
+        let form = &m.forms[0];
+        assert_eq!(form.max_data_len(), 4104);
+        assert_eq!(form.encoded_len(0), Some(8));
+        assert_eq!(form.encoded_len(1024), Some(4104));
+        assert_eq!(form.encoded_len(1025), None);
+        assert!(form.accepts_len(true, 4104) && !form.accepts_len(true, 4106));
+        assert!(
+            !form.accepts_len(false, 8),
+            "an open form has a data packet"
+        );
+        let rows = |n: usize| ("time_pos", FieldValue::List(vec![7.0; n]));
+        let b = encode(form, &[rows(1024)], m.id, 0x50, 0x01).expect("fits");
+        assert_eq!(b.len(), 6 + 4104);
+        assert_eq!(&b[2..5], &[0x08, 0x10, 0xD0]);
+        // One row more: refused, not a frame the framer would take for a corrupt header.
+        let e = encode(form, &[rows(1025)], m.id, 0x50, 0x01).expect_err("too long");
+        assert!(matches!(e, EncodeError::OutOfRange { .. }), "{e}");
+        // The open array given twice: the slot was sized by the first list, so a longer second
+        // one is refused (it once panicked, writing past the slot).
+        let e = encode(form, &[rows(1), rows(3)], m.id, 0x50, 0x01).expect_err("twice");
+        assert!(matches!(e, EncodeError::BadValue { .. }), "{e}");
     }
 }

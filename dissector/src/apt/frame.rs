@@ -68,6 +68,83 @@ impl Item<'_> {
     }
 }
 
+/// The lengths a frame may have, by its header: the rule the framer cuts frames by
+/// ([`AptFramer`]) and [`check_frame`] holds them to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LenRule {
+    /// The length the header states: [`HEADER_LEN`] plus the length field when the 0x80 data
+    /// flag is set, else [`HEADER_LEN`] (a header-only frame).
+    pub declared: usize,
+    /// For a header without the data flag: the frame length when its param bytes, read as a
+    /// length, give a data form of its known message (example programs send data so). The
+    /// framer takes it when the message has no header-only form, or when the bytes after it
+    /// start a frame and the bytes after the header do not (or the stream ends there).
+    pub unflagged: Option<usize>,
+}
+
+impl LenRule {
+    /// The rule for the frame whose header is `h`.
+    #[inline]
+    pub fn of(table: &Table, h: Header<'_>) -> LenRule {
+        let declared = HEADER_LEN + h.data_len();
+        let unflagged = if h.has_data() {
+            None
+        } else {
+            let len = usize::from(u16::from_le_bytes([h.param1(), h.param2()]));
+            table
+                .msg(h.msg_id())
+                .filter(|m| len > 0 && len <= table.max_data_len(m))
+                .filter(|m| table.accepts_len(m, true, len))
+                .map(|_| HEADER_LEN + len)
+        };
+        LenRule {
+            declared,
+            unflagged,
+        }
+    }
+    /// Whether a whole frame may be `len` bytes long.
+    pub fn allows(&self, len: usize) -> bool {
+        len == self.declared || Some(len) == self.unflagged
+    }
+    /// The longest frame the rule allows.
+    pub fn longest(&self) -> usize {
+        self.declared.max(self.unflagged.unwrap_or(0))
+    }
+}
+
+/// Check what the framer claims of one frame (as [`Item::Frame`] gives it), against the length
+/// rules: it holds a header; its header's data length is within the message's largest (255, or
+/// its `maxlen=`); whole, its length is one [`LenRule`] allows; `truncated`, it is shorter than
+/// one the rule allows. `Err` says which rule fails. (That only the stream's last frame is
+/// truncated is for the caller to see.)
+pub fn check_frame(table: &Table, bytes: &[u8], truncated: bool) -> Result<(), String> {
+    let Some(h) = Header::new(bytes) else {
+        return Err(format!("{} bytes: shorter than a header", bytes.len()));
+    };
+    let max = table
+        .msg(h.msg_id())
+        .map_or(MAX_DATA_LEN, |m| table.max_data_len(m));
+    if h.data_len() > max {
+        return Err(format!(
+            "the header says {} data bytes, more than the {max} its message may have",
+            h.data_len()
+        ));
+    }
+    let rule = LenRule::of(table, h);
+    let n = bytes.len();
+    match truncated {
+        false if !rule.allows(n) => Err(format!(
+            "{n} bytes, where the header allows {} or {:?} (unflagged data)",
+            rule.declared, rule.unflagged
+        )),
+        true if n >= rule.longest() => Err(format!(
+            "{n} bytes and truncated, where the header allows at most {}",
+            rule.longest()
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// The decision for the bytes at one position.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Step {
@@ -141,14 +218,15 @@ fn step(table: &Table, b: &[u8], eof: bool) -> Step {
     let Step::Frame(HEADER_LEN) = s else {
         return s;
     };
-    let Some(m) = Header::new(b).and_then(|h| table.msg(h.msg_id())) else {
+    let Some(h) = Header::new(b) else {
         return s;
     };
-    let len = u16::from_le_bytes([b[2], b[3]]) as usize;
-    if len == 0 || len > table.max_data_len(m) || !table.accepts_len(m, true, len) {
+    let Some(whole) = LenRule::of(table, h).unflagged else {
         return s;
-    }
-    let whole = HEADER_LEN + len;
+    };
+    let Some(m) = table.msg(h.msg_id()) else {
+        return s;
+    };
     if !table.accepts_len(m, false, 0) {
         return Step::Frame(whole);
     }
@@ -308,6 +386,99 @@ impl<'t> AptFramer<'t> {
                     return Some(self.garbage_item(start, self.pos, GarbageKind::TrailingBytes));
                 }
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rule(b: &[u8]) -> LenRule {
+        LenRule::of(Table::global(), Header::new(b).expect("a header"))
+    }
+
+    #[test]
+    fn the_length_rule_follows_the_flag_and_the_message_forms() {
+        // MOT_MOVE_ABSOLUTE flagged with 6 data bytes: as the header says.
+        let flagged = [0x53, 0x04, 0x06, 0x00, 0xD0, 0x01];
+        assert_eq!(
+            rule(&flagged),
+            LenRule {
+                declared: 12,
+                unflagged: None
+            }
+        );
+        // Unflagged, its params read as 6, one of its data lengths: either length.
+        let unflagged = [0x53, 0x04, 0x06, 0x00, 0x50, 0x01];
+        let r = rule(&unflagged);
+        assert_eq!((r.declared, r.unflagged), (6, Some(12)));
+        assert!(r.allows(6) && r.allows(12) && !r.allows(7));
+        assert_eq!(r.longest(), 12);
+        // Params that are no data length of the message, or an unknown message: header only.
+        assert_eq!(rule(&[0x53, 0x04, 0x01, 0x02, 0x50, 0x01]).unflagged, None);
+        assert_eq!(rule(&[0x34, 0x12, 0x06, 0x00, 0x50, 0x01]).unflagged, None);
+        // An open form: any whole number of rows up to its `maxlen=` (4104).
+        let sync = |len: u16, flag: u8| {
+            let l = len.to_le_bytes();
+            rule(&[0x00, 0x0A, l[0], l[1], 0x50 | flag, 0x01])
+        };
+        assert_eq!(sync(4104, 0).unflagged, Some(4110));
+        assert_eq!(sync(4105, 0).unflagged, None, "not a whole row");
+        assert_eq!(sync(4108, 0).unflagged, None, "beyond maxlen=");
+        assert_eq!(sync(1208, 0x80).declared, 1214);
+    }
+
+    #[test]
+    fn check_frame_states_what_the_framer_may_cut() {
+        let t = Table::global();
+        let unflagged = [0x53, 0x04, 0x06, 0x00, 0x50, 0x01, 1, 0, 0x20, 0x4E, 0, 0];
+        assert_eq!(check_frame(t, &unflagged, false), Ok(()));
+        assert_eq!(check_frame(t, &unflagged[..6], false), Ok(()));
+        // MOT_SET_VELPARAMS has no header-only form, so the framer takes its unflagged data
+        // without look-ahead and may end the stream within it: the fuzz harness's old rule (a
+        // frame is as long as its flag says) failed on such a frame, longer than a header.
+        let vel = [0x13, 0x04, 0x0E, 0x00, 0x50, 0x01, 1, 0];
+        assert_eq!(check_frame(t, &vel, true), Ok(()));
+        assert!(check_frame(t, &vel, false).is_err());
+        assert!(
+            check_frame(t, &unflagged, true).is_err(),
+            "whole yet truncated"
+        );
+        assert!(check_frame(t, &unflagged[..5], true).is_err(), "no header");
+        // More data than the message may have.
+        assert!(check_frame(t, &[0x53, 0x04, 0x00, 0x01, 0xD0, 0x01], true).is_err());
+    }
+
+    /// Every frame the framer cuts from a stream of unflagged, header-only, flagged and open
+    /// frames, whole and truncated at each length, keeps `check_frame`.
+    #[test]
+    fn the_framer_keeps_its_own_rules() {
+        let t = Table::global();
+        let mut s = vec![0x53, 0x04, 0x06, 0x00, 0x50, 0x01, 1, 0, 0x20, 0x4E, 0, 0];
+        s.extend([0x53, 0x04, 0x06, 0x00, 0x50, 0x01]);
+        s.extend([0x05, 0x00, 0x00, 0x00, 0x50, 0x01]);
+        s.extend([0x00, 0x0A, 0x10, 0x00, 0xD0, 0x01]);
+        s.extend([1, 0, 3, 0, 1, 0, 0, 0, 9, 0, 0, 0, 7, 0, 0, 0]);
+        s.extend([0x13, 0x04, 0x0E, 0x00, 0x50, 0x01, 1, 0, 0, 0, 0, 0, 0, 0]);
+        s.extend([0, 0, 0, 0, 0, 0, 0, 0]);
+        for end in 0..=s.len() {
+            let mut f = AptFramer::new(t);
+            f.push(&s[..end]);
+            f.finish();
+            let mut frames = 0;
+            while let Some(it) = f.next_item() {
+                if let Item::Frame {
+                    bytes, truncated, ..
+                } = it
+                {
+                    frames += 1;
+                    if let Err(e) = check_frame(t, bytes, truncated) {
+                        panic!("{end} bytes: {bytes:02x?}: {e}");
+                    }
+                }
+            }
+            assert!(end < 6 || frames > 0);
         }
     }
 }

@@ -10,5 +10,5 @@ pub use decode::{
     text_of, AptFrame, Value,
 };
 pub use encode::{encode, encode_named, encode_named_report, EncodeError, FieldValue, Named};
-pub use frame::{AptFramer, GarbageKind, Item, MAX_GARBAGE_RUN};
+pub use frame::{check_frame, AptFramer, GarbageKind, Item, LenRule, MAX_GARBAGE_RUN};
 pub use header::{emit_header, Addr, AddrName, Header, DATA_FLAG, HEADER_LEN, MAX_DATA_LEN};

@@ -144,7 +144,25 @@ impl Table {
         let mut data = parse::parse_sources(src)?;
         let msg_forms = data.msgs.iter_mut().flat_map(|m| m.forms.iter_mut());
         let sub_forms = data.subs.iter_mut().flat_map(|s| s.forms.iter_mut());
-        msg_forms.chain(sub_forms).for_each(Form::index);
+        msg_forms.chain(sub_forms).for_each(|f| {
+            f.index();
+            f.idx.max_data = crate::apt::MAX_DATA_LEN as u16;
+        });
+        // Each form knows its message's largest packet (`maxlen=`), so its length rule
+        // (`Form::accepts_len`) needs no table; a sub-message's form takes its group's largest.
+        for i in 0..data.msgs.len() {
+            let Some(max) = data.msgs[i].max_len else {
+                continue;
+            };
+            let group = data.msgs[i].subs;
+            for f in data.msgs[i].forms.iter_mut() {
+                f.idx.max_data = max;
+            }
+            let subs = data.subs.iter_mut().filter(|s| Some(s.group) == group);
+            for f in subs.flat_map(|s| s.forms.iter_mut()) {
+                f.idx.max_data = f.idx.max_data.max(max);
+            }
+        }
         for m in data.msgs.iter_mut() {
             let first = m.forms.iter().position(|f| f.kind == FormKind::Header);
             m.hdr_form = first.and_then(|i| u8::try_from(i).ok());
@@ -289,20 +307,18 @@ impl Table {
     }
 
     /// Whether `m` exists in this length (header-only when `!has_data`).
+    /// The rule of each form is [`Form::accepts_len`]; a `sub` form takes the lengths of its
+    /// group's sub-messages' forms.
     pub fn accepts_len(&self, m: &MsgDef, has_data: bool, len: usize) -> bool {
         m.forms.iter().any(|f| match f.kind {
-            FormKind::Header => !has_data,
-            FormKind::Data(n) => has_data && n as usize == len,
-            FormKind::Open(_) => has_data && f.open_fits(len, self.max_data_len(m)),
             FormKind::Sub => {
                 has_data
                     && self.data.subs.iter().any(|s| {
                         Some(s.group) == m.subs
-                            && s.forms
-                                .iter()
-                                .any(|sf| sf.kind == FormKind::Data(len as u16))
+                            && s.forms.iter().any(|sf| sf.accepts_len(true, len))
                     })
             }
+            _ => f.accepts_len(has_data, len),
         })
     }
 

@@ -322,6 +322,10 @@ pub(crate) struct FormIdx {
     units: bool,
     /// A field reports a device maximum (`max_of=`).
     maxima: bool,
+    /// The largest data packet of the form's message ([`Table::max_data_len`]); 0 until set.
+    ///
+    /// [`Table::max_data_len`]: crate::table::Table::max_data_len
+    pub(crate) max_data: u16,
 }
 
 impl Form {
@@ -341,6 +345,8 @@ impl Form {
                 .iter()
                 .any(|x| x.q.is_some() || x.pct_of.is_some() || x.max_of.is_some()),
             maxima: self.fields.iter().any(|x| x.max_of.is_some()),
+            // Set by the table (`Table::from_sources`), which knows the messages' `maxlen=`.
+            max_data: 0,
         };
     }
     /// The `chan_ident` field, if the form has one.
@@ -386,6 +392,42 @@ impl Form {
                 len >= n as usize && len <= max && (len - n as usize).is_multiple_of(w)
             }
             _ => false,
+        }
+    }
+    /// The largest data packet of this form's message: the spec's 255 bytes, or its `maxlen=`
+    /// (for a sub-message's form, the largest of its group's messages).
+    #[inline]
+    pub fn max_data_len(&self) -> usize {
+        usize::from(self.idx.max_data)
+    }
+    /// The length rule of forms, the one decoding matches frames to forms by and encoding
+    /// builds by: whether a frame with (`has_data`) or without a data packet of `len` bytes is
+    /// of this form. Header-only: no data packet; `LEN`: exactly `LEN` bytes; `LEN+`: `LEN`
+    /// and whole elements of the open array, up to [`max_data_len`](Self::max_data_len).
+    /// `sub` is a placeholder: its sub-messages' forms say (see `Table::accepts_len`).
+    #[inline]
+    pub fn accepts_len(&self, has_data: bool, len: usize) -> bool {
+        match self.kind {
+            FormKind::Header => !has_data,
+            FormKind::Data(n) => has_data && usize::from(n) == len,
+            FormKind::Open(_) => has_data && self.open_fits(len, self.max_data_len()),
+            FormKind::Sub => false,
+        }
+    }
+    /// The data packet length of a frame of this form whose open array (if it has one) holds
+    /// `elems` elements; `None` when no such frame exists: a `sub` placeholder, elements given
+    /// to a closed form, or a packet beyond [`max_data_len`](Self::max_data_len). What
+    /// `encode` builds; [`accepts_len`](Self::accepts_len) accepts every `Some`.
+    pub fn encoded_len(&self, elems: usize) -> Option<usize> {
+        match self.kind {
+            FormKind::Header | FormKind::Data(_) if elems > 0 => None,
+            FormKind::Header => Some(0),
+            FormKind::Data(n) => Some(usize::from(n)),
+            FormKind::Sub => None,
+            FormKind::Open(n) => elems
+                .checked_mul(self.open_elem()?)
+                .and_then(|x| x.checked_add(usize::from(n)))
+                .filter(|&len| len <= self.max_data_len()),
         }
     }
 }

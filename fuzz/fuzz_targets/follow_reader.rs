@@ -1,0 +1,4 @@
+//! The `follow_reader` target: its body is `aptscope_fuzz_bodies::follow_reader::fuzz` (see there).
+#![no_main]
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| aptscope_fuzz_bodies::follow_reader::fuzz(data));
