@@ -287,7 +287,8 @@ enum Cmd {
         #[arg(long)]
         usb_device: Option<String>,
         /// Follow a capture another program (a tap) is still writing, like `tail -f`: new
-        /// records appear as the file grows; a cut last block is waited for.
+        /// records appear as the file grows; a cut last block is waited for. `-` (a pipe:
+        /// `dumpcap -w - | aptscope view --follow -`) is followed until its writer ends.
         #[arg(long)]
         follow: bool,
         #[command(flatten)]
@@ -911,22 +912,10 @@ fn stats(
         // Forced: counted whatever the input holds.
         return Ok(());
     }
-    refuse_non_traffic(&dec, format, st.file_problems.values().sum())
-}
-
-/// The input was not traffic of these protocols (nothing framed, or a raw file that is not a
-/// capture): the command fails with the reason (its output, if any, already written).
-fn refuse_non_traffic(dec: &Decoder, format: Format, file_problems: u64) -> io::Result<()> {
-    use aptscope_capture::judge::{not_a_capture, not_a_capture_error, not_traffic, Seen};
-    if let Some(d) = dec.detection().filter(|d| not_a_capture(format, d)) {
-        return Err(not_a_capture_error(d));
-    }
-    let seen = Seen {
-        bytes: dec.bytes(),
-        frames: dec.frames(),
-        file_problems,
-    };
-    not_traffic(seen).map_or(Ok(()), Err)
+    // Not traffic of these protocols: the command fails with the reason (the tables above are
+    // written already).
+    let problems = st.file_problems.values().sum();
+    aptscope_capture::judge::refuse(&dec, format, problems).map_or(Ok(()), Err)
 }
 
 fn info(file: &str, opts: OpenOptions, as_json: bool, proto: ProtoArg) -> io::Result<()> {

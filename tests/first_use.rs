@@ -346,14 +346,7 @@ fn garbage_is_hex_at_the_time_of_its_first_byte() {
 fn inputs_that_are_not_captures_are_refused_with_the_reason() {
     let dir = scratch("not-captures");
     let rand = dir.join("rand.bin");
-    // Deterministic noise (an LCG): frames as neither protocol.
-    let mut x: u32 = 12345;
-    let bytes: Vec<u8> = (0..6000)
-        .map(|_| {
-            x = x.wrapping_mul(1_103_515_245).wrapping_add(12_345);
-            (x >> 16) as u8
-        })
-        .collect();
+    let bytes = common::noise(6000, 12345);
     std::fs::write(&rand, &bytes).expect("write");
     let jpg = dir.join("pic.jpg");
     let mut img = vec![

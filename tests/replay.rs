@@ -361,17 +361,9 @@ fn port_and_option_errors_say_what_is_wrong_before_any_prompt() {
 /// they happen to hold, `MOT_MOVE_STOP ch202` among them), saying why.
 #[test]
 fn a_file_that_is_not_a_capture_is_not_replayed() {
-    let dir = std::env::temp_dir().join(format!("aptscope-replay-rand-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("replay-rand");
     let rand = dir.join("rand.bin");
-    let mut x: u32 = 7;
-    let bytes: Vec<u8> = (0..5000)
-        .map(|_| {
-            x = x.wrapping_mul(1_103_515_245).wrapping_add(12_345);
-            (x >> 16) as u8
-        })
-        .collect();
-    std::fs::write(&rand, bytes).unwrap();
+    std::fs::write(&rand, common::noise(5000, 7)).unwrap();
     let o = run(&["replay", rand.to_str().unwrap(), "--dry-run"]);
     assert!(!o.status.success(), "{}", text(&o.stdout));
     assert!(
@@ -380,7 +372,6 @@ fn a_file_that_is_not_a_capture_is_not_replayed() {
         text(&o.stderr)
     );
     assert!(!text(&o.stdout).contains("to send"), "{}", text(&o.stdout));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A device replay stopped by SIGINT or SIGTERM removes the link it made for the host.

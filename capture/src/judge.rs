@@ -4,6 +4,7 @@
 
 use crate::open::Format;
 use aptscope_dissector::detect::Detection;
+use aptscope_dissector::record::Decoder;
 use std::io;
 
 /// A raw byte file (no known container or log format) whose first 4 KiB frame as neither
@@ -56,4 +57,19 @@ pub fn not_traffic(seen: Seen) -> Option<io::Error> {
         return None;
     };
     Some(io::Error::new(io::ErrorKind::InvalidData, why))
+}
+
+/// The verdict on a whole input a decoder has read (`file_problems`: the reader's own
+/// diagnostics): why it is not traffic of these protocols ([`not_a_capture`], [`not_traffic`]),
+/// when it is not. Only asked when the protocol was detected: a forced one decodes whatever
+/// the input holds.
+pub fn refuse(dec: &Decoder, format: Format, file_problems: u64) -> Option<io::Error> {
+    if let Some(d) = dec.detection().filter(|d| not_a_capture(format, d)) {
+        return Some(not_a_capture_error(d));
+    }
+    not_traffic(Seen {
+        bytes: dec.bytes(),
+        frames: dec.frames(),
+        file_problems,
+    })
 }

@@ -8,7 +8,7 @@
 //! evaluated on the record itself when the capture is loaded.
 
 use crate::decoded::Decoded;
-use aptscope_capture::judge::{not_a_capture, not_a_capture_error, not_traffic, Seen};
+use aptscope_capture::judge::refuse;
 use aptscope_capture::open::{open, OpenOptions};
 use aptscope_capture::Event;
 use aptscope_dissector::detect::Proto;
@@ -353,15 +353,7 @@ impl Script {
         let _ = dec.finish(&mut emit);
         // What is not a capture of these protocols is not replayed: random bytes would send
         // the few headers they happen to hold (MOT_MOVE_STOP on channel 202) to a real device.
-        if let Some(d) = dec.detection().filter(|d| not_a_capture(format, d)) {
-            return Err(not_a_capture_error(d));
-        }
-        let seen = Seen {
-            bytes: dec.bytes(),
-            frames: dec.frames(),
-            file_problems,
-        };
-        if let Some(e) = not_traffic(seen).filter(|_| proto.is_none()) {
+        if let Some(e) = refuse(&dec, format, file_problems).filter(|_| proto.is_none()) {
             return Err(e);
         }
         let proto = c.proto.or(dec.proto()).unwrap_or(Proto::Apt);

@@ -93,3 +93,15 @@ pub fn apt_frames(bytes: &[u8]) -> Vec<Vec<u8>> {
     }
     out
 }
+
+/// `n` bytes of deterministic noise (a linear congruential generator from `seed`): input that
+/// frames as neither protocol.
+pub fn noise(n: usize, seed: u32) -> Vec<u8> {
+    let mut x = seed;
+    (0..n)
+        .map(|_| {
+            x = x.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+            (x >> 16) as u8
+        })
+        .collect()
+}

@@ -362,14 +362,16 @@ pub fn encode(
         .ok_or_else(|| match elems {
             Some((f, n)) => EncodeError::OutOfRange {
                 field: f.name.to_string(),
-                value: format!(
-                    "{n} elements (at most {} bytes of data)",
+                value: format!("{n} elements"),
+                range: format!(
+                    "as many as fit {} bytes of data (the message's largest packet)",
                     form.max_data_len()
                 ),
             },
             None => EncodeError::OutOfRange {
                 field: form.label(),
-                value: "no data length fits the form".into(),
+                value: "no data length".into(),
+                range: "a data length the form has".into(),
             },
         })?;
     let mut out = vec![0u8; HEADER_LEN + data_len];
