@@ -6,6 +6,7 @@
 mod common;
 
 use aptscope_capture::open::{open, Format, OpenOptions};
+use aptscope_capture::tools::{on_missing, Missing};
 use aptscope_capture::{Direction, Event};
 use common::host::{ask_info, open_host, ready, start_sim, start_sim_with, HW_GET_INFO_LEN};
 use common::proc::{lock, wait_for, Proc, DEADLINE, POLL};
@@ -1138,4 +1139,193 @@ fn sim_elliptec_view_shows_host_commands_sent_without_terminator_at_once() {
         "{err}"
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A Python environment with thorlabs-apt-device (PyPI), made once under `target/` as
+/// `python/run-tests` makes its own: the interpreter, or `None` when it cannot be made and the
+/// tools rule says skip (in CI it fails).
+fn client_python() -> Option<PathBuf> {
+    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/client-venv");
+    let py = venv.join("bin/python");
+    let has = |py: &Path| {
+        Command::new(py)
+            .args(["-c", "import thorlabs_apt_device"])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    if has(&py) {
+        return Some(py);
+    }
+    let made = Command::new("python3")
+        .args(["-m", "venv"])
+        .arg(&venv)
+        .status()
+        .is_ok_and(|s| s.success())
+        && Command::new(&py)
+            .args(["-m", "pip", "install", "-q", "--disable-pip-version-check"])
+            .arg("thorlabs-apt-device==0.3.8")
+            .status()
+            .is_ok_and(|s| s.success());
+    if made && has(&py) {
+        return Some(py);
+    }
+    // The project's rule for a missing tool: fail in CI, skip outside it only when asked.
+    let env = |k| std::env::var(k).ok();
+    match on_missing(
+        env("CI").as_deref(),
+        env("APTSCOPE_SKIP_MISSING_TOOLS").as_deref(),
+    ) {
+        Missing::Skip => {
+            eprintln!("thorlabs-apt-device could not be installed: skipped");
+            None
+        }
+        Missing::Fail => panic!(
+            "a virtual environment with thorlabs-apt-device (PyPI) could not be made in \
+             {}: python3 with venv (`apt-get install python3-venv`) and PyPI are needed",
+            venv.display()
+        ),
+    }
+}
+
+/// thorlabs-apt-device's KDC101 class driving the simulator through the tap: it polls the
+/// status every few milliseconds; homing and a move every 5 s; every `burst_s` a megabyte of
+/// MOT_SET_VELPARAMS written on its port (the client's own serial object).
+const CLIENT_SOAK: &str = r#"
+import sys, time
+from thorlabs_apt_device import KDC101
+link, secs, burst_s = sys.argv[1], float(sys.argv[2]), float(sys.argv[3])
+frame = bytes.fromhex("13040e00d0010100") + bytes(12)
+burst = (frame * 250 + bytes.fromhex("230200005001")) * 210
+d = KDC101(serial_port=link, home=False)
+t0 = time.monotonic()
+d.home()
+next_move, next_burst, pos = 5.0, burst_s / 2, 0
+while time.monotonic() - t0 < secs:
+    t = time.monotonic() - t0
+    if t >= next_move:
+        pos = 20000 - pos
+        d.move_absolute(pos)
+        next_move += 5.0
+    if t >= next_burst:
+        d._port.write(burst)
+        next_burst += burst_s
+    time.sleep(0.05)
+d.close()
+time.sleep(0.5)
+print("position", d.status["position"], "updates", d.status.get("msgid"))
+"#;
+
+/// The soak with a real client (issue: fuzzing and soaks that keep up): thorlabs-apt-device's
+/// KDC101 class ⇄ `tap --view` in a terminal ⇄ the simulator for `APTSCOPE_CLIENT_SOAK_SECS`
+/// (default 60; `bench/client-soak.sh` runs 600), a megabyte burst every
+/// `APTSCOPE_CLIENT_SOAK_BURST_SECS` (default 60, the first half-way into the first period).
+/// Checked: the client ran to the end; not a byte lost (the tap's own check); the view never
+/// more than 1 s behind the file; the simulator's memory flat after the first third, the tap's
+/// flat but for the view's index of the records. Prints its figures.
+#[test]
+fn soak_with_a_real_client_loses_nothing_and_keeps_memory_flat() {
+    let env_secs = |k: &str, d: f64| {
+        std::env::var(k)
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(d)
+    };
+    let secs = env_secs("APTSCOPE_CLIENT_SOAK_SECS", 60.0);
+    let burst_s = env_secs("APTSCOPE_CLIENT_SOAK_BURST_SECS", 60.0);
+    let Some(py) = client_python() else { return };
+    let dir = scratch("client-soak");
+    let mut sim = start_sim(&dir.join("dev"));
+    let (host, cap) = (dir.join("host"), dir.join("cap.pcapng"));
+    let Some(term) = Term::start_view(&dir, &tap_args(&dir, &["--view"]), &host) else {
+        return;
+    };
+    let (tap_pid, sim_pid) = (term.pid(), sim.pid());
+    let script = dir.join("client.py");
+    std::fs::write(&script, CLIENT_SOAK).unwrap();
+    let client = Command::new(&py)
+        .arg(&script)
+        .arg(&host)
+        .arg(secs.to_string())
+        .arg(burst_s.to_string())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run the client");
+    let t0 = Instant::now();
+    let (mut samples, mut rss) = (vec![], vec![]);
+    let client = thread::spawn(move || client.wait_with_output());
+    while !client.is_finished() {
+        assert!(
+            t0.elapsed() < DEADLINE + Duration::from_secs_f64(secs),
+            "the client did not finish\n{}",
+            term.stderr()
+        );
+        let screen = term.screen();
+        let t = now_ns();
+        if let Some(n) = shown_records(&screen) {
+            samples.push((t, n));
+        }
+        if let (Some(a), Some(b)) = (rss_kib(tap_pid), rss_kib(sim_pid)) {
+            rss.push((t0.elapsed().as_secs_f64(), a, b));
+        }
+        thread::sleep(Duration::from_millis(100));
+    }
+    let out = client.join().unwrap().expect("the client's output");
+    assert!(
+        out.status.success(),
+        "the client failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let recs = decode_json(&cap);
+    let ts: Vec<u64> = recs
+        .iter()
+        .filter(|r| r["n"].is_u64())
+        .map(|r| r["ts_ns"].as_u64().expect("a time"))
+        .collect();
+    let total = ts.len() as u64;
+    term.wait("every record on the screen", |s| {
+        shown_records(s) == Some(total)
+    });
+    term.keys(&["q"]);
+    let (code, err) = term.exit();
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("matches what was forwarded"), "{err}");
+    sim.interrupt();
+
+    let lag_ns = samples
+        .iter()
+        .filter_map(|&(t, n)| ts.get(n as usize).map(|&first| t.saturating_sub(first)))
+        .max()
+        .unwrap_or(0);
+    let bytes = std::fs::metadata(&cap).map_or(0, |m| m.len());
+    // Memory after the first third, against the end.
+    let third = rss.iter().find(|r| r.0 >= secs / 3.0).copied();
+    let last = rss.last().copied();
+    let (Some((_, tap_a, sim_a)), Some((_, tap_b, sim_b))) = (third, last) else {
+        panic!("no memory samples: {rss:?}");
+    };
+    eprintln!(
+        "client soak: {secs} s, {total} records, {bytes} bytes captured; view lag max {} ms \
+         over {} samples; tap RSS {tap_a} → {tap_b} KiB, simulator RSS {sim_a} → {sim_b} KiB \
+         (from a third of the run to its end); client: {}",
+        lag_ns / 1_000_000,
+        samples.len(),
+        String::from_utf8_lossy(&out.stdout).trim()
+    );
+    assert!(
+        lag_ns < 1_000_000_000,
+        "the view lagged {} ms",
+        lag_ns / 1_000_000
+    );
+    assert!(
+        sim_b <= sim_a + 2048,
+        "the simulator grew from {sim_a} to {sim_b} KiB"
+    );
+    // The tap holds the view's index of the records (about 40 bytes each, plus their bytes;
+    // 4× allowed for the UI's caches): beyond that, flat.
+    let index_kib = (40 * total + bytes) * 4 / 1024;
+    assert!(
+        tap_b <= tap_a + index_kib + 8 * 1024,
+        "the tap grew from {tap_a} to {tap_b} KiB for {total} records"
+    );
 }
