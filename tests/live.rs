@@ -945,6 +945,25 @@ fn rss_kib(pid: Pid) -> Option<u64> {
     l.split_whitespace().nth(1)?.parse().ok()
 }
 
+/// The capture times of a capture's records (frames and garbage), in record order.
+fn record_times(cap: &Path) -> Vec<u64> {
+    decode_json(cap)
+        .iter()
+        .filter(|r| r["n"].is_u64())
+        .map(|r| r["ts_ns"].as_u64().expect("a time"))
+        .collect()
+}
+
+/// The view's worst lag over `(time, records shown)` samples: at each, how long ago the first
+/// record not yet shown was captured (`ts`: the records' capture times).
+fn view_lag_ns(samples: &[(u64, u64)], ts: &[u64]) -> u64 {
+    samples
+        .iter()
+        .filter_map(|&(t, n)| ts.get(n as usize).map(|&first| t.saturating_sub(first)))
+        .max()
+        .unwrap_or(0)
+}
+
 fn now_ns() -> u64 {
     let d = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -1027,12 +1046,7 @@ fn soak_of_the_live_view_loses_nothing_lags_under_a_second_and_keeps_memory_flat
     let run = t0.elapsed();
 
     // Every record ends up on the screen.
-    let recs = decode_json(&cap);
-    let ts: Vec<u64> = recs
-        .iter()
-        .filter(|r| r["n"].is_u64())
-        .map(|r| r["ts_ns"].as_u64().expect("a time"))
-        .collect();
+    let ts = record_times(&cap);
     let total = ts.len() as u64;
     let catch_up = Instant::now();
     term.wait("every record on the screen", |s| {
@@ -1053,12 +1067,7 @@ fn soak_of_the_live_view_loses_nothing_lags_under_a_second_and_keeps_memory_flat
     assert!(c.h2d == sent, "h2d: {}", first_difference(&c.h2d, &sent));
     assert!(c.d2h == got, "d2h: {}", first_difference(&c.d2h, &got));
 
-    // The view's lag: at each sample, how long ago the first record not yet shown was captured.
-    let lag_ns = samples
-        .iter()
-        .filter_map(|&(t, n)| ts.get(n as usize).map(|&first| t.saturating_sub(first)))
-        .max()
-        .unwrap_or(0);
+    let lag_ns = view_lag_ns(&samples, &ts);
     if std::env::var("APTSCOPE_SOAK_DEBUG").is_ok() {
         let t_first = ts.first().copied().unwrap_or(0);
         for &(t, n) in &samples {
@@ -1276,12 +1285,7 @@ fn soak_with_a_real_client_loses_nothing_and_keeps_memory_flat() {
         "the client failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let recs = decode_json(&cap);
-    let ts: Vec<u64> = recs
-        .iter()
-        .filter(|r| r["n"].is_u64())
-        .map(|r| r["ts_ns"].as_u64().expect("a time"))
-        .collect();
+    let ts = record_times(&cap);
     let total = ts.len() as u64;
     term.wait("every record on the screen", |s| {
         shown_records(s) == Some(total)
@@ -1292,11 +1296,7 @@ fn soak_with_a_real_client_loses_nothing_and_keeps_memory_flat() {
     assert!(err.contains("matches what was forwarded"), "{err}");
     sim.interrupt();
 
-    let lag_ns = samples
-        .iter()
-        .filter_map(|&(t, n)| ts.get(n as usize).map(|&first| t.saturating_sub(first)))
-        .max()
-        .unwrap_or(0);
+    let lag_ns = view_lag_ns(&samples, &ts);
     let bytes = std::fs::metadata(&cap).map_or(0, |m| m.len());
     // Memory after the first third, against the end.
     let third = rss.iter().find(|r| r.0 >= secs / 3.0).copied();
