@@ -8,7 +8,7 @@
 //! of their own (named by the file's index), so nothing is ordered or merged.
 
 use crate::{compile_filter, fatal, proto_of, ProtoArg};
-use aptscope_capture::judge::{not_a_capture, not_a_capture_error, not_traffic, Seen};
+use aptscope_capture::judge::{not_a_capture, not_a_capture_error, refuse};
 use aptscope_capture::open::{open_with_progress, OpenOptions, Progress};
 use aptscope_capture::Event;
 use aptscope_capture::{Chunk, Direction};
@@ -277,9 +277,6 @@ fn collect(job: &Job<'_>, rxs: Vec<Receiver<Msg>>, bar: &Bar, stop: &AtomicBool)
 fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<Stats> {
     let file = job.files[i].as_str();
     let mut seen = 0u64;
-    // What is not a capture is refused (one input: the run fails; among several, it is
-    // skipped), unless the protocol is forced.
-    let judge = true;
     match &job.out {
         Output::Parquet(root) => {
             let opts = aptscope_parquet::Options::default();
@@ -289,7 +286,9 @@ fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<S
                 proto: proto_of(job.proto),
                 units: job.units.clone(),
                 timeout_ns: job.timeout,
-                judge,
+                // What is not a capture is refused (one input: the run fails; among several,
+                // it is skipped).
+                judge: true,
             };
             let (_, s) = decode_file(file, &o, w, &mut |p| bar.tick(p, &mut seen))?;
             Ok(Stats {
@@ -299,9 +298,9 @@ fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<S
         }
         Output::Lines { json: as_json } => {
             let (mut reader, format, progress) = open_with_progress(file, job.open)?;
-            // Held until the detector has judged the first 4 KiB (a given protocol: nothing to
-            // judge).
-            let held = Cell::new(judge && job.proto == ProtoArg::Auto);
+            // Held until the detector has judged the first 4 KiB, so that what is not a capture
+            // prints nothing (a given protocol: nothing to judge).
+            let held = Cell::new(job.proto == ProtoArg::Auto);
             let mut out = ChanWriter {
                 tx,
                 buf: Vec::with_capacity(BLOCK),
@@ -390,14 +389,10 @@ fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<S
                     bar.note(&format!("aptscope: {file}: {note}"));
                 }
             }
-            let judged = Seen {
-                bytes: p.decoder().bytes(),
-                frames: p.decoder().frames(),
-                file_problems,
-            };
             // A forced protocol decodes whatever the input holds (the note above says what
             // detection thinks of it).
-            if let Some(e) = not_traffic(judged).filter(|_| job.proto == ProtoArg::Auto) {
+            let refused = refuse(p.decoder(), format, file_problems);
+            if let Some(e) = refused.filter(|_| job.proto == ProtoArg::Auto) {
                 out.borrow_mut().flush()?;
                 return Err(e);
             }

@@ -6,7 +6,7 @@
 mod common;
 
 use aptscope_capture::open::{open, Format, OpenOptions};
-use aptscope_capture::tools::{on_missing, Missing};
+use aptscope_capture::tools::missing;
 use aptscope_capture::{Direction, Event};
 use common::host::{ask_info, open_host, ready, start_sim, start_sim_with, HW_GET_INFO_LEN};
 use common::proc::{lock, wait_for, Proc, DEADLINE, POLL};
@@ -1179,21 +1179,13 @@ fn client_python() -> Option<PathBuf> {
         return Some(py);
     }
     // The project's rule for a missing tool: fail in CI, skip outside it only when asked.
-    let env = |k| std::env::var(k).ok();
-    match on_missing(
-        env("CI").as_deref(),
-        env("APTSCOPE_SKIP_MISSING_TOOLS").as_deref(),
-    ) {
-        Missing::Skip => {
-            eprintln!("thorlabs-apt-device could not be installed: skipped");
-            None
-        }
-        Missing::Fail => panic!(
-            "a virtual environment with thorlabs-apt-device (PyPI) could not be made in \
-             {}: python3 with venv (`apt-get install python3-venv`) and PyPI are needed",
-            venv.display()
-        ),
-    }
+    let how = "python3 with venv (`apt-get install python3-venv`) and PyPI are needed";
+    let what = format!(
+        "a virtual environment with thorlabs-apt-device could not be made in {}",
+        venv.display()
+    );
+    missing(&what, how);
+    None
 }
 
 /// thorlabs-apt-device's KDC101 class driving the simulator through the tap: it polls the

@@ -31,21 +31,26 @@ pub fn require(tool: &str, version_arg: &str, package: &str) -> bool {
         .arg(version_arg)
         .output()
         .is_ok_and(|o| o.status.success());
-    if ok {
-        return true;
-    }
+    ok || missing(
+        &format!("{tool} is not installed"),
+        &format!("install it (Debian/Ubuntu: `apt-get install {package}`; `.ci/run` does)"),
+    )
+}
+
+/// What a test does when something it needs (`what`, how to get it: `how`) is missing, by the
+/// rule of [`on_missing`]: `false` (skip, saying so), or a panic saying how to get it.
+pub fn missing(what: &str, how: &str) -> bool {
     let env = |k| std::env::var(k).ok();
     match on_missing(
         env("CI").as_deref(),
         env("APTSCOPE_SKIP_MISSING_TOOLS").as_deref(),
     ) {
         Missing::Skip => {
-            eprintln!("{tool} is not installed: skipped (APTSCOPE_SKIP_MISSING_TOOLS=1)");
+            eprintln!("{what}: skipped (APTSCOPE_SKIP_MISSING_TOOLS=1)");
             false
         }
         Missing::Fail => panic!(
-            "{tool} is not installed: install it (Debian/Ubuntu: `apt-get install {package}`; \
-             `.ci/run` does), or outside CI set APTSCOPE_SKIP_MISSING_TOOLS=1 to skip this test"
+            "{what}: {how}, or outside CI set APTSCOPE_SKIP_MISSING_TOOLS=1 to skip this test"
         ),
     }
 }
