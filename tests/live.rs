@@ -17,6 +17,7 @@ use nix::poll::PollFlags;
 use nix::sys::signal::{kill, Signal};
 use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, ControlFlags, SetArg};
 use nix::unistd::Pid;
+use std::cell::RefCell;
 use std::fs::File;
 use std::io::{self, Read, Write};
 use std::path::{Path, PathBuf};
@@ -954,6 +955,19 @@ fn record_times(cap: &Path) -> Vec<u64> {
         .collect()
 }
 
+/// Waits until the view shows every record the capture file holds, and returns their times.
+/// The file is read again at each look: the device may still answer after the host is done
+/// (a stop's MOT_MOVE_STOPPED comes when the deceleration ends), so a count read once goes
+/// stale.
+fn wait_all_shown(term: &Term, cap: &Path) -> Vec<u64> {
+    let ts = RefCell::new(vec![]);
+    term.wait("every record on the screen", |s| {
+        *ts.borrow_mut() = record_times(cap);
+        shown_records(s) == Some(ts.borrow().len() as u64)
+    });
+    ts.into_inner()
+}
+
 /// The view's worst lag over `(time, records shown)` samples: at each, how long ago the first
 /// record not yet shown was captured (`ts`: the records' capture times).
 fn view_lag_ns(samples: &[(u64, u64)], ts: &[u64]) -> u64 {
@@ -1046,12 +1060,9 @@ fn soak_of_the_live_view_loses_nothing_lags_under_a_second_and_keeps_memory_flat
     let run = t0.elapsed();
 
     // Every record ends up on the screen.
-    let ts = record_times(&cap);
-    let total = ts.len() as u64;
     let catch_up = Instant::now();
-    term.wait("every record on the screen", |s| {
-        shown_records(s) == Some(total)
-    });
+    let ts = wait_all_shown(&term, &cap);
+    let total = ts.len() as u64;
     let catch_up = catch_up.elapsed();
     rss.extend(rss_kib(pid));
 
@@ -1277,11 +1288,8 @@ fn soak_with_a_real_client_loses_nothing_and_keeps_memory_flat() {
         "the client failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let ts = record_times(&cap);
+    let ts = wait_all_shown(&term, &cap);
     let total = ts.len() as u64;
-    term.wait("every record on the screen", |s| {
-        shown_records(s) == Some(total)
-    });
     term.keys(&["q"]);
     let (code, err) = term.exit();
     assert_eq!(code, 0, "{err}");
