@@ -218,7 +218,7 @@ fn rows_are_coloured_by_rule() {
     let rule = |name: &str| COLOURS.iter().position(|c| c.name == name);
     // Which rule each record takes.
     let a = app("damaged.bin");
-    let ix = a.shared.index.read().expect("lock");
+    let ix = a.shared().index.read().expect("lock");
     let rules: Vec<Option<usize>> = (1..=9)
         .map(|n| {
             let r = row(&ix, n).expect("row");
@@ -239,7 +239,7 @@ fn rows_are_coloured_by_rule() {
          bad length, absurd header, move without reply, truncated"
     );
     let a = app("kdc101-session.pcapng");
-    let ix = a.shared.index.read().expect("lock");
+    let ix = a.shared().index.read().expect("lock");
     let rules: Vec<Option<usize>> = [1, 2, 8]
         .iter()
         .map(|&n| colour_rule(ix.rec(n).expect("rec"), row(&ix, n).expect("row").way))
@@ -250,7 +250,7 @@ fn rows_are_coloured_by_rule() {
     let mut a = app("kdc101-session.pcapng");
     let mut t = Terminal::new(TestBackend::new(80, 24)).expect("terminal");
     t.draw(|f| draw(f, &mut a)).expect("draw");
-    let y = a.areas.list.y + 1;
+    let y = a.areas().list.y + 1;
     let reply = COLOURS[rule("Replies").expect("rule")].style;
     for x in [0, 10, 40, 79] {
         let cell = t.backend().buffer().cell((x, y)).expect("cell");
@@ -262,7 +262,7 @@ fn rows_are_coloured_by_rule() {
     let cell = t
         .backend()
         .buffer()
-        .cell((5, a.areas.list.y + 2))
+        .cell((5, a.areas().list.y + 2))
         .expect("cell");
     assert_eq!(
         (cell.fg, cell.bg),
@@ -275,7 +275,7 @@ fn tiny_windows_draw_without_panic() {
     let mut a = app("kdc101-session.pcapng");
     for (w, h) in [(1, 1), (10, 3), (20, 4), (30, 6), (40, 8)] {
         for help in [false, true] {
-            a.help = help;
+            a.set_help(help);
             let s = screen(&mut a, w, h);
             assert_eq!(s.lines().count(), h as usize, "{w}x{h}");
         }
