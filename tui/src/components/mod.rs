@@ -17,6 +17,19 @@ use ratatui::style::{Color, Modifier, Style};
 use ratatui::text::Span;
 use ratatui::widgets::{Block, Borders};
 
+/// The first line `top` to show so that line `sel` is on a screen of `rows` lines (moved as
+/// little as it must).
+pub(crate) fn scroll_to(sel: usize, top: usize, rows: usize) -> usize {
+    let h = rows.max(1);
+    if sel < top {
+        sel
+    } else if sel >= top + h {
+        sel + 1 - h
+    } else {
+        top
+    }
+}
+
 /// A pane's frame: a top border with its title, highlighted when the pane has the focus.
 pub(crate) fn pane_block(title: String, focused: bool) -> Block<'static> {
     let style = if focused {

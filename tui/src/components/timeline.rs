@@ -49,12 +49,7 @@ impl Default for Timeline {
 impl Timeline {
     /// Scroll so that the selected row is on screen.
     pub(crate) fn scroll_into_view(&mut self) {
-        let h = self.rows.max(1);
-        if self.sel < self.top {
-            self.top = self.sel;
-        } else if self.sel >= self.top + h {
-            self.top = self.sel + 1 - h;
-        }
+        self.top = super::scroll_to(self.sel, self.top, self.rows);
     }
 
     /// The next time mode (`t`).
