@@ -11,6 +11,7 @@ use crate::components::hex::Hex;
 use crate::components::plot::Plot;
 use crate::components::stats::{self, Stats};
 use crate::components::timeline::Timeline;
+use crate::components::Step;
 use crate::decode::{tree, Node};
 use crate::fields;
 use crate::index::Shared;
@@ -88,18 +89,6 @@ pub struct Areas {
     pub detail: Rect,
     /// Hex rows.
     pub hex: Rect,
-}
-
-/// What a movement does where it applies (a page is the focused pane's height).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Step {
-    By(isize),
-    Top,
-    Bottom,
-    Toggle,
-    Collapse,
-    Expand,
-    None,
 }
 
 /// The whole UI state: the parts ([`crate::components`]) and what they share.
@@ -713,32 +702,10 @@ impl App {
             Some(Move::Collapse) => Step::Collapse,
             Some(Move::Expand) => Step::Expand,
         };
-        match self.view {
-            View::Stats => {
-                let s = &mut self.stats.scroll;
-                *s = match step {
-                    Step::By(d) => s.saturating_add_signed(d),
-                    Step::Top => 0,
-                    // The update clamps it to the last page.
-                    Step::Bottom => usize::MAX / 2,
-                    _ => *s,
-                };
-                return;
-            }
-            View::Plot => {
-                let p = &mut self.plot.page;
-                match step {
-                    Step::By(d) if d > 0 => *p += 1,
-                    Step::By(_) => *p = p.saturating_sub(1),
-                    Step::Top => *p = 0,
-                    _ => {}
-                }
-                return;
-            }
-            View::Timeline => {}
-        }
-        match self.focus {
-            Pane::List => match step {
+        match (self.view, self.focus) {
+            (View::Stats, _) => self.stats.on_step(step),
+            (View::Plot, _) => self.plot.on_step(step),
+            (View::Timeline, Pane::List) => match step {
                 Step::By(d) => {
                     self.timeline.follow = false;
                     self.select(self.timeline.sel.saturating_add_signed(d));
@@ -757,37 +724,13 @@ impl App {
                 Step::Toggle => self.focus = Pane::Detail,
                 _ => {}
             },
-            Pane::Detail => {
+            (View::Timeline, Pane::Detail) => {
                 let lines = self.detail_lines();
-                let last = lines.len().saturating_sub(1);
-                let d = &mut self.detail;
-                match step {
-                    Step::By(by) => d.sel = d.sel.saturating_add_signed(by).min(last),
-                    Step::Top => d.sel = 0,
-                    Step::Bottom => d.sel = last,
-                    Step::Toggle | Step::Collapse | Step::Expand => {
-                        if let Some(node) = lines.get(d.sel) {
-                            if step == Step::Toggle && node.link.is_some() {
-                                self.jump_pair();
-                                return;
-                            }
-                            let collapse = match step {
-                                Step::Collapse => Some(true),
-                                Step::Expand => Some(false),
-                                _ => None,
-                            };
-                            d.fold(&node.id, collapse);
-                        }
-                    }
-                    Step::None => {}
+                if self.detail.on_step(step, &lines) {
+                    self.jump_pair();
                 }
-                d.scroll_into_view();
             }
-            Pane::Hex => match step {
-                Step::By(d) => self.hex.top = self.hex.top.saturating_add_signed(d.signum()),
-                Step::Top => self.hex.top = 0,
-                _ => {}
-            },
+            (View::Timeline, Pane::Hex) => self.hex.on_step(step),
         }
     }
 

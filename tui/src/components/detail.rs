@@ -1,7 +1,7 @@
 //! The detail tree of the selected record: its lines (collapsible), the selected line, the
 //! vertical and sideways scroll.
 
-use super::pane_block;
+use super::{pane_block, Step};
 use crate::decode::{Node, NodeKind};
 use ratatui::layout::Rect;
 use ratatui::style::{Color, Modifier, Style};
@@ -72,8 +72,35 @@ impl Detail {
         self.top = super::scroll_to(self.sel, self.top, self.rows);
     }
 
+    /// A movement over the record's visible `lines`; true when the selected line is a link
+    /// to open (the paired record) instead.
+    pub(crate) fn on_step(&mut self, step: Step, lines: &[Node]) -> bool {
+        let last = lines.len().saturating_sub(1);
+        match step {
+            Step::By(by) => self.sel = self.sel.saturating_add_signed(by).min(last),
+            Step::Top => self.sel = 0,
+            Step::Bottom => self.sel = last,
+            Step::Toggle | Step::Collapse | Step::Expand => {
+                if let Some(node) = lines.get(self.sel) {
+                    if step == Step::Toggle && node.link.is_some() {
+                        return true;
+                    }
+                    let collapse = match step {
+                        Step::Collapse => Some(true),
+                        Step::Expand => Some(false),
+                        _ => None,
+                    };
+                    self.fold(&node.id, collapse);
+                }
+            }
+            Step::None => {}
+        }
+        self.scroll_into_view();
+        false
+    }
+
     /// Collapse (`Some(true)`), expand (`Some(false)`) or toggle (`None`) node `id`.
-    pub(crate) fn fold(&mut self, id: &str, collapse: Option<bool>) {
+    fn fold(&mut self, id: &str, collapse: Option<bool>) {
         let collapse = collapse.unwrap_or(!self.collapsed.contains(id));
         if collapse {
             self.collapsed.insert(id.to_string());

@@ -1,6 +1,6 @@
 //! The hex dump of the selected record, with the bytes of the selected detail line highlighted.
 
-use super::pane_block;
+use super::{pane_block, Step};
 use crate::app::{App, Pane};
 use ratatui::layout::Rect;
 use ratatui::style::{Color, Style};
@@ -16,6 +16,15 @@ pub struct Hex {
 }
 
 impl Hex {
+    /// Scroll a row at a time (a page too: frames are short).
+    pub(crate) fn on_step(&mut self, step: Step) {
+        match step {
+            Step::By(d) => self.top = self.top.saturating_add_signed(d.signum()),
+            Step::Top => self.top = 0,
+            _ => {}
+        }
+    }
+
     /// Draw the selected record's bytes in `area` (those of the selected detail line
     /// highlighted unless the focus is on the timeline).
     pub(crate) fn draw(&self, f: &mut Frame<'_>, app: &App, area: Rect) {

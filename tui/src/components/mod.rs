@@ -17,6 +17,25 @@ use ratatui::style::{Color, Modifier, Style};
 use ratatui::text::Span;
 use ratatui::widgets::{Block, Borders};
 
+/// What a movement key does where it applies (a page is the focused pane's height).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Step {
+    /// Down (positive) or up by lines.
+    By(isize),
+    /// To the first line.
+    Top,
+    /// To the last line.
+    Bottom,
+    /// Open the selected line.
+    Toggle,
+    /// Collapse the selected node.
+    Collapse,
+    /// Expand the selected node.
+    Expand,
+    /// Nothing (a key that does nothing).
+    None,
+}
+
 /// The first line `top` to show so that line `sel` is on a screen of `rows` lines (moved as
 /// little as it must).
 pub(crate) fn scroll_to(sel: usize, top: usize, rows: usize) -> usize {

@@ -1,6 +1,6 @@
 //! The plot view: positions and velocities over time, one series per page.
 
-use super::pane_block;
+use super::{pane_block, Step};
 use crate::app::App;
 use ratatui::layout::Rect;
 use ratatui::style::{Color, Style};
@@ -21,6 +21,16 @@ impl Plot {
     pub(crate) fn update(&mut self, series: usize) {
         if series > 0 {
             self.page = self.page.min(series - 1);
+        }
+    }
+
+    /// Turn the page: down for the next series, up for the previous.
+    pub(crate) fn on_step(&mut self, step: Step) {
+        match step {
+            Step::By(d) if d > 0 => self.page += 1,
+            Step::By(_) => self.page = self.page.saturating_sub(1),
+            Step::Top => self.page = 0,
+            _ => {}
         }
     }
 

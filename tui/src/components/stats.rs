@@ -1,6 +1,6 @@
 //! The statistics view: what the capture is, then the scan's counts.
 
-use super::pane_block;
+use super::{pane_block, Step};
 use crate::app::App;
 use ratatui::layout::Rect;
 use ratatui::widgets::Paragraph;
@@ -23,6 +23,17 @@ impl Stats {
         let h = area.height.saturating_sub(1) as usize;
         self.scroll = self.scroll.min(total.saturating_sub(h));
         self.text = text;
+    }
+
+    /// Scroll.
+    pub(crate) fn on_step(&mut self, step: Step) {
+        self.scroll = match step {
+            Step::By(d) => self.scroll.saturating_add_signed(d),
+            Step::Top => 0,
+            // The update clamps it to the last page.
+            Step::Bottom => usize::MAX / 2,
+            _ => self.scroll,
+        };
     }
 
     /// Draw the view in `area`.
