@@ -27,7 +27,8 @@ fn keys(app: &mut App, s: &str) {
 
 fn screen(app: &mut App, w: u16, h: u16) -> String {
     let mut t = Terminal::new(TestBackend::new(w, h)).expect("terminal");
-    // Twice: the first draw learns the pane sizes (as in the real loop).
+    // Twice, as the real loop draws: a second frame shows the same (the update step before
+    // each draw fits the state to the screen).
     t.draw(|f| draw(f, app)).expect("draw");
     t.draw(|f| draw(f, app)).expect("draw");
     format!("{}", t.backend())
