@@ -556,7 +556,13 @@ fn main() -> ExitCode {
                 // Nothing says when another program's writing ends: followed until `q`.
                 o.follow = Some(FollowStop::new());
             }
-            aptscope_tui::run_with(&file, o, proto_of(proto), units.opts()?)
+            let source = aptscope_tui::Source::File {
+                path: &file,
+                opts: o,
+                proto: proto_of(proto),
+                units: units.opts()?,
+            };
+            aptscope_tui::run(source, Default::default())
         }),
         Cmd::Sim { what } => match what {
             SimCmd::Apt {
@@ -1189,7 +1195,17 @@ fn live_view(v: LiveView<'_>, proto: Proto, units: UnitsOpts) -> io::Result<()> 
         follow: Some(v.written),
         ..OpenOptions::default()
     };
-    aptscope_tui::run_live(v.path, v.host, o, Some(proto), units, v.quit)
+    let source = aptscope_tui::Source::File {
+        path: v.path,
+        opts: o,
+        proto: Some(proto),
+        units,
+    };
+    let options = aptscope_tui::Options {
+        note: v.host,
+        quit: Some(v.quit),
+    };
+    aptscope_tui::run(source, options)
 }
 
 /// After a live view: say where the capture is, and check it holds every forwarded byte.
