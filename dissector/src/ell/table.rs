@@ -635,8 +635,8 @@ impl Model {
 
 /// Source of the manual's model table (p.7).
 const MANUAL: &str = "manual p.7";
-/// Source of values no document gives: a model a client library names, with its family's.
-const ASSUMED: &str = "assumed (its family's values)";
+/// Source of values no document gives: a rotation stage a client library names, as an ELL18.
+const AS_ELL18: &str = "assumed (ELL18's)";
 
 /// Known ELL models: the manual's (ELL4–ELL8) and those the client libraries drive (`elliptec`:
 /// ELL6, ELL9, ELL14, ELL15, ELL18, ELL20; thorlabs-elliptec: ELL7, ELL8, ELL10, ELL12, ELL16,
@@ -656,7 +656,7 @@ pub static MODELS: &[Model] = &[
     Model { number: 9, what: "four-position slider", unit: "slot", slots: 4, mechanism: Mechanism::Indexed,
         travel: 19, pulses: 32, motors: 1, source: "elliptec package (positions 0, 32, 64, 96)" },
     Model { number: 10, what: "linear stage", unit: "mm", slots: 0, mechanism: Mechanism::Linear,
-        travel: 60, pulses: 1024, motors: 2, source: ASSUMED },
+        travel: 60, pulses: 1024, motors: 2, source: "assumed (ELL20's)" },
     Model { number: 12, what: "six-position slider", unit: "slot", slots: 6, mechanism: Mechanism::Indexed,
         travel: 31, pulses: 32, motors: 1, source: "assumed (ELL9's spacing)" },
     Model { number: 14, what: "rotation mount", unit: "deg", slots: 0, mechanism: Mechanism::Rotary,
@@ -664,15 +664,15 @@ pub static MODELS: &[Model] = &[
     Model { number: 15, what: "motorized iris", unit: "mm", slots: 0, mechanism: Mechanism::Linear,
         travel: 12, pulses: 1024, motors: 2, source: "assumed (elliptec package: 1-11.5 mm aperture)" },
     Model { number: 16, what: "rotation stage", unit: "deg", slots: 0, mechanism: Mechanism::Rotary,
-        travel: 360, pulses: 0x40000, motors: 2, source: ASSUMED },
+        travel: 360, pulses: 0x40000, motors: 2, source: AS_ELL18 },
     Model { number: 17, what: "linear stage", unit: "mm", slots: 0, mechanism: Mechanism::Linear,
         travel: 28, pulses: 2048, motors: 2, source: "manual p.7 (ELL7's 2048 pulses/mm)" },
     Model { number: 18, what: "rotation stage", unit: "deg", slots: 0, mechanism: Mechanism::Rotary,
         travel: 360, pulses: 0x40000, motors: 2, source: "manual p.7 (ELL8's pulses/rev)" },
     Model { number: 20, what: "linear stage", unit: "mm", slots: 0, mechanism: Mechanism::Linear,
-        travel: 60, pulses: 1024, motors: 2, source: ASSUMED },
+        travel: 60, pulses: 1024, motors: 2, source: "60 mm travel; 1024 pulses/mm assumed" },
     Model { number: 21, what: "rotation stage", unit: "deg", slots: 0, mechanism: Mechanism::Rotary,
-        travel: 360, pulses: 0x40000, motors: 2, source: ASSUMED },
+        travel: 360, pulses: 0x40000, motors: 2, source: AS_ELL18 },
 ];
 
 /// The model with this ELL number.

@@ -547,7 +547,7 @@ impl EllSim {
                     self.modules[i].velocity = v as u8;
                     self.status(now, addr, OK);
                 }
-                _ => self.fail(i, now, addr, OUT_OF_RANGE),
+                _ => self.fail(i, now, addr, VALUE_OUT_OF_RANGE),
             },
             "sj" => {
                 self.modules[i].jog = num("step").unwrap_or(0);
