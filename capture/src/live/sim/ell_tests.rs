@@ -152,65 +152,74 @@ fn an_unknown_command_without_terminator_gets_gs03_and_the_error_stays_for_gs() 
     assert_eq!(talk(&mut sim, b"7in7i3\r\n", 5 * SEC, 6 * SEC), "");
 }
 
+/// Each command in turn, 3 s apart (long enough for any slider move), with the reply it gets.
+fn script(sim: &mut EllSim, steps: &[(&str, &str)]) {
+    for (k, (cmd, want)) in steps.iter().enumerate() {
+        let t = k as u64 * 3 * SEC;
+        assert_eq!(
+            talk(sim, cmd.as_bytes(), t, t + 3 * SEC - 1),
+            *want,
+            "{cmd}"
+        );
+    }
+}
+
 #[test]
 fn sliders_rest_on_their_positions() {
     let mut sim = EllSim::new(&parse_modules("0:ELL6,1:ELL9,2:ELL12").unwrap()).unwrap();
-    // ELL6: IN gives travel 0x1F and 0 pulses; forward is 0x1F (the manual's `ga` example).
-    assert!(talk(&mut sim, b"0in", 0, SEC).ends_with("001F00000000\r\n"));
-    assert_eq!(talk(&mut sim, b"0fw", SEC, 3 * SEC), "0PO0000001F\r\n");
-    // Forward again: it stays (the elliptec package's Shutter.open sends fw wherever it is).
-    assert_eq!(talk(&mut sim, b"0fw", 3 * SEC, 5 * SEC), "0PO0000001F\r\n");
-    assert_eq!(talk(&mut sim, b"0bw", 5 * SEC, 7 * SEC), "0PO00000000\r\n");
-    assert_eq!(
-        talk(&mut sim, b"0ma00000000", 7 * SEC, 8 * SEC),
-        "0GS03\r\n"
-    );
-    // ELL9: positions 32 apart; `ma` between two settles on the nearer one.
-    assert_eq!(
-        talk(&mut sim, b"1ma00000040", 8 * SEC, 10 * SEC),
-        "1PO00000040\r\n"
-    );
-    assert_eq!(
-        talk(&mut sim, b"1ma00000025", 10 * SEC, 12 * SEC),
-        "1PO00000020\r\n"
-    );
-    assert_eq!(
-        talk(&mut sim, b"1ma00000080", 12 * SEC, 13 * SEC),
-        "1GS0C\r\n"
-    );
-    assert_eq!(
-        talk(&mut sim, b"1ho0", 13 * SEC, 15 * SEC),
-        "1PO00000000\r\n"
-    );
-    // ELL12: six positions, the last at 5 × 32.
-    assert_eq!(
-        talk(&mut sim, b"2ma000000A0", 15 * SEC, 18 * SEC),
-        "2PO000000A0\r\n"
+    script(
+        &mut sim,
+        &[
+            // ELL6: IN gives travel 0x1F and 0 pulses; forward is 0x1F (the manual's `ga`
+            // example); forward again stays there (the elliptec package's Shutter.open sends
+            // fw wherever the slider is); no `ma` (p.33).
+            ("0in", "0IN061060010020231701001F00000000\r\n"),
+            ("0fw", "0PO0000001F\r\n"),
+            ("0fw", "0PO0000001F\r\n"),
+            ("0bw", "0PO00000000\r\n"),
+            ("0ma00000000", "0GS03\r\n"),
+            // ELL9: positions 32 apart; `ma` between two settles on the nearer one.
+            ("1ma00000040", "1PO00000040\r\n"),
+            ("1ma00000025", "1PO00000020\r\n"),
+            ("1ma00000080", "1GS0C\r\n"),
+            ("1ho0", "1PO00000000\r\n"),
+            // ELL12: six positions, the last at 5 × 32.
+            ("2ma000000A0", "2PO000000A0\r\n"),
+        ],
     );
 }
 
 #[test]
 fn motor_settings_read_back_and_scans_take_their_time() {
     let mut sim = EllSim::new(&parse_modules("0:ELL18").unwrap()).unwrap();
-    assert_eq!(talk(&mut sim, b"0f200C0", 0, SEC), "0GS00\r\n");
-    assert_eq!(talk(&mut sim, b"0e2008D", SEC, 2 * SEC), "0GS00\r\n");
-    assert_eq!(
-        talk(&mut sim, b"0i2", 2 * SEC, 3 * SEC),
-        "0I2110428FFFFFFFF00C0008B\r\n"
+    script(
+        &mut sim,
+        &[
+            ("0f200C0", "0GS00\r\n"),
+            ("0e2008D", "0GS00\r\n"),
+            ("0i2", "0I2110428FFFFFFFF00C0008B\r\n"),
+            ("0h2", "0GS00\r\n"),
+            ("0f10000", "0GS04\r\n"),
+            ("0gs", "0GS04\r\n"),
+        ],
     );
-    assert_eq!(talk(&mut sim, b"0h2", 3 * SEC, 4 * SEC), "0GS00\r\n");
     // The frequency search: busy, then GS00 and the best periods back.
-    sim.input(b"0s2", 4 * SEC);
+    let t = 18 * SEC;
+    sim.input(b"0s2", t);
     assert_eq!(
-        talk(&mut sim, b"0gs", 5 * SEC, 5 * SEC + 50 * MS),
+        talk(&mut sim, b"0gs", t + SEC, t + SEC + 50 * MS),
         "0GS09\r\n"
     );
-    assert_eq!(drive(&mut sim, 5 * SEC + 50 * MS, 7 * SEC), b"0GS00\r\n");
-    assert!(talk(&mut sim, b"0i2", 7 * SEC, 8 * SEC).ends_with("00BD008B\r\n"));
+    assert_eq!(
+        drive(&mut sim, t + SEC + 50 * MS, t + 3 * SEC),
+        b"0GS00\r\n"
+    );
+    assert!(talk(&mut sim, b"0i2", t + 3 * SEC, t + 4 * SEC).ends_with("00BD008B\r\n"));
     // The current curve: about 12 s, then 87 binary points.
-    sim.input(b"0c1", 8 * SEC);
-    assert!(drive(&mut sim, 8 * SEC, 19 * SEC).is_empty());
-    let c1 = drive(&mut sim, 19 * SEC, 30 * SEC);
+    let t = t + 4 * SEC;
+    sim.input(b"0c1", t);
+    assert!(drive(&mut sim, t, t + 11 * SEC).is_empty());
+    let c1 = drive(&mut sim, t + 11 * SEC, t + 20 * SEC);
     assert_eq!(&c1[..3], b"0C1");
     assert!(c1.ends_with(b"\r\n"));
     let pts: Vec<_> = curve_points(&c1[3..c1.len() - 2]).collect();
