@@ -158,6 +158,9 @@ ir = elliptec.Iris(c, address="4", debug=False)
 ir.home()
 r["ir_set"] = ir.set_aperture(5.0)
 r["ir_get"] = ir.get_aperture()
+ir.change_address("7")
+r["ir_moved"] = [ir.address, ir.get_aperture()]
+r["scan"] = [d["info"]["Motor Type"] for d in elliptec.scan_for_devices(c, 0, 3, debug=False)]
 r["status_after"] = list(ro.get("status"))
 c.close_connection()
 print(json.dumps(r))
@@ -192,6 +195,9 @@ fn the_elliptec_package_drives_every_kind_of_module() {
     assert_eq!(r["sh_close"], 1, "{r}");
     assert!(near(&r["ir_set"], 5.0, 0.001), "{r}");
     assert!(near(&r["ir_get"], 5.0, 0.001), "{r}");
+    assert_eq!(r["ir_moved"][0], "7", "{r}");
+    assert!(near(&r["ir_moved"][1], 5.0, 0.001), "{r}");
+    assert_eq!(r["scan"], serde_json::json!([14, 9, 20, 6]), "{r}");
     assert_eq!(
         r["status_after"],
         serde_json::json!(["0", "GS", "0"]),
@@ -202,13 +208,14 @@ fn the_elliptec_package_drives_every_kind_of_module() {
     assert!(lines.iter().any(|l| l.starts_with("3fw")), "{lines:?}");
 }
 
-/// thorlabs-elliptec (1.3.0): an ELL14 and an ELL20 sharing the port (its multi-drop use),
+/// thorlabs-elliptec (1.3.0): an ELL14, an ELL9 and an ELL20 sharing the port (multi-drop),
 /// polled in the background every 0.1 s while blocking homes and moves run.
 const THORLABS_ELLIPTEC: &str = r#"
 import json, sys, time
 from thorlabs_elliptec import ELLx, ELLStatus
 ro = ELLx(serial_port=sys.argv[1], x=14, device_id=0)
 li = ELLx(serial_port=ro, x=20, device_id=2)
+sl = ELLx(serial_port=ro, x=9, device_id=1)
 r = {}
 r["info"] = [ro.model_number, ro.serial_number, ro.travel, ro.units, ro.firmware_version,
              ro.thread_type, li.model_number, li.travel, li.units]
@@ -222,12 +229,16 @@ li.move_absolute(12.5, blocking=True)
 r["li_abs"] = li.get_position()
 li.move_relative_raw(-1024, blocking=True)
 r["li_rel_raw"] = li.get_position_raw()
+sl.home(blocking=True)
+sl.move_absolute_raw(64, blocking=True)
+r["sl"] = [sl.model_number, sl.get_position_raw(), sl.get_position()]
 ro.move_absolute(90)
 r["moving"] = ro.is_moving()
 ro.wait(raise_errors=True)
 r["moved"] = ro.get_position()
 time.sleep(0.3)
-r["status"] = [int(ro.status), int(li.status)]
+r["status"] = [int(ro.status), int(li.status), int(sl.status)]
+sl.close()
 li.close()
 ro.close()
 time.sleep(0.3)
@@ -235,9 +246,9 @@ print(json.dumps(r))
 "#;
 
 #[test]
-fn thorlabs_elliptec_homes_moves_and_polls_two_modules() {
+fn thorlabs_elliptec_homes_moves_and_polls_three_modules() {
     let Some(py) = client_python() else { return };
-    let rig = Rig::start("ell-thorlabs", "0:ELL14,2:ELL20");
+    let rig = Rig::start("ell-thorlabs", "0:ELL14,1:ELL9,2:ELL20");
     let r = rig.client(&py, THORLABS_ELLIPTEC);
     let info = r["info"].as_array().expect("info");
     assert_eq!(info[0], "ELL14/M", "{r}");
@@ -251,7 +262,9 @@ fn thorlabs_elliptec_homes_moves_and_polls_two_modules() {
     assert_eq!(r["li_rel_raw"], 12_800 - 1024, "{r}");
     assert_eq!(r["moving"], true, "{r}");
     assert!(near(&r["moved"], 90.0, 0.01), "{r}");
-    assert_eq!(r["status"], serde_json::json!([0, 0]), "{r}");
+    // An ELL9: positions in pulses, 32 per slot (the third slot at 64).
+    assert_eq!(r["sl"], serde_json::json!(["ELL9/M", 64, 2.0]), "{r}");
+    assert_eq!(r["status"], serde_json::json!([0, 0, 0]), "{r}");
     let lines = rig.finish();
     // The background polling went on throughout.
     let polls = lines.iter().filter(|l| l.ends_with("gs\r\n")).count();
