@@ -1,8 +1,7 @@
 //! The Elliptec bus simulator.
 
 use super::{earliest, Line, Simulator, MS, SEC};
-use aptscope_dissector::ell::table::CURVE_POINTS;
-use aptscope_dissector::ell::table::{model, Mechanism, Model, MODELS};
+use aptscope_dissector::ell::table::{model, Mechanism, Model, CURVE_POINTS, MODELS};
 use aptscope_dissector::ell::{curve_bytes, head, CurvePoint, EllFrame};
 use aptscope_dissector::table::Dir;
 
