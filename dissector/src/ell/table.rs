@@ -605,7 +605,9 @@ pub struct Model {
     /// Travel as `IN` gives it: mm, degrees (360), or a slider's travel.
     pub travel: u16,
     /// Pulses per unit as `IN` gives it: per mm, per revolution, per slider position (0: the
-    /// slider's positions are `travel` apart, as on an ELL6).
+    /// slider's positions are `travel` apart, as on an ELL6). An ELL9's positions are 0x1F
+    /// apart in Micro-Manager's adapter ("experimentally determined") and 32 in the `elliptec`
+    /// package, which accepts ±5: 31 serves both.
     pub pulses: u32,
     /// Piezo motors (1 or 2): a single-motor module has no `i2` … `c2`.
     pub motors: u8,
@@ -654,11 +656,11 @@ pub static MODELS: &[Model] = &[
     Model { number: 8, what: "rotary stage", unit: "deg", slots: 0, mechanism: Mechanism::Rotary,
         travel: 360, pulses: 0x40000, motors: 2, source: MANUAL },
     Model { number: 9, what: "four-position slider", unit: "slot", slots: 4, mechanism: Mechanism::Indexed,
-        travel: 19, pulses: 32, motors: 1, source: "elliptec package (positions 0, 32, 64, 96)" },
+        travel: 19, pulses: 31, motors: 1, source: "Micro-Manager's measured positions 0, 0x1F, 0x3E, 0x5D" },
     Model { number: 10, what: "linear stage", unit: "mm", slots: 0, mechanism: Mechanism::Linear,
         travel: 60, pulses: 1024, motors: 2, source: "assumed (ELL20's)" },
     Model { number: 12, what: "six-position slider", unit: "slot", slots: 6, mechanism: Mechanism::Indexed,
-        travel: 31, pulses: 32, motors: 1, source: "assumed (ELL9's spacing)" },
+        travel: 31, pulses: 31, motors: 1, source: "assumed (ELL9's spacing)" },
     Model { number: 14, what: "rotation mount", unit: "deg", slots: 0, mechanism: Mechanism::Rotary,
         travel: 360, pulses: 0x23000, motors: 2, source: "ELL14s' IN replies" },
     Model { number: 15, what: "motorized iris", unit: "mm", slots: 0, mechanism: Mechanism::Linear,

@@ -178,13 +178,15 @@ fn sliders_rest_on_their_positions() {
             ("0fw", "0PO0000001F\r\n"),
             ("0bw", "0PO00000000\r\n"),
             ("0ma00000000", "0GS03\r\n"),
-            // ELL9: positions 32 apart; `ma` between two settles on the nearer one.
-            ("1ma00000040", "1PO00000040\r\n"),
-            ("1ma00000025", "1PO00000020\r\n"),
+            // ELL9: positions 0x1F apart (Micro-Manager's, measured); `ma` between two settles
+            // on the nearer one (the elliptec package asks for 32, 64, 96).
+            ("1ma0000003E", "1PO0000003E\r\n"),
+            ("1ma00000040", "1PO0000003E\r\n"),
+            ("1ma00000025", "1PO0000001F\r\n"),
             ("1ma00000080", "1GS0C\r\n"),
             ("1ho0", "1PO00000000\r\n"),
-            // ELL12: six positions, the last at 5 × 32.
-            ("2ma000000A0", "2PO000000A0\r\n"),
+            // ELL12: six positions, the last at 5 × 31.
+            ("2ma0000009B", "2PO0000009B\r\n"),
         ],
     );
 }
