@@ -4,7 +4,9 @@
 use aptscope_capture::follow::FollowStop;
 use aptscope_capture::info::summarize;
 use aptscope_capture::live::serial::Flow;
-use aptscope_capture::live::sim::{apt_sim, ell_sim, sim_apt_main, sim_elliptec_main, SimLine};
+use aptscope_capture::live::sim::{
+    apt_sim, ell_model_list, ell_sim, sim_apt_main, sim_elliptec_main, SimLine,
+};
 use aptscope_capture::live::tap::{
     sim_with_view, sniff_main, sniff_with_view, tap_main, tap_with_view, LiveView, SniffOptions,
     TapOptions, TapStats,
@@ -69,6 +71,9 @@ enum SimCmd {
         /// Modules by address: `0:ELL14,1:ELL9`.
         #[arg(long, default_value = "0:ELL14")]
         modules: String,
+        /// List the simulated models (travel, pulses, slots, motors, commands) and exit.
+        #[arg(long, conflicts_with_all = ["pty", "port", "once"])]
+        list: bool,
         /// Symlink to the pseudo-terminal.
         #[arg(long, conflicts_with = "port")]
         pty: Option<std::path::PathBuf>,
@@ -565,6 +570,10 @@ fn main() -> ExitCode {
             aptscope_tui::run(source, Default::default())
         }),
         Cmd::Sim { what } => match what {
+            SimCmd::Elliptec { list: true, .. } => {
+                print!("{}", ell_model_list());
+                Ok(())
+            }
             SimCmd::Apt {
                 model, pty, view, ..
             } if view.view => {

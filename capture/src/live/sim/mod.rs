@@ -15,7 +15,7 @@ mod ell;
 mod run;
 
 pub use apt::{AptModel, AptSim};
-pub use ell::{parse_modules, EllModel, EllSim, SimError};
+pub use ell::{model_list as ell_model_list, parse_modules, EllModel, EllSim, SimError};
 pub use run::{
     run_on_port, run_on_pty, serve_pty, stop_pair, termination_signals, Pty, StopHandle, StopSignal,
 };
@@ -151,5 +151,7 @@ pub fn sim_elliptec_main(modules: &str, line: SimLine<'_>) -> io::Result<()> {
     serve(ell_sim(modules)?, line)
 }
 
+#[cfg(test)]
+mod ell_tests;
 #[cfg(test)]
 mod tests;
