@@ -7,7 +7,7 @@ use aptscope_capture::live::serial::Flow;
 use aptscope_capture::live::sim::{apt_sim, ell_sim, sim_apt_main, sim_elliptec_main, SimLine};
 use aptscope_capture::live::tap::{
     sim_with_view, sniff_main, sniff_with_view, tap_main, tap_with_view, LiveView, SniffOptions,
-    TapOptions, TapStats,
+    TapOptions, TapStats, ViewAbandoned,
 };
 use aptscope_capture::open::{create, open, open_with_progress, Format, OpenOptions, Progress};
 use aptscope_capture::Event;
@@ -597,7 +597,7 @@ fn main() -> ExitCode {
             live_fields!(o, live, proto, flow);
             if live.view {
                 let (path, units) = (viewed_file(&mut o.write, "tap"), o.units.clone());
-                let r = tap_with_view(o, |v| live_view(v, proto, units));
+                let r = tap_with_view(o, |v| live_view(v, proto, units), end_abandoned);
                 return_view(r, &path, "aptscope tap")
             } else {
                 tap_main(o).and_then(check_stats)
@@ -636,7 +636,7 @@ fn main() -> ExitCode {
             live_fields!(o, live, proto, flow);
             if live.view {
                 let (path, units) = (viewed_file(&mut o.write, "sniff"), o.units.clone());
-                let r = sniff_with_view(o, |v| live_view(v, proto, units));
+                let r = sniff_with_view(o, |v| live_view(v, proto, units), end_abandoned);
                 return_view(r, &path, "aptscope sniff")
             } else {
                 sniff_main(o).and_then(check_stats)
@@ -1192,6 +1192,12 @@ fn live_view(v: LiveView<'_>, proto: Proto, units: UnitsOpts) -> io::Result<()> 
     aptscope_tui::run_live(v.path, v.host, o, Some(proto), units, v.quit)
 }
 
+/// A live view whose terminal has gone never returns: the capture is complete (and said so),
+/// end the process with its verdict.
+fn end_abandoned(a: ViewAbandoned) -> ! {
+    std::process::exit(a.exit_code())
+}
+
 /// After a live view: say where the capture is, and check it holds every forwarded byte.
 fn return_view(r: io::Result<TapStats>, path: &str, what: &str) -> io::Result<()> {
     if std::path::Path::new(path).exists() {
@@ -1214,7 +1220,12 @@ fn sim_view(
     o.write = view.write;
     o.force = view.force;
     let path = viewed_file(&mut o.write, "sim");
-    let r = sim_with_view(sim, o, |v| live_view(v, proto, UnitsOpts::default()));
+    let r = sim_with_view(
+        sim,
+        o,
+        |v| live_view(v, proto, UnitsOpts::default()),
+        end_abandoned,
+    );
     return_view(r, &path, "aptscope sim")
 }
 
