@@ -2,6 +2,7 @@
 //! UI (`--view`); and what `sim --view` shares with them.
 
 use crate::common::{bad, proto_of, ProtoArg, UnitsArgs};
+use aptscope_capture::live::error::LiveError;
 use aptscope_capture::live::serial::Flow;
 use aptscope_capture::live::tap::{
     sniff_main, sniff_with_view, tap_main, tap_with_view, LiveView, SniffOptions, TapOptions,
@@ -113,7 +114,7 @@ pub(crate) fn tap(a: TapArgs) -> io::Result<()> {
         let r = tap_with_view(o, |v| live_view(v, proto, units), end_abandoned);
         return_view(r, &path, "aptscope tap")
     } else {
-        tap_main(o).and_then(check_stats)
+        check_stats(tap_main(o))
     }
 }
 
@@ -132,7 +133,7 @@ pub(crate) fn sniff(a: SniffArgs) -> io::Result<()> {
         let r = sniff_with_view(o, |v| live_view(v, proto, units), end_abandoned);
         return_view(r, &path, "aptscope sniff")
     } else {
-        sniff_main(o).and_then(check_stats)
+        check_stats(sniff_main(o))
     }
 }
 
@@ -192,16 +193,20 @@ pub(crate) fn end_abandoned(a: ViewAbandoned) -> ! {
 }
 
 /// After a live view: say where the capture is, and check it holds every forwarded byte.
-pub(crate) fn return_view(r: io::Result<TapStats>, path: &str, what: &str) -> io::Result<()> {
+pub(crate) fn return_view(
+    r: Result<TapStats, LiveError>,
+    path: &str,
+    what: &str,
+) -> io::Result<()> {
     if std::path::Path::new(path).exists() {
         aptscope_capture::note!("{what}: capture in {path}");
     }
-    r.and_then(check_stats)
+    check_stats(r)
 }
 
 /// A capture that does not hold every forwarded byte is a failure.
-fn check_stats(s: TapStats) -> io::Result<()> {
-    if s.file_matches() {
+fn check_stats(r: Result<TapStats, LiveError>) -> io::Result<()> {
+    if r?.file_matches() {
         Ok(())
     } else {
         Err(io::Error::other(

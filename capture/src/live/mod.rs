@@ -1,6 +1,7 @@
 //! Live traffic: device simulators, and taps between a host program and a device (being
 //! written).
 
+pub mod error;
 pub mod pty;
 pub mod serial;
 pub mod session;

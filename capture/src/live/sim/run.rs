@@ -1,6 +1,7 @@
 //! Serving a simulator on a pseudo-terminal or a serial port.
 
 use super::Simulator;
+use crate::live::error::LiveError;
 use crate::live::pty::Link;
 use crate::live::serial::open_serial;
 use crate::live::serial::{Flow, LineSettings};
@@ -15,10 +16,6 @@ use std::time::Instant;
 
 /// Output not yet taken by the peer is dropped beyond this (like a full FTDI buffer).
 const MAX_PENDING: usize = 64 * 1024;
-
-fn io_err(e: Errno) -> io::Error {
-    io::Error::from(e)
-}
 
 pub use crate::live::pty::Pty;
 pub use crate::live::stop::StopHandle;
@@ -65,7 +62,9 @@ pub fn serve_pty<S: Simulator + ?Sized>(
     }
     stops.extend_from_slice(extra_stops);
     let (master, slave, _) = pty.into_parts();
-    serve_fd(sim, &master, slave, &stops, Line::Pty, Instant::now()).map(|_| ())
+    serve_fd(sim, &master, slave, &stops, Line::Pty, Instant::now())
+        .map(|_| ())
+        .map_err(io::Error::from)
 }
 
 /// Why serving ended.
@@ -79,11 +78,11 @@ enum End {
 
 /// What the simulator serves on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Line {
+enum Line<'a> {
     /// A pseudo-terminal's master: the peer closing its end is the normal end.
     Pty,
-    /// A real serial port: it vanishing is an error.
-    Port,
+    /// A real serial port (this one): it vanishing is an error.
+    Port(&'a Path),
 }
 
 /// Serve `sim` on the non-blocking descriptor `fd` until one of `stops` becomes readable or
@@ -96,13 +95,12 @@ fn serve_fd<S: Simulator + ?Sized>(
     stops: &[BorrowedFd<'_>],
     line: Line,
     start: Instant,
-) -> io::Result<End> {
+) -> Result<End, LiveError> {
     let gone = || match line {
         Line::Pty => Ok(End::HungUp),
-        Line::Port => Err(io::Error::new(
-            io::ErrorKind::BrokenPipe,
-            "the serial port went away",
-        )),
+        Line::Port(path) => Err(LiveError::PortGone {
+            path: path.display().to_string(),
+        }),
     };
     let mut pending: Vec<u8> = vec![];
     let mut buf = [0u8; 4096];
@@ -123,7 +121,7 @@ fn serve_fd<S: Simulator + ?Sized>(
                 }
                 Err(Errno::EAGAIN) | Err(Errno::EINTR) => break,
                 Err(Errno::EIO) => return gone(), // peer gone
-                Err(e) => return Err(io_err(e)),
+                Err(e) => return Err(e.into()),
             }
         }
         let timeout = timeout_until(sim.next_deadline(), elapsed_ns(start));
@@ -137,7 +135,7 @@ fn serve_fd<S: Simulator + ?Sized>(
         }
         match poll(&mut fds, timeout) {
             Ok(_) | Err(Errno::EINTR) => {}
-            Err(e) => return Err(io_err(e)),
+            Err(e) => return Err(e.into()),
         }
         let revents: Vec<PollFlags> = fds
             .iter()
@@ -161,7 +159,7 @@ fn serve_fd<S: Simulator + ?Sized>(
                     slave = None;
                 }
                 Err(Errno::EAGAIN) | Err(Errno::EINTR) => {}
-                Err(e) => return Err(io_err(e)),
+                Err(e) => return Err(e.into()),
             }
         } else if m.intersects(PollFlags::POLLHUP | PollFlags::POLLERR) && slave.is_none() {
             return gone();
@@ -181,7 +179,16 @@ pub fn termination_signals() -> io::Result<Signals> {
 /// program after another (with `once`, it ends when the first one hangs up). Call it from the
 /// main thread before starting others: it blocks SIGINT/SIGTERM in the calling thread to
 /// receive them through a descriptor.
-pub fn run_on_pty<S: Simulator>(mut sim: S, link: Option<&Path>, once: bool) -> io::Result<()> {
+pub fn run_on_pty<S: Simulator>(sim: S, link: Option<&Path>, once: bool) -> io::Result<()> {
+    Ok(serve_on_pty(sim, link, once)?)
+}
+
+/// [`run_on_pty`], its error saying what it concerns.
+fn serve_on_pty<S: Simulator>(
+    mut sim: S,
+    link: Option<&Path>,
+    once: bool,
+) -> Result<(), LiveError> {
     let sigs = termination_signals()?;
     let pty = Pty::open()?;
     let path = pty.path().to_path_buf();
@@ -226,13 +233,12 @@ pub fn run_on_pty<S: Simulator>(mut sim: S, link: Option<&Path>, once: bool) -> 
 
 /// Open our own copy of a pseudo-terminal's slave again (so the master sees no hang-up while no
 /// program has it open), dropping what the last program left unread.
-fn reopen_slave(path: &Path) -> io::Result<OwnedFd> {
+fn reopen_slave(path: &Path) -> Result<OwnedFd, LiveError> {
     let fd = nix::fcntl::open(
         path,
         OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_NONBLOCK | OFlag::O_CLOEXEC,
         nix::sys::stat::Mode::empty(),
-    )
-    .map_err(io_err)?;
+    )?;
     let _ = nix::sys::termios::tcflush(&fd, nix::sys::termios::FlushArg::TCIOFLUSH);
     Ok(fd)
 }
@@ -240,7 +246,12 @@ fn reopen_slave(path: &Path) -> io::Result<OwnedFd> {
 /// Serve `sim` on a real serial port `dev` at `baud` (8N1, no flow control), until SIGINT or
 /// SIGTERM; the port vanishing is an error. The port's I/O is polled on our own descriptor
 /// (see [`crate::live::serial`]), so the signals reach the signalfd.
-pub fn run_on_port<S: Simulator>(mut sim: S, dev: &Path, baud: u32) -> io::Result<()> {
+pub fn run_on_port<S: Simulator>(sim: S, dev: &Path, baud: u32) -> io::Result<()> {
+    Ok(serve_on_port(sim, dev, baud)?)
+}
+
+/// [`run_on_port`], its error saying what it concerns.
+fn serve_on_port<S: Simulator>(mut sim: S, dev: &Path, baud: u32) -> Result<(), LiveError> {
     let sigs = termination_signals()?;
     let settings = LineSettings {
         baud,
@@ -253,7 +264,7 @@ pub fn run_on_port<S: Simulator>(mut sim: S, dev: &Path, baud: u32) -> io::Resul
         &fd,
         None,
         &[sigs.as_fd()],
-        Line::Port,
+        Line::Port(dev),
         Instant::now(),
     )
     .map(|_| ())

@@ -5,12 +5,13 @@ use super::port::{open_device, DevicePair, FdPort, HostPty, Port};
 use super::record::{forward, run_recorded, run_signalled, supervise, FwdEnd, Recording, Shared};
 use super::sink::FileSink;
 use super::{clock_time, TapOptions, TapStats, READ_BUF, RETRY_EVERY};
+use crate::live::error::LiveError;
 use crate::live::serial::LineSettings;
 use crate::live::signals::Signals;
 use crate::model::{Direction, StreamInfo};
 use crate::open::Format;
 use crate::Say;
-use std::io::{self, Write};
+use std::io::Write;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread;
 use std::time::{Duration, Instant};
@@ -18,7 +19,7 @@ use std::time::{Duration, Instant};
 /// Run a tap: create the pseudo-terminal (symlinked at `opts.link`), open the device, forward
 /// both ways until stopped (signal, [`StopHandle`], duration) or the device disappears (unless
 /// `reconnect`), write the capture, show the timeline; print and return the statistics.
-pub fn tap_main(opts: TapOptions) -> io::Result<TapStats> {
+pub fn tap_main(opts: TapOptions) -> Result<TapStats, LiveError> {
     Tap::new(opts)?.run(None)
 }
 
@@ -32,7 +33,7 @@ pub(super) struct Tap {
 }
 
 impl Tap {
-    pub(super) fn new(opts: TapOptions) -> io::Result<Tap> {
+    pub(super) fn new(opts: TapOptions) -> Result<Tap, LiveError> {
         let settings = LineSettings::for_proto(opts.proto, opts.baud, opts.flow);
         let format = match (&opts.write, opts.stream) {
             // A pipe's name says nothing about what goes through it.
@@ -91,7 +92,7 @@ impl Tap {
     }
 
     /// Run until stopped, with the timeline going to `display` (standard output when `None`).
-    pub(super) fn run(self, display: Option<Box<dyn Write + Send>>) -> io::Result<TapStats> {
+    pub(super) fn run(self, display: Option<Box<dyn Write + Send>>) -> Result<TapStats, LiveError> {
         let say = self.opts.say;
         run_signalled((self.opts.signals, say), "aptscope tap", |sig| {
             self.run_with(display, sig, say)
@@ -105,7 +106,7 @@ impl Tap {
         display: Option<Box<dyn Write + Send>>,
         signals: Option<&Signals>,
         say: Say,
-    ) -> io::Result<TapStats> {
+    ) -> Result<TapStats, LiveError> {
         let Tap {
             opts,
             settings,
@@ -176,7 +177,7 @@ impl Tap {
                         (FwdEnd::Stopped, FwdEnd::Stopped) => (None, None),
                     };
                     if let Some((_, e)) = host_gone {
-                        return Err(io::Error::new(e.kind(), format!("host side: {e}")));
+                        return Err(LiveError::HostSide(e));
                     }
                     if let Some((t, e)) = dev_gone {
                         sh.disconnect(t, &opts.device, &e);

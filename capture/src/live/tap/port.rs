@@ -2,6 +2,7 @@
 //! read and written in ticks so that a stop is seen within [`TICK`].
 
 use super::TICK;
+use crate::live::error::LiveError;
 use crate::live::pty::{Link, Pty};
 use crate::live::serial::{self, LineSettings, SerialFd};
 use crate::live::wait_fd;
@@ -94,7 +95,7 @@ impl Port for SerialPort {
 pub(super) type DevicePair = (Box<dyn Port>, Box<dyn Port>);
 
 /// Open a serial port (exclusively) with `settings`.
-pub(super) fn open_serial(path: &str, settings: &LineSettings) -> io::Result<SerialPort> {
+pub(super) fn open_serial(path: &str, settings: &LineSettings) -> Result<SerialPort, LiveError> {
     let s = serial::open_serial(path, settings)?;
     Ok(SerialPort {
         fd: FdPort::new(OwnedFd::from(s.file.try_clone()?))?,
@@ -102,7 +103,7 @@ pub(super) fn open_serial(path: &str, settings: &LineSettings) -> io::Result<Ser
     })
 }
 
-pub(super) fn open_device(path: &str, settings: &LineSettings) -> io::Result<DevicePair> {
+pub(super) fn open_device(path: &str, settings: &LineSettings) -> Result<DevicePair, LiveError> {
     let r = open_serial(path, settings)?;
     let w = SerialPort {
         fd: r.fd.try_clone()?,
@@ -123,7 +124,7 @@ pub(super) struct HostPty {
 }
 
 impl HostPty {
-    pub(super) fn create(link: Option<&str>) -> io::Result<HostPty> {
+    pub(super) fn create(link: Option<&str>) -> Result<HostPty, LiveError> {
         let (master, slave, slave_path) = Pty::open()?.into_parts();
         let link = match link {
             Some(l) => Some(Link::create(Path::new(l), &slave_path)?),

@@ -8,6 +8,7 @@ use super::sink::FileSink;
 use super::writer::{writer_loop, WriterOut};
 use super::{clock_time, Clock, Disconnect, StopHandle, TapStats, DISPLAY_QUEUE, FILE_BACKLOG};
 use super::{READ_BUF, TICK};
+use crate::live::error::LiveError;
 use crate::live::signals::{Signals, STOP};
 use crate::live::stop::lock;
 use crate::model::Direction;
@@ -245,8 +246,8 @@ pub(super) fn run_recorded<'s, 'e: 's>(
     sink: Option<FileSink>,
     display: Option<DisplayTo>,
     decode: (Proto, UnitsOpts),
-    body: impl FnOnce() -> io::Result<()>,
-) -> io::Result<TapStats> {
+    body: impl FnOnce() -> Result<(), LiveError>,
+) -> Result<TapStats, LiveError> {
     let clock = sh.clock;
     let writer = match (sink, &sh.file) {
         (Some(sink), Some(q)) => Some(scope.spawn(move || writer_loop(q, sink, clock, &sh.stop))),
@@ -329,8 +330,8 @@ impl Recording {
 pub(super) fn run_signalled(
     (handle, say): (bool, Say),
     what: &str,
-    f: impl FnOnce(Option<&Signals>) -> io::Result<TapStats>,
-) -> io::Result<TapStats> {
+    f: impl FnOnce(Option<&Signals>) -> Result<TapStats, LiveError>,
+) -> Result<TapStats, LiveError> {
     let signals = if handle {
         Some(Signals::install(STOP)?)
     } else {

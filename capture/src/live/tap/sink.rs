@@ -1,9 +1,10 @@
 //! The capture file the tap writes: pcapng or pcap, flushed while it is written so that a
 //! follower sees it and a killed tap leaves it readable; or the pipe of a stream.
 
+use crate::live::error::LiveError;
 use crate::live::stop::lock;
 use crate::model::{StreamInfo, Writer};
-use crate::open::Format;
+use crate::open::{CreateError, Format};
 use crate::pcap::{PcapNgOut, PcapOut};
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use std::fs::File;
@@ -41,17 +42,13 @@ impl FileSink {
     /// The capture's format (checked before any port is opened). Streaming formats only:
     /// every block is whole once flushed, so a killed tap leaves a readable file. MCAP needs
     /// its footer (and text formats lose the times): convert.
-    pub(super) fn format(path: &str, forced: Option<Format>) -> io::Result<Format> {
+    pub(super) fn format(path: &str, forced: Option<Format>) -> Result<Format, LiveError> {
         match Format::for_writing(path, forced)? {
             f @ (Format::PcapNg | Format::Pcap) => Ok(f),
-            other => Err(io::Error::new(
-                io::ErrorKind::InvalidInput,
-                format!(
-                    "{path}: the tap writes pcapng or pcap (readable up to the last block if \
-                     it is killed), not {}; record a .pcapng and `aptscope convert` it",
-                    other.name()
-                ),
-            )),
+            other => Err(LiveError::NotStreamable {
+                path: path.to_string(),
+                format: other.name(),
+            }),
         }
     }
 
@@ -63,23 +60,21 @@ impl FileSink {
         format: Format,
         force: bool,
         stream: &StreamInfo,
-    ) -> io::Result<FileSink> {
+    ) -> Result<FileSink, LiveError> {
         let f = if force {
             File::create(path)
         } else {
             File::options().write(true).create_new(true).open(path)
         }
-        .map_err(|e| {
-            if e.kind() == io::ErrorKind::AlreadyExists {
-                io::Error::new(
-                    e.kind(),
-                    format!("{path} exists (use --force to overwrite)"),
-                )
+        .map_err(|source| {
+            let path = path.to_string();
+            if source.kind() == io::ErrorKind::AlreadyExists {
+                CreateError::Exists { path }
             } else {
-                io::Error::new(e.kind(), format!("{path}: {e}"))
+                CreateError::File { path, source }
             }
         })?;
-        FileSink::over(f, format, stream, false)
+        Ok(FileSink::over(f, format, stream, false)?)
     }
 
     /// The sink `opts` ask for: the pipe of a stream, else a file created, flushed as it is
@@ -89,7 +84,7 @@ impl FileSink {
         format: Format,
         (stream, force, followed): (bool, bool, bool),
         info: &StreamInfo,
-    ) -> io::Result<FileSink> {
+    ) -> Result<FileSink, LiveError> {
         let mut sink = if stream {
             FileSink::open_stream(path, format, info)?
         } else {
@@ -101,23 +96,21 @@ impl FileSink {
 
     /// Open the existing pipe `path` (waiting for its reader, as opening a FIFO does) and
     /// declare `stream` in `format`.
-    fn open_stream(path: &str, format: Format, stream: &StreamInfo) -> io::Result<FileSink> {
+    fn open_stream(path: &str, format: Format, stream: &StreamInfo) -> Result<FileSink, LiveError> {
         use std::os::unix::fs::FileTypeExt;
-        let t = std::fs::metadata(path)
-            .map_err(|e| io::Error::new(e.kind(), format!("{path}: {e}")))?
-            .file_type();
+        let failed = |source| LiveError::Stream {
+            path: path.to_string(),
+            source,
+        };
+        let t = std::fs::metadata(path).map_err(failed)?.file_type();
         // Written from its start without truncating: only right for a pipe (or a terminal).
         if !(t.is_fifo() || t.is_char_device() || t.is_socket()) {
-            return Err(io::Error::new(
-                io::ErrorKind::InvalidInput,
-                format!("{path}: not a pipe (a stream goes into an existing FIFO)"),
-            ));
+            return Err(LiveError::NotAPipe {
+                path: path.to_string(),
+            });
         }
-        let f = File::options()
-            .write(true)
-            .open(path)
-            .map_err(|e| io::Error::new(e.kind(), format!("{path}: {e}")))?;
-        FileSink::over(f, format, stream, true)
+        let f = File::options().write(true).open(path).map_err(failed)?;
+        Ok(FileSink::over(f, format, stream, true)?)
     }
 
     fn over(f: File, format: Format, stream: &StreamInfo, live: bool) -> io::Result<FileSink> {

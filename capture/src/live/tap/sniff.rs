@@ -5,12 +5,13 @@ use super::port::{open_serial, SerialPort};
 use super::record::{forward, run_recorded, run_signalled, supervise, FwdEnd, Recording, Shared};
 use super::sink::FileSink;
 use super::{clock_time, SniffOptions, TapStats, RETRY_EVERY};
+use crate::live::error::LiveError;
 use crate::live::serial::LineSettings;
 use crate::live::signals::Signals;
 use crate::model::{Direction, StreamInfo};
 use crate::open::Format;
 use crate::Say;
-use std::io::{self, Write};
+use std::io::Write;
 use std::sync::atomic::AtomicBool;
 use std::thread;
 use std::time::Instant;
@@ -18,7 +19,7 @@ use std::time::Instant;
 /// Run a sniff: read the two receive-only adapters (each in its own thread), merge both
 /// directions by time into the capture, show the timeline, until stopped or an adapter
 /// disappears (unless `reconnect`); print and return the statistics.
-pub fn sniff_main(opts: SniffOptions) -> io::Result<TapStats> {
+pub fn sniff_main(opts: SniffOptions) -> Result<TapStats, LiveError> {
     Sniff::new(opts)?.run(None)
 }
 
@@ -31,7 +32,7 @@ pub(super) struct Sniff {
 }
 
 impl Sniff {
-    pub(super) fn new(opts: SniffOptions) -> io::Result<Sniff> {
+    pub(super) fn new(opts: SniffOptions) -> Result<Sniff, LiveError> {
         let settings = LineSettings::for_proto(opts.proto, opts.baud, opts.flow);
         let format = opts
             .write
@@ -82,7 +83,7 @@ impl Sniff {
     }
 
     /// Run until stopped, with the timeline going to `display` (standard output when `None`).
-    pub(super) fn run(self, display: Option<Box<dyn Write + Send>>) -> io::Result<TapStats> {
+    pub(super) fn run(self, display: Option<Box<dyn Write + Send>>) -> Result<TapStats, LiveError> {
         let say = self.opts.say;
         run_signalled((self.opts.signals, say), "aptscope sniff", |sig| {
             self.run_with(display, sig, say)
@@ -96,7 +97,7 @@ impl Sniff {
         display: Option<Box<dyn Write + Send>>,
         signals: Option<&Signals>,
         say: Say,
-    ) -> io::Result<TapStats> {
+    ) -> Result<TapStats, LiveError> {
         let Sniff {
             opts,
             settings,

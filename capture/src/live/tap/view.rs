@@ -5,6 +5,7 @@ use super::mitm::Tap;
 use super::sniff::Sniff;
 use super::{SniffOptions, StopHandle, TapOptions, TapStats, TICK};
 use crate::follow::FollowStop;
+use crate::live::error::LiveError;
 use crate::live::pty::Pty;
 use crate::live::signals::{Blocked, Signals, STOP};
 use crate::Say;
@@ -60,7 +61,7 @@ pub fn tap_with_view(
     mut opts: TapOptions,
     view: impl FnOnce(LiveView<'_>) -> io::Result<()>,
     abandon: fn(ViewAbandoned) -> !,
-) -> io::Result<TapStats> {
+) -> Result<TapStats, LiveError> {
     let path = viewed_path(&opts.write)?;
     opts.followed = true;
     opts.quiet = true;
@@ -84,7 +85,7 @@ pub fn sniff_with_view(
     mut opts: SniffOptions,
     view: impl FnOnce(LiveView<'_>) -> io::Result<()>,
     abandon: fn(ViewAbandoned) -> !,
-) -> io::Result<TapStats> {
+) -> Result<TapStats, LiveError> {
     let path = viewed_path(&opts.write)?;
     opts.followed = true;
     opts.quiet = true;
@@ -110,7 +111,7 @@ pub fn sim_with_view(
     mut opts: TapOptions,
     view: impl FnOnce(LiveView<'_>) -> io::Result<()>,
     abandon: fn(ViewAbandoned) -> !,
-) -> io::Result<TapStats> {
+) -> Result<TapStats, LiveError> {
     use crate::live::sim::serve_pty;
     // Blocked before the simulator's thread starts, so that it inherits the mask and the
     // signals reach the tap's signalfd rather than killing the process.
@@ -127,8 +128,8 @@ pub fn sim_with_view(
         let r = tap_with_view(opts, view, abandon);
         stop.stop();
         match server.join() {
-            Ok(Err(e)) if r.is_ok() => Err(io::Error::new(e.kind(), format!("simulator: {e}"))),
-            Err(_) => Err(io::Error::other("the simulator panicked")),
+            Ok(Err(e)) if r.is_ok() => Err(LiveError::Simulator(e)),
+            Err(_) => Err(LiveError::Panicked("simulator")),
             _ => r,
         }
     });
@@ -139,13 +140,8 @@ pub fn sim_with_view(
 /// How long a view asked to close may take before it is given up (see [`ViewAbandoned`]).
 const VIEW_GRACE: Duration = Duration::from_secs(2);
 
-fn viewed_path(write: &Option<String>) -> io::Result<String> {
-    write.clone().ok_or_else(|| {
-        io::Error::new(
-            io::ErrorKind::InvalidInput,
-            "a live view follows the capture file: give one (-w)",
-        )
-    })
+fn viewed_path(write: &Option<String>) -> Result<String, LiveError> {
+    write.clone().ok_or(LiveError::NoViewFile)
 }
 
 /// A tap or sniff set up for a live view, and how to end it.
@@ -171,9 +167,9 @@ impl Viewed<'_> {
     /// [`tap_with_view`].
     fn run(
         self,
-        run: impl FnOnce(Option<&Signals>) -> io::Result<TapStats> + Send,
+        run: impl FnOnce(Option<&Signals>) -> Result<TapStats, LiveError> + Send,
         view: impl FnOnce(LiveView<'_>) -> io::Result<()>,
-    ) -> io::Result<TapStats> {
+    ) -> Result<TapStats, LiveError> {
         // Installed here, before any thread starts: the view's threads inherit the mask too.
         let signals = if self.signals {
             Some(Signals::install(STOP)?)
@@ -221,20 +217,18 @@ impl Viewed<'_> {
             });
             view_done.store(true, Ordering::SeqCst);
             self.stop.stop();
-            let stats = tap
-                .join()
-                .unwrap_or_else(|_| Err(io::Error::other("the tap panicked")));
+            let stats = tap.join().unwrap_or(Err(LiveError::Panicked("tap")));
             (stats, shown)
         });
         drop(signals);
         let stats = stats?;
         self.say.line(format_args!("{}", stats.summary(self.what)));
-        shown.map(|()| stats)
+        Ok(shown.map(|()| stats)?)
     }
 
     /// The view did not close when asked: say what the run did and where the capture is
     /// (standard error may still go somewhere), and hand the verdict to `abandon`.
-    fn abandon_view(&self, r: &io::Result<TapStats>) -> ! {
+    fn abandon_view(&self, r: &Result<TapStats, LiveError>) -> ! {
         let (say, what) = (self.say, self.what);
         let capture_ok = match r {
             Ok(stats) => {
