@@ -172,7 +172,8 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
             "--filter applies to text and NDJSON output; filter the Parquet dataset with a \
              query (DuckDB, pandas) instead"
                 .into(),
-        ));
+        )
+        .into());
     }
     // A bad filter is one error, not one per file.
     job.filter.map(compile_filter).transpose()?;

@@ -1,6 +1,7 @@
 //! What the subcommands share: protocol and units options, opening captures, filters, the
 //! progress line, and the error for a bad argument.
 
+use crate::error::{CliError, Result};
 use aptscope_capture::open::{Format, OpenOptions, Progress};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::filter::Filter;
@@ -32,7 +33,7 @@ pub(crate) struct UnitsArgs {
 }
 
 impl UnitsArgs {
-    pub(crate) fn opts(&self) -> io::Result<UnitsOpts> {
+    pub(crate) fn opts(&self) -> Result<UnitsOpts> {
         UnitsOpts::from_args(
             self.stage.as_deref(),
             self.scale.as_deref(),
@@ -50,11 +51,7 @@ pub(crate) fn proto_of(p: ProtoArg) -> Option<Proto> {
     }
 }
 
-pub(crate) fn open_opts(
-    format: Option<&str>,
-    hex: bool,
-    usb: Option<&str>,
-) -> io::Result<OpenOptions> {
+pub(crate) fn open_opts(format: Option<&str>, hex: bool, usb: Option<&str>) -> Result<OpenOptions> {
     let format = match (format, hex) {
         (Some(f), _) => Some(Format::parse(f).ok_or_else(|| {
             bad(format!(
@@ -86,19 +83,19 @@ pub(crate) fn open_opts(
 
 /// A reader's diagnostic that makes the command fail: the input has nothing of what was asked
 /// for (`--usb-device` naming no device of the capture).
-pub(crate) fn fatal(d: &aptscope_capture::ReadDiag) -> io::Result<()> {
+pub(crate) fn fatal(d: &aptscope_capture::ReadDiag) -> Result<()> {
     if d.kind() == aptscope_capture::usb::NOT_FOUND {
         return Err(bad(d.msg()));
     }
     Ok(())
 }
 
-pub(crate) fn compile_filter(src: &str) -> io::Result<Filter> {
+pub(crate) fn compile_filter(src: &str) -> Result<Filter> {
     Filter::parse(src).map_err(|e| bad(format!("bad filter: {e}\n{}", e.caret(src))))
 }
 
-pub(crate) fn bad(msg: String) -> io::Error {
-    io::Error::new(io::ErrorKind::InvalidInput, msg)
+pub(crate) fn bad(msg: String) -> CliError {
+    CliError::Usage(msg)
 }
 
 /// A progress line on stderr for long jobs, only when stderr is a terminal.

@@ -8,8 +8,11 @@ use std::process::ExitCode;
 mod batch;
 mod cmd;
 mod common;
+mod error;
 mod extcap;
 mod shell;
+
+use error::CliError;
 
 #[derive(Parser)]
 #[command(
@@ -94,11 +97,11 @@ fn main() -> ExitCode {
         Cmd::Info(a) => cmd::info::run(a),
         Cmd::Convert(a) => cmd::convert::run(a),
         Cmd::Export(a) => cmd::export::run(a),
-        Cmd::Extcap(a) => extcap::extcap_main(a),
+        Cmd::Extcap(a) => extcap::extcap_main(a).map_err(CliError::from),
         Cmd::Messages(a) => cmd::messages::run(a),
         Cmd::Encode(a) => cmd::encode::run(a),
-        Cmd::Completions { shell } => shell::completions(shell),
-        Cmd::Man { command } => shell::man(&command),
+        Cmd::Completions { shell } => shell::completions(shell).map_err(CliError::from),
+        Cmd::Man { command } => shell::man(&command).map_err(CliError::from),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,

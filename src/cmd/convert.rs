@@ -1,6 +1,7 @@
 //! `aptscope convert`: a capture rewritten in another format, losslessly where it can be.
 
 use crate::common::{bad, fatal, open_opts, Ticker};
+use crate::error::Result;
 use aptscope_capture::open::{create, open_with_progress, Format};
 use aptscope_capture::Event;
 use std::io;
@@ -27,7 +28,7 @@ pub(crate) struct ConvertArgs {
 }
 
 /// Convert the capture `a` names.
-pub(crate) fn run(a: ConvertArgs) -> io::Result<()> {
+pub(crate) fn run(a: ConvertArgs) -> Result<()> {
     let opts = open_opts(a.format.as_deref(), false, a.usb_device.as_deref())?;
     let (input, output, to, force) = (
         a.input.as_str(),

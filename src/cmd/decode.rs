@@ -2,6 +2,7 @@
 
 use crate::batch;
 use crate::common::{bad, open_opts, ProtoArg, UnitsArgs};
+use crate::error::Result;
 use aptscope_capture::follow::FollowStop;
 use aptscope_replay::parse_duration;
 use std::io;
@@ -67,7 +68,7 @@ pub(crate) enum ToArg {
 }
 
 /// Decode the files `a` names.
-pub(crate) fn run(a: DecodeArgs) -> io::Result<()> {
+pub(crate) fn run(a: DecodeArgs) -> Result<()> {
     let DecodeArgs {
         files,
         format,
@@ -129,7 +130,7 @@ pub(crate) fn run(a: DecodeArgs) -> io::Result<()> {
     };
     let files = decode_inputs(files)?;
     let jobs = jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    batch::run(batch::Job {
+    Ok(batch::run(batch::Job {
         files: &files,
         open: o,
         proto,
@@ -138,12 +139,12 @@ pub(crate) fn run(a: DecodeArgs) -> io::Result<()> {
         units: u,
         out,
         jobs,
-    })
+    })?)
 }
 
 /// The inputs of `decode`: standard input when none is named, unless it is a terminal (a user
 /// who forgot the file would wait for nothing).
-fn decode_inputs(files: Vec<String>) -> io::Result<Vec<String>> {
+fn decode_inputs(files: Vec<String>) -> Result<Vec<String>> {
     use std::io::IsTerminal;
     if !files.is_empty() {
         return Ok(files);

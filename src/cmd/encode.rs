@@ -1,6 +1,7 @@
 //! `aptscope encode`: a frame built from field values.
 
 use crate::common::{bad, ProtoArg};
+use crate::error::Result;
 use aptscope_dissector::apt::{encode_named_report, Addr, Named};
 use aptscope_dissector::Table;
 use std::io::{self, Write};
@@ -31,7 +32,7 @@ pub(crate) struct EncodeArgs {
 }
 
 /// Encode the frame `a` describes and print it.
-pub(crate) fn run(a: EncodeArgs) -> io::Result<()> {
+pub(crate) fn run(a: EncodeArgs) -> Result<()> {
     if a.proto == ProtoArg::Elliptec {
         return match (&a.dest, &a.source, &a.form, &a.sub) {
             (None, None, None, None) => ell_encode(&a.name, &a.values),
@@ -52,7 +53,7 @@ pub(crate) fn run(a: EncodeArgs) -> io::Result<()> {
 
 /// `encode --proto elliptec ADDR CMD field=value…`: the frame as text (escaped CR LF for
 /// replies), or as hex when it holds binary data (`C1`/`C2`).
-fn ell_encode(addr: &str, args: &[String]) -> io::Result<()> {
+fn ell_encode(addr: &str, args: &[String]) -> Result<()> {
     use aptscope_dissector::ell::encode;
     let (cmd, values) = args
         .split_first()
@@ -60,7 +61,7 @@ fn ell_encode(addr: &str, args: &[String]) -> io::Result<()> {
     let bytes = encode::assignments(values)
         .and_then(|v| encode::encode(addr, cmd, &v))
         .map_err(|e| bad(e.to_string()))?;
-    writeln!(io::stdout(), "{}", encode::display(&bytes))
+    Ok(writeln!(io::stdout(), "{}", encode::display(&bytes))?)
 }
 
 fn encode_cmd(
@@ -70,7 +71,7 @@ fn encode_cmd(
     source: Option<&str>,
     form: Option<&str>,
     sub: Option<&str>,
-) -> io::Result<()> {
+) -> Result<()> {
     let table = Table::global();
     let m = table.msg_by_name(name).ok_or_else(|| {
         bad(aptscope_dissector::apt::EncodeError::unknown_message(table, name).to_string())
@@ -83,7 +84,7 @@ fn encode_cmd(
         })
         .collect::<Result<_, _>>()?;
     let to_host = m.dir == aptscope_dissector::table::Dir::DeviceToHost;
-    let addr = |s: Option<&str>, default: Addr| -> io::Result<u8> {
+    let addr = |s: Option<&str>, default: Addr| -> Result<u8> {
         match s {
             None => Ok(default.byte()),
             Some(t) => Addr::parse(t).map(Addr::byte).ok_or_else(|| {
@@ -115,5 +116,5 @@ fn encode_cmd(
         eprintln!("fields not given, set to 0: {}", zero.join(", "));
     }
     let hex: Vec<String> = bytes.iter().map(|b| format!("{b:02X}")).collect();
-    writeln!(io::stdout(), "{}", hex.join(" "))
+    Ok(writeln!(io::stdout(), "{}", hex.join(" "))?)
 }

@@ -1,5 +1,6 @@
 //! `aptscope export`: the message tables for other tools.
 
+use crate::error::Result;
 use std::io::{self, Write};
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -20,14 +21,14 @@ pub(crate) struct ExportArgs {
 }
 
 /// Write what `a` asks for.
-pub(crate) fn run(a: ExportArgs) -> io::Result<()> {
+pub(crate) fn run(a: ExportArgs) -> Result<()> {
     match a.what {
         ExportArg::WiresharkLua => {
             let lua = aptscope_dissector::wireshark::lua();
             match a.output.as_deref() {
-                None | Some("-") => io::stdout().lock().write_all(lua.as_bytes()),
-                Some(path) => std::fs::write(path, lua)
-                    .map_err(|e| io::Error::new(e.kind(), format!("{path}: {e}"))),
+                None | Some("-") => Ok(io::stdout().lock().write_all(lua.as_bytes())?),
+                Some(path) => Ok(std::fs::write(path, lua)
+                    .map_err(|e| io::Error::new(e.kind(), format!("{path}: {e}")))?),
             }
         }
     }

@@ -1,6 +1,7 @@
 //! `aptscope info`: what a capture holds (like capinfos).
 
 use crate::common::{fatal, open_opts, proto_of, ProtoArg};
+use crate::error::Result;
 use aptscope_capture::info::summarize;
 use aptscope_capture::open::open;
 use std::io::{self, Write};
@@ -25,7 +26,7 @@ pub(crate) struct InfoArgs {
 }
 
 /// Summarize the capture `a` names.
-pub(crate) fn run(a: InfoArgs) -> io::Result<()> {
+pub(crate) fn run(a: InfoArgs) -> Result<()> {
     let opts = open_opts(a.format.as_deref(), false, a.usb_device.as_deref())?;
     let (file, as_json, proto) = (a.file.as_str(), a.json, a.proto);
     let (mut reader, _) = open(file, opts)?;
@@ -33,8 +34,8 @@ pub(crate) fn run(a: InfoArgs) -> io::Result<()> {
     i.file_diags.iter().try_for_each(fatal)?;
     let mut out = io::stdout().lock();
     if as_json {
-        writeln!(out, "{}", i.to_json(file))
+        Ok(writeln!(out, "{}", i.to_json(file))?)
     } else {
-        write!(out, "{}", i.to_text(file))
+        Ok(write!(out, "{}", i.to_text(file))?)
     }
 }

@@ -2,6 +2,7 @@
 //! UI (`--view`); and what `sim --view` shares with them.
 
 use crate::common::{bad, proto_of, ProtoArg, UnitsArgs};
+use crate::error::{CliError, Result};
 use aptscope_capture::live::error::LiveError;
 use aptscope_capture::live::serial::Flow;
 use aptscope_capture::live::tap::{
@@ -104,7 +105,7 @@ macro_rules! live_fields {
 }
 
 /// Run a tap.
-pub(crate) fn tap(a: TapArgs) -> io::Result<()> {
+pub(crate) fn tap(a: TapArgs) -> Result<()> {
     let TapArgs { device, link, live } = a;
     let (proto, flow) = live_opts(&live)?;
     let mut o = TapOptions::new(device, link);
@@ -119,7 +120,7 @@ pub(crate) fn tap(a: TapArgs) -> io::Result<()> {
 }
 
 /// Run a sniff.
-pub(crate) fn sniff(a: SniffArgs) -> io::Result<()> {
+pub(crate) fn sniff(a: SniffArgs) -> Result<()> {
     let SniffArgs {
         host_tx,
         device_tx,
@@ -138,7 +139,7 @@ pub(crate) fn sniff(a: SniffArgs) -> io::Result<()> {
 }
 
 /// `--write-format` of tap and sniff: pcapng or pcap.
-fn write_format(f: Option<&str>) -> io::Result<Option<Format>> {
+fn write_format(f: Option<&str>) -> Result<Option<Format>> {
     match f {
         None => Ok(None),
         Some("pcapng") => Ok(Some(Format::PcapNg)),
@@ -149,7 +150,7 @@ fn write_format(f: Option<&str>) -> io::Result<Option<Format>> {
     }
 }
 
-fn live_opts(l: &LiveArgs) -> io::Result<(Proto, Option<Flow>)> {
+fn live_opts(l: &LiveArgs) -> Result<(Proto, Option<Flow>)> {
     let proto = proto_of(l.proto).unwrap_or(Proto::Apt);
     let flow = match &l.flow {
         None => None,
@@ -193,11 +194,7 @@ pub(crate) fn end_abandoned(a: ViewAbandoned) -> ! {
 }
 
 /// After a live view: say where the capture is, and check it holds every forwarded byte.
-pub(crate) fn return_view(
-    r: Result<TapStats, LiveError>,
-    path: &str,
-    what: &str,
-) -> io::Result<()> {
+pub(crate) fn return_view(r: Result<TapStats, LiveError>, path: &str, what: &str) -> Result<()> {
     if std::path::Path::new(path).exists() {
         aptscope_capture::note!("{what}: capture in {path}");
     }
@@ -205,12 +202,10 @@ pub(crate) fn return_view(
 }
 
 /// A capture that does not hold every forwarded byte is a failure.
-fn check_stats(r: Result<TapStats, LiveError>) -> io::Result<()> {
+fn check_stats(r: Result<TapStats, LiveError>) -> Result<()> {
     if r?.file_matches() {
         Ok(())
     } else {
-        Err(io::Error::other(
-            "the capture file does not hold every forwarded byte (see the counts above)",
-        ))
+        Err(CliError::CaptureIncomplete)
     }
 }

@@ -2,6 +2,7 @@
 //! dissector's listings; printed here).
 
 use crate::common::{bad, ProtoArg};
+use crate::error::Result;
 use aptscope_dissector::{listing, Table};
 use std::io::{self, BufWriter, Write};
 
@@ -23,7 +24,7 @@ pub(crate) struct MessagesArgs {
 }
 
 /// List the tables, or show what `a.query` names.
-pub(crate) fn run(a: MessagesArgs) -> io::Result<()> {
+pub(crate) fn run(a: MessagesArgs) -> Result<()> {
     let MessagesArgs {
         query,
         proto,
@@ -46,17 +47,17 @@ pub(crate) fn run(a: MessagesArgs) -> io::Result<()> {
 }
 
 /// `messages NAME|ID`: the pages of what the query names.
-fn message_page(query: &str, as_json: bool) -> io::Result<()> {
+fn message_page(query: &str, as_json: bool) -> Result<()> {
     let pages = listing::pages(Table::global(), query, as_json).map_err(bad)?;
     let mut out = BufWriter::new(io::stdout().lock());
     for p in pages {
         writeln!(out, "{p}")?;
     }
-    out.flush()
+    Ok(out.flush()?)
 }
 
 /// `messages --proto apt`: every message, then every sub-message.
-fn messages(as_json: bool, verbose: bool) -> io::Result<()> {
+fn messages(as_json: bool, verbose: bool) -> Result<()> {
     let table = Table::global();
     let mut out = BufWriter::new(io::stdout().lock());
     if as_json {
@@ -66,11 +67,11 @@ fn messages(as_json: bool, verbose: bool) -> io::Result<()> {
     } else {
         out.write_all(listing::text(table, verbose).as_bytes())?;
     }
-    out.flush()
+    Ok(out.flush()?)
 }
 
 /// `messages --proto elliptec`: the listing lives in the dissector.
-fn ell_messages(as_json: bool, verbose: bool) -> io::Result<()> {
+fn ell_messages(as_json: bool, verbose: bool) -> Result<()> {
     let mut out = BufWriter::new(io::stdout().lock());
     if as_json {
         for l in aptscope_dissector::ell::listing::json_lines() {
@@ -79,5 +80,5 @@ fn ell_messages(as_json: bool, verbose: bool) -> io::Result<()> {
     } else {
         out.write_all(aptscope_dissector::ell::listing::text(verbose).as_bytes())?;
     }
-    out.flush()
+    Ok(out.flush()?)
 }

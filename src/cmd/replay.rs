@@ -1,9 +1,9 @@
 //! `aptscope replay`: a capture sent again with its timing, the replies compared.
 
 use crate::common::{bad, open_opts, proto_of, ProtoArg};
+use crate::error::{CliError, Result};
 use aptscope_capture::live::serial::Flow;
 use aptscope_replay::{replay_main, ReplayArgs, ReplayOptions};
-use std::io;
 
 // The options of `replay`: the replay's own, and how the capture is read.
 #[derive(clap::Args)]
@@ -23,7 +23,7 @@ pub(crate) struct ReplayCmd {
 }
 
 /// Replay the capture `a` names.
-pub(crate) fn run(a: ReplayCmd) -> io::Result<()> {
+pub(crate) fn run(a: ReplayCmd) -> Result<()> {
     let open = open_opts(a.format.as_deref(), false, None)?;
     let flow = match a.flow {
         None => None,
@@ -40,7 +40,7 @@ pub(crate) fn run(a: ReplayCmd) -> io::Result<()> {
     };
     match replay_main(o) {
         Ok(true) => Ok(()),
-        Ok(false) => Err(io::Error::other("differences found (--check)")),
-        Err(e) => Err(e),
+        Ok(false) => Err(CliError::Differences),
+        Err(e) => Err(e.into()),
     }
 }

@@ -2,11 +2,11 @@
 //! terminal UI behind a tap (`--view`).
 
 use crate::cmd::live::{end_abandoned, live_view, return_view, viewed_file};
+use crate::error::Result;
 use aptscope_capture::live::sim::{apt_sim, ell_sim, sim_apt_main, sim_elliptec_main, SimLine};
 use aptscope_capture::live::tap::{sim_with_view, TapOptions};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::units::UnitsOpts;
-use std::io;
 
 #[derive(clap::Subcommand)]
 pub(crate) enum SimCmd {
@@ -70,18 +70,14 @@ pub(crate) struct SimView {
 }
 
 /// Run the simulator `what` names.
-pub(crate) fn run(what: SimCmd) -> io::Result<()> {
+pub(crate) fn run(what: SimCmd) -> Result<()> {
     match what {
         SimCmd::Apt {
             model, pty, view, ..
-        } if view.view => {
-            apt_sim(&model).and_then(|sim| sim_view(Box::new(sim), Proto::Apt, pty, view))
-        }
+        } if view.view => sim_view(Box::new(apt_sim(&model)?), Proto::Apt, pty, view),
         SimCmd::Elliptec {
             modules, pty, view, ..
-        } if view.view => {
-            ell_sim(&modules).and_then(|sim| sim_view(Box::new(sim), Proto::Elliptec, pty, view))
-        }
+        } if view.view => sim_view(Box::new(ell_sim(&modules)?), Proto::Elliptec, pty, view),
         SimCmd::Apt {
             model,
             pty,
@@ -89,10 +85,10 @@ pub(crate) fn run(what: SimCmd) -> io::Result<()> {
             baud,
             once,
             ..
-        } => sim_apt_main(
+        } => Ok(sim_apt_main(
             &model,
             sim_line(pty.as_deref(), port.as_deref(), baud, once),
-        ),
+        )?),
         SimCmd::Elliptec {
             modules,
             pty,
@@ -100,10 +96,10 @@ pub(crate) fn run(what: SimCmd) -> io::Result<()> {
             baud,
             once,
             ..
-        } => sim_elliptec_main(
+        } => Ok(sim_elliptec_main(
             &modules,
             sim_line(pty.as_deref(), port.as_deref(), baud, once),
-        ),
+        )?),
     }
 }
 
@@ -127,7 +123,7 @@ fn sim_view(
     proto: Proto,
     pty: Option<std::path::PathBuf>,
     view: SimView,
-) -> io::Result<()> {
+) -> Result<()> {
     let link = pty.map(|p| p.to_string_lossy().into_owned());
     let mut o = TapOptions::new(String::new(), link);
     o.proto = proto;

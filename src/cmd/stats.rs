@@ -1,6 +1,7 @@
 //! `aptscope stats`: counts, bytes, latencies, diagnostics and rates of a capture.
 
 use crate::common::{compile_filter, fatal, open_opts, proto_of, ProtoArg, Ticker, UnitsArgs};
+use crate::error::Result;
 use aptscope_capture::open::{open_with_progress, OpenOptions};
 use aptscope_capture::Event;
 use aptscope_dissector::record::{Decoder, Record};
@@ -40,7 +41,7 @@ pub(crate) struct StatsArgs {
 }
 
 /// The statistics of the capture `a` names.
-pub(crate) fn run(a: StatsArgs) -> io::Result<()> {
+pub(crate) fn run(a: StatsArgs) -> Result<()> {
     let o = open_opts(a.format.as_deref(), false, a.usb_device.as_deref())?;
     let u = a.units.opts()?;
     stats(
@@ -75,7 +76,7 @@ fn stats(
     bin: u64,
     timeout: Option<u64>,
     units: UnitsOpts,
-) -> io::Result<()> {
+) -> Result<()> {
     let f = filter.map(compile_filter).transpose()?;
     let (mut reader, format, progress) = open_with_progress(file, opts)?;
     let mut ticker = Ticker::new(progress);
@@ -125,5 +126,5 @@ fn stats(
     // Not traffic of these protocols: the command fails with the reason (the tables above are
     // written already).
     let problems = st.file_problems.values().sum();
-    aptscope_capture::judge::refuse(&dec, format, problems).map_or(Ok(()), Err)
+    aptscope_capture::judge::refuse(&dec, format, problems).map_or(Ok(()), |e| Err(e.into()))
 }

@@ -1,8 +1,8 @@
 //! `aptscope view`: a capture in the terminal UI.
 
 use crate::common::{open_opts, proto_of, ProtoArg, UnitsArgs};
+use crate::error::Result;
 use aptscope_capture::follow::FollowStop;
-use std::io;
 
 // The options of `view`.
 #[derive(clap::Args)]
@@ -28,7 +28,7 @@ pub(crate) struct ViewArgs {
 }
 
 /// Browse the capture `a` names in the terminal UI.
-pub(crate) fn run(a: ViewArgs) -> io::Result<()> {
+pub(crate) fn run(a: ViewArgs) -> Result<()> {
     let mut o = open_opts(a.format.as_deref(), false, a.usb_device.as_deref())?;
     // Standard input is followed as it comes, with or without --follow (a pipe ends when its
     // writer does: `dumpcap -w - | aptscope view --follow -`).
@@ -36,5 +36,10 @@ pub(crate) fn run(a: ViewArgs) -> io::Result<()> {
         // Nothing says when another program's writing ends: followed until `q`.
         o.follow = Some(FollowStop::new());
     }
-    aptscope_tui::run_with(&a.file, o, proto_of(a.proto), a.units.opts()?)
+    Ok(aptscope_tui::run_with(
+        &a.file,
+        o,
+        proto_of(a.proto),
+        a.units.opts()?,
+    )?)
 }
