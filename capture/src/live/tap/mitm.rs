@@ -2,9 +2,9 @@
 //! device, forwarding both ways and recording what crossed.
 
 use super::port::{open_device, DevicePair, FdPort, HostPty, Port};
-use super::record::{forward, run_recorded, run_signalled, supervise, FwdEnd, Recording, Shared};
+use super::record::{forward, run_recorded, supervise, FwdEnd, Recording, Run, Shared};
 use super::sink::FileSink;
-use super::{clock_time, TapOptions, TapStats, READ_BUF, RETRY_EVERY};
+use super::{clock_time, StopHandle, TapOptions, TapStats, READ_BUF, RETRY_EVERY};
 use crate::live::error::LiveError;
 use crate::live::serial::LineSettings;
 use crate::live::signals::Signals;
@@ -90,18 +90,16 @@ impl Tap {
             rec,
         })
     }
+}
 
-    /// Run until stopped, with the timeline going to `display` (standard output when `None`).
-    pub(super) fn run(self, display: Option<Box<dyn Write + Send>>) -> Result<TapStats, LiveError> {
-        let say = self.opts.say;
-        run_signalled((self.opts.signals, say), "aptscope tap", |sig| {
-            self.run_with(display, sig, say)
-        })
+impl Run for Tap {
+    const WHAT: &'static str = "aptscope tap";
+
+    fn control(&self) -> (bool, StopHandle, Say) {
+        (self.opts.signals, self.opts.stop.clone(), self.opts.say)
     }
 
-    /// [`Tap::run`] with the signals (when handled) already installed by the caller; the
-    /// statistics are not printed; progress goes to `say`.
-    pub(super) fn run_with(
+    fn run_with(
         self,
         display: Option<Box<dyn Write + Send>>,
         signals: Option<&Signals>,

@@ -326,8 +326,36 @@ impl Recording {
     }
 }
 
+/// A tap or a sniff, set up and ready to run.
+pub(super) trait Run: Sized + Send {
+    /// What says its statistics: `aptscope tap`, `aptscope sniff`.
+    const WHAT: &'static str;
+
+    /// Whether it handles the stop signals, its stop handle, and where it says progress.
+    fn control(&self) -> (bool, StopHandle, Say);
+
+    /// Run until stopped, with the timeline going to `display` (standard output when `None`)
+    /// and the signals (when handled) installed by the caller; progress goes to `say`, the
+    /// statistics are returned, not said.
+    fn run_with(
+        self,
+        display: Option<Box<dyn Write + Send>>,
+        signals: Option<&Signals>,
+        say: Say,
+    ) -> Result<TapStats, LiveError>;
+
+    /// [`Run::run_with`] with the stop signals handled (when asked for), then the statistics
+    /// said.
+    fn run(self, display: Option<Box<dyn Write + Send>>) -> Result<TapStats, LiveError> {
+        let (signals, _, say) = self.control();
+        run_signalled((signals, say), Self::WHAT, |sig| {
+            self.run_with(display, sig, say)
+        })
+    }
+}
+
 /// Run `f` with the stop signals handled (when `handle`), then say the statistics as `what`.
-pub(super) fn run_signalled(
+fn run_signalled(
     (handle, say): (bool, Say),
     what: &str,
     f: impl FnOnce(Option<&Signals>) -> Result<TapStats, LiveError>,

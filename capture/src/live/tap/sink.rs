@@ -4,7 +4,7 @@
 use crate::live::error::LiveError;
 use crate::live::stop::lock;
 use crate::model::{StreamInfo, Writer};
-use crate::open::{CreateError, Format};
+use crate::open::{create_file, Format};
 use crate::pcap::{PcapNgOut, PcapOut};
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use std::fs::File;
@@ -61,19 +61,7 @@ impl FileSink {
         force: bool,
         stream: &StreamInfo,
     ) -> Result<FileSink, LiveError> {
-        let f = if force {
-            File::create(path)
-        } else {
-            File::options().write(true).create_new(true).open(path)
-        }
-        .map_err(|source| {
-            let path = path.to_string();
-            if source.kind() == io::ErrorKind::AlreadyExists {
-                CreateError::Exists { path }
-            } else {
-                CreateError::File { path, source }
-            }
-        })?;
+        let f = create_file(path, force)?;
         Ok(FileSink::over(f, format, stream, false)?)
     }
 

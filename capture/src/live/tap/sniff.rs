@@ -2,9 +2,9 @@
 //! into one capture.
 
 use super::port::{open_serial, SerialPort};
-use super::record::{forward, run_recorded, run_signalled, supervise, FwdEnd, Recording, Shared};
+use super::record::{forward, run_recorded, supervise, FwdEnd, Recording, Run, Shared};
 use super::sink::FileSink;
-use super::{clock_time, SniffOptions, TapStats, RETRY_EVERY};
+use super::{clock_time, SniffOptions, StopHandle, TapStats, RETRY_EVERY};
 use crate::live::error::LiveError;
 use crate::live::serial::LineSettings;
 use crate::live::signals::Signals;
@@ -81,18 +81,16 @@ impl Sniff {
             rec,
         })
     }
+}
 
-    /// Run until stopped, with the timeline going to `display` (standard output when `None`).
-    pub(super) fn run(self, display: Option<Box<dyn Write + Send>>) -> Result<TapStats, LiveError> {
-        let say = self.opts.say;
-        run_signalled((self.opts.signals, say), "aptscope sniff", |sig| {
-            self.run_with(display, sig, say)
-        })
+impl Run for Sniff {
+    const WHAT: &'static str = "aptscope sniff";
+
+    fn control(&self) -> (bool, StopHandle, Say) {
+        (self.opts.signals, self.opts.stop.clone(), self.opts.say)
     }
 
-    /// [`Sniff::run`] with the signals already installed by the caller; the statistics are
-    /// not printed; progress goes to `say`.
-    pub(super) fn run_with(
+    fn run_with(
         self,
         display: Option<Box<dyn Write + Send>>,
         signals: Option<&Signals>,

@@ -3,6 +3,7 @@
 use super::mitm::Tap;
 use super::port::{FdPort, HostPty, Port};
 use super::queue::{FileQueue, QItem, Rec};
+use super::record::Run;
 use super::sniff::Sniff;
 use super::writer::Merger;
 use super::*;

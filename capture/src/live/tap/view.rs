@@ -2,6 +2,7 @@
 //! view (the terminal UI) follows the file in the calling one.
 
 use super::mitm::Tap;
+use super::record::Run;
 use super::sniff::Sniff;
 use super::{SniffOptions, StopHandle, TapOptions, TapStats, TICK};
 use crate::follow::FollowStop;
@@ -67,17 +68,7 @@ pub fn tap_with_view(
     opts.quiet = true;
     let tap = Tap::new(opts)?;
     let host = format!("host {}", tap.host.path().display());
-    let viewed = Viewed {
-        path: &path,
-        host: Some(&host),
-        signals: tap.opts.signals,
-        stop: tap.opts.stop.clone(),
-        say: tap.opts.say,
-        what: "aptscope tap",
-        abandon,
-    };
-    let run = move |sig: Option<&Signals>| tap.run_with(None, sig, Say::Nothing);
-    viewed.run(run, view)
+    view_run(tap, (&path, Some(&host)), view, abandon)
 }
 
 /// [`tap_with_view`] for a sniff.
@@ -90,17 +81,29 @@ pub fn sniff_with_view(
     opts.followed = true;
     opts.quiet = true;
     let sniff = Sniff::new(opts)?;
+    view_run(sniff, (&path, None), view, abandon)
+}
+
+/// Run `run` (a tap or sniff set up to write `path`; host programs connect at `host`) in a
+/// thread and `view` in this one; see [`tap_with_view`].
+fn view_run<R: Run>(
+    run: R,
+    (path, host): (&str, Option<&str>),
+    view: impl FnOnce(LiveView<'_>) -> io::Result<()>,
+    abandon: fn(ViewAbandoned) -> !,
+) -> Result<TapStats, LiveError> {
+    let (signals, stop, say) = run.control();
     let viewed = Viewed {
-        path: &path,
-        host: None,
-        signals: sniff.opts.signals,
-        stop: sniff.opts.stop.clone(),
-        say: sniff.opts.say,
-        what: "aptscope sniff",
+        path,
+        host,
+        signals,
+        stop,
+        say,
+        what: R::WHAT,
         abandon,
     };
-    let run = move |sig: Option<&Signals>| sniff.run_with(None, sig, Say::Nothing);
-    viewed.run(run, view)
+    // The view has the terminal: the run says nothing while it does.
+    viewed.run(move |sig| run.run_with(None, sig, Say::Nothing), view)
 }
 
 /// A simulator's own traffic in a live view: `sim` served on a private pseudo-terminal with a
