@@ -32,7 +32,8 @@ impl Write for SharedFile {
 pub(super) struct FileSink {
     pub(super) out: Box<dyn Writer + Send>,
     file: SharedFile,
-    /// A stream ([`TapOptions::stream`]): the pipe, to see its reader go away.
+    /// A stream ([`TapOptions::stream`](super::TapOptions::stream)): the pipe, to see its
+    /// reader go away.
     pub(super) stream: Option<File>,
     /// Flushed whenever something was written (a stream, or a file a live view follows).
     pub(super) eager: bool,

@@ -32,8 +32,8 @@ pub struct TapStats {
     pub file: bool,
     /// The file error, when writing failed.
     pub file_error: Option<String>,
-    /// A stream's reader closed it ([`TapOptions::stream`]): the normal end of a capture
-    /// into Wireshark; `file_error` says so too.
+    /// A stream's reader closed it ([`TapOptions::stream`](super::TapOptions::stream)): the
+    /// normal end of a capture into Wireshark; `file_error` says so too.
     pub reader_closed: bool,
     /// Bytes not written to the file because writing it had failed.
     pub file_lost: u64,
