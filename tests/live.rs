@@ -6,8 +6,8 @@
 mod common;
 
 use aptscope_capture::open::{open, Format, OpenOptions};
-use aptscope_capture::tools::missing;
 use aptscope_capture::{Direction, Event};
+use common::clients::client_python;
 use common::host::{ask_info, open_host, ready, start_sim, start_sim_with, HW_GET_INFO_LEN};
 use common::proc::{lock, wait_for, Proc, DEADLINE, POLL};
 use common::term::Term;
@@ -1159,44 +1159,6 @@ fn sim_elliptec_view_shows_host_commands_sent_without_terminator_at_once() {
         "{err}"
     );
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// A Python environment with thorlabs-apt-device (PyPI), made once under `target/` as
-/// `python/run-tests` makes its own: the interpreter, or `None` when it cannot be made and the
-/// tools rule says skip (in CI it fails).
-fn client_python() -> Option<PathBuf> {
-    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/client-venv");
-    let py = venv.join("bin/python");
-    let has = |py: &Path| {
-        Command::new(py)
-            .args(["-c", "import thorlabs_apt_device"])
-            .output()
-            .is_ok_and(|o| o.status.success())
-    };
-    if has(&py) {
-        return Some(py);
-    }
-    let made = Command::new("python3")
-        .args(["-m", "venv"])
-        .arg(&venv)
-        .status()
-        .is_ok_and(|s| s.success())
-        && Command::new(&py)
-            .args(["-m", "pip", "install", "-q", "--disable-pip-version-check"])
-            .arg("thorlabs-apt-device==0.3.8")
-            .status()
-            .is_ok_and(|s| s.success());
-    if made && has(&py) {
-        return Some(py);
-    }
-    // The project's rule for a missing tool: fail in CI, skip outside it only when asked.
-    let how = "python3 with venv (`apt-get install python3-venv`) and PyPI are needed";
-    let what = format!(
-        "a virtual environment with thorlabs-apt-device could not be made in {}",
-        venv.display()
-    );
-    missing(&what, how);
-    None
 }
 
 /// thorlabs-apt-device's KDC101 class driving the simulator through the tap: it polls the

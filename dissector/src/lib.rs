@@ -17,6 +17,7 @@ pub mod hash;
 pub mod hex;
 pub mod json;
 pub mod listing;
+pub mod msg;
 pub mod pair;
 pub mod pipeline;
 pub mod record;

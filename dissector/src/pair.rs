@@ -9,6 +9,7 @@ use crate::apt::AptFrame;
 use crate::apt::Value;
 use crate::diag::{Diag, DiagKind};
 use crate::hash::NumMap;
+use crate::msg;
 use crate::table::{Class, DeviceProfile, Dir, MsgDef, Table, DEFAULT_TIMEOUT_MS};
 use std::collections::{BTreeSet, VecDeque};
 
@@ -483,7 +484,7 @@ impl AptPairer {
         info: &mut PairInfo,
     ) {
         // HW_GET_INFO names the device's model.
-        if m.id == 0x0006 {
+        if m.id == msg::HW_GET_INFO {
             let model = f.field("model_number").and_then(|(_, v)| match v {
                 Value::Str(b) => Some(b),
                 _ => None,

@@ -22,6 +22,7 @@
 //! model a device reports in HW_GET_INFO, followed by [`Tracker`].
 
 use crate::apt::{text_of, AptFrame, Value};
+use crate::msg;
 use crate::table::{Maximum, Quantity};
 use std::fmt::Write;
 
@@ -759,9 +760,6 @@ pub struct Tracker {
     devices: Vec<Device>,
 }
 
-/// HW_GET_INFO's message id.
-const HW_GET_INFO: u16 = 0x0006;
-
 impl Tracker {
     /// A tracker applying `opts`.
     pub fn new(opts: UnitsOpts) -> Tracker {
@@ -787,7 +785,7 @@ impl Tracker {
         f: &AptFrame<'_, '_>,
     ) -> (Option<&Scale>, Option<Box<Notice>>) {
         let h = f.header();
-        let info = h.msg_id() == HW_GET_INFO;
+        let info = h.msg_id() == msg::HW_GET_INFO;
         let has_q = f.form.is_some_and(|fm| fm.has_units());
         if !info && !has_q {
             return (None, None);

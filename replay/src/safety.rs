@@ -3,6 +3,7 @@
 
 use crate::script::Msg;
 use aptscope_dissector::apt::{encode_named, Named};
+use aptscope_dissector::msg;
 use aptscope_dissector::table::{Class, MsgDef};
 use aptscope_dissector::Table;
 use std::path::Path;
@@ -71,10 +72,11 @@ impl Moving {
     /// MOT_MOVE_STOP (profiled) for this channel, from the host.
     pub fn stop_command(&self) -> Option<Vec<u8>> {
         let chan = self.chan.to_string();
+        let table = Table::global();
         encode_named(
-            Table::global(),
+            table,
             &Named {
-                name: "MOT_MOVE_STOP",
+                name: table.msg(msg::MOT_MOVE_STOP)?.name,
                 sub: None,
                 values: &[("chan_ident", &chan), ("stop_mode", "PROFILED")],
                 form: Some("hdr"),

@@ -184,7 +184,17 @@ pub(crate) fn live_view(v: LiveView<'_>, proto: Proto, units: UnitsOpts) -> io::
         follow: Some(v.written),
         ..OpenOptions::default()
     };
-    aptscope_tui::run_live(v.path, v.host, o, Some(proto), units, v.quit)
+    let source = aptscope_tui::Source::File {
+        path: v.path,
+        opts: o,
+        proto: Some(proto),
+        units,
+    };
+    let options = aptscope_tui::Options {
+        note: v.host,
+        quit: Some(v.quit),
+    };
+    aptscope_tui::run(source, options)
 }
 
 /// A live view whose terminal has gone never returns: the capture is complete (and said so),

@@ -36,10 +36,11 @@ pub(crate) fn run(a: ViewArgs) -> Result<()> {
         // Nothing says when another program's writing ends: followed until `q`.
         o.follow = Some(FollowStop::new());
     }
-    Ok(aptscope_tui::run_with(
-        &a.file,
-        o,
-        proto_of(a.proto),
-        a.units.opts()?,
-    )?)
+    let source = aptscope_tui::Source::File {
+        path: &a.file,
+        opts: o,
+        proto: proto_of(a.proto),
+        units: a.units.opts()?,
+    };
+    Ok(aptscope_tui::run(source, Default::default())?)
 }

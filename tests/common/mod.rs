@@ -2,6 +2,7 @@
 //! the live tests the processes, the host's port and the terminal ([`proc`], [`host`], [`term`]).
 #![allow(dead_code)]
 
+pub mod clients;
 pub mod host;
 pub mod proc;
 mod scratch;
