@@ -562,11 +562,14 @@ fn main() -> ExitCode {
             SimCmd::Apt {
                 model, pty, view, ..
             } if view.view => {
-                apt_sim(&model).and_then(|sim| sim_view(Box::new(sim), Proto::Apt, pty, view))
+                apt_sim(&model)
+                    .map_err(invalid_input)
+                    .and_then(|sim| sim_view(Box::new(sim), Proto::Apt, pty, view))
             }
             SimCmd::Elliptec {
                 modules, pty, view, ..
             } if view.view => ell_sim(&modules)
+                .map_err(invalid_input)
                 .and_then(|sim| sim_view(Box::new(sim), Proto::Elliptec, pty, view)),
             SimCmd::Apt {
                 model,
@@ -1286,4 +1289,9 @@ fn encode_cmd(
     }
     let hex: Vec<String> = bytes.iter().map(|b| format!("{b:02X}")).collect();
     writeln!(io::stdout(), "{}", hex.join(" "))
+}
+
+/// A simulator that cannot be built from its arguments, as the I/O error the commands return.
+fn invalid_input(e: aptscope_capture::live::sim::SimError) -> io::Error {
+    io::Error::new(io::ErrorKind::InvalidInput, e)
 }
