@@ -44,10 +44,13 @@ struct Cli {
 enum SimCmd {
     /// An APT controller.
     Apt {
-        /// kdc101, tdc001, kpz101, bsc203 (three bays), tls001 (laser), ttc001 (TEC) or kpa101
-        /// (quad detector).
+        /// The controller model, any the spec names (`--list` shows them): kdc101, tdc001,
+        /// bsc203 (three bays), kpz101, k10cr1, kim101, tls001 …
         #[arg(long, default_value = "kdc101")]
         model: String,
+        /// List the models with their family, bays and channels, and exit.
+        #[arg(long)]
+        list: bool,
         /// Symlink to the pseudo-terminal.
         #[arg(long, conflicts_with = "port")]
         pty: Option<std::path::PathBuf>,
@@ -559,6 +562,10 @@ fn main() -> ExitCode {
             aptscope_tui::run_with(&file, o, proto_of(proto), units.opts()?)
         }),
         Cmd::Sim { what } => match what {
+            SimCmd::Apt { list: true, .. } => {
+                print!("{}", aptscope_capture::live::sim::model_list());
+                Ok(())
+            }
             SimCmd::Apt {
                 model, pty, view, ..
             } if view.view => {

@@ -1,8 +1,21 @@
-//! The APT controller simulator.
+//! The APT controller simulator: one generic core for every model of [`crate::models`], with
+//! the behaviour of each family in one place.
+//!
+//! Generic: every request of the model's message list (the table's device profile) is answered
+//! with its GET, from what a SET stored for that channel, else from the spec's example for the
+//! GET (or its SET, same layout) where the table holds one, else zeros (enumerations' first
+//! value is not needed: the decoder checks structure, and zero is the spec's power-on value for
+//! most fields). Messages the model does not implement are ignored, as a device ignores them,
+//! and the simulator's log ([`AptSim::take_log`]) says so.
 
-use super::{earliest, Line, Simulator, MS, SEC};
-use aptscope_dissector::apt::{encode, AptFrame, AptFramer, FieldValue, Item, Value};
-use aptscope_dissector::table::{Access, FormKind, Table, Ty};
+use crate::models::{self, Family, ModelSpec};
+use crate::{earliest, Line, Simulator, MS, SEC};
+use aptscope_dissector::apt::{encode, AptFrame, AptFramer, FieldValue, Item};
+use aptscope_dissector::msg;
+use aptscope_dissector::table::{
+    example_bytes, Access, DeviceProfile, FormKind, Loc, MsgDef, Table,
+};
+use aptscope_dissector::units;
 
 /// Host address.
 const HOST: u8 = 0x01;
@@ -12,16 +25,19 @@ const RACK: u8 = 0x11;
 const BAY0: u8 = 0x21;
 /// Generic USB unit address.
 const USB: u8 = 0x50;
-/// Bays of a BSC203.
-const BSC203_BAYS: u8 = 3;
 /// Period of status updates after HW_START_UPDATEMSGS.
 const UPDATE_NS: u64 = 100 * MS;
+/// Status updates a controller sends without the host's "server alive" ACK before it stops
+/// (spec, MOT_ACK_DCSTATUSUPDATE: "about 50").
+const KEEPALIVE_UPDATES: u32 = 50;
 /// Homing: searching the limit switch and backing off, on top of the travel to it.
 const HOME_BASE_NS: u64 = 2 * SEC;
 /// 115 200 baud, 8N1: 10 bits per byte.
 const BYTE_NS: u64 = 86_806;
 /// Time from a request to the first byte of its reply.
 const TURNAROUND_NS: u64 = MS;
+/// Lines the log keeps before the oldest are dropped (nobody reading it).
+const LOG_MAX: usize = 1000;
 
 // mot_status bits (dissector/msgs/21_motor_b.apt).
 const CW_HW_LIMIT: u32 = 0x1;
@@ -52,104 +68,128 @@ const TEC_HOLD_MA: i64 = 420;
 /// closed loop.
 const QUAD_BEAM: (i64, i64, i64) = (1200, -800, 45_000);
 const QUAD_RESIDUAL: (i64, i64) = (3, -2);
+/// Counts per mm or degree of a stage the units table does not know (MPC paddles, flippers).
+const DEFAULT_COUNTS: f64 = 1000.0;
 
-/// The controllers the simulator can be.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum AptModel {
-    /// K-Cube brushed DC servo controller (with a Z825B-like stage).
-    Kdc101,
-    /// T-Cube DC servo controller (same stage).
-    Tdc001,
-    /// K-Cube piezo controller (open loop, 75 V).
-    Kpz101,
-    /// Three-bay benchtop stepper controller: motherboard at 0x11, bays at 0x21–0x23.
-    Bsc203,
-    /// T-Cube laser source (LA_ PARAMS sub-messages, LA_ENABLEOUTPUT/DISABLEOUTPUT).
-    Tls001,
-    /// T-Cube TEC controller (TEC_ PARAMS sub-messages).
-    Ttc001,
-    /// K-Cube position aligner with a quad detector (QUAD_ PARAMS sub-messages).
-    Kpa101,
+/// A controller model the simulator can be: an entry of [`models::MODELS`].
+#[derive(Debug, Clone, Copy)]
+pub struct AptModel(&'static ModelSpec);
+
+impl PartialEq for AptModel {
+    fn eq(&self, o: &AptModel) -> bool {
+        self.0.name == o.0.name
+    }
+}
+
+impl Eq for AptModel {}
+
+/// The models the first simulators had, by the names their callers use.
+#[allow(non_upper_case_globals)]
+impl AptModel {
+    /// K-Cube brushed DC servo controller.
+    pub const Kdc101: AptModel = AptModel(&models::KDC101);
+    /// T-Cube DC servo controller.
+    pub const Tdc001: AptModel = AptModel(&models::TDC001);
+    /// K-Cube piezo controller.
+    pub const Kpz101: AptModel = AptModel(&models::KPZ101);
+    /// Three-bay benchtop stepper controller.
+    pub const Bsc203: AptModel = AptModel(&models::BSC203);
+    /// T-Cube laser source.
+    pub const Tls001: AptModel = AptModel(&models::TLS001);
+    /// T-Cube TEC controller.
+    pub const Ttc001: AptModel = AptModel(&models::TTC001);
+    /// K-Cube position aligner.
+    pub const Kpa101: AptModel = AptModel(&models::KPA101);
 }
 
 impl AptModel {
-    /// The names [`parse`](Self::parse) accepts.
-    pub const NAMES: &'static [&'static str] = &[
-        "kdc101", "tdc001", "kpz101", "bsc203", "tls001", "ttc001", "kpa101",
-    ];
+    /// Every model, in the spec's order.
+    pub fn all() -> impl Iterator<Item = AptModel> {
+        models::MODELS.iter().map(AptModel)
+    }
 
-    /// Parse `kdc101`, `tdc001`, `kpz101`, `bsc203`, `tls001`, `ttc001`, `kpa101` (any case).
+    /// The model `s` names (any case: `kdc101`, `BSC203`).
     pub fn parse(s: &str) -> Option<AptModel> {
-        Some(match s.trim().to_ascii_lowercase().as_str() {
-            "kdc101" => AptModel::Kdc101,
-            "tdc001" => AptModel::Tdc001,
-            "kpz101" => AptModel::Kpz101,
-            "bsc203" => AptModel::Bsc203,
-            "tls001" => AptModel::Tls001,
-            "ttc001" => AptModel::Ttc001,
-            "kpa101" => AptModel::Kpa101,
-            _ => return None,
-        })
+        models::find(s).map(AptModel)
     }
 
     /// The model name as HW_GET_INFO gives it.
     pub fn name(self) -> &'static str {
-        match self {
-            AptModel::Kdc101 => "KDC101",
-            AptModel::Tdc001 => "TDC001",
-            AptModel::Kpz101 => "KPZ101",
-            AptModel::Bsc203 => "BSC203",
-            AptModel::Tls001 => "TLS001",
-            AptModel::Ttc001 => "TTC001",
-            AptModel::Kpa101 => "KPA101",
-        }
+        self.0.name
     }
 
-    /// The first two digits of the serial number (the spec's table of serial prefixes).
+    /// Its data: family, bays, channels, serial prefix, firmware, stage.
+    pub fn spec(self) -> &'static ModelSpec {
+        self.0
+    }
+
+    /// The first digits of the serial number.
     pub fn serial_prefix(self) -> u32 {
-        match self {
-            AptModel::Kdc101 => 27,
-            AptModel::Tdc001 => 83,
-            AptModel::Kpz101 => 29,
-            AptModel::Bsc203 => 70,
-            AptModel::Tls001 => 86,
-            AptModel::Ttc001 => 87,
-            AptModel::Kpa101 => 69,
-        }
+        self.0.serial_prefix
     }
 
-    /// Whether the controller drives a motor (moves and homing); the others ignore motion.
-    fn has_motor(self) -> bool {
-        matches!(self, AptModel::Kdc101 | AptModel::Tdc001 | AptModel::Bsc203)
+    /// What it implements: the table's device profile (every model here has one; a test says
+    /// so).
+    pub fn profile(self) -> Option<DeviceProfile> {
+        Table::global().device_profile(self.0.name)
     }
 
-    /// Motion scaling: position counts per mm, travel in mm, and the factors from counts/s and
-    /// counts/s² to the units of the velocity and acceleration parameters.
+    /// Motion scaling from the units table's stage rows (spec section 8).
     fn scaling(self) -> Scaling {
-        match self {
-            // Z8 stage on a DC servo controller: 34 554.96 counts/mm, T = 2048/6e6 s;
-            // velocity = counts/s × T × 65536, acceleration = counts/s² × T² × 65536.
-            AptModel::Kdc101
-            | AptModel::Tdc001
-            | AptModel::Kpz101
-            | AptModel::Tls001
-            | AptModel::Ttc001
-            | AptModel::Kpa101 => Scaling {
-                counts_per_mm: 34_554.96,
-                travel_mm: 25.0,
-                vel: 22.369_621,
-                acc: 0.007_635_4,
-            },
-            // Stepper bay: 409 600 microsteps/mm; velocity = µsteps/s × 53.687091,
-            // acceleration = µsteps/s² × 0.010995.
-            AptModel::Bsc203 => Scaling {
-                counts_per_mm: 409_600.0,
-                travel_mm: 50.0,
-                vel: 53.687_091,
-                acc: 0.010_995,
-            },
+        let (stage, travel) = self.0.stage;
+        let fam = units::model(self.0.name)
+            .and_then(|m| m.family)
+            .unwrap_or(match self.0.family {
+                Family::Brushless => units::Family::Brushless,
+                Family::Stepper => units::Family::Trinamic,
+                _ => units::Family::DcServo,
+            });
+        let counts = units::stage_for(stage, fam).map_or(DEFAULT_COUNTS, |s| s.counts_per_unit);
+        let q = aptscope_dissector::table::Quantity::Vel;
+        let vel = fam.factor(q, 1.0).unwrap_or(1.0);
+        let acc = fam
+            .factor(aptscope_dissector::table::Quantity::Acc, 1.0)
+            .unwrap_or(1.0);
+        Scaling {
+            counts_per_mm: counts,
+            travel_mm: travel,
+            vel,
+            acc,
         }
     }
+}
+
+/// One line of `sim apt --list` per model: name, family, bays, channels, HW_GET_INFO serial.
+pub fn model_list() -> String {
+    let mut out = String::from("MODEL    FAMILY         BAYS  CHANNELS  SERIAL\n");
+    for m in models::MODELS {
+        let note = if m.prefix_in_spec { "" } else { " *" };
+        out.push_str(&format!(
+            "{:<8} {:<14} {:>4}  {:>8}  {}{}\n",
+            m.name,
+            m.family.name(),
+            if m.bays == 0 {
+                "-".to_string()
+            } else {
+                m.bays.to_string()
+            },
+            m.channels,
+            serial_of(m, 0),
+            note
+        ));
+    }
+    out.push_str(
+        "(bays: a rack answering at 0x11 with bays from 0x21; -: a single unit at 0x50 and \
+         0x21)\n(*: serial prefix not in the spec's table)\n",
+    );
+    out
+}
+
+/// The serial number of unit `i` of a model (8 digits from its prefix).
+fn serial_of(m: &ModelSpec, i: u32) -> u32 {
+    let p = m.serial_prefix;
+    let base = if p >= 100 { p * 100_000 } else { p * 1_000_000 };
+    base + 123 + i
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -295,15 +335,26 @@ impl Motion {
     }
 }
 
-/// Parameters as the GET message carries them: field name and value.
-type Params = Vec<(&'static str, FieldValue)>;
+/// A parameter block a unit holds for one GET message (and sub-message): the frame's param
+/// bytes or data packet, as a SET sent it or the defaults made it.
+#[derive(Debug, Clone)]
+struct Stored {
+    get: u16,
+    sub: u16,
+    params: [u8; 2],
+    data: Option<Vec<u8>>,
+}
 
-/// One addressable controller: a standalone unit (0x50) or a bay of the rack.
+/// One addressable channel: a single unit's channel (address 0x50, also 0x21) or a rack's bay
+/// (or the rack itself, at 0x11).
 #[derive(Debug, Clone)]
 struct Unit {
     addr: u8,
+    /// Channel number (1-based) within its address.
+    chan: u8,
+    /// The rack's motherboard: rack messages only, no status.
+    rack: bool,
     serial: u32,
-    motor: bool,
     enabled: bool,
     /// Laser output on (LA_ENABLEOUTPUT).
     output: bool,
@@ -312,205 +363,109 @@ struct Unit {
     motion: Option<Motion>,
     /// Next status update, while updates are on.
     next_update: Option<u64>,
-    /// Stored parameters by GET message name (answers REQ_, updated by SET_).
-    params: Vec<(&'static str, Params)>,
-    /// Sub-message parameter blocks: GET message name, sub-message id, fields (answers
-    /// REQ_PARAMS for that id, updated by SET_PARAMS).
-    subs: Vec<(&'static str, u16, Params)>,
+    /// Status updates sent since the host's last ACK.
+    unacked: u32,
+    /// Where its status updates come from (0x50 or 0x21: where the host started them).
+    update_src: u8,
+    store: Vec<Stored>,
 }
 
-impl Unit {
-    fn param(&self, get: &str, field: &str) -> Option<i64> {
-        self.params
-            .iter()
-            .find(|(n, _)| *n == get)?
-            .1
-            .iter()
-            .find(|(f, _)| *f == field)
-            .and_then(|(_, v)| match v {
-                FieldValue::Int(i) => Some(*i),
-                FieldValue::Float(x) => Some(*x as i64),
-                _ => None,
-            })
-    }
-
-    fn sub_param(&self, get: &str, id: u16, field: &str) -> Option<i64> {
-        self.subs
-            .iter()
-            .find(|(n, i, _)| *n == get && *i == id)?
-            .2
-            .iter()
-            .find(|(f, _)| *f == field)
-            .and_then(|(_, v)| match v {
-                FieldValue::Int(i) => Some(*i),
-                FieldValue::Float(x) => Some(*x as i64),
-                _ => None,
-            })
-    }
-
-    fn set_param(&mut self, get: &'static str, field: &'static str, v: i64) {
-        if let Some((_, p)) = self.params.iter_mut().find(|(n, _)| *n == get) {
-            if let Some(slot) = p.iter_mut().find(|(f, _)| *f == field) {
-                slot.1 = FieldValue::Int(v);
-            } else {
-                p.push((field, FieldValue::Int(v)));
-            }
-        } else {
-            self.params.push((get, vec![(field, FieldValue::Int(v))]));
-        }
-    }
-}
-
-/// A simulated APT controller (sans-io): see the [module docs](super).
+/// A simulated APT controller (sans-io): see the [module docs](self).
 ///
-/// Standalone models answer at the generic USB address 0x50; a BSC203 answers as the
-/// motherboard at 0x11 (and 0x50) and as bays 0x21–0x23, each bay from its own address.
-/// Move commands are ignored while a channel is disabled, as real controllers do.
-/// Positions are encoder counts (34 554.96/mm, 25 mm travel on DC models; 409 600 µsteps/mm,
-/// 50 mm on BSC203 bays); moves follow a trapezoidal profile from the velocity parameters,
-/// homing takes 2 s plus the travel back to 0 at the homing velocity. The `velocity` of
-/// DC status updates is the speed in counts/s divided by 10 (the spec leaves it to the model).
+/// Single units answer at the generic USB address 0x50 and at bay address 0x21 (where
+/// thorlabs-apt-device's TDC001 class sends), each reply from the address the request named;
+/// racks answer as the motherboard at 0x11 (and 0x50) and as bays 0x21…, each bay from its own
+/// address. Move commands are ignored while a channel is disabled, as real controllers do.
+/// Moves follow a trapezoidal profile from the velocity parameters in the units of the model's
+/// family (spec section 8), homing takes 2 s plus the travel back to 0 at the homing velocity.
+/// The `velocity` of DC status updates is the speed in counts/s divided by 10 (the spec leaves
+/// it to the model).
 #[derive(Debug)]
 pub struct AptSim {
     model: AptModel,
+    profile: Option<DeviceProfile>,
     scaling: Scaling,
     serial: u32,
     units: Vec<Unit>,
     framer: AptFramer<'static>,
     line: Line,
     identified: u32,
+    log: Vec<String>,
 }
 
 fn int(v: i64) -> FieldValue {
     FieldValue::Int(v)
 }
 
-/// A decoded field's value as a SET message stores it for its GET (numbers only).
-fn stored(ty: Ty, v: Value<'_>) -> Option<FieldValue> {
-    match (ty, v) {
-        (Ty::Prim(_), Value::F(x)) => Some(FieldValue::Float(x)),
-        (Ty::Prim(_), v) => v.as_i64().map(FieldValue::Int),
-        _ => None,
-    }
-}
-
 /// A message to one unit, as the family handlers of [`AptSim`] take it.
 #[derive(Clone, Copy)]
 struct Req<'r, 'a> {
     f: &'r AptFrame<'a, 'static>,
-    name: &'static str,
+    m: &'static MsgDef,
     /// Index of the unit addressed.
     ui: usize,
+    /// The channel ident as the host sent it (echoed in replies).
     chan: i64,
+    /// The address the request named: replies come from it.
+    src: u8,
     now: u64,
 }
 
 impl AptSim {
     /// A controller of this model with a default serial number (prefix + `000123`).
     pub fn new(model: AptModel) -> AptSim {
-        Self::with_serial(model, model.serial_prefix() * 1_000_000 + 123)
+        Self::with_serial(model, serial_of(model.0, 0))
     }
 
     /// A controller with this serial number.
     pub fn with_serial(model: AptModel, serial: u32) -> AptSim {
+        let spec = model.0;
         let s = model.scaling();
         let mut units = vec![];
-        let addrs: Vec<u8> = match model {
-            AptModel::Bsc203 => (0..BSC203_BAYS).map(|b| BAY0 + b).collect(),
-            _ => vec![USB],
+        let unit = |addr: u8, chan: u8, serial: u32, rack: bool| Unit {
+            addr,
+            chan,
+            rack,
+            serial,
+            enabled: true,
+            output: false,
+            homed: false,
+            pos: 0,
+            motion: None,
+            next_update: None,
+            unacked: 0,
+            update_src: addr,
+            store: vec![],
         };
-        for (i, addr) in addrs.into_iter().enumerate() {
-            let piezo = model == AptModel::Kpz101;
-            let subs = sub_params(model);
-            let params: Vec<(&'static str, Params)> = if !model.has_motor() && !piezo {
-                vec![]
-            } else if piezo {
-                vec![
-                    ("PZ_GET_OUTPUTVOLTS", vec![("voltage", int(0))]),
-                    ("PZ_GET_POSCONTROLMODE", vec![("mode", int(1))]),
-                    ("PZ_GET_OUTPUTPOS", vec![("position_sw", int(0))]),
-                    (
-                        "PZ_GET_OUTPUTMAXVOLTS",
-                        vec![("voltage", int(750)), ("flags", int(0x2))],
-                    ),
-                    ("PZ_GET_MAXTRAVEL", vec![("travel", int(0))]),
-                    (
-                        "PZ_GET_INPUTVOLTSSRC",
-                        vec![("volts_src", int(0)), ("source", int(0))],
-                    ),
-                ]
-            } else {
-                vec![
-                    (
-                        "MOT_GET_VELPARAMS",
-                        vec![
-                            ("min_vel", int(0)),
-                            ("acceleration", int(s.acc_param(1.5))),
-                            ("max_vel", int(s.vel_param(2.0))),
-                        ],
-                    ),
-                    (
-                        "MOT_GET_JOGPARAMS",
-                        vec![
-                            ("jog_mode", int(2)),
-                            ("jog_step_size", int((s.counts_per_mm * 0.1) as i64)),
-                            ("jog_min_vel", int(0)),
-                            ("jog_acceleration", int(s.acc_param(1.5))),
-                            ("jog_max_vel", int(s.vel_param(2.0))),
-                            ("jog_stop_mode", int(2)),
-                        ],
-                    ),
-                    (
-                        "MOT_GET_HOMEPARAMS",
-                        vec![
-                            ("home_dir", int(2)),
-                            ("limit_switch", int(1)),
-                            ("home_velocity", int(s.vel_param(1.0))),
-                            ("offset_distance", int((s.counts_per_mm * 0.1) as i64)),
-                        ],
-                    ),
-                    (
-                        "MOT_GET_LIMSWITCHPARAMS",
-                        vec![
-                            ("cw_hard_limit", int(2)),
-                            ("ccw_hard_limit", int(2)),
-                            ("cw_soft_limit", int(s.max_pos())),
-                            ("ccw_soft_limit", int(0)),
-                            ("soft_limit_mode", int(1)),
-                        ],
-                    ),
-                    ("MOT_GET_GENMOVEPARAMS", vec![("backlash_distance", int(0))]),
-                    ("MOT_GET_MOVERELPARAMS", vec![("relative_distance", int(0))]),
-                    ("MOT_GET_MOVEABSPARAMS", vec![("absolute_position", int(0))]),
-                    (
-                        "MOT_GET_POWERPARAMS",
-                        vec![("rest_factor", int(10)), ("move_factor", int(30))],
-                    ),
-                ]
-            };
-            units.push(Unit {
-                addr,
-                serial: serial + i as u32 * (model == AptModel::Bsc203) as u32,
-                motor: model.has_motor(),
-                enabled: true,
-                output: false,
-                homed: false,
-                pos: 0,
-                motion: None,
-                next_update: None,
-                params,
-                subs,
-            });
+        if spec.bays > 0 {
+            units.push(unit(RACK, 1, serial, true));
+            for b in 0..spec.bays {
+                for c in 1..=spec.channels {
+                    units.push(unit(BAY0 + b, c, serial + u32::from(b), false));
+                }
+            }
+        } else {
+            for c in 1..=spec.channels {
+                units.push(unit(USB, c, serial, false));
+            }
         }
-        AptSim {
+        let mut sim = AptSim {
             model,
+            profile: model.profile(),
             scaling: s,
             serial,
             units,
             framer: AptFramer::new(Table::global()),
             line: Line::new(BYTE_NS, TURNAROUND_NS),
             identified: 0,
+            log: vec![],
+        };
+        for ui in 0..sim.units.len() {
+            if !sim.units[ui].rack {
+                sim.seed(ui);
+            }
         }
+        sim
     }
 
     /// The model simulated.
@@ -523,9 +478,22 @@ impl AptSim {
         self.identified
     }
 
+    /// What the simulator noted since the last call: messages ignored as not for the model or
+    /// to no address it has, status updates stopped for want of the host's ACK.
+    pub fn take_log(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.log)
+    }
+
+    fn note(&mut self, s: String) {
+        if self.log.len() >= LOG_MAX {
+            self.log.remove(0);
+        }
+        self.log.push(s);
+    }
+
     /// Position counter of the unit at `addr` (0x50, or a bay address) at `now_ns`.
     pub fn position(&self, addr: u8, now_ns: u64) -> Option<i64> {
-        let ui = self.units.iter().position(|u| u.addr == addr)?;
+        let ui = self.units.iter().position(|u| u.addr == addr && !u.rack)?;
         Some(self.unit_pos(ui, now_ns))
     }
 
@@ -535,11 +503,171 @@ impl AptSim {
         u.motion.map_or(u.pos, |m| m.pos(now).0)
     }
 
-    /// Answer `r` with `get` from its unit to the host: its channel, then `vals`.
-    fn reply(&mut self, r: &Req<'_, '_>, get: &str, vals: &[(&str, FieldValue)]) {
+    /// The power-on parameters of a family that has them: motion parameters in the units of
+    /// the model's stage, and the sub-message blocks of laser, TEC and quad controllers.
+    fn seed(&mut self, ui: usize) {
+        let s = self.scaling;
+        let fam = self.model.0.family;
+        let vals: Vec<(u16, Vec<(&'static str, FieldValue)>)> = if fam.moves() {
+            vec![
+                (
+                    msg::MOT_GET_VELPARAMS,
+                    vec![
+                        ("min_vel", int(0)),
+                        ("acceleration", int(s.acc_param(1.5))),
+                        ("max_vel", int(s.vel_param(2.0))),
+                    ],
+                ),
+                (
+                    msg::MOT_GET_JOGPARAMS,
+                    vec![
+                        ("jog_mode", int(2)),
+                        ("jog_step_size", int((s.counts_per_mm * 0.1) as i64)),
+                        ("jog_min_vel", int(0)),
+                        ("jog_acceleration", int(s.acc_param(1.5))),
+                        ("jog_max_vel", int(s.vel_param(2.0))),
+                        ("jog_stop_mode", int(2)),
+                    ],
+                ),
+                (
+                    msg::MOT_GET_HOMEPARAMS,
+                    vec![
+                        ("home_dir", int(2)),
+                        ("limit_switch", int(1)),
+                        ("home_velocity", int(s.vel_param(1.0))),
+                        ("offset_distance", int((s.counts_per_mm * 0.1) as i64)),
+                    ],
+                ),
+                (
+                    msg::MOT_GET_LIMSWITCHPARAMS,
+                    vec![
+                        ("cw_hard_limit", int(2)),
+                        ("ccw_hard_limit", int(2)),
+                        ("cw_soft_limit", int(s.max_pos())),
+                        ("ccw_soft_limit", int(0)),
+                        ("soft_limit_mode", int(1)),
+                    ],
+                ),
+                (
+                    msg::MOT_GET_GENMOVEPARAMS,
+                    vec![("backlash_distance", int(0))],
+                ),
+                (
+                    msg::MOT_GET_MOVERELPARAMS,
+                    vec![("relative_distance", int(0))],
+                ),
+                (
+                    msg::MOT_GET_MOVEABSPARAMS,
+                    vec![("absolute_position", int(0))],
+                ),
+                (
+                    msg::MOT_GET_POWERPARAMS,
+                    vec![("rest_factor", int(10)), ("move_factor", int(30))],
+                ),
+            ]
+        } else if fam == Family::Piezo {
+            vec![
+                (msg::PZ_GET_OUTPUTVOLTS, vec![("voltage", int(0))]),
+                (msg::PZ_GET_POSCONTROLMODE, vec![("mode", int(1))]),
+                (msg::PZ_GET_OUTPUTPOS, vec![("position_sw", int(0))]),
+                (
+                    msg::PZ_GET_OUTPUTMAXVOLTS,
+                    vec![("voltage", int(750)), ("flags", int(0x2))],
+                ),
+                (msg::PZ_GET_MAXTRAVEL, vec![("travel", int(0))]),
+                (
+                    msg::PZ_GET_INPUTVOLTSSRC,
+                    vec![("volts_src", int(0)), ("source", int(0))],
+                ),
+            ]
+        } else {
+            vec![]
+        };
+        let chan = i64::from(self.units[ui].chan);
+        for (get, v) in vals {
+            let mut all = vec![("chan_ident", int(chan))];
+            all.extend(v);
+            if let Some(b) = build(get, None, HOST, USB, &all) {
+                self.keep(ui, get, 0, &b);
+            }
+        }
+        for (get, sub, v) in sub_params(fam) {
+            if let Some(b) = build_sub(get, sub, HOST, USB, &v) {
+                self.keep(ui, get, sub, &b);
+            }
+        }
+    }
+
+    /// Store the parameters of frame `b` (a GET or the SET of the same layout) as `get`'s.
+    fn keep(&mut self, ui: usize, get: u16, sub: u16, b: &[u8]) {
+        if b.len() < 6 {
+            return;
+        }
+        let has_data = b[4] & 0x80 != 0;
+        let st = Stored {
+            get,
+            sub,
+            params: [b[2], b[3]],
+            data: has_data.then(|| b[6..].to_vec()),
+        };
+        let store = &mut self.units[ui].store;
+        match store.iter_mut().find(|s| s.get == get && s.sub == sub) {
+            Some(slot) => *slot = st,
+            None => store.push(st),
+        }
+    }
+
+    /// The frame of `get` (sub-message `sub`) from `src` with what unit `ui` holds, or the
+    /// defaults.
+    fn held(&self, ui: usize, get: &'static MsgDef, sub: u16, src: u8) -> Option<Vec<u8>> {
+        let st = self.units[ui]
+            .store
+            .iter()
+            .find(|s| s.get == get.id && s.sub == sub);
+        let (params, data) = match st {
+            Some(s) => (s.params, s.data.clone()),
+            None => defaults(get, sub)?,
+        };
+        Some(frame(get.id, params, data.as_deref(), HOST, src))
+    }
+
+    /// A numeric field of what unit `ui` holds for `get` (sub-message `sub`).
+    fn held_field(&self, ui: usize, get: u16, sub: u16, field: &str) -> Option<i64> {
+        let m = Table::global().msg(get)?;
+        let b = self.held(ui, m, sub, USB)?;
+        let f = AptFrame::decode(Table::global(), 0, &b, false)?;
+        f.field(field).and_then(|(_, v)| v.as_i64())
+    }
+
+    /// Store one field of what unit `ui` holds for `get`.
+    fn set_field(&mut self, ui: usize, get: u16, field: &str, v: i64) {
+        let Some(m) = Table::global().msg(get) else {
+            return;
+        };
+        let Some(mut b) = self.held(ui, m, 0, USB) else {
+            return;
+        };
+        let Some(f) = AptFrame::decode(Table::global(), 0, &b, false) else {
+            return;
+        };
+        let Some(form) = f.form else { return };
+        let Some(fd) = form.fields.iter().find(|x| x.name == field) else {
+            return;
+        };
+        let at = fd.loc.frame_offset();
+        let w = fd.ty.width();
+        let bytes = v.to_le_bytes();
+        if at + w <= b.len() && w <= 8 {
+            b[at..at + w].copy_from_slice(&bytes[..w]);
+            self.keep(ui, get, 0, &b);
+        }
+    }
+
+    /// Answer `r` with `get` from its unit: its channel, then `vals`.
+    fn reply(&mut self, r: &Req<'_, '_>, get: u16, vals: &[(&str, FieldValue)]) {
         let mut all = vec![("chan_ident", int(r.chan))];
         all.extend_from_slice(vals);
-        let b = build(get, None, HOST, self.units[r.ui].addr, &all);
+        let b = build(get, None, HOST, r.src, &all);
         self.send(r.now, b);
     }
 
@@ -551,30 +679,60 @@ impl AptSim {
         let Some(m) = f.msg else {
             return;
         };
-        let h = f.header();
-        let dst = h.dst_byte();
-        let chan = f.channel().filter(|c| *c > 0).unwrap_or(1);
-        let bsc = self.model == AptModel::Bsc203;
-        let to_rack = if bsc {
-            dst == RACK || dst == USB
-        } else {
-            false
-        };
-        // Rack-level (and broadcast-ish) messages of the BSC203 motherboard.
-        if to_rack {
-            self.rack_msg(&f, m.name, now);
+        let dst = f.header().dst_byte();
+        let rack = self.model.0.bays > 0;
+        let implemented = self
+            .profile
+            .as_ref()
+            .is_none_or(|p| table.implements(p, m.id));
+        if !implemented {
+            self.note(format!(
+                "ignored {} to 0x{dst:02X}: not a message the {} implements",
+                m.name,
+                self.model.name()
+            ));
             return;
         }
-        let Some(ui) = self.units.iter().position(|u| u.addr == dst) else {
+        let chan_raw = f
+            .field("chan_ident")
+            .and_then(|(_, v)| v.as_i64())
+            .filter(|c| *c > 0);
+        let chan = f.channel().filter(|c| *c > 0).unwrap_or(1);
+        // Single units answer at 0x50 and as bay 0x21; racks as the motherboard (0x11, and
+        // 0x50) and per bay.
+        let addr = match (rack, dst) {
+            (false, USB | BAY0) => USB,
+            (true, USB | RACK) => RACK,
+            (true, d) => d,
+            (false, _) => 0,
+        };
+        let Some(ui) = self
+            .units
+            .iter()
+            .position(|u| u.addr == addr && i64::from(u.chan) == chan)
+            .or_else(|| self.units.iter().position(|u| u.addr == addr))
+        else {
+            self.note(format!(
+                "ignored {} to 0x{dst:02X}: no such unit on a {}",
+                m.name,
+                self.model.name()
+            ));
             return;
         };
         let r = Req {
             f: &f,
-            name: m.name,
+            m,
             ui,
-            chan,
+            chan: chan_raw.unwrap_or(1),
+            src: dst,
             now,
         };
+        if self.units[ui].rack {
+            if !self.rack_msg(&r) {
+                self.generic(&r);
+            }
+            return;
+        }
         let handled = self.module_msg(&r)
             || self.readback_msg(&r)
             || self.motion_msg(&r)
@@ -584,75 +742,87 @@ impl AptSim {
         }
     }
 
-    /// Messages to the BSC203's rack (the motherboard) rather than a bay.
-    fn rack_msg(&mut self, f: &AptFrame<'_, '_>, name: &str, now: u64) {
-        match name {
-            "HW_REQ_INFO" => {
-                let b = self.info(RACK, self.serial, BSC203_BAYS as i64, 45);
+    /// Messages to a rack's motherboard rather than a bay.
+    fn rack_msg(&mut self, r: &Req<'_, '_>) -> bool {
+        let now = r.now;
+        let bays = i64::from(self.model.0.bays);
+        match r.m.id {
+            msg::HW_REQ_INFO => {
+                let b = self.info(r.src, self.serial, bays, 45);
                 self.line.send(now, b);
             }
-            "RACK_REQ_BAYUSED" => {
-                let bay = f.field("bay_ident").and_then(|(_, v)| v.as_i64());
+            msg::RACK_REQ_BAYUSED => {
+                let bay = r.f.field("bay_ident").and_then(|(_, v)| v.as_i64());
                 let bay = bay.unwrap_or(0);
-                let state = if (0..BSC203_BAYS as i64).contains(&bay) {
-                    1
-                } else {
-                    2
-                };
+                let state = if (0..bays).contains(&bay) { 1 } else { 2 };
                 let b = build(
-                    "RACK_GET_BAYUSED",
+                    msg::RACK_GET_BAYUSED,
                     None,
                     HOST,
-                    RACK,
+                    r.src,
                     &[("bay_ident", int(bay)), ("bay_state", int(state))],
                 );
                 self.send(now, b);
             }
-            "RACK_REQ_STATUSBITS" => {
-                let b = build(
-                    "RACK_GET_STATUSBITS",
-                    None,
-                    HOST,
-                    RACK,
-                    &[("status_bits", int(0))],
-                );
-                self.send(now, b);
-            }
-            "MOD_IDENTIFY" => self.identified += 1,
-            "HW_START_UPDATEMSGS" => {
-                for u in &mut self.units {
-                    u.next_update.get_or_insert(now + UPDATE_NS);
+            msg::MOD_IDENTIFY => self.identified += 1,
+            msg::HW_START_UPDATEMSGS | msg::HW_STOP_UPDATEMSGS => {
+                let start = r.m.id == msg::HW_START_UPDATEMSGS;
+                for u in self.units.iter_mut().filter(|u| !u.rack) {
+                    if start {
+                        u.next_update.get_or_insert(now + UPDATE_NS);
+                        u.unacked = 0;
+                    } else {
+                        u.next_update = None;
+                    }
                 }
             }
-            "HW_STOP_UPDATEMSGS" => {
-                for u in &mut self.units {
+            _ => return false,
+        }
+        true
+    }
+
+    /// Module-level messages: information, identify, status update switches and their
+    /// keep-alive, channel enable. False when `r` is not of this family.
+    fn module_msg(&mut self, r: &Req<'_, '_>) -> bool {
+        let Req {
+            f, m, ui, now, src, ..
+        } = *r;
+        match m.id {
+            msg::HW_REQ_INFO => {
+                let hw = if self.model.0.bays > 0 { 45 } else { 44 };
+                let nchs = i64::from(self.model.0.channels);
+                let b = self.info(src, self.units[ui].serial, nchs, hw);
+                self.line.send(now, b);
+            }
+            msg::MOD_IDENTIFY => self.identified += 1,
+            msg::HW_START_UPDATEMSGS => {
+                let addr = self.units[ui].addr;
+                for u in self.units.iter_mut().filter(|u| u.addr == addr) {
+                    u.next_update.get_or_insert(now + UPDATE_NS);
+                    u.unacked = 0;
+                    u.update_src = src;
+                }
+            }
+            msg::HW_STOP_UPDATEMSGS => {
+                let addr = self.units[ui].addr;
+                for u in self.units.iter_mut().filter(|u| u.addr == addr) {
                     u.next_update = None;
                 }
             }
-            _ => {}
-        }
-    }
-
-    /// Module-level messages: information, identify, status update switches, channel enable. False
-    /// when `r` is not of this family.
-    fn module_msg(&mut self, r: &Req<'_, '_>) -> bool {
-        let Req {
-            f, name, ui, now, ..
-        } = *r;
-        let bsc = self.model == AptModel::Bsc203;
-        match name {
-            "HW_REQ_INFO" => {
-                let u = &self.units[ui];
-                let (serial, nchs, hw) = (u.serial, 1, if bsc { 45 } else { 44 });
-                let b = self.info(u.addr, serial, nchs, hw);
-                self.line.send(now, b);
+            msg::MOT_ACK_DCSTATUSUPDATE
+            | msg::PZ_ACK_PZSTATUSUPDATE
+            | msg::PZ_ACK_NTSTATUSUPDATE
+            | msg::LA_ACK_STATUSUPDATE
+            | msg::LD_ACK_STATUSUPDATE
+            | msg::TEC_ACK_STATUSUPDATE
+            | msg::QUAD_ACK_STATUSUPDATE
+            | msg::PZMOT_ACK_STATUSUPDATE => {
+                let addr = self.units[ui].addr;
+                for u in self.units.iter_mut().filter(|u| u.addr == addr) {
+                    u.unacked = 0;
+                }
             }
-            "MOD_IDENTIFY" => self.identified += 1,
-            "HW_START_UPDATEMSGS" => {
-                self.units[ui].next_update.get_or_insert(now + UPDATE_NS);
-            }
-            "HW_STOP_UPDATEMSGS" => self.units[ui].next_update = None,
-            "MOD_SET_CHANENABLESTATE" => {
+            msg::MOD_SET_CHANENABLESTATE => {
                 let st = f.field("enable_state").and_then(|(_, v)| v.as_i64());
                 match st {
                     Some(1) => self.units[ui].enabled = true,
@@ -667,9 +837,13 @@ impl AptSim {
                     _ => {}
                 }
             }
-            "MOD_REQ_CHANENABLESTATE" => {
+            msg::MOD_REQ_CHANENABLESTATE => {
                 let st = if self.units[ui].enabled { 1 } else { 2 };
-                self.reply(r, "MOD_GET_CHANENABLESTATE", &[("enable_state", int(st))]);
+                self.reply(
+                    r,
+                    msg::MOD_GET_CHANENABLESTATE,
+                    &[("enable_state", int(st))],
+                );
             }
             _ => return false,
         }
@@ -679,25 +853,19 @@ impl AptSim {
     /// Requests for counters and status: answered from the unit's state. False when `r` is not of
     /// this family.
     fn readback_msg(&mut self, r: &Req<'_, '_>) -> bool {
-        let Req {
-            f,
-            name,
-            ui,
-            chan,
-            now,
-        } = *r;
-        match name {
-            "MOT_REQ_POSCOUNTER" | "MOT_REQ_ENCCOUNTER" => {
+        let Req { f, m, ui, now, .. } = *r;
+        match m.id {
+            msg::MOT_REQ_POSCOUNTER | msg::MOT_REQ_ENCCOUNTER => {
                 let p = self.unit_pos(ui, now);
-                let (get, field) = if name == "MOT_REQ_POSCOUNTER" {
-                    ("MOT_GET_POSCOUNTER", "position")
+                let (get, field) = if m.id == msg::MOT_REQ_POSCOUNTER {
+                    (msg::MOT_GET_POSCOUNTER, "position")
                 } else {
-                    ("MOT_GET_ENCCOUNTER", "encoder_count")
+                    (msg::MOT_GET_ENCCOUNTER, "encoder_count")
                 };
                 self.reply(r, get, &[(field, int(p))]);
             }
-            "MOT_SET_POSCOUNTER" | "MOT_SET_ENCCOUNTER" => {
-                let field = if name == "MOT_SET_POSCOUNTER" {
+            msg::MOT_SET_POSCOUNTER | msg::MOT_SET_ENCCOUNTER => {
+                let field = if m.id == msg::MOT_SET_POSCOUNTER {
                     "position"
                 } else {
                     "encoder_count"
@@ -707,53 +875,85 @@ impl AptSim {
                     u.pos = v;
                 }
             }
-            "MOT_REQ_STATUSBITS" => {
+            msg::MOT_REQ_STATUSBITS => {
                 let bits = self.status_bits(ui, now);
                 self.reply(
                     r,
-                    "MOT_GET_STATUSBITS",
+                    msg::MOT_GET_STATUSBITS,
                     &[("status_bits", int(bits as i64))],
                 );
             }
-            "MOT_REQ_DCSTATUSUPDATE" => {
-                let b = self.dc_status(ui, now, "MOT_GET_DCSTATUSUPDATE", chan);
+            msg::MOT_REQ_DCSTATUSUPDATE => {
+                let b = self.dc_status(ui, now, msg::MOT_GET_DCSTATUSUPDATE, r.chan, r.src);
                 self.send(now, b);
             }
-            "MOT_REQ_STATUSUPDATE"
-            | "LA_REQ_STATUSUPDATE"
-            | "TEC_REQ_STATUSUPDATE"
-            | "QUAD_REQ_STATUSUPDATE" => {
-                let b = self.status_update(ui, now);
+            msg::MOT_REQ_STATUSUPDATE
+            | msg::PZ_REQ_PZSTATUSUPDATE
+            | msg::PZ_REQ_NTSTATUSUPDATE
+            | msg::LA_REQ_STATUSUPDATE
+            | msg::LD_REQ_STATUSUPDATE
+            | msg::TEC_REQ_STATUSUPDATE
+            | msg::QUAD_REQ_STATUSUPDATE
+            | msg::PZMOT_REQ_STATUSUPDATE => {
+                let get = Table::global()
+                    .reply_ids(m)
+                    .first()
+                    .copied()
+                    .unwrap_or(msg::MOT_GET_STATUSUPDATE);
+                let b = self.status_update(ui, now, get, r.src);
                 self.send(now, b);
             }
-            "PZ_REQ_PZSTATUSBITS" => {
+            msg::PZ_REQ_PZSTATUSBITS => {
                 let bits = int(PZ_ACTUATOR_CONNECTED as i64);
-                self.reply(r, "PZ_GET_PZSTATUSBITS", &[("status_bits", bits)]);
+                self.reply(r, msg::PZ_GET_PZSTATUSBITS, &[("status_bits", bits)]);
             }
             _ => return false,
         }
         true
     }
 
-    /// Moves, homing and stops: start or end the unit's motion. False when `r` is not of this
-    /// family.
+    /// Moves, homing and stops: start or end the unit's motion (motor families only). False
+    /// when `r` is not of this family.
     fn motion_msg(&mut self, r: &Req<'_, '_>) -> bool {
         let Req {
             f,
-            name,
+            m,
             ui,
             chan,
             now,
+            ..
         } = *r;
         let sc = self.scaling;
-        match name {
-            "MOT_MOVE_HOME" => {
+        let fam = self.model.0.family;
+        let motion = matches!(
+            m.id,
+            msg::MOT_MOVE_HOME
+                | msg::MOT_MOVE_ABSOLUTE
+                | msg::MOT_MOVE_RELATIVE
+                | msg::MOT_MOVE_JOG
+                | msg::MOT_MOVE_VELOCITY
+                | msg::MOT_MOVE_STOP
+                | msg::PZMOT_MOVE_ABSOLUTE
+                | msg::PZMOT_MOVE_JOG
+        );
+        if !motion {
+            return false;
+        }
+        if !fam.moves() {
+            return true;
+        }
+        let fv = |n: &str| f.field(n).and_then(|(_, v)| v.as_i64());
+        match m.id {
+            msg::MOT_MOVE_HOME => {
                 let u = &self.units[ui];
-                if !u.motor || !u.enabled {
+                if !u.enabled {
                     return true;
                 }
                 let from = self.unit_pos(ui, now);
-                let hv = sc.counts_s(u.param("MOT_GET_HOMEPARAMS", "home_velocity").unwrap_or(1));
+                let hv = self
+                    .held_field(ui, msg::MOT_GET_HOMEPARAMS, 0, "home_velocity")
+                    .unwrap_or(1);
+                let hv = sc.counts_s(hv);
                 let secs = HOME_BASE_NS as f64 / SEC as f64 + from.unsigned_abs() as f64 / hv;
                 let mut mo = Motion::linear(Kind::Home, now, from, 0, secs, chan);
                 if from == 0 {
@@ -763,39 +963,67 @@ impl AptSim {
                 self.units[ui].motion = Some(mo);
                 self.units[ui].homed = false;
             }
-            "MOT_MOVE_ABSOLUTE" | "MOT_MOVE_RELATIVE" | "MOT_MOVE_JOG" | "MOT_MOVE_VELOCITY" => {
-                let u = &self.units[ui];
-                if !u.motor || !u.enabled {
+            msg::PZMOT_MOVE_ABSOLUTE | msg::PZMOT_MOVE_JOG => {
+                if !self.units[ui].enabled {
+                    return true;
+                }
+                // Inertia motors count steps at the drive's step rate and acceleration
+                // (PZMOT sub-messages 7 and 9); they have no end of travel.
+                let from = self.unit_pos(ui, now);
+                let g = msg::PZMOT_GET_PARAMS;
+                let sub = |s: u16, n: &str| self.held_field(ui, g, s, n);
+                let v = sub(msg::pzmot::DRIVE_OP_PARAMS, "step_rate").unwrap_or(500);
+                let a = sub(msg::pzmot::DRIVE_OP_PARAMS, "step_accn").unwrap_or(100_000);
+                let (v, a) = ((v as f64).max(1.0), (a as f64).max(1.0));
+                let (kind, to) = if m.id == msg::PZMOT_MOVE_ABSOLUTE {
+                    (Kind::Move, fv("abs_position").unwrap_or(from))
+                } else {
+                    let step = sub(msg::pzmot::TIM_JOG_PARAMS, "jog_step_size").unwrap_or(250);
+                    let back = fv("jog_dir") == Some(2);
+                    (Kind::Jog, if back { from - step } else { from + step })
+                };
+                self.units[ui].motion = Some(Motion::trapezoid(kind, now, from, to, v, a, chan));
+            }
+            msg::MOT_MOVE_ABSOLUTE
+            | msg::MOT_MOVE_RELATIVE
+            | msg::MOT_MOVE_JOG
+            | msg::MOT_MOVE_VELOCITY => {
+                if !self.units[ui].enabled {
                     return true;
                 }
                 let from = self.unit_pos(ui, now);
-                let fv = |n: &str| f.field(n).and_then(|(_, v)| v.as_i64());
-                let vel = |get: &str, vf: &str, af: &str| {
+                let p = |get: u16, n: &str| self.held_field(ui, get, 0, n);
+                let vel = |get: u16, vf: &str, af: &str| {
                     (
-                        sc.counts_s(u.param(get, vf).unwrap_or(1)),
-                        sc.counts_s2(u.param(get, af).unwrap_or(1)),
+                        sc.counts_s(p(get, vf).unwrap_or(1)),
+                        sc.counts_s2(p(get, af).unwrap_or(1)),
                     )
                 };
-                let (v, a) = vel("MOT_GET_VELPARAMS", "max_vel", "acceleration");
-                let (jv, ja) = vel("MOT_GET_JOGPARAMS", "jog_max_vel", "jog_acceleration");
+                let (v, a) = vel(msg::MOT_GET_VELPARAMS, "max_vel", "acceleration");
+                let (jv, ja) = vel(msg::MOT_GET_JOGPARAMS, "jog_max_vel", "jog_acceleration");
                 let max = sc.max_pos();
-                let (kind, to, v, a) = match name {
-                    "MOT_MOVE_ABSOLUTE" => {
+                let (kind, to, v, a) = match m.id {
+                    msg::MOT_MOVE_ABSOLUTE => {
                         let to = fv("absolute_position")
-                            .or_else(|| u.param("MOT_GET_MOVEABSPARAMS", "absolute_position"));
+                            .or_else(|| p(msg::MOT_GET_MOVEABSPARAMS, "absolute_position"));
                         (Kind::Move, to.unwrap_or(from), v, a)
                     }
-                    "MOT_MOVE_RELATIVE" => {
+                    msg::MOT_MOVE_RELATIVE => {
                         let d = fv("relative_distance")
-                            .or_else(|| u.param("MOT_GET_MOVERELPARAMS", "relative_distance"));
+                            .or_else(|| p(msg::MOT_GET_MOVERELPARAMS, "relative_distance"));
                         (Kind::Move, from.saturating_add(d.unwrap_or(0)), v, a)
                     }
-                    "MOT_MOVE_JOG" => {
+                    msg::MOT_MOVE_JOG if fam == Family::Flipper => {
+                        // A flipper jogs between its two end positions.
                         let back = fv("direction") == Some(2);
-                        if u.param("MOT_GET_JOGPARAMS", "jog_mode") == Some(1) {
+                        (Kind::Move, if back { 0 } else { max }, v, a)
+                    }
+                    msg::MOT_MOVE_JOG => {
+                        let back = fv("direction") == Some(2);
+                        if p(msg::MOT_GET_JOGPARAMS, "jog_mode") == Some(1) {
                             (Kind::Velocity, if back { 0 } else { max }, jv, ja)
                         } else {
-                            let step = u.param("MOT_GET_JOGPARAMS", "jog_step_size").unwrap_or(0);
+                            let step = p(msg::MOT_GET_JOGPARAMS, "jog_step_size").unwrap_or(0);
                             let to = if back { from - step } else { from + step };
                             (Kind::Jog, to, jv, ja)
                         }
@@ -814,12 +1042,13 @@ impl AptSim {
                 };
                 self.units[ui].motion = Some(Motion::trapezoid(kind, now, from, to, v, a, chan));
             }
-            "MOT_MOVE_STOP" => {
-                let profiled = f.field("stop_mode").and_then(|(_, v)| v.as_i64()) == Some(2);
+            _ => {
+                // MOT_MOVE_STOP.
+                let profiled = fv("stop_mode") == Some(2);
                 let u = &mut self.units[ui];
                 let Some(mo) = u.motion else {
                     // Not moving: a stop is still acknowledged.
-                    let b = self.dc_status(ui, now, "MOT_MOVE_STOPPED", chan);
+                    let b = self.dc_status(ui, now, msg::MOT_MOVE_STOPPED, chan, r.src);
                     self.send(now, b);
                     return true;
                 };
@@ -844,32 +1073,28 @@ impl AptSim {
                 } else {
                     u.motion = None;
                     u.pos = p;
-                    let b = self.dc_status(ui, now, "MOT_MOVE_STOPPED", chan);
+                    let b = self.dc_status(ui, now, msg::MOT_MOVE_STOPPED, chan, r.src);
                     self.send(now, b);
                 }
             }
-            _ => return false,
         }
         true
     }
 
-    /// Outputs: the laser source's enable, the piezo's output voltage. False when `r` is not of
-    /// this family.
+    /// Outputs that react beyond storing the value: the laser source's enable, the piezo's
+    /// output voltage (within 0..100 %, only while the channel is enabled). False when `r` is
+    /// not of this family.
     fn output_msg(&mut self, r: &Req<'_, '_>) -> bool {
-        let Req { f, name, ui, .. } = *r;
-        match name {
-            "LA_ENABLEOUTPUT" | "LA_DISABLEOUTPUT" if self.model == AptModel::Tls001 => {
-                self.units[ui].output = name == "LA_ENABLEOUTPUT";
+        let Req { f, m, ui, .. } = *r;
+        match m.id {
+            msg::LA_ENABLEOUTPUT | msg::LA_DISABLEOUTPUT => {
+                self.units[ui].output = m.id == msg::LA_ENABLEOUTPUT;
             }
-            "PZ_SET_OUTPUTVOLTS" => {
-                // Outputs within ±100 % only.
+            msg::PZ_SET_OUTPUTVOLTS => {
                 if let Some(v) = f.field("voltage").and_then(|(_, v)| v.as_i64()) {
                     if self.units[ui].enabled {
-                        self.units[ui].set_param(
-                            "PZ_GET_OUTPUTVOLTS",
-                            "voltage",
-                            v.clamp(0, 32767),
-                        );
+                        let v = v.clamp(0, 32767);
+                        self.set_field(ui, msg::PZ_GET_OUTPUTVOLTS, "voltage", v);
                     }
                 }
             }
@@ -878,113 +1103,96 @@ impl AptSim {
         true
     }
 
-    /// SET_x stores its fields for GET_x; REQ_x answers with GET_x when it is modelled.
+    /// SET_x stores its parameters for GET_x (per channel); REQ_x answers with GET_x: what was
+    /// stored, else the defaults. Sub-message groups (x_SET/REQ/GET_PARAMS) by sub-message id.
     fn generic(&mut self, r: &Req<'_, '_>) {
-        let Req { f, ui, now, .. } = *r;
-        let Some(m) = f.msg else { return };
-        if m.subs.is_some() {
-            self.sub_message(ui, f, now);
-            return;
-        }
-        let Some((gm, access)) = Table::global().readback_of(m) else {
+        let Req { f, m, ui, now, .. } = *r;
+        let t = Table::global();
+        let Some((gm, access)) = t.readback_of(m) else {
             return;
         };
-        if access == Access::Set {
-            let Some(slot) = self.units[ui]
-                .params
-                .iter_mut()
-                .find(|(n, _)| *n == gm.name)
-            else {
-                return;
-            };
-            for (field, v) in f.fields() {
-                if field.name == "chan_ident" {
-                    continue;
-                }
-                let Some(fv) = stored(field.ty, v) else {
-                    continue;
-                };
-                if let Some(s) = slot.1.iter_mut().find(|(n, _)| *n == field.name) {
-                    s.1 = fv;
-                } else {
-                    slot.1.push((field.name, fv));
-                }
-            }
+        let sub = if m.subs.is_some() {
+            let id = f
+                .field("sub_id")
+                .and_then(|(_, v)| v.as_i64())
+                .and_then(|i| u16::try_from(i).ok())
+                .or(f.sub.map(|s| s.id));
+            let Some(id) = id else { return };
+            id
         } else {
-            let Some((gname, p)) = self.units[ui].params.iter().find(|(n, _)| *n == gm.name) else {
-                return;
-            };
-            let (gname, p) = (*gname, p.clone());
-            self.reply(r, gname, &p);
-        }
-    }
-
-    /// `x_SET_PARAMS` stores the sub-message's fields for `x_GET_PARAMS` (blocks the model
-    /// has only); `x_REQ_PARAMS` answers the block named by its sub-message id, with live
-    /// readings where the block has them.
-    fn sub_message(&mut self, ui: usize, f: &AptFrame<'_, '_>, now: u64) {
-        let Some(m) = f.msg else { return };
-        let Some((gm, access)) = Table::global().readback_of(m) else {
-            return;
+            0
         };
-        let set = access == Access::Set;
-        let id = f
-            .field("sub_id")
-            .and_then(|(_, v)| v.as_i64())
-            .and_then(|i| u16::try_from(i).ok())
-            .or(f.sub.map(|s| s.id));
-        let Some(id) = id else { return };
-        let addr = self.units[ui].addr;
-        let Some(si) = self.units[ui]
-            .subs
+        // Laser sources, TEC and quad controllers have the blocks their family seeded; the
+        // group's other blocks belong to its other models (TLD_, KLD_, KPA_ …).
+        let seeded = matches!(
+            self.model.0.family,
+            Family::Laser | Family::Tec | Family::Quad
+        );
+        let held = self.units[ui]
+            .store
             .iter()
-            .position(|(n, i, _)| *n == gm.name && *i == id)
-        else {
+            .any(|s| s.get == gm.id && s.sub == sub);
+        if m.subs.is_some() && seeded && !held {
+            self.note(format!(
+                "ignored {} sub-message {sub}: a block the {} does not have",
+                m.name,
+                self.model.name()
+            ));
+            return;
+        }
+        if access == Access::Set {
+            // Only what the GET can carry: a SET of another length is not its layout.
+            let has_data = f.header().has_data();
+            let len = f.data_len();
+            if m.subs.is_some() || t.accepts_len(gm, has_data, len) {
+                self.keep(ui, gm.id, sub, f.bytes);
+            }
+            return;
+        }
+        let Some(mut b) = self.held(ui, gm, sub, r.src) else {
             return;
         };
-        if set {
-            let mut new: Params = vec![];
-            for (field, v) in f.fields() {
-                if field.name == "sub_id" {
-                    continue;
+        // Live readings where the block has them.
+        let live = self.live(ui, gm.id, sub);
+        if !live.is_empty() {
+            if let Some(fr) = AptFrame::decode(t, 0, &b, false) {
+                let mut vals: Vec<(&str, FieldValue)> = fr
+                    .fields()
+                    .filter(|(fd, _)| fd.name != "sub_id")
+                    .filter_map(|(fd, v)| Some((fd.name, int(v.as_i64()?))))
+                    .collect();
+                for (name, v) in live {
+                    if let Some(s) = vals.iter_mut().find(|(n, _)| *n == name) {
+                        s.1 = v;
+                    }
                 }
-                let Some(fv) = stored(field.ty, v) else {
-                    continue;
-                };
-                new.push((field.name, fv));
-            }
-            let slot = &mut self.units[ui].subs[si].2;
-            for (name, fv) in new {
-                if let Some(s) = slot.iter_mut().find(|(n, _)| *n == name) {
-                    s.1 = fv;
-                }
-            }
-        } else {
-            let mut vals = self.units[ui].subs[si].2.clone();
-            for (name, v) in self.live(ui, gm.name, id) {
-                if let Some(s) = vals.iter_mut().find(|(n, _)| *n == name) {
-                    s.1 = v;
+                if let Some(nb) = build_sub(gm.id, sub, HOST, r.src, &vals) {
+                    b = nb;
                 }
             }
-            let b = build_sub(gm.name, id, HOST, addr, &vals);
-            self.send(now, b);
         }
+        set_chan(gm, &mut b, r.chan);
+        self.line.send(now, b);
     }
 
     /// Readings of a sub-message block that come from the unit's state, not from SET_PARAMS.
-    fn live(&self, ui: usize, get: &str, id: u16) -> Params {
+    fn live(&self, ui: usize, get: u16, id: u16) -> Vec<(&'static str, FieldValue)> {
         match (get, id) {
-            ("LA_GET_PARAMS", 3) => {
+            (msg::LA_GET_PARAMS, msg::la::CURRENT_POWER) => {
                 let (c, p, _) = self.laser(ui);
                 vec![("laser_current", int(c)), ("laser_power", int(p))]
             }
-            ("LA_GET_PARAMS", 7) => vec![("status_bits", int(self.laser(ui).2 as i64))],
-            ("TEC_GET_PARAMS", 3) => {
+            (msg::LA_GET_PARAMS, msg::la::STATUS_BITS) => {
+                vec![("status_bits", int(self.laser(ui).2 as i64))]
+            }
+            (msg::TEC_GET_PARAMS, msg::tec::READINGS) => {
                 let (i, ta, ts, _) = self.tec(ui);
                 vec![("i_tec", int(i)), ("t_act", int(ta)), ("t_set", int(ts))]
             }
-            ("TEC_GET_PARAMS", 7) => vec![("status_bits", int(self.tec(ui).3 as i64))],
-            ("QUAD_GET_PARAMS", 3) => {
+            (msg::TEC_GET_PARAMS, msg::tec::STATUS_BITS) => {
+                vec![("status_bits", int(self.tec(ui).3 as i64))]
+            }
+            (msg::QUAD_GET_PARAMS, msg::quad::READINGS) => {
                 let q = self.quad(ui);
                 vec![
                     ("x_diff", int(q.0)),
@@ -994,7 +1202,9 @@ impl AptSim {
                     ("y_pos", int(q.4)),
                 ]
             }
-            ("QUAD_GET_PARAMS", 9) => vec![("status_bits", int(self.quad(ui).5 as i64))],
+            (msg::QUAD_GET_PARAMS, msg::quad::STATUS_BITS) => {
+                vec![("status_bits", int(self.quad(ui).5 as i64))]
+            }
             _ => vec![],
         }
     }
@@ -1003,7 +1213,9 @@ impl AptSim {
     /// the output is on.
     fn laser(&self, ui: usize) -> (i64, i64, u32) {
         let u = &self.units[ui];
-        let sp = u.sub_param("LA_GET_PARAMS", 1, "setpoint").unwrap_or(0);
+        let sp = self
+            .held_field(ui, msg::LA_GET_PARAMS, msg::la::SETPOINT, "setpoint")
+            .unwrap_or(0);
         let mut bits = LA_KEYSWITCH_ENABLED | LA_CLOSED_LOOP | LA_UNITS_MW;
         if u.output {
             bits |= LA_OUTPUT_ENABLED;
@@ -1017,12 +1229,14 @@ impl AptSim {
     /// TEC current (mA), actual and set temperature, status bits: the element holds its
     /// setpoint.
     fn tec(&self, ui: usize) -> (i64, i64, i64, u32) {
-        let u = &self.units[ui];
-        let ts = u.sub_param("TEC_GET_PARAMS", 1, "t_set").unwrap_or(0);
-        let lim = u
-            .sub_param("TEC_GET_PARAMS", 5, "i_lim")
+        let g = msg::TEC_GET_PARAMS;
+        let ts = self
+            .held_field(ui, g, msg::tec::TEMP_SETPOINT, "t_set")
+            .unwrap_or(0);
+        let lim = self
+            .held_field(ui, g, msg::tec::IO_SETTINGS, "i_lim")
             .unwrap_or(TEC_HOLD_MA);
-        let disp = match u.sub_param("TEC_GET_PARAMS", 0x0B, "disp_mode") {
+        let disp = match self.held_field(ui, g, msg::tec::DISP_SETTINGS, "disp_mode") {
             Some(1) => 0x20,
             Some(2) => 0x40,
             Some(3) => 0x80,
@@ -1035,12 +1249,13 @@ impl AptSim {
     /// operating mode: monitor (outputs 0), open loop (outputs as set), closed loop (the
     /// outputs cancel the beam's offset).
     fn quad(&self, ui: usize) -> (i64, i64, i64, i64, i64, u32) {
-        let u = &self.units[ui];
+        let g = msg::QUAD_GET_PARAMS;
         let (bx, by, sum) = QUAD_BEAM;
-        match u.sub_param("QUAD_GET_PARAMS", 7, "mode") {
+        match self.held_field(ui, g, msg::quad::OPER_MODE, "mode") {
             Some(2) => {
-                let x = u.sub_param("QUAD_GET_PARAMS", 0x0D, "x_pos").unwrap_or(0);
-                let y = u.sub_param("QUAD_GET_PARAMS", 0x0D, "y_pos").unwrap_or(0);
+                let d = msg::quad::POS_DEMAND_OUTPUTS;
+                let x = self.held_field(ui, g, d, "x_pos").unwrap_or(0);
+                let y = self.held_field(ui, g, d, "y_pos").unwrap_or(0);
                 (bx, by, sum, x, y, 0x2)
             }
             Some(3) | Some(4) => {
@@ -1058,22 +1273,19 @@ impl AptSim {
     }
 
     fn info(&self, src: u8, serial: u32, nchs: i64, hw_type: i64) -> Vec<u8> {
-        let (major, interim, minor) = match self.model {
-            AptModel::Tdc001 => (2, 0, 4),
-            _ => (3, 0, 11),
-        };
+        let (major, interim, minor) = self.model.0.firmware;
         build(
-            "HW_GET_INFO",
+            msg::HW_GET_INFO,
             None,
             HOST,
             src,
             &[
-                ("serial_number", int(serial as i64)),
+                ("serial_number", int(i64::from(serial))),
                 ("model_number", FieldValue::Text(self.model.name().into())),
                 ("hw_type", int(hw_type)),
-                ("fw_minor", int(minor)),
-                ("fw_interim", int(interim)),
-                ("fw_major", int(major)),
+                ("fw_minor", int(minor.into())),
+                ("fw_interim", int(interim.into())),
+                ("fw_major", int(major.into())),
                 ("hw_version", int(1)),
                 ("mod_state", int(0)),
                 ("nchs", int(nchs)),
@@ -1109,25 +1321,28 @@ impl AptSim {
             }
         }
         let max = self.scaling.max_pos();
-        if p >= max {
-            bits |= CW_HW_LIMIT;
-        }
-        if p <= 0 && u.homed {
-            bits |= CCW_HW_LIMIT;
+        if self.model.0.family != Family::InertiaMotor {
+            if p >= max {
+                bits |= CW_HW_LIMIT;
+            }
+            // A flipper reports its first position on the CCW switch.
+            if p <= 0 && (u.homed || self.model.0.family == Family::Flipper) {
+                bits |= CCW_HW_LIMIT;
+            }
         }
         bits
     }
 
     /// MOT_GET_DCSTATUSUPDATE (or MOVE_COMPLETED/MOVE_STOPPED, same structure). Velocity is the
     /// speed in counts/s divided by 10 (the spec leaves its scale to the controller).
-    fn dc_status(&self, ui: usize, now: u64, name: &str, chan: i64) -> Option<Vec<u8>> {
+    fn dc_status(&self, ui: usize, now: u64, id: u16, chan: i64, src: u8) -> Option<Vec<u8>> {
         let u = &self.units[ui];
         let (p, v) = u.motion.map_or((u.pos, 0.0), |m| m.pos(now));
         build(
-            name,
+            id,
             Some(14),
             HOST,
-            u.addr,
+            src,
             &[
                 ("chan_ident", int(chan)),
                 ("position", int(p)),
@@ -1140,97 +1355,115 @@ impl AptSim {
         )
     }
 
-    /// The model's periodic status message.
-    fn status_update(&self, ui: usize, now: u64) -> Option<Vec<u8>> {
+    /// The status message a family sends after HW_START_UPDATEMSGS: the first of its
+    /// candidates the model implements.
+    fn status_msg(&self) -> u16 {
+        let cands: &[u16] = match self.model.0.family {
+            Family::DcServo | Family::Brushless | Family::Polariser => {
+                &[msg::MOT_GET_DCSTATUSUPDATE, msg::MOT_GET_STATUSUPDATE]
+            }
+            Family::Stepper | Family::Solenoid | Family::Flipper => {
+                &[msg::MOT_GET_STATUSUPDATE, msg::MOT_GET_DCSTATUSUPDATE]
+            }
+            Family::Piezo | Family::StrainGauge => &[msg::PZ_GET_PZSTATUSUPDATE],
+            Family::NanoTrak => &[msg::PZ_GET_NTSTATUSUPDATE],
+            Family::Laser => &[msg::LA_GET_STATUSUPDATE],
+            Family::LaserDiode => &[msg::LD_GET_STATUSUPDATE, msg::LA_GET_STATUSUPDATE],
+            Family::Tec => &[msg::TEC_GET_STATUSUPDATE],
+            Family::Quad => &[msg::QUAD_GET_STATUSUPDATE],
+            Family::InertiaMotor => &[msg::PZMOT_GET_STATUSUPDATE, msg::MOT_GET_STATUSUPDATE],
+        };
+        let t = Table::global();
+        cands
+            .iter()
+            .copied()
+            .find(|id| self.profile.as_ref().is_none_or(|p| t.implements(p, *id)))
+            .unwrap_or(cands[0])
+    }
+
+    /// Status message `get` of unit `ui` from `src`: the family's live values in the message's
+    /// fields, the rest as the defaults have them.
+    fn status_update(&self, ui: usize, now: u64, get: u16, src: u8) -> Option<Vec<u8>> {
         let u = &self.units[ui];
-        match self.model {
-            AptModel::Kpz101 => {
-                let v = u.param("PZ_GET_OUTPUTVOLTS", "voltage").unwrap_or(0);
+        let chan = i64::from(u.chan);
+        let pos = u.motion.map_or(u.pos, |m| m.pos(now).0);
+        let bits = i64::from(self.status_bits(ui, now));
+        let vals: Vec<(&str, FieldValue)> = match get {
+            msg::MOT_GET_DCSTATUSUPDATE => {
+                return self.dc_status(ui, now, get, chan, src);
+            }
+            msg::PZ_GET_PZSTATUSUPDATE => {
+                let v = self
+                    .held_field(ui, msg::PZ_GET_OUTPUTVOLTS, 0, "voltage")
+                    .unwrap_or(0);
                 let mut bits = PZ_ACTUATOR_CONNECTED;
-                if u.param("PZ_GET_POSCONTROLMODE", "mode")
-                    .is_some_and(|m| m == 2 || m == 4)
-                {
+                let mode = self.held_field(ui, msg::PZ_GET_POSCONTROLMODE, 0, "mode");
+                if mode.is_some_and(|m| m == 2 || m == 4) {
                     bits |= 0x400;
                 }
-                build(
-                    "PZ_GET_PZSTATUSUPDATE",
-                    None,
-                    HOST,
-                    u.addr,
-                    &[
-                        ("chan_ident", int(1)),
-                        ("op_voltage", int(v)),
-                        ("position", int(0)),
-                        ("status_bits", int(bits as i64)),
-                    ],
-                )
+                vec![
+                    ("chan_ident", int(chan)),
+                    ("op_voltage", int(v)),
+                    ("position", int(0)),
+                    ("status_bits", int(bits as i64)),
+                ]
             }
-            AptModel::Bsc203 => {
-                let (p, _) = u.motion.map_or((u.pos, 0.0), |m| m.pos(now));
+            msg::MOT_GET_STATUSUPDATE => {
                 // Stepper status bits share the low 11 bits with mot_status.
-                let bits = self.status_bits(ui, now) & 0x7FF;
-                build(
-                    "MOT_GET_STATUSUPDATE",
-                    Some(28),
-                    HOST,
-                    u.addr,
-                    &[
-                        ("chan_ident", int(1)),
-                        ("position", int(p)),
-                        ("enc_count", int(0)),
-                        ("status_bits", int(bits as i64)),
-                        ("chan_ident2", int(1)),
-                    ],
-                )
+                vec![
+                    ("chan_ident", int(chan)),
+                    ("position", int(pos)),
+                    ("enc_count", int(0)),
+                    ("status_bits", int(bits & 0x7FF)),
+                    ("chan_ident2", int(chan)),
+                ]
             }
-            AptModel::Tls001 => {
+            msg::LA_GET_STATUSUPDATE => {
                 let (c, p, bits) = self.laser(ui);
-                build(
-                    "LA_GET_STATUSUPDATE",
-                    None,
-                    HOST,
-                    u.addr,
-                    &[
-                        ("laser_current", int(c)),
-                        ("laser_power", int(p)),
-                        ("status_bits", int(bits as i64)),
-                    ],
-                )
+                vec![
+                    ("laser_current", int(c)),
+                    ("laser_power", int(p)),
+                    ("status_bits", int(bits as i64)),
+                ]
             }
-            AptModel::Ttc001 => {
+            msg::TEC_GET_STATUSUPDATE => {
                 let (i, ta, ts, bits) = self.tec(ui);
-                build(
-                    "TEC_GET_STATUSUPDATE",
-                    None,
-                    HOST,
-                    u.addr,
-                    &[
-                        ("i_tec", int(i)),
-                        ("t_act", int(ta)),
-                        ("t_set", int(ts)),
-                        ("status_bits", int(bits as i64)),
-                    ],
-                )
+                vec![
+                    ("i_tec", int(i)),
+                    ("t_act", int(ta)),
+                    ("t_set", int(ts)),
+                    ("status_bits", int(bits as i64)),
+                ]
             }
-            AptModel::Kpa101 => {
+            msg::QUAD_GET_STATUSUPDATE => {
                 let q = self.quad(ui);
-                build(
-                    "QUAD_GET_STATUSUPDATE",
-                    None,
-                    HOST,
-                    u.addr,
-                    &[
-                        ("x_diff", int(q.0)),
-                        ("y_diff", int(q.1)),
-                        ("sum", int(q.2)),
-                        ("x_pos", int(q.3)),
-                        ("y_pos", int(q.4)),
-                        ("status_bits", int(q.5 as i64)),
-                    ],
-                )
+                vec![
+                    ("x_diff", int(q.0)),
+                    ("y_diff", int(q.1)),
+                    ("sum", int(q.2)),
+                    ("x_pos", int(q.3)),
+                    ("y_pos", int(q.4)),
+                    ("status_bits", int(q.5 as i64)),
+                ]
             }
-            _ => self.dc_status(ui, now, "MOT_GET_DCSTATUSUPDATE", 1),
-        }
+            msg::PZMOT_GET_STATUSUPDATE => {
+                vec![
+                    ("chan_ident", int(chan)),
+                    ("position", int(pos)),
+                    ("enc_count", int(0)),
+                    ("status_bits", int(bits & 0x7FF)),
+                ]
+            }
+            _ => {
+                // No live values: the defaults (NanoTrak, laser diode readings).
+                let m = Table::global().msg(get)?;
+                let mut b = self.held(ui, m, 0, src)?;
+                set_chan(m, &mut b, chan);
+                return Some(b);
+            }
+        };
+        let len = (get == msg::MOT_GET_STATUSUPDATE).then_some(14);
+        build(get, len, HOST, src, &vals).or_else(|| build(get, None, HOST, src, &vals))
     }
 
     /// The next event (motion end or status update) at or before `now`, if any.
@@ -1266,26 +1499,57 @@ impl AptSim {
                 };
                 let u = &mut self.units[ui];
                 u.pos = m.to;
-                let b = match m.kind {
-                    Kind::Home => {
-                        u.homed = true;
-                        build(
-                            "MOT_MOVE_HOMED",
-                            None,
-                            HOST,
-                            u.addr,
-                            &[("chan_ident", int(m.chan))],
-                        )
+                let src = u.update_src;
+                let b = if self.model.0.family == Family::InertiaMotor {
+                    let bits = i64::from(self.status_bits(ui, t) & 0x7FF);
+                    build(
+                        msg::PZMOT_MOVE_COMPLETED,
+                        None,
+                        HOST,
+                        src,
+                        &[
+                            ("chan_ident", int(m.chan)),
+                            ("abs_position", int(m.to)),
+                            ("status_bits", int(bits)),
+                        ],
+                    )
+                } else {
+                    match m.kind {
+                        Kind::Home => {
+                            self.units[ui].homed = true;
+                            build(
+                                msg::MOT_MOVE_HOMED,
+                                None,
+                                HOST,
+                                src,
+                                &[("chan_ident", int(m.chan))],
+                            )
+                        }
+                        Kind::Velocity | Kind::Stopping => {
+                            self.dc_status(ui, t, msg::MOT_MOVE_STOPPED, m.chan, src)
+                        }
+                        Kind::Move | Kind::Jog => {
+                            self.dc_status(ui, t, msg::MOT_MOVE_COMPLETED, m.chan, src)
+                        }
                     }
-                    Kind::Velocity | Kind::Stopping => {
-                        self.dc_status(ui, t, "MOT_MOVE_STOPPED", m.chan)
-                    }
-                    Kind::Move | Kind::Jog => self.dc_status(ui, t, "MOT_MOVE_COMPLETED", m.chan),
                 };
                 self.send(t, b);
             } else {
-                self.units[ui].next_update = Some(t + UPDATE_NS);
-                let b = self.status_update(ui, t);
+                let u = &mut self.units[ui];
+                u.unacked += 1;
+                if u.unacked > KEEPALIVE_UPDATES {
+                    // The host has not said it is alive: the controller stops its updates.
+                    u.next_update = None;
+                    let addr = u.addr;
+                    self.note(format!(
+                        "status updates of 0x{addr:02X} stopped: {KEEPALIVE_UPDATES} sent \
+                         without the host's ACK"
+                    ));
+                    continue;
+                }
+                u.next_update = Some(t + UPDATE_NS);
+                let src = u.update_src;
+                let b = self.status_update(ui, t, self.status_msg(), src);
                 self.send(t, b);
             }
         }
@@ -1328,17 +1592,124 @@ impl Simulator for AptSim {
     }
 }
 
-/// Encode `name` from `src` to `dst`: the data form of length `len` when given, else the first
-/// form holding every named field (header-only when no values). Values the form lacks are
-/// dropped; `None` only if the table cannot encode them (a bug, never input-driven).
+/// A frame of message `id` with these param bytes, or this data packet.
+fn frame(id: u16, params: [u8; 2], data: Option<&[u8]>, dst: u8, src: u8) -> Vec<u8> {
+    let mut b = Vec::with_capacity(6 + data.map_or(0, <[u8]>::len));
+    b.extend_from_slice(&id.to_le_bytes());
+    match data {
+        Some(d) => {
+            let len = u16::try_from(d.len()).unwrap_or(u16::MAX);
+            b.extend_from_slice(&len.to_le_bytes());
+            b.push(dst | 0x80);
+            b.push(src);
+            b.extend_from_slice(d);
+        }
+        None => {
+            b.extend_from_slice(&params);
+            b.push(dst);
+            b.push(src);
+        }
+    }
+    b
+}
+
+/// Write the host's channel ident into `b`'s `chan_ident` field, where its form has one.
+fn set_chan(m: &MsgDef, b: &mut [u8], chan: i64) {
+    let Some(f) = AptFrame::decode(Table::global(), 0, b, false) else {
+        return;
+    };
+    let Some(fd) = f.form.and_then(|fo| fo.chan_field()) else {
+        return;
+    };
+    let (at, w) = (fd.loc.frame_offset(), fd.ty.width());
+    let _ = m;
+    if at + w <= b.len() && (1..=2).contains(&w) {
+        b[at..at + w].copy_from_slice(&chan.to_le_bytes()[..w]);
+    }
+}
+
+/// The power-on parameters of `get` (sub-message `sub`, 0 for none): the spec's example for
+/// the GET or its SET where the table holds one that fits, else zeros in its first form (the
+/// sub-message id in place).
+fn defaults(get: &MsgDef, sub: u16) -> Option<([u8; 2], Option<Vec<u8>>)> {
+    let t = Table::global();
+    let set = get.name.find("_GET_").and_then(|i| {
+        let name = format!("{}_SET_{}", &get.name[..i], &get.name[i + 5..]);
+        t.msg_by_name(&name)
+    });
+    let examples: Vec<&aptscope_dissector::table::Example> = if sub != 0 {
+        let sd = t.sub_of(get, get.subs?, sub)?;
+        sd.examples.iter().collect()
+    } else {
+        get.examples
+            .iter()
+            .chain(set.iter().flat_map(|s| s.examples.iter()))
+            .collect()
+    };
+    let ids: Vec<u16> = [Some(get.id), set.map(|s| s.id)]
+        .into_iter()
+        .flatten()
+        .collect();
+    for ex in examples.iter().filter(|e| e.bad_reason.is_none()) {
+        let Ok(b) = example_bytes(ex.hex) else {
+            continue;
+        };
+        let Some(f) = AptFrame::decode(t, 0, &b, false) else {
+            continue;
+        };
+        let id = f.msg.map_or(0, |m| m.id);
+        if !ids.contains(&id) || f.diags().next().is_some() {
+            continue;
+        }
+        let has_data = f.header().has_data();
+        if sub != 0 && f.sub.map(|s| s.id) != Some(sub) {
+            continue;
+        }
+        if sub == 0 && !t.accepts_len(get, has_data, f.data_len()) {
+            continue;
+        }
+        let data = has_data.then(|| b.get(6..6 + f.data_len()).unwrap_or(&[]).to_vec());
+        return Some(([b[2], b[3]], data));
+    }
+    if sub != 0 {
+        let sd = t.sub_of(get, get.subs?, sub)?;
+        let form = sd.forms.first()?;
+        let len = form.encoded_len(0)?;
+        let mut d = vec![0u8; len];
+        if d.len() >= 2 {
+            d[..2].copy_from_slice(&sub.to_le_bytes());
+        }
+        return Some(([0, 0], Some(d)));
+    }
+    let form = get
+        .forms
+        .iter()
+        .find(|f| matches!(f.kind, FormKind::Data(_)))
+        .or_else(|| get.forms.iter().find(|f| f.kind == FormKind::Header))?;
+    match form.kind {
+        FormKind::Data(_) => Some(([0, 0], Some(vec![0u8; form.encoded_len(0)?]))),
+        _ => {
+            // A header-only GET: its param bytes, a channel 1 where p1 is the channel.
+            let p1 = form
+                .fields
+                .iter()
+                .any(|f| f.loc == Loc::P1 && f.name == "chan_ident");
+            Some(([u8::from(p1), 0], None))
+        }
+    }
+}
+
+/// Encode message `id` from `src` to `dst`: the data form of length `len` when given, else the
+/// first form holding every named field (header-only when no values). Values the form lacks
+/// are dropped; `None` only if the table cannot encode them (a bug, never input-driven).
 pub(crate) fn build(
-    name: &str,
+    id: u16,
     len: Option<u16>,
     dst: u8,
     src: u8,
     vals: &[(&str, FieldValue)],
 ) -> Option<Vec<u8>> {
-    let m = Table::global().msg_by_name(name)?;
+    let m = Table::global().msg(id)?;
     let forms = m.forms.iter().filter(|f| f.kind != FormKind::Sub);
     let has = |f: &&aptscope_dissector::table::Form| {
         vals.iter()
@@ -1360,23 +1731,24 @@ pub(crate) fn build(
     encode(form, &vals, m.id, dst, src).ok()
 }
 
-/// Encode sub-message `id` of the group of `get` (an `x_GET_PARAMS`) from `src` to `dst`, with
-/// the sub-message id first and the fields its form has; `None` if the table has no such block.
+/// Encode sub-message `sub` of the group of `get` (an `x_GET_PARAMS`) from `src` to `dst`,
+/// with the sub-message id first and the fields its form has; `None` if the table has no such
+/// block.
 pub(crate) fn build_sub(
-    get: &str,
-    id: u16,
+    get: u16,
+    sub: u16,
     dst: u8,
     src: u8,
     vals: &[(&str, FieldValue)],
 ) -> Option<Vec<u8>> {
     let t = Table::global();
-    let m = t.msg_by_name(get)?;
-    let sub = t.sub(m.subs?, id)?;
-    let form = sub.forms.iter().find(|f| {
+    let m = t.msg(get)?;
+    let sd = t.sub_of(m, m.subs?, sub)?;
+    let form = sd.forms.iter().find(|f| {
         vals.iter()
             .all(|(k, _)| f.fields.iter().any(|x| x.name == *k))
     })?;
-    let mut v: Vec<(&str, FieldValue)> = vec![("sub_id", int(id as i64))];
+    let mut v: Vec<(&str, FieldValue)> = vec![("sub_id", int(i64::from(sub)))];
     v.extend(
         vals.iter()
             .filter(|(k, _)| *k != "sub_id" && form.fields.iter().any(|x| x.name == *k))
@@ -1385,12 +1757,13 @@ pub(crate) fn build_sub(
     encode(form, &v, m.id, dst, src).ok()
 }
 
-/// The sub-message parameter blocks a model answers, with their power-on values.
-fn sub_params(model: AptModel) -> Vec<(&'static str, u16, Params)> {
+/// The sub-message parameter blocks of a family, with their power-on values (the others come
+/// from the spec's examples).
+fn sub_params(family: Family) -> Vec<(u16, u16, Vec<(&'static str, FieldValue)>)> {
     let f = FieldValue::Float;
-    match model {
-        AptModel::Tls001 => {
-            let g = "LA_GET_PARAMS";
+    match family {
+        Family::Laser | Family::LaserDiode => {
+            let g = msg::LA_GET_PARAMS;
             vec![
                 (g, 0x01, vec![("setpoint", int(0))]),
                 (
@@ -1417,8 +1790,8 @@ fn sub_params(model: AptModel) -> Vec<(&'static str, u16, Params)> {
                 ),
             ]
         }
-        AptModel::Ttc001 => {
-            let g = "TEC_GET_PARAMS";
+        Family::Tec => {
+            let g = msg::TEC_GET_PARAMS;
             vec![
                 (g, 0x01, vec![("t_set", int(2500))]),
                 (
@@ -1444,8 +1817,8 @@ fn sub_params(model: AptModel) -> Vec<(&'static str, u16, Params)> {
                 ),
             ]
         }
-        AptModel::Kpa101 => {
-            let g = "QUAD_GET_PARAMS";
+        Family::Quad => {
+            let g = msg::QUAD_GET_PARAMS;
             vec![
                 (
                     g,

@@ -11,8 +11,9 @@
 
 mod apt;
 mod ell;
+pub mod models;
 
-pub use apt::{AptModel, AptSim};
+pub use apt::{model_list, AptModel, AptSim};
 pub use ell::{parse_modules, EllModel, EllSim, SimError};
 
 use std::collections::VecDeque;
@@ -107,3 +108,6 @@ pub fn ell_sim(modules: &str) -> Result<EllSim, SimError> {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod tests_models;
