@@ -145,11 +145,20 @@ impl AptModel {
                 _ => units::Family::DcServo,
             });
         let counts = units::stage_for(stage, fam).map_or(DEFAULT_COUNTS, |s| s.counts_per_unit);
-        let q = aptscope_dissector::table::Quantity::Vel;
-        let vel = fam.factor(q, 1.0).unwrap_or(1.0);
-        let acc = fam
-            .factor(aptscope_dissector::table::Quantity::Acc, 1.0)
-            .unwrap_or(1.0);
+        let (vel, acc) = match fam {
+            // Section 8's DC servo and Trinamic factors to the digits the first simulators
+            // used: the committed session recordings (samples/sessions/) hold positions
+            // computed with them.
+            units::Family::DcServo => (22.369_621, 0.007_635_4),
+            units::Family::Trinamic => (53.687_091, 0.010_995),
+            f => {
+                let q = |q| f.factor(q, 1.0).unwrap_or(1.0);
+                (
+                    q(aptscope_dissector::table::Quantity::Vel),
+                    q(aptscope_dissector::table::Quantity::Acc),
+                )
+            }
+        };
         Scaling {
             counts_per_mm: counts,
             travel_mm: travel,
@@ -797,10 +806,15 @@ impl AptSim {
             msg::MOD_IDENTIFY => self.identified += 1,
             msg::HW_START_UPDATEMSGS => {
                 let addr = self.units[ui].addr;
+                // An inertia motor controller's status message covers its four channels.
+                let one = self.model.0.family == Family::InertiaMotor;
                 for u in self.units.iter_mut().filter(|u| u.addr == addr) {
+                    u.update_src = src;
+                    if one && u.chan != 1 {
+                        continue;
+                    }
                     u.next_update.get_or_insert(now + UPDATE_NS);
                     u.unacked = 0;
-                    u.update_src = src;
                 }
             }
             msg::HW_STOP_UPDATEMSGS => {
@@ -1153,7 +1167,7 @@ impl AptSim {
             return;
         };
         // Live readings where the block has them.
-        let live = self.live(ui, gm.id, sub);
+        let live = self.live(ui, gm.id, sub, now);
         if !live.is_empty() {
             if let Some(fr) = AptFrame::decode(t, 0, &b, false) {
                 let mut vals: Vec<(&str, FieldValue)> = fr
@@ -1176,7 +1190,7 @@ impl AptSim {
     }
 
     /// Readings of a sub-message block that come from the unit's state, not from SET_PARAMS.
-    fn live(&self, ui: usize, get: u16, id: u16) -> Vec<(&'static str, FieldValue)> {
+    fn live(&self, ui: usize, get: u16, id: u16, now: u64) -> Vec<(&'static str, FieldValue)> {
         match (get, id) {
             (msg::LA_GET_PARAMS, msg::la::CURRENT_POWER) => {
                 let (c, p, _) = self.laser(ui);
@@ -1201,6 +1215,9 @@ impl AptSim {
                     ("x_pos", int(q.3)),
                     ("y_pos", int(q.4)),
                 ]
+            }
+            (msg::PZMOT_GET_PARAMS, msg::pzmot::POS_COUNTS) => {
+                vec![("position", int(self.unit_pos(ui, now)))]
             }
             (msg::QUAD_GET_PARAMS, msg::quad::STATUS_BITS) => {
                 vec![("status_bits", int(self.quad(ui).5 as i64))]
@@ -1447,12 +1464,26 @@ impl AptSim {
                 ]
             }
             msg::PZMOT_GET_STATUSUPDATE => {
-                vec![
-                    ("chan_ident", int(chan)),
-                    ("position", int(pos)),
-                    ("enc_count", int(0)),
-                    ("status_bits", int(bits & 0x7FF)),
-                ]
+                // All four channels of the controller in one message.
+                const NAMES: [[&str; 3]; 4] = [
+                    ["chan_ident1", "position1", "status_bits1"],
+                    ["chan_ident2", "position2", "status_bits2"],
+                    ["chan_ident3", "position3", "status_bits3"],
+                    ["chan_ident4", "position4", "status_bits4"],
+                ];
+                let mut v = vec![];
+                let chans = self
+                    .units
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, x)| x.addr == u.addr);
+                for ((i, x), n) in chans.zip(NAMES) {
+                    let bits = i64::from(self.status_bits(i, now) & 0x7FF);
+                    v.push((n[0], int(1 << (x.chan - 1).min(3))));
+                    v.push((n[1], int(self.unit_pos(i, now))));
+                    v.push((n[2], int(bits)));
+                }
+                v
             }
             _ => {
                 // No live values: the defaults (NanoTrak, laser diode readings).
@@ -1462,8 +1493,7 @@ impl AptSim {
                 return Some(b);
             }
         };
-        let len = (get == msg::MOT_GET_STATUSUPDATE).then_some(14);
-        build(get, len, HOST, src, &vals).or_else(|| build(get, None, HOST, src, &vals))
+        build(get, None, HOST, src, &vals)
     }
 
     /// The next event (motion end or status update) at or before `now`, if any.
@@ -1500,7 +1530,11 @@ impl AptSim {
                 let u = &mut self.units[ui];
                 u.pos = m.to;
                 let src = u.update_src;
-                let b = if self.model.0.family == Family::InertiaMotor {
+                let b = if self.model.0.family == Family::Flipper {
+                    // pylablib's MFF class (written against the hardware) polls the status
+                    // bits and takes a MOT_MOVE_COMPLETED for an error: a flipper sends none.
+                    None
+                } else if self.model.0.family == Family::InertiaMotor {
                     let bits = i64::from(self.status_bits(ui, t) & 0x7FF);
                     build(
                         msg::PZMOT_MOVE_COMPLETED,
@@ -1675,7 +1709,9 @@ fn defaults(get: &MsgDef, sub: u16) -> Option<([u8; 2], Option<Vec<u8>>)> {
         let sd = t.sub_of(get, get.subs?, sub)?;
         let form = sd.forms.first()?;
         let len = form.encoded_len(0)?;
-        let mut d = vec![0u8; len];
+        let mut b = vec![0u8; 6 + len];
+        first_enum_values(form, &mut b);
+        let mut d = b.split_off(6);
         if d.len() >= 2 {
             d[..2].copy_from_slice(&sub.to_le_bytes());
         }
@@ -1687,7 +1723,11 @@ fn defaults(get: &MsgDef, sub: u16) -> Option<([u8; 2], Option<Vec<u8>>)> {
         .find(|f| matches!(f.kind, FormKind::Data(_)))
         .or_else(|| get.forms.iter().find(|f| f.kind == FormKind::Header))?;
     match form.kind {
-        FormKind::Data(_) => Some(([0, 0], Some(vec![0u8; form.encoded_len(0)?]))),
+        FormKind::Data(_) => {
+            let mut b = vec![0u8; 6 + form.encoded_len(0)?];
+            first_enum_values(form, &mut b);
+            Some(([0, 0], Some(b.split_off(6))))
+        }
         _ => {
             // A header-only GET: its param bytes, a channel 1 where p1 is the channel.
             let p1 = form
@@ -1695,6 +1735,28 @@ fn defaults(get: &MsgDef, sub: u16) -> Option<([u8; 2], Option<Vec<u8>>)> {
                 .iter()
                 .any(|f| f.loc == Loc::P1 && f.name == "chan_ident");
             Some(([u8::from(p1), 0], None))
+        }
+    }
+}
+
+/// In the zeroed frame `b` of `form`, each enumerated field whose 0 is no value of its
+/// enumeration set to the enumeration's first value (clients reject what the device never
+/// sends: pylablib's KPZ101 voltage range of 0).
+fn first_enum_values(form: &aptscope_dissector::table::Form, b: &mut [u8]) {
+    let t = Table::global();
+    for f in &form.fields {
+        let Some(e) = f.enumeration.map(|i| t.enum_def(i)) else {
+            continue;
+        };
+        let Some(&(v, _)) = e.items.first() else {
+            continue;
+        };
+        if e.label(0).is_some() {
+            continue;
+        }
+        let (at, w) = (f.loc.frame_offset(), f.ty.width());
+        if w <= 8 && at + w <= b.len() {
+            b[at..at + w].copy_from_slice(&v.to_le_bytes()[..w]);
         }
     }
 }
