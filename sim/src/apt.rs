@@ -344,6 +344,9 @@ impl Motion {
     }
 }
 
+/// Named field values, as the encoder takes them.
+type Params = Vec<(&'static str, FieldValue)>;
+
 /// A parameter block a unit holds for one GET message (and sub-message): the frame's param
 /// bytes or data packet, as a SET sent it or the defaults made it.
 #[derive(Debug, Clone)]
@@ -517,7 +520,7 @@ impl AptSim {
     fn seed(&mut self, ui: usize) {
         let s = self.scaling;
         let fam = self.model.0.family;
-        let vals: Vec<(u16, Vec<(&'static str, FieldValue)>)> = if fam.moves() {
+        let vals: Vec<(u16, Params)> = if fam.moves() {
             vec![
                 (
                     msg::MOT_GET_VELPARAMS,
@@ -1190,7 +1193,7 @@ impl AptSim {
     }
 
     /// Readings of a sub-message block that come from the unit's state, not from SET_PARAMS.
-    fn live(&self, ui: usize, get: u16, id: u16, now: u64) -> Vec<(&'static str, FieldValue)> {
+    fn live(&self, ui: usize, get: u16, id: u16, now: u64) -> Params {
         match (get, id) {
             (msg::LA_GET_PARAMS, msg::la::CURRENT_POWER) => {
                 let (c, p, _) = self.laser(ui);
@@ -1530,7 +1533,16 @@ impl AptSim {
                 let u = &mut self.units[ui];
                 u.pos = m.to;
                 let src = u.update_src;
-                let b = if self.model.0.family == Family::Flipper {
+                let b = if m.kind == Kind::Home {
+                    self.units[ui].homed = true;
+                    build(
+                        msg::MOT_MOVE_HOMED,
+                        None,
+                        HOST,
+                        src,
+                        &[("chan_ident", int(m.chan))],
+                    )
+                } else if self.model.0.family == Family::Flipper {
                     // pylablib's MFF class (written against the hardware) polls the status
                     // bits and takes a MOT_MOVE_COMPLETED for an error: a flipper sends none.
                     None
@@ -1821,7 +1833,7 @@ pub(crate) fn build_sub(
 
 /// The sub-message parameter blocks of a family, with their power-on values (the others come
 /// from the spec's examples).
-fn sub_params(family: Family) -> Vec<(u16, u16, Vec<(&'static str, FieldValue)>)> {
+fn sub_params(family: Family) -> Vec<(u16, u16, Params)> {
     let f = FieldValue::Float;
     match family {
         Family::Laser | Family::LaserDiode => {
