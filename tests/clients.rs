@@ -320,3 +320,23 @@ d.close()
     assert_eq!(said(&out, "trig"), "33 34 35");
     assert_eq!(said(&out, "pos"), "0 100000 0");
 }
+
+#[test]
+fn pylablib_laser_diode_driver_on_a_kld101_follows_its_setpoint() {
+    let script = r#"
+d = Thorlabs.kinesis.KinesisLaserDiodeDriver(("serial", link))
+print("setpoint", round(d.set_laser_power_setpoint(50)))
+print("off", d.get_complete_status().output)
+print("on", d.enable_output(True))
+print("current", round(d.get_complete_status().laser_current))
+d.enable_output(False)
+d.close()
+"#;
+    let Some(out) = run_client("pll-kld101", "kld101", PYLABLIB, script) else {
+        return;
+    };
+    assert_eq!(said(&out, "setpoint"), "50");
+    assert_eq!((said(&out, "off"), said(&out, "on")), ("False", "True"));
+    // The simulated diode draws 0.6 of full scale per unit of power setpoint.
+    assert_eq!(said(&out, "current"), "30");
+}

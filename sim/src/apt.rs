@@ -6,7 +6,7 @@
 //! GET (or its SET, same layout) where the table holds one, else zeros (enumerations' first
 //! value is not needed: the decoder checks structure, and zero is the spec's power-on value for
 //! most fields). Messages the model does not implement are ignored, as a device ignores them,
-//! and the simulator's log ([`AptSim::take_log`]) says so.
+//! and the simulator's log ([`Simulator::take_log`]) says so.
 
 use crate::models::{self, Family, ModelSpec};
 use crate::{earliest, Line, Simulator, MS, SEC};
@@ -57,6 +57,11 @@ const LA_OUTPUT_ENABLED: u32 = 0x1;
 const LA_KEYSWITCH_ENABLED: u32 = 0x2;
 const LA_CLOSED_LOOP: u32 = 0x4;
 const LA_UNITS_MW: u32 = 0x20;
+// ld_status bits (pylablib's KinesisLaserDiodeDriver reads the same).
+const LD_OUTPUT: u32 = 0x1;
+const LD_KEYSWITCH: u32 = 0x2;
+const LD_PSU_OK: u32 = 0x1000;
+const LD_STABLE: u32 = 0x8000_0000;
 // tec_status bits.
 const TEC_OUTPUT_ENABLED: u32 = 0x1;
 const TEC_DISP_TACT: u32 = 0x10;
@@ -488,12 +493,6 @@ impl AptSim {
     /// How many MOD_IDENTIFY requests were received (the LED would flash).
     pub fn identify_count(&self) -> u32 {
         self.identified
-    }
-
-    /// What the simulator noted since the last call: messages ignored as not for the model or
-    /// to no address it has, status updates stopped for want of the host's ACK.
-    pub fn take_log(&mut self) -> Vec<String> {
-        std::mem::take(&mut self.log)
     }
 
     fn note(&mut self, s: String) {
@@ -1446,6 +1445,19 @@ impl AptSim {
                     ("status_bits", int(bits as i64)),
                 ]
             }
+            msg::LD_GET_STATUSUPDATE => {
+                // A laser diode driver: the current follows the power setpoint while the output
+                // is on; key switch, supply and stability bits set.
+                let (c, _, _) = self.laser(ui);
+                let on = self.units[ui].output;
+                let bits = LD_KEYSWITCH | LD_PSU_OK | LD_STABLE | u32::from(on) * LD_OUTPUT;
+                vec![
+                    ("laser_current", int(c)),
+                    ("photo_current", int(c / 2)),
+                    ("laser_voltage", int(if on { 1800 } else { 0 })),
+                    ("status_bits", int(i64::from(bits))),
+                ]
+            }
             msg::TEC_GET_STATUSUPDATE => {
                 let (i, ta, ts, bits) = self.tec(ui);
                 vec![
@@ -1626,6 +1638,12 @@ impl Simulator for AptSim {
     fn poll(&mut self, now_ns: u64) -> Option<Vec<u8>> {
         self.run_events(now_ns);
         self.line.take_due(now_ns)
+    }
+
+    /// Messages ignored as not for the model or to no address it has, sub-message blocks it
+    /// does not have, status updates stopped for want of the host's ACK.
+    fn take_log(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.log)
     }
 
     fn next_deadline(&self) -> Option<u64> {

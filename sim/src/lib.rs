@@ -27,6 +27,11 @@ pub trait Simulator {
     fn poll(&mut self, now_ns: u64) -> Option<Vec<u8>>;
     /// When [`poll`](Self::poll) will next have something to do (`None`: only after input).
     fn next_deadline(&self) -> Option<u64>;
+    /// What the simulator noted since the last call (messages it ignored and why), for its
+    /// runner to show; none by default.
+    fn take_log(&mut self) -> Vec<String> {
+        Vec::new()
+    }
 }
 
 /// Nanoseconds per second.

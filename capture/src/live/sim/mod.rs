@@ -36,12 +36,41 @@ fn serve<S: Simulator>(sim: S, line: SimLine<'_>) -> io::Result<()> {
     }
 }
 
+/// A simulator whose log lines (messages it ignored and why) go to standard error as they come,
+/// `aptscope sim: …`.
+struct Logged<S>(S);
+
+impl<S: Simulator> Logged<S> {
+    fn show(&mut self) {
+        for l in self.0.take_log() {
+            eprintln!("aptscope sim: {l}");
+        }
+    }
+}
+
+impl<S: Simulator> Simulator for Logged<S> {
+    fn input(&mut self, bytes: &[u8], now_ns: u64) {
+        self.0.input(bytes, now_ns);
+        self.show();
+    }
+
+    fn poll(&mut self, now_ns: u64) -> Option<Vec<u8>> {
+        let out = self.0.poll(now_ns);
+        self.show();
+        out
+    }
+
+    fn next_deadline(&self) -> Option<u64> {
+        self.0.next_deadline()
+    }
+}
+
 /// `aptscope sim apt --model MODEL [--pty LINK | --port DEV]`: simulate an APT controller
-/// (`kdc101`, `tdc001`, `kpz101`, `bsc203`, `tls001`, `ttc001`, `kpa101`) on a new
-/// pseudo-terminal (its path printed, and linked at `LINK`) or a serial port, until
-/// SIGINT/SIGTERM or until the program using the pseudo-terminal hangs up.
+/// (any model of the spec: `sim apt --list`) on a new pseudo-terminal (its path printed, and
+/// linked at `LINK`) or a serial port, until SIGINT/SIGTERM or until the program using the
+/// pseudo-terminal hangs up. What the simulator ignores, and why, goes to standard error.
 pub fn sim_apt_main(model: &str, line: SimLine<'_>) -> io::Result<()> {
-    serve(aptscope_sim::apt_sim(model).map_err(invalid)?, line)
+    serve(Logged(aptscope_sim::apt_sim(model).map_err(invalid)?), line)
 }
 
 /// `aptscope sim elliptec --modules 0:ELL14,1:ELL9 [--pty LINK | --port DEV]`: simulate an
