@@ -1098,8 +1098,8 @@ impl AptSim {
     }
 
     /// Outputs that react beyond storing the value: the laser source's enable, the piezo's
-    /// output voltage (within 0..100 %, only while the channel is enabled). False when `r` is
-    /// not of this family.
+    /// output voltage (within 0..100 %, only while the channel is enabled), the strain gauge's
+    /// zero. False when `r` is not of this family.
     fn output_msg(&mut self, r: &Req<'_, '_>) -> bool {
         let Req { f, m, ui, .. } = *r;
         match m.id {
@@ -1113,6 +1113,11 @@ impl AptSim {
                         self.set_field(ui, msg::PZ_GET_OUTPUTVOLTS, "voltage", v);
                     }
                 }
+            }
+            msg::PZ_SET_ZERO if self.model.0.family == Family::StrainGauge => {
+                // The gauge takes its present reading as zero.
+                self.set_field(ui, msg::PZ_GET_TSG_READING, "reading", 0);
+                self.set_field(ui, msg::PZ_GET_TSG_READING, "smoothed", 0);
             }
             _ => return false,
         }

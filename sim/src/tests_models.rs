@@ -177,3 +177,35 @@ fn inertia_motor_models_answer_every_request() {
 fn polariser_models_answer_every_request() {
     every_request_answered(Family::Polariser);
 }
+
+#[test]
+fn a_strain_gauge_zeroes_its_reading() {
+    let t = Table::global();
+    let mut sim = AptSim::new(AptModel::parse("ksg101").expect("model"));
+    let ask = |sim: &mut AptSim, id: u16, now: u64| {
+        let req = build(id, None, 0x50, 0x01, &[("chan_ident", FieldValue::Int(1))]).expect("req");
+        sim.input(&req, now);
+        let mut out = vec![];
+        while let Some(d) = sim.next_deadline().filter(|d| *d <= now + 50 * MS) {
+            out.extend(sim.poll(d).unwrap_or_default());
+        }
+        out
+    };
+    let reading = |b: &[u8]| {
+        let f = AptFrame::decode(t, 0, b, false).expect("frame");
+        f.field("reading").and_then(|(_, v)| v.as_i64())
+    };
+    let before = ask(&mut sim, aptscope_dissector::msg::PZ_REQ_TSG_READING, 1000);
+    assert_ne!(
+        reading(&before),
+        Some(0),
+        "the spec's example reading first"
+    );
+    ask(&mut sim, aptscope_dissector::msg::PZ_SET_ZERO, 100 * MS);
+    let after = ask(
+        &mut sim,
+        aptscope_dissector::msg::PZ_REQ_TSG_READING,
+        200 * MS,
+    );
+    assert_eq!(reading(&after), Some(0));
+}
