@@ -4,6 +4,7 @@
 //! picks the exit status.
 
 use aptscope_capture::live::error::LiveError;
+use aptscope_capture::live::sim::SimError;
 use aptscope_capture::open::{CreateError, OpenError};
 use std::io;
 
@@ -25,6 +26,9 @@ pub(crate) enum CliError {
     /// A tap, sniff, live view or simulator failed.
     #[error(transparent)]
     Live(#[from] LiveError),
+    /// A simulator's arguments name no model or bus it can be.
+    #[error(transparent)]
+    Sim(#[from] SimError),
     /// `replay --check` found the replies differ from the captured ones.
     #[error("differences found (--check)")]
     Differences,
@@ -52,6 +56,7 @@ impl CliError {
                 CreateError::McapToStdout | CreateError::ReadOnly(_) => io::ErrorKind::Unsupported,
             },
             CliError::Live(e) => e.kind(),
+            CliError::Sim(_) => io::ErrorKind::InvalidInput,
             CliError::Differences | CliError::CaptureIncomplete => io::ErrorKind::Other,
             CliError::Io(e) => e.kind(),
         }

@@ -103,15 +103,6 @@ fn every_sample_decodes_without_diagnostics_but_the_intended_ones() {
                 // Noise before the first reply and between two status updates, the last
                 // status update cut after 9 bytes, and the move it was part of never completes.
                 &["garbage", "garbage", "truncated", "no_reply"]
-            } else if *name == "kpz101" {
-                // The simulated KPZ101 answers PZ_REQ_OUTPUTMAXVOLTS and PZ_REQ_PZSTATUSBITS,
-                // which the spec's list for TPZ001/KPZ101 leaves out: the analyser says so.
-                &[
-                    "not_for_model",
-                    "not_for_model",
-                    "not_for_model",
-                    "not_for_model",
-                ]
             } else {
                 &[]
             };

@@ -4,7 +4,7 @@
 use crate::cmd::live::{end_abandoned, live_view, return_view, viewed_file};
 use crate::error::Result;
 use aptscope_capture::live::sim::{
-    apt_sim, ell_model_list, ell_sim, sim_apt_main, sim_elliptec_main, SimLine,
+    apt_sim, ell_model_list, ell_sim, model_list, sim_apt_main, sim_elliptec_main, SimLine,
 };
 use aptscope_capture::live::tap::{sim_with_view, TapOptions};
 use aptscope_dissector::detect::Proto;
@@ -14,10 +14,13 @@ use aptscope_dissector::units::UnitsOpts;
 pub(crate) enum SimCmd {
     /// An APT controller.
     Apt {
-        /// kdc101, tdc001, kpz101, bsc203 (three bays), tls001 (laser), ttc001 (TEC) or kpa101
-        /// (quad detector).
+        /// The controller model, any the spec names (`--list` shows them): kdc101, tdc001,
+        /// bsc203 (three bays), kpz101, k10cr1, kim101, tls001 …
         #[arg(long, default_value = "kdc101")]
         model: String,
+        /// List the models with their family, bays and channels, and exit.
+        #[arg(long)]
+        list: bool,
         /// Symlink to the pseudo-terminal.
         #[arg(long, conflicts_with = "port")]
         pty: Option<std::path::PathBuf>,
@@ -77,6 +80,10 @@ pub(crate) struct SimView {
 /// Run the simulator `what` names.
 pub(crate) fn run(what: SimCmd) -> Result<()> {
     match what {
+        SimCmd::Apt { list: true, .. } => {
+            print!("{}", model_list());
+            Ok(())
+        }
         SimCmd::Elliptec { list: true, .. } => {
             print!("{}", ell_model_list());
             Ok(())

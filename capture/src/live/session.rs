@@ -491,8 +491,8 @@ fn bsc203() -> Result<Vec<Part>, SessionError> {
     )?])
 }
 
-/// KPZ101: identify, enable, open loop, the maximum output, two output voltages with status
-/// updates in between, the status bits.
+/// KPZ101: identify, enable, open loop, the voltage limit, two output voltages with status
+/// updates in between, the status (as pylablib polls it).
 fn kpz101() -> Result<Vec<Part>, SessionError> {
     let mut s = Script::new();
     s.ask("HW_REQ_INFO", USB, "", "HW_GET_INFO")
@@ -508,11 +508,13 @@ fn kpz101() -> Result<Vec<Part>, SessionError> {
             "chan_ident=CH1",
             "PZ_GET_POSCONTROLMODE",
         )
+        // Its voltage limit: a KPZ101 has PZ_REQ_TPZ_IOSETTINGS, not PZ_REQ_OUTPUTMAXVOLTS
+        // (its lists in both revisions of the spec), and the simulator ignores the latter.
         .ask(
-            "PZ_REQ_OUTPUTMAXVOLTS",
+            "PZ_REQ_TPZ_IOSETTINGS",
             USB,
             "chan_ident=CH1",
-            "PZ_GET_OUTPUTMAXVOLTS",
+            "PZ_GET_TPZ_IOSETTINGS",
         )
         .apt("PZ_SET_OUTPUTVOLTS", USB, "chan_ident=CH1 voltage=16384")
         .ask(
@@ -532,11 +534,12 @@ fn kpz101() -> Result<Vec<Part>, SessionError> {
             "chan_ident=CH1",
             "PZ_GET_OUTPUTVOLTS",
         )
+        // Its status as pylablib asks for it (PZ_REQ_PZSTATUSBITS is not in its lists).
         .ask(
-            "PZ_REQ_PZSTATUSBITS",
+            "PZ_REQ_PZSTATUSUPDATE",
             USB,
             "chan_ident=CH1",
-            "PZ_GET_PZSTATUSBITS",
+            "PZ_GET_PZSTATUSUPDATE",
         );
     Ok(vec![part(
         Device::Apt(AptModel::Kpz101),

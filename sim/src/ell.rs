@@ -265,7 +265,7 @@ pub struct EllSim {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum SimError {
     /// An APT model that is not simulated.
-    #[error("unknown model `{0}` ({names})", names = super::AptModel::NAMES.join(", "))]
+    #[error("unknown model `{0}` (`aptscope sim apt --list` lists them)")]
     UnknownApt(String),
     /// A part of the module list that is not `ADDRESS:MODEL`.
     #[error("`{0}`: expected ADDRESS:MODEL, e.g. 0:ELL14")]
