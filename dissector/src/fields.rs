@@ -13,138 +13,11 @@ use crate::diag::Diag;
 use crate::ell::table::Kind as EllKind;
 use crate::ell::EllValue;
 use crate::record::{AptRec, EllRec, Record};
+use crate::shape::{curve_members, ell_derived, CurveNum, DerivedVal, EllDerived};
 use std::borrow::Cow;
 
-/// The top-level keys of records, as filters and statistics name them.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-#[allow(missing_docs)]
-pub enum Key {
-    File,
-    N,
-    Proto,
-    Type,
-    Offset,
-    CapOffset,
-    Len,
-    Raw,
-    Msgid,
-    MsgidHex,
-    Name,
-    MsgDir,
-    Src,
-    Dst,
-    DataFlag,
-    DataLen,
-    FormNote,
-    Channel,
-    Sub,
-    Fields,
-    Phys,
-    Codes,
-    Pair,
-    LatencyMs,
-    PairOtherAddress,
-    Interim,
-    Diag,
-    Dir,
-    TsNs,
-    Stream,
-    StreamName,
-    Ref,
-    Unpaired,
-    Paired,
-    Text,
-    Addr,
-    Cmd,
-    Module,
-}
-
-/// Usable without a protocol prefix.
-pub const TOP: u8 = 1;
-/// A key of APT records (`apt.` prefix).
-pub const APT: u8 = 2;
-/// A key of Elliptec records (`ell.` prefix).
-pub const ELL: u8 = 4;
-
-/// One name a filter may use: the key it reads and where it is valid.
-#[derive(Clone, Copy, Debug)]
-pub struct KeyDef {
-    /// The name as written in a filter (an NDJSON key, or an alias of one).
-    pub name: &'static str,
-    /// The key read.
-    pub key: Key,
-    /// [`TOP`], [`APT`], [`ELL`] bits.
-    pub scope: u8,
-}
-
-const fn k(name: &'static str, key: Key, scope: u8) -> KeyDef {
-    KeyDef { name, key, scope }
-}
-
-/// Every name of the filter language: NDJSON keys and the aliases `chan` (`channel`), `ts`
-/// (`ts_ns`, in seconds), `latency` (`latency_ms`). The one list the name check, the
-/// suggestions and the accessors share.
-pub const KEYS: &[KeyDef] = &[
-    k("file", Key::File, TOP),
-    k("n", Key::N, TOP | APT | ELL),
-    k("proto", Key::Proto, TOP | APT | ELL),
-    k("type", Key::Type, TOP | APT | ELL),
-    k("offset", Key::Offset, TOP | APT | ELL),
-    k("cap_offset", Key::CapOffset, TOP | APT | ELL),
-    k("len", Key::Len, TOP | APT | ELL),
-    k("raw", Key::Raw, TOP | APT | ELL),
-    k("msgid", Key::Msgid, APT),
-    k("msgid_hex", Key::MsgidHex, APT),
-    k("name", Key::Name, APT | ELL),
-    k("msg_dir", Key::MsgDir, APT),
-    k("src", Key::Src, APT),
-    k("dst", Key::Dst, APT),
-    k("data_flag", Key::DataFlag, APT),
-    k("data_len", Key::DataLen, APT),
-    k("form_note", Key::FormNote, APT),
-    k("channel", Key::Channel, APT),
-    k("chan", Key::Channel, APT),
-    k("sub", Key::Sub, APT),
-    k("text", Key::Text, ELL),
-    k("addr", Key::Addr, ELL),
-    k("cmd", Key::Cmd, ELL),
-    k("fields", Key::Fields, APT | ELL),
-    k("phys", Key::Phys, APT | ELL),
-    k("codes", Key::Codes, APT | ELL),
-    k("module", Key::Module, ELL),
-    k("pair", Key::Pair, TOP | APT | ELL),
-    k("latency", Key::LatencyMs, TOP | APT | ELL),
-    k("latency_ms", Key::LatencyMs, TOP | APT | ELL),
-    k("pair_other_address", Key::PairOtherAddress, APT),
-    k("interim", Key::Interim, TOP | ELL),
-    k("diag", Key::Diag, TOP | APT | ELL),
-    k("dir", Key::Dir, TOP | APT | ELL),
-    k("ts", Key::TsNs, TOP | APT | ELL),
-    k("ts_ns", Key::TsNs, TOP | APT | ELL),
-    k("stream", Key::Stream, TOP | APT | ELL),
-    // Read by statistics, not offered to filters (it would be suggested for `name`).
-    k("stream_name", Key::StreamName, 0),
-    k("ref", Key::Ref, TOP | APT | ELL),
-    k("unpaired", Key::Unpaired, TOP | APT | ELL),
-    k("paired", Key::Paired, TOP | APT | ELL),
-];
-
-impl Key {
-    /// The key's NDJSON name.
-    pub fn json_name(self) -> &'static str {
-        match self {
-            Key::Channel => "channel",
-            Key::LatencyMs => "latency_ms",
-            Key::TsNs => "ts_ns",
-            other => KEYS.iter().find(|d| d.key == other).map_or("", |d| d.name),
-        }
-    }
-
-    /// The definition of a filter name valid in `scope`.
-    pub fn lookup(name: &str, scope: u8) -> Option<&'static KeyDef> {
-        KEYS.iter().find(|d| d.name == name && d.scope & scope != 0)
-    }
-}
+// The key list and the `codes` rules live with the rest of the record's shape.
+pub use crate::shape::{apt_code, ell_code, Key, KeyDef, APT, ELL, KEYS, TOP};
 
 /// A number: integers stay exact.
 #[derive(Clone, Copy, Debug)]
@@ -390,9 +263,9 @@ fn float(x: f64) -> Option<Val<'static>> {
 }
 
 fn hex(b: &[u8]) -> Val<'static> {
-    let mut s = String::with_capacity(b.len() * 2 + 2);
-    crate::json::hex(&mut s, b);
-    Val::Str(Cow::Owned(s.trim_matches('"').to_string()))
+    let mut s = String::with_capacity(b.len() * 2);
+    crate::shape::hex_digits(&mut s, b);
+    Val::Str(Cow::Owned(s))
 }
 
 /// A member object given as `(name, value)` pairs: the path below it, or itself.
@@ -558,7 +431,7 @@ impl Fields for Record<'_> {
                     Key::Text if g.kind.is_none() => Val::Str(String::from_utf8_lossy(g.bytes)),
                     Key::Diag => {
                         let d = match g.kind {
-                            Some(kind) => crate::json::garbage_diag(g.offset, g.bytes.len(), kind),
+                            Some(kind) => crate::shape::garbage_diag(g.offset, g.bytes.len(), kind),
                             None => Diag {
                                 offset: g.offset,
                                 kind: crate::DiagKind::Garbage {
@@ -728,26 +601,6 @@ fn apt_value<'v>(
     }
 }
 
-/// The numeric code of an enum or flag field (what `codes` holds).
-pub fn apt_code(fd: &crate::table::Field, v: &AptValue<'_>) -> Option<i128> {
-    if fd.enumeration.is_none() && fd.flags.is_none() {
-        return None;
-    }
-    match v {
-        AptValue::U(x) => Some(i128::from(*x)),
-        AptValue::I(x) => Some(i128::from(*x)),
-        _ => None,
-    }
-}
-
-/// The numeric code of an Elliptec field shown by name (status codes).
-pub fn ell_code(fd: &crate::ell::table::Field, v: &EllValue<'_>) -> Option<u64> {
-    match (fd.kind, v) {
-        (EllKind::Status, EllValue::U(c)) => Some(*c),
-        _ => None,
-    }
-}
-
 fn apt_visit(a: &AptRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
     let fr = a.frame;
     let h = fr.header();
@@ -760,7 +613,7 @@ fn apt_visit(a: &AptRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_
     };
     if let Some(found) = frame_key(
         &common,
-        || crate::json::apt_diags(fr, a.pair),
+        || crate::shape::apt_diags(fr, a.pair),
         || {
             fr.fields()
                 .filter_map(|(fd, v)| Some((fd.name, crate::apt::phys_or_scaled(fd, &v, a.scale)?)))
@@ -864,8 +717,8 @@ fn own(v: Val<'_>) -> Val<'static> {
     }
 }
 
-/// The value of an Elliptec field, or of a key NDJSON derives beside it (`curve_points`,
-/// `<name>_name`, `<name>_version`, `thread`, `hw_release`), by name.
+/// The value of an Elliptec field, or of a key NDJSON derives beside it
+/// ([`crate::shape::ell_derived`]), by name.
 fn ell_field(
     fr: &crate::ell::EllFrame<'_>,
     name: &str,
@@ -873,74 +726,52 @@ fn ell_field(
     f: &mut dyn FnMut(Val<'_>, Role),
 ) {
     // The last key of that name wins, as in a JSON object with a repeated key.
-    let mut last: Option<(&crate::ell::table::Field, EllValue<'_>, u8)> = None;
+    let mut last: Option<(&crate::ell::table::Field, EllValue<'_>, Option<&EllDerived>)> = None;
     for (fd, v) in fr.fields() {
-        let which = if fd.name == name {
-            1
-        } else {
-            match (fd.kind, v) {
-                (EllKind::Raw, EllValue::Raw(_)) if name == "curve_points" => 2,
-                (EllKind::Model, EllValue::U(_)) if name.strip_suffix("_name") == Some(fd.name) => {
-                    3
-                }
-                (EllKind::Firmware, EllValue::U(_))
-                    if name.strip_suffix("_version") == Some(fd.name) =>
-                {
-                    4
-                }
-                (EllKind::ThreadHw, EllValue::U(_)) if name == "thread" => 5,
-                (EllKind::ThreadHw, EllValue::U(_)) if name == "hw_release" => 6,
-                _ => 0,
-            }
-        };
-        if which > 0 {
-            last = Some((fd, v, which));
+        if fd.name == name {
+            last = Some((fd, v, None));
+        } else if let Some(d) = ell_derived(fd.kind)
+            .iter()
+            .find(|d| d.name.is(name, fd.name) && (d.value)(&v).is_some())
+        {
+            last = Some((fd, v, Some(d)));
         }
     }
-    let Some((fd, v, which)) = last else { return };
-    match (which, v) {
-        (1, v) => {
-            let x = match (fd.kind, v) {
-                (EllKind::Status, EllValue::U(c)) => {
-                    str_val(crate::ell::table::status_name(c as u32))
-                }
-                (_, EllValue::U(x)) => num(x),
-                (_, EllValue::I(x)) => num(x),
-                (_, EllValue::Char(c)) => Val::Str(Cow::Owned(c.to_string())),
-                (_, EllValue::Digits(d)) => Val::Str(Cow::Owned(d.to_string())),
-                (_, EllValue::Raw(b)) => hex(b),
-            };
-            scalar(rest, x, f);
-            if rest.is_empty() {
-                if let Some(c) = ell_code(fd, &v) {
-                    f(num(c), Role::Code);
-                }
+    let Some((fd, v, derived)) = last else { return };
+    let Some(d) = derived else {
+        let x = match (fd.kind, v) {
+            (EllKind::Status, EllValue::U(c)) => str_val(crate::ell::table::status_name(c as u32)),
+            (_, EllValue::U(x)) => num(x),
+            (_, EllValue::I(x)) => num(x),
+            (_, EllValue::Char(c)) => Val::Str(Cow::Owned(c.to_string())),
+            (_, EllValue::Digits(d)) => Val::Str(Cow::Owned(d.to_string())),
+            (_, EllValue::Raw(b)) => hex(b),
+        };
+        scalar(rest, x, f);
+        if rest.is_empty() {
+            if let Some(c) = ell_code(fd, &v) {
+                f(num(c), Role::Code);
             }
         }
-        (2, EllValue::Raw(b)) => {
+        return;
+    };
+    match (d.value)(&v) {
+        Some(DerivedVal::Curve(b)) => {
             for p in crate::ell::curve_points(b) {
-                let members = [
-                    ("period", Some(num(p.period))),
-                    ("current", Some(num(p.current))),
-                    ("hz", float(p.hz().round())),
-                    ("amps", float(crate::apt::round_sig(p.amps()))),
-                ];
+                let members = curve_members(&p).map(|(n, x)| {
+                    let x = match x {
+                        CurveNum::U(u) => Some(num(u)),
+                        CurveNum::F(x) => float(x),
+                    };
+                    (n, x)
+                });
                 object(rest, &members, Role::Member, f);
             }
         }
-        (3, EllValue::U(x)) => scalar(rest, Val::Str(Cow::Owned(format!("ELL{x}"))), f),
-        (4, EllValue::U(x)) => scalar(
-            rest,
-            Val::Str(Cow::Owned(format!("{}.{}", x >> 4, x & 15))),
-            f,
-        ),
-        (5, EllValue::U(x)) => scalar(
-            rest,
-            str_val(if x & 0x80 != 0 { "imperial" } else { "metric" }),
-            f,
-        ),
-        (6, EllValue::U(x)) => scalar(rest, num(x & 0x7F), f),
-        _ => {}
+        Some(DerivedVal::Word(w)) => scalar(rest, str_val(w), f),
+        Some(DerivedVal::Uint(x)) => scalar(rest, num(x), f),
+        Some(x) => scalar(rest, Val::Str(Cow::Owned(x.to_string())), f),
+        None => {}
     }
 }
 
@@ -959,7 +790,7 @@ fn ell_visit(e: &EllRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_
         || fr.diags().iter().copied(),
         || {
             fr.fields()
-                .filter_map(move |(fd, v)| Some((fd.name, crate::json::ell_phys(fd, &v, scale)?)))
+                .filter_map(move |(fd, v)| Some((fd.name, crate::shape::ell_phys(fd, &v, scale)?)))
         },
         || {
             fr.fields()
@@ -1006,7 +837,9 @@ fn ell_visit(e: &EllRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_
                     ("first_addr", Some(num(md.first_addr))),
                     (
                         "model",
-                        md.model.map(|x| Val::Str(Cow::Owned(format!("ELL{x}")))),
+                        md.model.map(|x| {
+                            Val::Str(Cow::Owned(DerivedVal::Model(u64::from(x)).to_string()))
+                        }),
                     ),
                     ("serial", md.serial.as_deref().map(str_val)),
                 ];

@@ -1,7 +1,7 @@
 //! The key list: the names a filter may use, resolved to record keys, with suggestions for unknown ones.
 
 use super::ast::FieldRef;
-use crate::fields::{Key, APT, ELL, KEYS, TOP};
+use crate::shape::{ell_derived, DerivedName, Key, APT, ELL, KEYS, TOP};
 
 /// Names usable without a protocol prefix.
 fn top_level() -> impl Iterator<Item = &'static str> + Clone {
@@ -34,16 +34,13 @@ fn field_names(proto: &str) -> &'static [&'static str] {
             for c in crate::ell::table::COMMANDS {
                 for f in c.fields {
                     v.push(f.name);
-                    match f.kind {
-                        crate::ell::table::Kind::Model => {
-                            v.push(Box::leak(format!("{}_name", f.name).into_boxed_str()))
-                        }
-                        crate::ell::table::Kind::Firmware => {
-                            v.push(Box::leak(format!("{}_version", f.name).into_boxed_str()))
-                        }
-                        crate::ell::table::Kind::ThreadHw => v.extend(["thread", "hw_release"]),
-                        crate::ell::table::Kind::Raw => v.push("curve_points"),
-                        _ => {}
+                    for d in ell_derived(f.kind) {
+                        v.push(match d.name {
+                            DerivedName::Fixed(name) => name,
+                            DerivedName::Suffix(s) => {
+                                Box::leak(format!("{}{s}", f.name).into_boxed_str())
+                            }
+                        });
                     }
                 }
             }

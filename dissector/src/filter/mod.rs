@@ -19,7 +19,7 @@
 //! value   := "string" | 123 | 0x1F | -5 | 1.5 | 50ms | true | false | bare_word
 //! ```
 //!
-//! Fields name NDJSON keys (the list is [`crate::fields::KEYS`]), with a few aliases: `apt.chan` is `channel`, `ts` is `ts_ns` in
+//! Fields name NDJSON keys (the list is [`crate::shape::KEYS`]), with a few aliases: `apt.chan` is `channel`, `ts` is `ts_ns` in
 //! seconds (capture time, not relative to the first record), `latency` is `latency_ms`;
 //! durations (`50ms`, `1.5s`, `200us`, `2min`) convert to the unit of `ts`, `ts_ns` and
 //! `latency`, plain numbers are in that unit. `len` (also `apt.len`) is the record's length in
