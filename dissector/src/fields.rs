@@ -12,8 +12,8 @@ use crate::apt::{text_of, AptFrame, Value as AptValue};
 use crate::diag::Diag;
 use crate::ell::table::Kind as EllKind;
 use crate::ell::EllValue;
-use crate::record::{AptRec, EllRec, Record};
-use crate::shape::{curve_members, ell_derived, CurveNum, DerivedVal, EllDerived};
+use crate::record::{AptRec, EllRec, GarbageRec, Record};
+use crate::shape::{self, curve_members, ell_derived, CurveNum, DerivedVal, EllDerived, Head};
 use std::borrow::Cow;
 
 // The key list and the `codes` rules live with the rest of the record's shape.
@@ -376,40 +376,19 @@ impl Fields for Record<'_> {
     // What `visit` gives as one plain number or word for the commonest keys of frames and
     // garbage (statistics and filters read them for every record).
     fn number(&self, key: Key) -> Option<i64> {
-        let (m, offset, len, pair) = match self {
-            Record::Apt(a) => (&a.meta, a.frame.offset, a.frame.bytes.len(), a.pair.pair),
-            Record::Ell(e) => (&e.meta, e.frame.offset, e.frame.bytes.len(), e.obs.pair),
-            Record::Garbage(g) => (&g.meta, g.offset, g.bytes.len(), None),
-            _ => return None,
-        };
-        let frame = !matches!(self, Record::Garbage(_));
-        let x: u64 = match key {
-            Key::N => m.n,
-            Key::Offset => offset,
-            Key::CapOffset => m.cap_offset,
-            Key::Len => len as u64,
-            Key::Stream => u64::from(m.stream),
-            Key::TsNs => m.ts_ns?,
-            Key::Pair if frame => pair?,
-            Key::Msgid => match self {
-                Record::Apt(a) => u64::from(a.frame.header().msg_id()),
-                _ => return None,
-            },
-            Key::Channel => match self {
-                Record::Apt(a) => return a.frame.channel(),
-                _ => return None,
-            },
-            _ => return None,
-        };
-        i64::try_from(x).ok()
+        match self {
+            Record::Apt(a) => shape::number(a, key),
+            Record::Ell(e) => shape::number(e, key),
+            Record::Garbage(g) => shape::number(g, key),
+            _ => None,
+        }
     }
 
     fn word(&self, key: Key) -> Option<&'static str> {
-        match (self, key) {
-            (Record::Apt(_) | Record::Ell(_), Key::Type) => Some("frame"),
-            (Record::Garbage(_), Key::Type) => Some("garbage"),
-            (Record::Apt(a), Key::Dir) => Some(a.dir().map_or("unknown", |d| d.as_str())),
-            (Record::Apt(a), Key::Name) => a.frame.msg.map(|m| m.name),
+        match self {
+            Record::Apt(a) => shape::word(a, key),
+            Record::Ell(e) => shape::word(e, key),
+            Record::Garbage(g) => shape::word(g, key),
             _ => None,
         }
     }
@@ -542,6 +521,123 @@ impl Fields for Record<'_> {
                 _ => false,
             },
         }
+    }
+}
+
+impl Head for AptRec<'_> {
+    fn n(&self) -> u64 {
+        self.meta.n
+    }
+    fn kind(&self) -> &'static str {
+        "frame"
+    }
+    fn offset(&self) -> u64 {
+        self.frame.offset
+    }
+    fn cap_offset(&self) -> u64 {
+        self.meta.cap_offset
+    }
+    fn len(&self) -> u64 {
+        self.frame.bytes.len() as u64
+    }
+    fn stream(&self) -> u32 {
+        self.meta.stream
+    }
+    fn ts_ns(&self) -> Option<u64> {
+        self.meta.ts_ns
+    }
+    fn pair(&self) -> Option<u64> {
+        self.pair.pair
+    }
+    fn msgid(&self) -> Option<u16> {
+        Some(self.frame.header().msg_id())
+    }
+    fn channel(&self) -> Option<i64> {
+        self.frame.channel()
+    }
+    fn dir(&self) -> Option<&'static str> {
+        Some(AptRec::dir(self).map_or("unknown", |d| d.as_str()))
+    }
+    fn name(&self) -> Option<&'static str> {
+        self.frame.msg.map(|m| m.name)
+    }
+}
+
+impl Head for EllRec<'_> {
+    fn n(&self) -> u64 {
+        self.meta.n
+    }
+    fn kind(&self) -> &'static str {
+        "frame"
+    }
+    fn offset(&self) -> u64 {
+        self.frame.offset
+    }
+    fn cap_offset(&self) -> u64 {
+        self.meta.cap_offset
+    }
+    fn len(&self) -> u64 {
+        self.frame.bytes.len() as u64
+    }
+    fn stream(&self) -> u32 {
+        self.meta.stream
+    }
+    fn ts_ns(&self) -> Option<u64> {
+        self.meta.ts_ns
+    }
+    fn pair(&self) -> Option<u64> {
+        self.obs.pair
+    }
+    fn msgid(&self) -> Option<u16> {
+        None
+    }
+    fn channel(&self) -> Option<i64> {
+        None
+    }
+    fn dir(&self) -> Option<&'static str> {
+        None
+    }
+    fn name(&self) -> Option<&'static str> {
+        None
+    }
+}
+
+impl Head for GarbageRec<'_> {
+    fn n(&self) -> u64 {
+        self.meta.n
+    }
+    fn kind(&self) -> &'static str {
+        "garbage"
+    }
+    fn offset(&self) -> u64 {
+        self.offset
+    }
+    fn cap_offset(&self) -> u64 {
+        self.meta.cap_offset
+    }
+    fn len(&self) -> u64 {
+        self.bytes.len() as u64
+    }
+    fn stream(&self) -> u32 {
+        self.meta.stream
+    }
+    fn ts_ns(&self) -> Option<u64> {
+        self.meta.ts_ns
+    }
+    fn pair(&self) -> Option<u64> {
+        None
+    }
+    fn msgid(&self) -> Option<u16> {
+        None
+    }
+    fn channel(&self) -> Option<i64> {
+        None
+    }
+    fn dir(&self) -> Option<&'static str> {
+        None
+    }
+    fn name(&self) -> Option<&'static str> {
+        None
     }
 }
 

@@ -148,6 +148,69 @@ impl Key {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Record-level values at hand.
+
+/// The record-level values of a frame or garbage record, as a holder of it keeps them (a typed
+/// [`crate::record::Record`], the terminal UI's compact record): what [`number`] and [`word`]
+/// answer for their keys. `None`: not at hand (read the record through
+/// [`crate::fields::Fields::visit`]).
+pub trait Head {
+    /// `n`.
+    fn n(&self) -> u64;
+    /// `type`: `frame` or `garbage`.
+    fn kind(&self) -> &'static str;
+    /// `offset`, in the record's lane.
+    fn offset(&self) -> u64;
+    /// `cap_offset`.
+    fn cap_offset(&self) -> u64;
+    /// `len`.
+    fn len(&self) -> u64;
+    /// `stream`.
+    fn stream(&self) -> u32;
+    /// `ts_ns`.
+    fn ts_ns(&self) -> Option<u64>;
+    /// `pair`: the request a reply answers.
+    fn pair(&self) -> Option<u64>;
+    /// `msgid` of an APT frame.
+    fn msgid(&self) -> Option<u16>;
+    /// `channel` of an APT frame.
+    fn channel(&self) -> Option<i64>;
+    /// `dir`.
+    fn dir(&self) -> Option<&'static str>;
+    /// `name` of an APT frame's message.
+    fn name(&self) -> Option<&'static str>;
+}
+
+/// The one number at top-level `key` that `h` has at hand (see [`crate::fields::Fields::number`]).
+#[inline]
+pub fn number<H: Head + ?Sized>(h: &H, key: Key) -> Option<i64> {
+    let x: u64 = match key {
+        Key::N => h.n(),
+        Key::Offset => h.offset(),
+        Key::CapOffset => h.cap_offset(),
+        Key::Len => h.len(),
+        Key::Stream => u64::from(h.stream()),
+        Key::TsNs => h.ts_ns()?,
+        Key::Pair => h.pair()?,
+        Key::Msgid => u64::from(h.msgid()?),
+        Key::Channel => return h.channel(),
+        _ => return None,
+    };
+    i64::try_from(x).ok()
+}
+
+/// The one word at top-level `key` that `h` has at hand (see [`crate::fields::Fields::word`]).
+#[inline]
+pub fn word<H: Head + ?Sized>(h: &H, key: Key) -> Option<&'static str> {
+    match key {
+        Key::Type => Some(h.kind()),
+        Key::Dir => h.dir(),
+        Key::Name => h.name(),
+        _ => None,
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Keys derived beside an Elliptec field.
 
 /// How a key derived beside an Elliptec field is named.
