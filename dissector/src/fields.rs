@@ -537,7 +537,7 @@ impl Head for AptRec<'_> {
     fn cap_offset(&self) -> u64 {
         self.meta.cap_offset
     }
-    fn len(&self) -> u64 {
+    fn len_bytes(&self) -> u64 {
         self.frame.bytes.len() as u64
     }
     fn stream(&self) -> u32 {
@@ -576,7 +576,7 @@ impl Head for EllRec<'_> {
     fn cap_offset(&self) -> u64 {
         self.meta.cap_offset
     }
-    fn len(&self) -> u64 {
+    fn len_bytes(&self) -> u64 {
         self.frame.bytes.len() as u64
     }
     fn stream(&self) -> u32 {
@@ -615,7 +615,7 @@ impl Head for GarbageRec<'_> {
     fn cap_offset(&self) -> u64 {
         self.meta.cap_offset
     }
-    fn len(&self) -> u64 {
+    fn len_bytes(&self) -> u64 {
         self.bytes.len() as u64
     }
     fn stream(&self) -> u32 {

@@ -164,7 +164,7 @@ pub trait Head {
     /// `cap_offset`.
     fn cap_offset(&self) -> u64;
     /// `len`.
-    fn len(&self) -> u64;
+    fn len_bytes(&self) -> u64;
     /// `stream`.
     fn stream(&self) -> u32;
     /// `ts_ns`.
@@ -188,7 +188,7 @@ pub fn number<H: Head + ?Sized>(h: &H, key: Key) -> Option<i64> {
         Key::N => h.n(),
         Key::Offset => h.offset(),
         Key::CapOffset => h.cap_offset(),
-        Key::Len => h.len(),
+        Key::Len => h.len_bytes(),
         Key::Stream => u64::from(h.stream()),
         Key::TsNs => h.ts_ns()?,
         Key::Pair => h.pair()?,

@@ -292,7 +292,7 @@ impl Head for View<'_> {
     fn cap_offset(&self) -> u64 {
         self.r.cap_offset
     }
-    fn len(&self) -> u64 {
+    fn len_bytes(&self) -> u64 {
         u64::from(self.r.len)
     }
     fn stream(&self) -> u32 {
