@@ -524,28 +524,35 @@ impl Fields for Record<'_> {
     }
 }
 
+/// The [`Head`] values APT and Elliptec frames give alike, from their context and bytes.
+macro_rules! frame_head {
+    () => {
+        fn n(&self) -> u64 {
+            self.meta.n
+        }
+        fn kind(&self) -> &'static str {
+            "frame"
+        }
+        fn offset(&self) -> u64 {
+            self.frame.offset
+        }
+        fn cap_offset(&self) -> u64 {
+            self.meta.cap_offset
+        }
+        fn len_bytes(&self) -> u64 {
+            self.frame.bytes.len() as u64
+        }
+        fn stream(&self) -> u32 {
+            self.meta.stream
+        }
+        fn ts_ns(&self) -> Option<u64> {
+            self.meta.ts_ns
+        }
+    };
+}
+
 impl Head for AptRec<'_> {
-    fn n(&self) -> u64 {
-        self.meta.n
-    }
-    fn kind(&self) -> &'static str {
-        "frame"
-    }
-    fn offset(&self) -> u64 {
-        self.frame.offset
-    }
-    fn cap_offset(&self) -> u64 {
-        self.meta.cap_offset
-    }
-    fn len_bytes(&self) -> u64 {
-        self.frame.bytes.len() as u64
-    }
-    fn stream(&self) -> u32 {
-        self.meta.stream
-    }
-    fn ts_ns(&self) -> Option<u64> {
-        self.meta.ts_ns
-    }
+    frame_head!();
     fn pair(&self) -> Option<u64> {
         self.pair.pair
     }
@@ -564,27 +571,7 @@ impl Head for AptRec<'_> {
 }
 
 impl Head for EllRec<'_> {
-    fn n(&self) -> u64 {
-        self.meta.n
-    }
-    fn kind(&self) -> &'static str {
-        "frame"
-    }
-    fn offset(&self) -> u64 {
-        self.frame.offset
-    }
-    fn cap_offset(&self) -> u64 {
-        self.meta.cap_offset
-    }
-    fn len_bytes(&self) -> u64 {
-        self.frame.bytes.len() as u64
-    }
-    fn stream(&self) -> u32 {
-        self.meta.stream
-    }
-    fn ts_ns(&self) -> Option<u64> {
-        self.meta.ts_ns
-    }
+    frame_head!();
     fn pair(&self) -> Option<u64> {
         self.obs.pair
     }

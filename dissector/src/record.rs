@@ -737,6 +737,17 @@ trait Framer {
     ) -> Result<bool, E>;
 }
 
+/// The index of `stream`'s entry in `list`, made with `make` on first use.
+fn slot<T>(list: &mut Vec<(u32, T)>, stream: u32, make: impl FnOnce() -> T) -> usize {
+    match list.iter().position(|(s, _)| *s == stream) {
+        Some(i) => i,
+        None => {
+            list.push((stream, make()));
+            list.len() - 1
+        }
+    }
+}
+
 /// APT: the pairer and the units tracker see every frame.
 struct AptSide;
 
@@ -744,15 +755,12 @@ impl Framer for AptSide {
     const PROTO: Proto = Proto::Apt;
 
     fn state(track: &mut Track, stream: u32) -> usize {
-        match track.pairers.iter().position(|(s, _)| *s == stream) {
-            Some(p) => p,
-            None => {
-                let mut p = AptPairer::new();
-                p.timeout_ns = track.reply_timeout;
-                track.pairers.push((stream, p));
-                track.pairers.len() - 1
-            }
-        }
+        let timeout_ns = track.reply_timeout;
+        slot(&mut track.pairers, stream, || {
+            let mut p = AptPairer::new();
+            p.timeout_ns = timeout_ns;
+            p
+        })
     }
 
     #[inline]
@@ -828,15 +836,12 @@ impl Framer for EllSide {
     const PROTO: Proto = Proto::Elliptec;
 
     fn state(track: &mut Track, stream: u32) -> usize {
-        match track.buses.iter().position(|(s, _)| *s == stream) {
-            Some(b) => b,
-            None => {
-                let mut b = Bus::new();
-                b.timeout_ns = track.reply_timeout;
-                track.buses.push((stream, b));
-                track.buses.len() - 1
-            }
-        }
+        let timeout_ns = track.reply_timeout;
+        slot(&mut track.buses, stream, || {
+            let mut b = Bus::new();
+            b.timeout_ns = timeout_ns;
+            b
+        })
     }
 
     #[inline]
