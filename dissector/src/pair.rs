@@ -412,6 +412,33 @@ impl AptPairer {
         ts: Option<u64>,
         info: &mut PairInfo,
     ) {
+        self.sweep(table, m, &p);
+        info.pair = Some(p.n);
+        info.other_address = p.device != src;
+        info.latency_ns = match (p.ts, ts) {
+            (Some(a), Some(b)) => Some(b.saturating_sub(a)),
+            _ => None,
+        };
+        if self.recent_keys.is_empty() {
+            self.recent_keys = vec![0; 1 << 16];
+        }
+        if self.recent.len() == RECENT {
+            if let Some(old) = self.recent.pop_front() {
+                let c = &mut self.recent_keys[recent_key(old.reply_id, old.device)];
+                *c = c.saturating_sub(1);
+            }
+        }
+        self.recent_keys[recent_key(m.id, p.device)] += 1;
+        self.recent.push_back(Answered {
+            n: p.n,
+            reply_id: m.id,
+            device: p.device,
+            chan: p.chan,
+        });
+    }
+
+    /// The other requests reply `m` also ends besides `p`, dropped.
+    fn sweep(&mut self, table: &Table, m: &MsgDef, p: &Pending) {
         // Requests are answered first in, first out per (device, channel, reply). An
         // end-of-move reply (`class=end_of_move`) also ends what the move it reports
         // superseded: the other moves waiting on that device and channel (one
@@ -449,28 +476,6 @@ impl AptPairer {
             self.remove(k);
         }
         self.also = also;
-        info.pair = Some(p.n);
-        info.other_address = p.device != src;
-        info.latency_ns = match (p.ts, ts) {
-            (Some(a), Some(b)) => Some(b.saturating_sub(a)),
-            _ => None,
-        };
-        if self.recent_keys.is_empty() {
-            self.recent_keys = vec![0; 1 << 16];
-        }
-        if self.recent.len() == RECENT {
-            if let Some(old) = self.recent.pop_front() {
-                let c = &mut self.recent_keys[recent_key(old.reply_id, old.device)];
-                *c = c.saturating_sub(1);
-            }
-        }
-        self.recent_keys[recent_key(m.id, p.device)] += 1;
-        self.recent.push_back(Answered {
-            n: p.n,
-            reply_id: m.id,
-            device: p.device,
-            chan: p.chan,
-        });
     }
 
     /// A reply no waiting request expects: a repeat of a reply already paired (the same id
