@@ -1,13 +1,14 @@
 //! The record's shape, described once: the keys of each record kind as NDJSON names them
-//! ([`KEYS`], with the filter's aliases and where each is valid), the keys NDJSON derives
-//! beside an Elliptec field ([`ell_derived`]: their names and values), and the rules that
-//! make a value of a record (`codes`, `phys` of Elliptec positions, the diagnostics of a frame
-//! or garbage run, raw bytes as hex).
+//! ([`KEYS`], with the filter's aliases and where each is valid), the record-level values a
+//! holder of a record has at hand ([`Head`], answered by [`number`] and [`word`]), the keys
+//! NDJSON derives beside an Elliptec field ([`ell_derived`]: their names and values), and the
+//! rules that make a value of a record (`codes`, `phys` of Elliptec positions, the diagnostics
+//! of a frame or garbage run, raw bytes as hex).
 //!
 //! The NDJSON writer ([`crate::json`]), the field access of filters and statistics
-//! ([`crate::fields`]), the filter's name check and suggestions ([`crate::filter`]), the
-//! terminal UI's compact records and the replay's decoded view all read this module; it reads
-//! none of them.
+//! ([`crate::fields`]), the filter's name check and suggestions ([`crate::filter`]) and the
+//! terminal UI's compact records read this module (the replay's decoded view reads the
+//! writer); it reads none of them.
 
 use crate::apt::{AptFrame, GarbageKind, Value as AptValue};
 use crate::diag::{Diag, DiagKind};
