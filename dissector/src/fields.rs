@@ -397,130 +397,147 @@ impl Fields for Record<'_> {
         match self {
             Record::Apt(a) => apt_visit(a, key, rest, f),
             Record::Ell(e) => ell_visit(e, key, rest, f),
-            Record::Garbage(g) => {
-                let m = &g.meta;
-                let v = match key {
-                    Key::N => num(m.n),
-                    Key::Proto => str_val(g.proto.code()),
-                    Key::Type => str_val("garbage"),
-                    Key::Offset => num(g.offset),
-                    Key::CapOffset => num(m.cap_offset),
-                    Key::Len => num(g.bytes.len() as u64),
-                    Key::Raw => hex(g.bytes),
-                    Key::Text if g.kind.is_none() => Val::Str(String::from_utf8_lossy(g.bytes)),
-                    Key::Diag => {
-                        let d = match g.kind {
-                            Some(kind) => crate::shape::garbage_diag(g.offset, g.bytes.len(), kind),
-                            None => Diag {
-                                offset: g.offset,
-                                kind: crate::DiagKind::Garbage {
-                                    len: g.bytes.len() as u32,
-                                },
-                            },
-                        };
-                        diag_list(rest, std::iter::once(d), f);
-                        return true;
-                    }
-                    // Elliptec garbage has no direction (the bus tells none).
-                    Key::Dir if g.kind.is_some() => {
-                        str_val(m.cap_dir.map_or("unknown", |d| d.as_str()))
-                    }
-                    Key::TsNs => match m.ts_ns {
-                        Some(t) => num(t),
-                        None => return false,
-                    },
-                    Key::Stream => num(m.stream),
-                    _ => return false,
-                };
-                scalar(rest, v, f);
-                true
-            }
-            Record::NoReply(e) => {
-                let v = match key {
-                    Key::Proto => str_val(e.proto.code()),
-                    Key::Type => str_val("diag"),
-                    Key::Ref => num(e.n),
-                    Key::Stream => num(e.stream),
-                    Key::Diag => {
-                        diag_list(rest, std::iter::once(e.diag()), f);
-                        return true;
-                    }
-                    _ => return false,
-                };
-                scalar(rest, v, f);
-                true
-            }
-            Record::Detect {
-                proto, detection, ..
-            } => {
-                let v = match key {
-                    Key::Type => str_val("detect"),
-                    Key::Proto => str_val(proto.code()),
-                    _ => return false,
-                };
-                let _ = detection;
-                scalar(rest, v, f);
-                true
-            }
-            Record::Stream { id, name, .. } => {
-                let v = match key {
-                    Key::Type => str_val("stream"),
-                    Key::Stream => num(*id),
-                    Key::StreamName => str_val(name),
-                    _ => return false,
-                };
-                scalar(rest, v, f);
-                true
-            }
-            Record::Input(d) => match key {
-                Key::Type => {
-                    scalar(rest, str_val("input"), f);
-                    true
-                }
-                Key::Diag => {
-                    diag_list(rest, std::iter::once(*d), f);
-                    true
-                }
-                _ => false,
-            },
-            Record::FileDiag { offset, kind, msg } => match key {
-                Key::Type => {
-                    scalar(rest, str_val("input"), f);
-                    true
-                }
-                Key::Diag => {
-                    let members = [
-                        ("kind", Some(str_val(kind))),
-                        ("offset", Some(num(*offset))),
-                        ("msg", Some(str_val(msg))),
-                    ];
-                    object(rest, &members, Role::Member, f);
-                    true
-                }
-                _ => false,
-            },
-            Record::Units(nt) => match key {
-                Key::Type => {
-                    scalar(rest, str_val("units"), f);
-                    true
-                }
-                Key::Stream => {
-                    scalar(rest, num(nt.stream), f);
-                    true
-                }
-                Key::Raw => {
-                    use crate::units::Resolution;
-                    let why = match &nt.resolution {
-                        Resolution::Scale(_) => return false,
-                        Resolution::Raw(why) => Cow::Borrowed(why.as_ref()),
-                        Resolution::None => Cow::Borrowed("no stage"),
-                    };
-                    scalar(rest, Val::Str(why), f);
-                    true
-                }
-                _ => false,
-            },
+            _ => other_visit(self, key, rest, f),
         }
+    }
+}
+
+/// [`Fields::visit`] of the records that are not frames. Out of line: it keeps the frames'
+/// path, which statistics and filters take for every record, small enough to be inlined.
+#[inline(never)]
+fn other_visit(
+    rec: &Record<'_>,
+    key: Key,
+    rest: &[String],
+    f: &mut dyn FnMut(Val<'_>, Role),
+) -> bool {
+    match rec {
+        Record::Apt(_) | Record::Ell(_) => {
+            unreachable!("frames are visited by apt_visit and ell_visit")
+        }
+        Record::Garbage(g) => {
+            let m = &g.meta;
+            let v = match key {
+                Key::N => num(m.n),
+                Key::Proto => str_val(g.proto.code()),
+                Key::Type => str_val("garbage"),
+                Key::Offset => num(g.offset),
+                Key::CapOffset => num(m.cap_offset),
+                Key::Len => num(g.bytes.len() as u64),
+                Key::Raw => hex(g.bytes),
+                Key::Text if g.kind.is_none() => Val::Str(String::from_utf8_lossy(g.bytes)),
+                Key::Diag => {
+                    let d = match g.kind {
+                        Some(kind) => crate::shape::garbage_diag(g.offset, g.bytes.len(), kind),
+                        None => Diag {
+                            offset: g.offset,
+                            kind: crate::DiagKind::Garbage {
+                                len: g.bytes.len() as u32,
+                            },
+                        },
+                    };
+                    diag_list(rest, std::iter::once(d), f);
+                    return true;
+                }
+                // Elliptec garbage has no direction (the bus tells none).
+                Key::Dir if g.kind.is_some() => {
+                    str_val(m.cap_dir.map_or("unknown", |d| d.as_str()))
+                }
+                Key::TsNs => match m.ts_ns {
+                    Some(t) => num(t),
+                    None => return false,
+                },
+                Key::Stream => num(m.stream),
+                _ => return false,
+            };
+            scalar(rest, v, f);
+            true
+        }
+        Record::NoReply(e) => {
+            let v = match key {
+                Key::Proto => str_val(e.proto.code()),
+                Key::Type => str_val("diag"),
+                Key::Ref => num(e.n),
+                Key::Stream => num(e.stream),
+                Key::Diag => {
+                    diag_list(rest, std::iter::once(e.diag()), f);
+                    return true;
+                }
+                _ => return false,
+            };
+            scalar(rest, v, f);
+            true
+        }
+        Record::Detect {
+            proto, detection, ..
+        } => {
+            let v = match key {
+                Key::Type => str_val("detect"),
+                Key::Proto => str_val(proto.code()),
+                _ => return false,
+            };
+            let _ = detection;
+            scalar(rest, v, f);
+            true
+        }
+        Record::Stream { id, name, .. } => {
+            let v = match key {
+                Key::Type => str_val("stream"),
+                Key::Stream => num(*id),
+                Key::StreamName => str_val(name),
+                _ => return false,
+            };
+            scalar(rest, v, f);
+            true
+        }
+        Record::Input(d) => match key {
+            Key::Type => {
+                scalar(rest, str_val("input"), f);
+                true
+            }
+            Key::Diag => {
+                diag_list(rest, std::iter::once(*d), f);
+                true
+            }
+            _ => false,
+        },
+        Record::FileDiag { offset, kind, msg } => match key {
+            Key::Type => {
+                scalar(rest, str_val("input"), f);
+                true
+            }
+            Key::Diag => {
+                let members = [
+                    ("kind", Some(str_val(kind))),
+                    ("offset", Some(num(*offset))),
+                    ("msg", Some(str_val(msg))),
+                ];
+                object(rest, &members, Role::Member, f);
+                true
+            }
+            _ => false,
+        },
+        Record::Units(nt) => match key {
+            Key::Type => {
+                scalar(rest, str_val("units"), f);
+                true
+            }
+            Key::Stream => {
+                scalar(rest, num(nt.stream), f);
+                true
+            }
+            Key::Raw => {
+                use crate::units::Resolution;
+                let why = match &nt.resolution {
+                    Resolution::Scale(_) => return false,
+                    Resolution::Raw(why) => Cow::Borrowed(why.as_ref()),
+                    Resolution::None => Cow::Borrowed("no stage"),
+                };
+                scalar(rest, Val::Str(why), f);
+                true
+            }
+            _ => false,
+        },
     }
 }
 

@@ -282,6 +282,7 @@ pub struct EllDerived {
 
 /// The keys derived beside an Elliptec field of `kind`, in the order NDJSON writes them after
 /// the field.
+#[inline]
 pub fn ell_derived(kind: EllKind) -> &'static [EllDerived] {
     const MODEL: &[EllDerived] = &[EllDerived {
         name: DerivedName::Suffix("_name"),
@@ -315,6 +316,7 @@ pub fn ell_derived(kind: EllKind) -> &'static [EllDerived] {
     }
 }
 
+#[inline]
 fn model<'a>(v: &EllValue<'a>) -> Option<DerivedVal<'a>> {
     match *v {
         EllValue::U(x) => Some(DerivedVal::Model(x)),
@@ -322,6 +324,7 @@ fn model<'a>(v: &EllValue<'a>) -> Option<DerivedVal<'a>> {
     }
 }
 
+#[inline]
 fn version<'a>(v: &EllValue<'a>) -> Option<DerivedVal<'a>> {
     match *v {
         EllValue::U(x) => Some(DerivedVal::Version(x)),
@@ -329,6 +332,7 @@ fn version<'a>(v: &EllValue<'a>) -> Option<DerivedVal<'a>> {
     }
 }
 
+#[inline]
 fn thread<'a>(v: &EllValue<'a>) -> Option<DerivedVal<'a>> {
     match *v {
         EllValue::U(x) => Some(DerivedVal::Word(if x & 0x80 != 0 {
@@ -340,6 +344,7 @@ fn thread<'a>(v: &EllValue<'a>) -> Option<DerivedVal<'a>> {
     }
 }
 
+#[inline]
 fn hw_release<'a>(v: &EllValue<'a>) -> Option<DerivedVal<'a>> {
     match *v {
         EllValue::U(x) => Some(DerivedVal::Uint(x & 0x7F)),
@@ -347,6 +352,7 @@ fn hw_release<'a>(v: &EllValue<'a>) -> Option<DerivedVal<'a>> {
     }
 }
 
+#[inline]
 fn curve<'a>(v: &EllValue<'a>) -> Option<DerivedVal<'a>> {
     match *v {
         EllValue::Raw(b) => Some(DerivedVal::Curve(b)),
@@ -356,6 +362,7 @@ fn curve<'a>(v: &EllValue<'a>) -> Option<DerivedVal<'a>> {
 
 /// The members of one point of the current curve (`curve_points`): period and current as
 /// integers, frequency (Hz, rounded) and current (A, 6 significant digits) as floats.
+#[inline]
 pub fn curve_members(p: &CurvePoint) -> [(&'static str, CurveNum); 4] {
     [
         ("period", CurveNum::U(u64::from(p.period))),
@@ -378,6 +385,7 @@ pub enum CurveNum {
 // Values a record derives.
 
 /// The numeric code of an enum or flag field (what `codes` holds).
+#[inline]
 pub fn apt_code(fd: &crate::table::Field, v: &AptValue<'_>) -> Option<i128> {
     if fd.enumeration.is_none() && fd.flags.is_none() {
         return None;
@@ -390,6 +398,7 @@ pub fn apt_code(fd: &crate::table::Field, v: &AptValue<'_>) -> Option<i128> {
 }
 
 /// The numeric code of an Elliptec field shown by name (status codes).
+#[inline]
 pub fn ell_code(fd: &crate::ell::table::Field, v: &EllValue<'_>) -> Option<u64> {
     match (fd.kind, v) {
         (EllKind::Status, EllValue::U(c)) => Some(*c),
@@ -399,6 +408,7 @@ pub fn ell_code(fd: &crate::ell::table::Field, v: &EllValue<'_>) -> Option<u64> 
 
 /// An Elliptec position in the module's physical unit (rounded to 6 significant digits), when
 /// its pulses per unit are known: what `phys` gives beside the raw count.
+#[inline]
 pub fn ell_phys(
     fd: &crate::ell::table::Field,
     v: &EllValue<'_>,
