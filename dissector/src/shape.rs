@@ -441,6 +441,7 @@ pub fn garbage_diag(offset: u64, len: usize, kind: GarbageKind) -> Diag {
 }
 
 /// Append bytes as lower-case hex digits (no quotes).
+#[inline]
 pub fn hex_digits(out: &mut String, b: &[u8]) {
     const H: &[u8; 16] = b"0123456789abcdef";
     // Through a stack buffer: pushing chars one by one costs a UTF-8 encode each.
