@@ -592,18 +592,6 @@ impl Head for EllRec<'_> {
     fn pair(&self) -> Option<u64> {
         self.obs.pair
     }
-    fn msgid(&self) -> Option<u16> {
-        None
-    }
-    fn channel(&self) -> Option<i64> {
-        None
-    }
-    fn dir(&self) -> Option<&'static str> {
-        None
-    }
-    fn name(&self) -> Option<&'static str> {
-        None
-    }
 }
 
 impl Head for GarbageRec<'_> {
@@ -627,21 +615,6 @@ impl Head for GarbageRec<'_> {
     }
     fn ts_ns(&self) -> Option<u64> {
         self.meta.ts_ns
-    }
-    fn pair(&self) -> Option<u64> {
-        None
-    }
-    fn msgid(&self) -> Option<u16> {
-        None
-    }
-    fn channel(&self) -> Option<i64> {
-        None
-    }
-    fn dir(&self) -> Option<&'static str> {
-        None
-    }
-    fn name(&self) -> Option<&'static str> {
-        None
     }
 }
 

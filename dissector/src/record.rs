@@ -710,6 +710,33 @@ enum Item<'a> {
     },
 }
 
+/// A protocol's framer item (`AptItem`, `EllItem`: the same variants) as an [`Item`], its
+/// garbage kind mapped by `kind`.
+macro_rules! item {
+    ($it:expr, $ty:ident, $kind:expr) => {
+        match $it {
+            $ty::Frame {
+                offset,
+                bytes,
+                truncated,
+            } => Item::Frame {
+                offset,
+                bytes,
+                truncated,
+            },
+            $ty::Garbage {
+                offset,
+                bytes,
+                kind,
+            } => Item::Garbage {
+                offset,
+                bytes,
+                kind: $kind(kind),
+            },
+        }
+    };
+}
+
 /// A frame's bytes as its framer found them, before decoding.
 struct RawFrame<'a> {
     offset: u64,
@@ -765,26 +792,7 @@ impl Framer for AptSide {
 
     #[inline]
     fn next_item(framers: &mut Framers) -> Option<Item<'_>> {
-        Some(match framers.apt.next_item()? {
-            AptItem::Frame {
-                offset,
-                bytes,
-                truncated,
-            } => Item::Frame {
-                offset,
-                bytes,
-                truncated,
-            },
-            AptItem::Garbage {
-                offset,
-                bytes,
-                kind,
-            } => Item::Garbage {
-                offset,
-                bytes,
-                kind: Some(kind),
-            },
-        })
+        Some(item!(framers.apt.next_item()?, AptItem, Some))
     }
 
     #[inline]
@@ -846,22 +854,8 @@ impl Framer for EllSide {
 
     #[inline]
     fn next_item(framers: &mut Framers) -> Option<Item<'_>> {
-        Some(match framers.ell.next_item()? {
-            EllItem::Frame {
-                offset,
-                bytes,
-                truncated,
-            } => Item::Frame {
-                offset,
-                bytes,
-                truncated,
-            },
-            EllItem::Garbage { offset, bytes, .. } => Item::Garbage {
-                offset,
-                bytes,
-                kind: None,
-            },
-        })
+        // The Elliptec framer's kinds of garbage are not reported.
+        Some(item!(framers.ell.next_item()?, EllItem, |_| None))
     }
 
     #[inline]

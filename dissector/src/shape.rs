@@ -171,15 +171,25 @@ pub trait Head {
     /// `ts_ns`.
     fn ts_ns(&self) -> Option<u64>;
     /// `pair`: the request a reply answers.
-    fn pair(&self) -> Option<u64>;
+    fn pair(&self) -> Option<u64> {
+        None
+    }
     /// `msgid` of an APT frame.
-    fn msgid(&self) -> Option<u16>;
+    fn msgid(&self) -> Option<u16> {
+        None
+    }
     /// `channel` of an APT frame.
-    fn channel(&self) -> Option<i64>;
+    fn channel(&self) -> Option<i64> {
+        None
+    }
     /// `dir`.
-    fn dir(&self) -> Option<&'static str>;
+    fn dir(&self) -> Option<&'static str> {
+        None
+    }
     /// `name` of an APT frame's message.
-    fn name(&self) -> Option<&'static str>;
+    fn name(&self) -> Option<&'static str> {
+        None
+    }
 }
 
 /// The one number at top-level `key` that `h` has at hand (see [`crate::fields::Fields::number`]).
