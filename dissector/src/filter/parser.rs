@@ -18,38 +18,29 @@ use regex::RegexBuilder;
 const MAX_DEPTH: usize = 64;
 
 pub(super) fn expr_or(i: &str, depth: usize) -> Res<'_, Expr> {
-    let (mut i, first) = expr_and(i, depth)?;
-    let mut xs = vec![first];
-    loop {
-        let (j, _) = multispace0(i)?;
-        match alt((tag("||"), keyword("or")))(j) {
-            Ok((k, op)) => {
-                let (k, x) = need(expr_and(k, depth), k, op)?;
-                xs.push(x);
-                i = k;
-            }
-            Err(NomErr::Error(_)) => break,
-            Err(e) => return Err(e),
-        }
-    }
-    Ok((
-        i,
-        if xs.len() == 1 {
-            xs.remove(0)
-        } else {
-            Expr::Or(xs)
-        },
-    ))
+    chain(i, depth, ("||", "or"), expr_and, Expr::Or)
 }
 
 fn expr_and(i: &str, depth: usize) -> Res<'_, Expr> {
-    let (mut i, first) = expr_not(i, depth)?;
+    chain(i, depth, ("&&", "and"), expr_not, Expr::And)
+}
+
+/// `sub (op sub)*`, `op` the symbol or the keyword of `ops`: one operand alone, or all of them
+/// joined by `join`.
+fn chain<'a>(
+    i: &'a str,
+    depth: usize,
+    ops: (&'static str, &'static str),
+    sub: fn(&'a str, usize) -> Res<'a, Expr>,
+    join: fn(Vec<Expr>) -> Expr,
+) -> Res<'a, Expr> {
+    let (mut i, first) = sub(i, depth)?;
     let mut xs = vec![first];
     loop {
         let (j, _) = multispace0(i)?;
-        match alt((tag("&&"), keyword("and")))(j) {
+        match alt((tag(ops.0), keyword(ops.1)))(j) {
             Ok((k, op)) => {
-                let (k, x) = need(expr_not(k, depth), k, op)?;
+                let (k, x) = need(sub(k, depth), k, op)?;
                 xs.push(x);
                 i = k;
             }
@@ -62,7 +53,7 @@ fn expr_and(i: &str, depth: usize) -> Res<'_, Expr> {
         if xs.len() == 1 {
             xs.remove(0)
         } else {
-            Expr::And(xs)
+            join(xs)
         },
     ))
 }
