@@ -1192,7 +1192,7 @@ impl AptSim {
                 }
             }
         }
-        set_chan(gm, &mut b, r.chan);
+        set_chan(&mut b, r.chan);
         self.line.send(now, b);
     }
 
@@ -1455,7 +1455,8 @@ impl AptSim {
                 // is on; key switch, supply and stability bits set.
                 let (c, _, _) = self.laser(ui);
                 let on = self.units[ui].output;
-                let bits = LD_KEYSWITCH | LD_PSU_OK | LD_STABLE | u32::from(on) * LD_OUTPUT;
+                let out = if on { LD_OUTPUT } else { 0 };
+                let bits = LD_KEYSWITCH | LD_PSU_OK | LD_STABLE | out;
                 vec![
                     ("laser_current", int(c)),
                     ("photo_current", int(c / 2)),
@@ -1509,7 +1510,7 @@ impl AptSim {
                 // No live values: the defaults (NanoTrak, laser diode readings).
                 let m = Table::global().msg(get)?;
                 let mut b = self.held(ui, m, 0, src)?;
-                set_chan(m, &mut b, chan);
+                set_chan(&mut b, chan);
                 return Some(b);
             }
         };
@@ -1683,7 +1684,7 @@ fn frame(id: u16, params: [u8; 2], data: Option<&[u8]>, dst: u8, src: u8) -> Vec
 }
 
 /// Write the host's channel ident into `b`'s `chan_ident` field, where its form has one.
-fn set_chan(m: &MsgDef, b: &mut [u8], chan: i64) {
+fn set_chan(b: &mut [u8], chan: i64) {
     let Some(f) = AptFrame::decode(Table::global(), 0, b, false) else {
         return;
     };
@@ -1691,7 +1692,6 @@ fn set_chan(m: &MsgDef, b: &mut [u8], chan: i64) {
         return;
     };
     let (at, w) = (fd.loc.frame_offset(), fd.ty.width());
-    let _ = m;
     if at + w <= b.len() && (1..=2).contains(&w) {
         b[at..at + w].copy_from_slice(&chan.to_le_bytes()[..w]);
     }
