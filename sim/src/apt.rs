@@ -10,7 +10,7 @@
 
 use crate::models::{self, Family, ModelSpec};
 use crate::{earliest, Line, Simulator, MS, SEC};
-use aptscope_dissector::apt::{encode, AptFrame, AptFramer, FieldValue, Item};
+use aptscope_dissector::apt::{encode, AptFrame, AptFramer, FieldValue, Item, Value};
 use aptscope_dissector::msg;
 use aptscope_dissector::table::{
     example_bytes, Access, DeviceProfile, FormKind, Loc, MsgDef, Table,
@@ -62,6 +62,9 @@ const LD_OUTPUT: u32 = 0x1;
 const LD_KEYSWITCH: u32 = 0x2;
 const LD_PSU_OK: u32 = 0x1000;
 const LD_STABLE: u32 = 0x8000_0000;
+// nt_status bits: tracking with a signal; both channels connected.
+const NT_TRACKING: u32 = 0x3;
+const NT_CHANS: u32 = 0x3_0000;
 // tec_status bits.
 const TEC_OUTPUT_ENABLED: u32 = 0x1;
 const TEC_DISP_TACT: u32 = 0x10;
@@ -1114,6 +1117,20 @@ impl AptSim {
                     }
                 }
             }
+            msg::PZ_SET_NTMODE => {
+                // The mode set (piezo, latch, track on both axes or one) as PZ_GET_NTMODE
+                // reports it: a tracking NanoTrak has a signal here.
+                let (state, mode) = match f.field("state").and_then(|(_, v)| v.as_i64()) {
+                    Some(1) => (1, 1),
+                    Some(2) => (2, 1),
+                    Some(3) => (4, 1),
+                    Some(4) => (4, 2),
+                    Some(5) => (4, 3),
+                    _ => return true,
+                };
+                let b = frame(msg::PZ_GET_NTMODE, [state, mode], None, HOST, USB);
+                self.keep(ui, msg::PZ_GET_NTMODE, 0, &b);
+            }
             msg::PZ_SET_ZERO if self.model.0.family == Family::StrainGauge => {
                 // The gauge takes its present reading as zero.
                 self.set_field(ui, msg::PZ_GET_TSG_READING, "reading", 0);
@@ -1177,11 +1194,8 @@ impl AptSim {
         let live = self.live(ui, gm.id, sub, now);
         if !live.is_empty() {
             if let Some(fr) = AptFrame::decode(t, 0, &b, false) {
-                let mut vals: Vec<(&str, FieldValue)> = fr
-                    .fields()
-                    .filter(|(fd, _)| fd.name != "sub_id")
-                    .filter_map(|(fd, v)| Some((fd.name, int(v.as_i64()?))))
-                    .collect();
+                let mut vals = values_of(&fr);
+                vals.retain(|(n, _)| *n != "sub_id");
                 for (name, v) in live {
                     if let Some(s) = vals.iter_mut().find(|(n, _)| *n == name) {
                         s.1 = v;
@@ -1464,6 +1478,25 @@ impl AptSim {
                     ("status_bits", int(i64::from(bits))),
                 ]
             }
+            msg::PZ_GET_NTSTATUSUPDATE => {
+                // The spec's example status, with the tracking bits of the mode set.
+                let m = Table::global().msg(get)?;
+                let b = self.held(ui, m, 0, src)?;
+                let f = AptFrame::decode(Table::global(), 0, &b, false)?;
+                let mut vals = values_of(&f);
+                let tracking = self.units[ui]
+                    .store
+                    .iter()
+                    .find(|s| s.get == msg::PZ_GET_NTMODE)
+                    .is_some_and(|s| s.params[0] >= 3);
+                let bits = NT_CHANS | if tracking { NT_TRACKING } else { 0 };
+                for (n, v) in &mut vals {
+                    if *n == "status_bits" {
+                        *v = int(i64::from(bits));
+                    }
+                }
+                vals
+            }
             msg::TEC_GET_STATUSUPDATE => {
                 let (i, ta, ts, bits) = self.tec(ui);
                 vec![
@@ -1660,6 +1693,16 @@ impl Simulator for AptSim {
         }
         d
     }
+}
+
+/// The numeric fields of a frame as the encoder takes them back.
+fn values_of(f: &AptFrame<'_, '_>) -> Params {
+    f.fields()
+        .filter_map(|(fd, v)| match v {
+            Value::F(x) => Some((fd.name, FieldValue::Float(x))),
+            v => Some((fd.name, int(v.as_i64()?))),
+        })
+        .collect()
 }
 
 /// A frame of message `id` with these param bytes, or this data packet.

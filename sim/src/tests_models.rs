@@ -278,3 +278,42 @@ fn status_updates_stop_after_50_without_the_hosts_ack_and_go_on_with_it() {
     }
     assert_eq!(n, 199, "updates in 20 s");
 }
+
+#[test]
+fn a_nanotrak_reports_the_mode_it_was_set_to() {
+    use aptscope_dissector::msg;
+    let t = Table::global();
+    let mut sim = AptSim::new(AptModel::parse("kna101").expect("model"));
+    let track = build(
+        msg::PZ_SET_NTMODE,
+        None,
+        0x50,
+        0x01,
+        &[("state", FieldValue::Int(3))],
+    );
+    sim.input(&track.expect("set"), 1000);
+    let req = |id| build(id, None, 0x50, 0x01, &[]).expect("req");
+    let mut out = vec![];
+    for (i, id) in [msg::PZ_REQ_NTMODE, msg::PZ_REQ_NTSTATUSUPDATE]
+        .into_iter()
+        .enumerate()
+    {
+        let now = (i as u64 + 1) * 100 * MS;
+        sim.input(&req(id), now);
+        while let Some(d) = sim.next_deadline().filter(|d| *d <= now + 50 * MS) {
+            out.extend(sim.poll(d).unwrap_or_default());
+        }
+    }
+    let fs = frames(&out);
+    assert_eq!(fs.len(), 2);
+    let get = |b: &[u8], n: &str| {
+        let f = AptFrame::decode(t, 0, b, false).expect("frame");
+        f.field(n).and_then(|(_, v)| v.as_i64())
+    };
+    // TRACKING_SIGNAL, DUAL_AXIS; TRACKING | TRACKING_WITH_SIGNAL and both channels.
+    assert_eq!(
+        (get(&fs[0], "state"), get(&fs[0], "mode")),
+        (Some(4), Some(1))
+    );
+    assert_eq!(get(&fs[1], "status_bits"), Some(0x3_0003));
+}
