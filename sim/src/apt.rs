@@ -385,6 +385,8 @@ struct Unit {
     next_update: Option<u64>,
     /// Status updates sent since the host's last ACK.
     unacked: u32,
+    /// Updates stopped for want of the host's ACK (they resume with it).
+    starved: bool,
     /// Where its status updates come from (0x50 or 0x21: where the host started them).
     update_src: u8,
     store: Vec<Stored>,
@@ -454,6 +456,7 @@ impl AptSim {
             motion: None,
             next_update: None,
             unacked: 0,
+            starved: false,
             update_src: addr,
             store: vec![],
         };
@@ -826,6 +829,7 @@ impl AptSim {
                 let addr = self.units[ui].addr;
                 for u in self.units.iter_mut().filter(|u| u.addr == addr) {
                     u.next_update = None;
+                    u.starved = false;
                 }
             }
             msg::MOT_ACK_DCSTATUSUPDATE
@@ -836,9 +840,14 @@ impl AptSim {
             | msg::TEC_ACK_STATUSUPDATE
             | msg::QUAD_ACK_STATUSUPDATE
             | msg::PZMOT_ACK_STATUSUPDATE => {
+                // The host is alive: the count starts again, and updates stopped for want of
+                // it resume (thorlabs-apt-device's first ACK can come after the 50th update).
                 let addr = self.units[ui].addr;
                 for u in self.units.iter_mut().filter(|u| u.addr == addr) {
                     u.unacked = 0;
+                    if std::mem::take(&mut u.starved) {
+                        u.next_update = Some(now + UPDATE_NS);
+                    }
                 }
             }
             msg::MOD_SET_CHANENABLESTATE => {
@@ -1637,6 +1646,7 @@ impl AptSim {
                 if u.unacked > KEEPALIVE_UPDATES {
                     // The host has not said it is alive: the controller stops its updates.
                     u.next_update = None;
+                    u.starved = true;
                     let addr = u.addr;
                     self.note(format!(
                         "status updates of 0x{addr:02X} stopped: {KEEPALIVE_UPDATES} sent \

@@ -250,7 +250,7 @@ fn a_single_unit_answers_at_0x50_and_0x21_from_the_address_named_and_ignores_the
 }
 
 #[test]
-fn status_updates_stop_after_50_without_the_hosts_ack_and_go_on_with_it() {
+fn status_updates_stop_after_50_without_the_hosts_ack_and_resume_with_it() {
     use aptscope_dissector::msg;
     let count = |sim: &mut AptSim, from: u64, to: u64| {
         let mut out = vec![];
@@ -267,10 +267,14 @@ fn status_updates_stop_after_50_without_the_hosts_ack_and_go_on_with_it() {
     sim.input(&start, 0);
     assert_eq!(count(&mut sim, 0, 20 * SEC), 50);
     assert!(sim.take_log().iter().any(|l| l.contains("stopped")));
+    // A late ACK: they resume.
+    let ack = build(msg::MOT_ACK_DCSTATUSUPDATE, None, 0x50, 0x01, &[]).expect("ack");
+    sim.input(&ack, 20 * SEC);
+    // 20.1 s … 21.0 s; the last is still on the line at 21 s.
+    assert_eq!(count(&mut sim, 20 * SEC, 21 * SEC), 9);
     // With an ACK every second (as thorlabs-apt-device sends it): they go on.
     let mut sim = AptSim::new(AptModel::Kdc101);
     sim.input(&start, 0);
-    let ack = build(msg::MOT_ACK_DCSTATUSUPDATE, None, 0x50, 0x01, &[]).expect("ack");
     let mut n = 0;
     for s in 0..20 {
         n += count(&mut sim, s * SEC, (s + 1) * SEC - 1);
