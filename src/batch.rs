@@ -7,7 +7,7 @@
 //! whatever the files' sizes. Parquet: each worker writes its file's row groups as part files
 //! of their own (named by the file's index), so nothing is ordered or merged.
 
-use crate::{compile_filter, fatal, proto_of, ProtoArg};
+use crate::common::{compile_filter, fatal, proto_of, ProtoArg};
 use aptscope_capture::judge::{not_a_capture, not_a_capture_error, refuse};
 use aptscope_capture::open::{open_with_progress, OpenOptions, Progress};
 use aptscope_capture::Event;
@@ -168,11 +168,12 @@ impl Write for ChanWriter<'_> {
 /// by name and skipped, and the run fails at its end; one input: its error is the run's.
 pub fn run(job: Job<'_>) -> io::Result<()> {
     if matches!(job.out, Output::Parquet(_)) && job.filter.is_some() {
-        return Err(crate::bad(
+        return Err(crate::common::bad(
             "--filter applies to text and NDJSON output; filter the Parquet dataset with a \
              query (DuckDB, pandas) instead"
                 .into(),
-        ));
+        )
+        .into());
     }
     // A bad filter is one error, not one per file.
     job.filter.map(compile_filter).transpose()?;

@@ -341,9 +341,9 @@ fn capture(iface: &str, a: &ExtcapArgs) -> io::Result<()> {
     o.quiet = true;
     o.reconnect = a.reconnect;
     o.signals = true;
-    aptscope_capture::set_notes(false);
+    // Wireshark shows anything on standard error as an error: only a failure is said there.
+    o.say = aptscope_capture::Say::Nothing;
     let stats = tap_main(o);
-    aptscope_capture::set_notes(true);
     let stats = match stats {
         Ok(s) => s,
         Err(e) => {

@@ -26,7 +26,7 @@ pub fn man(path: &[String]) -> io::Result<()> {
                 true => format!("`{}` has no subcommands", cmd.get_bin_name().unwrap_or("")),
                 false => format!("the commands are {}", names.join(", ")),
             };
-            crate::bad(format!("man: no command `{name}`: {what}"))
+            crate::common::bad(format!("man: no command `{name}`: {what}"))
         })?;
         cmd = sub;
     }

@@ -183,6 +183,12 @@ fn bad_inputs_are_named_and_skipped() {
         None,
     );
     assert!(!ok && err.contains("-o DIR"), "{err}");
+    // -o without --to parquet: said in one sentence (no gap from a lost line continuation).
+    let (_, err, ok) = aptscope(&["decode", "-o", o, "samples/kdc101-session.bin"], None);
+    assert!(
+        !ok && err.contains("text and NDJSON go to standard output"),
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&out);
     let _ = std::fs::remove_file(&junk);
 }

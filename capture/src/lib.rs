@@ -14,6 +14,7 @@ pub mod open;
 pub mod pcap;
 pub mod problem;
 pub mod raw;
+pub mod say;
 pub mod textlog;
 pub mod tools;
 pub mod usb;
@@ -29,30 +30,16 @@ pub use model::{
     UsbProblem, Writer,
 };
 pub use raw::{ByteSource, InputFormat, CHUNK};
+pub use say::Say;
 
 /// `eprintln!` that cannot panic: a closed or failing standard error is ignored, so a live tool
 /// never dies of its log (`aptscope tap … 2>&1 | tee log` after `tee` has gone) and nothing
-/// between a signal and the stop depends on it.
-/// Silenced by [`set_notes`]`(false)`.
+/// between a signal and the stop depends on it. Live taps say their progress through a
+/// [`Say`] instead, which can be silenced.
 #[macro_export]
 macro_rules! note {
     ($($arg:tt)*) => {{
         use std::io::Write as _;
-        if $crate::notes_on() {
-            let _ = writeln!(std::io::stderr(), $($arg)*);
-        }
+        let _ = writeln!(std::io::stderr(), $($arg)*);
     }};
-}
-
-static NOTES_OFF: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
-
-/// Turn [`note!`]'s progress lines on or off (an extcap: Wireshark shows anything on its
-/// standard error as an error, so only a failure may be said there).
-pub fn set_notes(on: bool) {
-    NOTES_OFF.store(!on, std::sync::atomic::Ordering::Relaxed);
-}
-
-/// Whether [`note!`] writes (see [`set_notes`]).
-pub fn notes_on() -> bool {
-    !NOTES_OFF.load(std::sync::atomic::Ordering::Relaxed)
 }

@@ -575,7 +575,17 @@ pub fn create(path: &str, format: Format, force: bool) -> Result<Box<dyn Writer>
     if path == "-" {
         return create_on(io::stdout(), format);
     }
-    let file = if force {
+    let file = create_file(path, force)?;
+    if format == Format::Mcap {
+        let w = io::BufWriter::with_capacity(1 << 16, file);
+        return Ok(Box::new(mcap::McapWriter::new(w, None)?));
+    }
+    create_on(file, format)
+}
+
+/// Create the file `path` (a capture's), refusing to overwrite it unless `force`.
+pub(crate) fn create_file(path: &str, force: bool) -> Result<File, CreateError> {
+    if force {
         File::create(path)
     } else {
         File::options().write(true).create_new(true).open(path)
@@ -587,12 +597,7 @@ pub fn create(path: &str, format: Format, force: bool) -> Result<Box<dyn Writer>
         } else {
             CreateError::File { path, source }
         }
-    })?;
-    if format == Format::Mcap {
-        let w = io::BufWriter::with_capacity(1 << 16, file);
-        return Ok(Box::new(mcap::McapWriter::new(w, None)?));
-    }
-    create_on(file, format)
+    })
 }
 
 /// A writer of `format` (any but MCAP) on `out`.

@@ -232,6 +232,97 @@ pub fn man_page(t: &Table, e: Entry<'_>, out: &mut String) {
     }
 }
 
+/// `aptscope messages NAME|ID`: the page of each entry `query` names (see [`lookup`]), as
+/// text ([`man_page`]) or one NDJSON object each, without trailing blank lines.
+pub fn pages(t: &Table, query: &str, as_json: bool) -> Result<Vec<String>, String> {
+    let mut pages = vec![];
+    for e in lookup(t, query)? {
+        let mut s = String::new();
+        match (as_json, e) {
+            (true, Entry::Msg(m)) => crate::json::msg_def(&mut s, t, m),
+            (true, Entry::Sub(x)) => crate::json::sub_def(&mut s, t, x),
+            (false, e) => man_page(t, e, &mut s),
+        }
+        pages.push(s.trim_end().to_string());
+    }
+    Ok(pages)
+}
+
+/// `aptscope messages --json`: one NDJSON object per message, then one per sub-message.
+pub fn json_lines(t: &Table) -> Vec<String> {
+    let msgs = t.msgs().iter().map(|m| {
+        let mut s = String::new();
+        crate::json::msg_def(&mut s, t, m);
+        s
+    });
+    let subs = t.subs().iter().map(|x| {
+        let mut s = String::new();
+        crate::json::sub_def(&mut s, t, x);
+        s
+    });
+    msgs.chain(subs).collect()
+}
+
+/// `aptscope messages`: one line per message by id (`0x0443  MOT_MOVE_HOME  …`: direction,
+/// forms, replies, a 2025 mark), with `verbose` its description, devices and each form's
+/// fields; then one line per sub-message.
+pub fn text(t: &Table, verbose: bool) -> String {
+    let mut out = String::new();
+    let mut msgs: Vec<&MsgDef> = t.msgs().iter().collect();
+    msgs.sort_by_key(|m| m.id);
+    for m in msgs {
+        let forms: Vec<String> = m.forms.iter().map(Form::label).collect();
+        let replies: Vec<&str> = t.replies_of(m).iter().map(|r| r.name).collect();
+        let reply = if replies.is_empty() {
+            String::new()
+        } else {
+            format!(" → {}", replies.join(","))
+        };
+        let rev = if m.revs == crate::table::Revs::REV_2025 {
+            "  [2025]"
+        } else {
+            ""
+        };
+        let _ = writeln!(
+            out,
+            "0x{:04X}  {:<40} {:<4}  {:<10}{reply}{rev}",
+            m.id,
+            m.name,
+            m.dir.as_str(),
+            forms.join("|")
+        );
+        if verbose {
+            if !m.doc.is_empty() {
+                let _ = writeln!(out, "        {}", m.doc);
+            }
+            let models = t.models_of(m);
+            if !models.is_empty() {
+                let _ = writeln!(out, "        devices: {}", models.join(" "));
+            }
+            for f in &m.forms {
+                let fields: Vec<String> = f
+                    .fields
+                    .iter()
+                    .map(|x| format!("{}:{}", x.name, x.ty.name()))
+                    .collect();
+                let _ = writeln!(out, "        [{}] {}", f.label(), fields.join(" "));
+            }
+        }
+    }
+    for s in t.subs() {
+        let forms: Vec<String> = s.forms.iter().map(Form::label).collect();
+        let _ = writeln!(
+            out,
+            "  sub {:<6} 0x{:04X}  {:<32} {}",
+            s.group,
+            s.id,
+            s.name,
+            forms.join("|")
+        );
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -374,16 +374,7 @@ pub fn replay_main(o: ReplayOptions) -> io::Result<bool> {
     }
     // Signals are received through a descriptor: block them before any thread starts.
     let sigs = termination_signals()?;
-    let mut abort = || -> Option<String> {
-        match sigs.read_signal() {
-            Ok(Some(s)) => Some(match s.ssi_signo {
-                2 => "SIGINT".to_string(),
-                15 => "SIGTERM".to_string(),
-                n => format!("signal {n}"),
-            }),
-            _ => None,
-        }
-    };
+    let mut abort = || sigs.take();
     let mut link = match (o.args.role, &o.args.port, &o.args.pty) {
         (_, Some(p), None) => Link::open_port(Path::new(p), line)?,
         (Role::Device, None, pty) => {

@@ -1,7 +1,8 @@
 //! The Elliptec bus simulator.
 
 use super::{earliest, Line, Simulator, MS, SEC};
-use aptscope_dissector::ell::{head, EllFrame};
+use aptscope_dissector::ell::table::{model, Mechanism, Model, CURVE_POINTS, MODELS};
+use aptscope_dissector::ell::{curve_bytes, head, CurvePoint, EllFrame};
 use aptscope_dissector::table::Dir;
 
 /// Longest line kept while waiting for the end of a command.
@@ -16,88 +17,128 @@ const MOVE_OVERHEAD_NS: u64 = 50 * MS;
 // Status codes (GS).
 const OK: u8 = 0;
 const COMMAND_ERROR: u8 = 3;
+const VALUE_OUT_OF_RANGE: u8 = 4;
 const BUSY: u8 = 9;
 const OUT_OF_RANGE: u8 = 12;
 
-/// How a module moves.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Mech {
-    /// Rotation: positions in pulses, `pulses` per revolution, any position accepted.
-    Rotary,
-    /// Linear stage: 0..=travel × pulses.
-    Linear,
-    /// Indexed slider: `n` positions `pulses` apart.
-    Indexed(u8),
-}
-
-/// An ELL module type: what its `IN` reply says and how it moves.
+/// An ELL module type as simulated: its row of the dissector's model table ([`MODELS`]), which
+/// gives what `IN` answers, how it moves and which commands it has.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EllModel {
-    /// ELL number (14 for ELL14).
-    pub number: u8,
-    /// Travel (mm, degrees, or positions × pulses for sliders) as `IN` gives it.
-    pub travel: u16,
-    /// Pulses per unit as `IN` gives it (per mm; per revolution for rotary; per position step
-    /// for sliders).
-    pub pulses: u32,
-    mech: Mech,
-    /// Full speed in units (mm or degrees) per second, or positions per second for sliders.
-    speed: f64,
+    /// The model's row.
+    pub spec: &'static Model,
 }
 
 impl EllModel {
-    /// The model with this name (`ELL14`, `ell9`, `14`), among those simulated: ELL6, ELL9,
-    /// ELL12, ELL14, ELL17, ELL18, ELL20.
+    /// The model with this name (`ELL14`, `ell9`, `14`), among the table's.
     pub fn parse(s: &str) -> Option<EllModel> {
         let s = s.trim();
         let n = s
-            .strip_prefix("ELL")
-            .or_else(|| s.strip_prefix("ell"))
-            .or_else(|| s.strip_prefix("Ell"))
-            .unwrap_or(s);
+            .get(..3)
+            .filter(|p| p.eq_ignore_ascii_case("ell"))
+            .map_or(s, |_| &s[3..]);
         let number: u8 = n.parse().ok()?;
-        let (travel, pulses, mech, speed) = match number {
-            6 => (0x1F, 0x1F, Mech::Indexed(2), 3.0),
-            9 => (0x13, 0x20, Mech::Indexed(4), 3.0),
-            12 => (0x1F, 0x20, Mech::Indexed(6), 3.0),
-            14 => (360, 0x23000, Mech::Rotary, 430.0),
-            17 => (0x1C, 0x800, Mech::Linear, 180.0),
-            18 => (360, 0x40000, Mech::Rotary, 430.0),
-            20 => (60, 0x400, Mech::Linear, 180.0),
-            _ => return None,
-        };
-        Some(EllModel {
-            number,
-            travel,
-            pulses,
-            mech,
-            speed,
-        })
+        model(number).map(|spec| EllModel { spec })
+    }
+
+    /// ELL number (14 for ELL14).
+    pub fn number(&self) -> u8 {
+        self.spec.number
+    }
+
+    /// Pulses between two slider positions (the `IN` pulses, or, when those are 0 or 1 as on
+    /// an ELL6, the travel: the manual's slider goes forward to 0x1F, p.43).
+    fn spacing(&self) -> i64 {
+        let (p, t) = (self.spec.pulses as i64, self.spec.travel as i64);
+        if p > 1 {
+            p
+        } else {
+            t.max(1)
+        }
     }
 
     /// Lowest and highest position in pulses (`None`: unbounded, rotary).
     fn range(&self) -> Option<(i64, i64)> {
-        match self.mech {
-            Mech::Rotary => None,
-            Mech::Linear => Some((0, self.travel as i64 * self.pulses as i64)),
-            Mech::Indexed(n) => Some((0, (n as i64 - 1) * self.pulses as i64)),
+        let s = self.spec;
+        match s.mechanism {
+            Mechanism::Rotary => None,
+            Mechanism::Linear => Some((0, s.travel as i64 * s.pulses as i64)),
+            Mechanism::Shutter | Mechanism::Indexed => {
+                Some((0, (s.slots.max(1) as i64 - 1) * self.spacing()))
+            }
+            Mechanism::OpenLoop => Some((0, 0)),
         }
     }
 
-    /// Pulses per second at full speed.
+    /// Pulses per second at full speed: rotary 430°/s and linear 180 mm/s (an ELL14's and an
+    /// ELL17's datasheet speeds), sliders 3 positions a second.
     fn pulses_per_s(&self) -> f64 {
-        match self.mech {
-            Mech::Rotary => self.speed * self.pulses as f64 / 360.0,
-            _ => self.speed * self.pulses as f64,
+        let p = self.spec.pulses as f64;
+        match self.spec.mechanism {
+            Mechanism::Rotary => 430.0 * p / 360.0,
+            Mechanism::Linear => 180.0 * p,
+            Mechanism::Shutter | Mechanism::Indexed => 3.0 * self.spacing() as f64,
+            Mechanism::OpenLoop => 1.0,
         }
     }
 
     fn default_jog(&self) -> i64 {
-        match self.mech {
-            Mech::Rotary => self.pulses as i64 / 36,
-            Mech::Linear | Mech::Indexed(_) => self.pulses as i64,
+        match self.spec.mechanism {
+            Mechanism::Rotary => self.spec.pulses as i64 / 36,
+            Mechanism::Linear => self.spec.pulses as i64,
+            Mechanism::Shutter | Mechanism::Indexed => self.spacing(),
+            Mechanism::OpenLoop => 0,
         }
     }
+
+    /// The nearest position a slider can rest at (sliders stop on their detents only).
+    fn settle(&self, p: i64) -> i64 {
+        match self.spec.mechanism {
+            Mechanism::Shutter | Mechanism::Indexed => {
+                let d = self.spacing();
+                (p + d / 2).div_euclid(d) * d
+            }
+            Mechanism::OpenLoop => 0,
+            Mechanism::Rotary | Mechanism::Linear => p,
+        }
+    }
+}
+
+/// The simulated models' names: `ELL4, ELL5, …`.
+fn model_names() -> String {
+    let names: Vec<String> = MODELS.iter().map(|m| format!("ELL{}", m.number)).collect();
+    names.join(", ")
+}
+
+/// `aptscope sim elliptec --list`: every model with its mechanism, travel, pulses, slots,
+/// motors, the source of those values and the commands it answers.
+pub fn model_list() -> String {
+    use std::fmt::Write;
+    let mut out = String::from(
+        "model  what                  mechanism  travel  pulses   slots  motors  source\n",
+    );
+    for m in MODELS {
+        let _ = writeln!(
+            out,
+            "ELL{:<3} {:<21} {:<10} {:>6}  {:<8} {:>5}  {:>6}  {}",
+            m.number,
+            m.what,
+            m.mechanism.name(),
+            m.travel,
+            format!("0x{:X}", m.pulses),
+            m.slots,
+            m.motors,
+            m.source
+        );
+    }
+    out.push_str(
+        "\ncommands answered (any other host command: GS03, command error or not supported):\n",
+    );
+    for m in MODELS {
+        let codes: Vec<&str> = m.commands().map(|c| c.code).collect();
+        let _ = writeln!(out, "ELL{:<3} {}", m.number, codes.join(" "));
+    }
+    out
 }
 
 /// A running motion: it ends at `end_ns` at `to`, answering `PO` from `reply_addr`.
@@ -126,9 +167,65 @@ struct Module {
     isolated_until: u64,
     /// Last error, reported (and cleared) by the next `gs`.
     error: u8,
+    /// Motor 1 and 2 drive state (`i1`/`i2` read it, `f1` … `h2` and `s1`/`s2` change it).
+    motors: [Drive; 2],
+    /// A frequency search or current-curve scan under way.
+    scan: Option<Scan>,
 }
 
+/// One piezo motor's drive: what `I1`/`I2` report.
+#[derive(Debug, Clone, Copy)]
+struct Drive {
+    /// Energised (`e1` … `h1`).
+    on: bool,
+    forward_period: u16,
+    backward_period: u16,
+}
+
+/// Periods a frequency search settles on: the manual's `I1` example's (78 kHz forward,
+/// 106 kHz backward, p.14).
+const BEST_FORWARD: u16 = 0x00BD;
+const BEST_BACKWARD: u16 = 0x008B;
+/// The manual's `I1` example's current measurement (0.57 A).
+const DRIVE_CURRENT: u16 = 0x0428;
+
+impl Default for Drive {
+    fn default() -> Drive {
+        Drive {
+            on: false,
+            forward_period: BEST_FORWARD,
+            backward_period: BEST_BACKWARD,
+        }
+    }
+}
+
+/// A motor scan: `s1`/`s2` (frequency search, answered `GS` when done) or `c1`/`c2` (current
+/// curve, answered `C1`/`C2`).
+#[derive(Debug, Clone, Copy)]
+struct Scan {
+    end_ns: u64,
+    reply_addr: u8,
+    /// Motor index (0, 1).
+    motor: usize,
+    curve: bool,
+}
+
+/// How long a frequency search runs (the manual gives no figure; a few seconds on hardware).
+const SEARCH_NS: u64 = 2 * SEC;
+/// How long a current-curve scan runs: "around 12 seconds" (p.21).
+const CURVE_NS: u64 = 12 * SEC;
+
 impl Module {
+    /// Whether a motion or scan is under way.
+    fn busy(&self, now: u64) -> bool {
+        self.next_event().is_some_and(|t| now < t)
+    }
+
+    /// When its motion or scan ends.
+    fn next_event(&self) -> Option<u64> {
+        earliest(self.motion.map(|mo| mo.end_ns), self.scan.map(|s| s.end_ns))
+    }
+
     fn position(&self, now: u64) -> i64 {
         match self.motion {
             Some(m) if now < m.end_ns && m.end_ns > m.start_ns => {
@@ -141,8 +238,9 @@ impl Module {
     }
 
     fn reported(&self, p: i64) -> i64 {
-        match self.model.mech {
-            Mech::Rotary if self.model.pulses > 0 => p.rem_euclid(self.model.pulses as i64),
+        let pulses = self.model.spec.pulses as i64;
+        match self.model.spec.mechanism {
+            Mechanism::Rotary if pulses > 0 => p.rem_euclid(pulses),
             _ => p,
         }
     }
@@ -176,7 +274,7 @@ pub enum SimError {
     #[error("`{0}`: an address is 0-F")]
     BadAddress(String),
     /// A model that is not simulated.
-    #[error("`{0}`: unknown module (ELL6, ELL9, ELL12, ELL14, ELL17, ELL18, ELL20)")]
+    #[error("`{0}`: unknown module ({names}; `sim elliptec --list` describes them)", names = model_names())]
     UnknownModel(String),
     /// An empty module list.
     #[error("no modules given (e.g. 0:ELL14,1:ELL9)")]
@@ -213,7 +311,8 @@ pub fn parse_modules(s: &str) -> Result<Vec<(u8, EllModel)>, SimError> {
 /// as a frame the decoder rejects): its length, or `None` when more bytes are needed. Unlike a
 /// capture's framer, a live device cannot wait for the next command to end the current one: a
 /// known command is complete as soon as its data is (separators allowed, CR/LF optional and
-/// taken with it when already there); an unknown one at its CR/LF.
+/// taken with it when already there); an unknown host command at its CR/LF when that is
+/// already there, else right after its mnemonic.
 fn next_command(b: &[u8]) -> Option<usize> {
     if b.is_empty() {
         return None;
@@ -247,6 +346,16 @@ fn next_command(b: &[u8]) -> Option<usize> {
             }
             at
         }
+        // A command the table does not know (pylablib's `0i3`, sent without CR LF): a module
+        // cannot know its data, so it answers at once; data already on the line up to CR/LF
+        // goes with it.
+        None if b[h.cmd_at].is_ascii_lowercase() => {
+            let known = |x: &[u8]| matches!(head(x), Some(Ok(k)) if k.cmd.is_some());
+            let end = (h.data_at..b.len())
+                .find(|&p| matches!(b[p], b'\r' | b'\n') || known(&b[p..]))
+                .unwrap_or(h.data_at);
+            end.min(h.data_at + MAX_LINE)
+        }
         _ => match eol {
             Some(e) => e,
             None if b.len() > MAX_LINE => return Some(1),
@@ -279,7 +388,7 @@ impl EllSim {
             ms.push(Module {
                 addr,
                 model,
-                serial: format!("1{:02}{:05}", model.number % 100, 100 + ms.len()),
+                serial: format!("1{:02}{:05}", model.number() % 100, 100 + ms.len()),
                 pos: 0,
                 jog: model.default_jog(),
                 home_offset: 0,
@@ -288,6 +397,8 @@ impl EllSim {
                 motion: None,
                 isolated_until: 0,
                 error: OK,
+                motors: [Drive::default(); 2],
+                scan: None,
             });
         }
         Ok(EllSim {
@@ -311,13 +422,20 @@ impl EllSim {
     }
 
     fn reply(&mut self, now: u64, addr: u8, code: &str, data: &str) {
-        let c = char::from_digit(addr as u32, 16).map_or('0', |c| c.to_ascii_uppercase());
+        let c = addr_char(addr);
         self.line
             .send(now, format!("{c}{code}{data}\r\n").into_bytes());
     }
 
     fn status(&mut self, now: u64, addr: u8, code: u8) {
         self.reply(now, addr, "GS", &format!("{code:02X}"));
+    }
+
+    /// Answer an error and keep it for the next `gs` (pylablib reads `gs` after an error
+    /// "otherwise it is returned as the next status result").
+    fn fail(&mut self, i: usize, now: u64, addr: u8, code: u8) {
+        self.modules[i].error = code;
+        self.status(now, addr, code);
     }
 
     fn handle(&mut self, f: &EllFrame<'_>, now: u64) {
@@ -334,8 +452,8 @@ impl EllSim {
         let code = f.code_str().to_string();
         let bad_data = !f.diags().is_empty() && f.cmd.is_some_and(|c| c.data_len() > 0);
         for i in targets {
-            if bad_data {
-                self.status(now, addr, COMMAND_ERROR);
+            if bad_data || !self.modules[i].model.spec.supports(&code) {
+                self.fail(i, now, addr, COMMAND_ERROR);
                 continue;
             }
             self.command(i, addr, &code, f, now);
@@ -344,11 +462,16 @@ impl EllSim {
 
     fn command(&mut self, i: usize, addr: u8, code: &str, f: &EllFrame<'_>, now: u64) {
         let num = |name: &str| f.field(name).and_then(|v| v.as_i64());
-        let busy = self.modules[i].motion.is_some_and(|m| now < m.end_ns);
+        let busy = self.modules[i].busy(now);
+        // The motor a motor command drives (`i1`, `f2` …).
+        let motor = match code.as_bytes() {
+            [_, b'2'] => 1,
+            _ => 0,
+        };
         let m = &self.modules[i];
         match code {
             "in" => {
-                let md = m.model;
+                let md = m.model.spec;
                 let data = format!(
                     "{:02X}{}{}{:02X}{:02X}{:04X}{:08X}",
                     md.number, m.serial, "2023", 0x17, 0x01, md.travel, md.pulses
@@ -377,16 +500,53 @@ impl EllSim {
                 self.reply(now, addr, "HO", &hex8(o));
             }
             "i1" | "i2" => {
-                let r = if code == "i1" { "I1" } else { "I2" };
-                // Loop on, motor on, ~0.5 A, no ramps, ~103 kHz / ~83 kHz periods.
-                self.reply(now, addr, r, "1103A5FFFFFFFF008F00B2");
+                let d = m.motors[motor];
+                // Loop on; the current measured while energised; ramps undefined (0xFFFF), as
+                // in the manual's example (p.14).
+                let current = if d.on { DRIVE_CURRENT } else { 0 };
+                let data = format!(
+                    "1{}{current:04X}FFFFFFFF{:04X}{:04X}",
+                    u8::from(d.on),
+                    d.forward_period,
+                    d.backward_period
+                );
+                self.reply(now, addr, &code.to_ascii_uppercase(), &data);
+            }
+            "f1" | "f2" | "b1" | "b2" | "e1" | "e2" => match num("period") {
+                Some(p @ 1..=0xFFFF) => {
+                    let d = &mut self.modules[i].motors[motor];
+                    match code.as_bytes()[0] {
+                        b'f' => d.forward_period = p as u16,
+                        b'b' => d.backward_period = p as u16,
+                        _ => d.on = true,
+                    }
+                    self.status(now, addr, OK);
+                }
+                _ => self.fail(i, now, addr, VALUE_OUT_OF_RANGE),
+            },
+            "h1" | "h2" => {
+                self.modules[i].motors[motor].on = false;
+                self.status(now, addr, OK);
+            }
+            "s1" | "s2" | "c1" | "c2" => {
+                if busy {
+                    return self.status(now, addr, BUSY);
+                }
+                let curve = code.starts_with('c');
+                let took = if curve { CURVE_NS } else { SEARCH_NS };
+                self.modules[i].scan = Some(Scan {
+                    end_ns: now.saturating_add(took),
+                    reply_addr: addr,
+                    motor,
+                    curve,
+                });
             }
             "sv" => match num("velocity") {
                 Some(v) if (1..=100).contains(&v) => {
                     self.modules[i].velocity = v as u8;
                     self.status(now, addr, OK);
                 }
-                _ => self.status(now, addr, OUT_OF_RANGE),
+                _ => self.fail(i, now, addr, VALUE_OUT_OF_RANGE),
             },
             "sj" => {
                 self.modules[i].jog = num("step").unwrap_or(0);
@@ -396,22 +556,20 @@ impl EllSim {
                 self.modules[i].home_offset = num("offset").unwrap_or(0);
                 self.status(now, addr, OK);
             }
-            "us" | "f1" | "b1" | "e1" | "h1" | "f2" | "b2" | "e2" | "h2" => {
-                self.status(now, addr, OK)
-            }
+            "us" => self.status(now, addr, OK),
             "ca" => match num("new_address") {
                 Some(a) if (0..16).contains(&a) => {
                     self.modules[i].addr = a as u8;
                     self.status(now, a as u8, OK);
                 }
-                _ => self.status(now, addr, COMMAND_ERROR),
+                _ => self.fail(i, now, addr, COMMAND_ERROR),
             },
             "ga" => match num("new_address") {
                 Some(a) if (0..16).contains(&a) => {
                     self.modules[i].group = Some(a as u8);
                     self.status(now, a as u8, OK);
                 }
-                _ => self.status(now, addr, COMMAND_ERROR),
+                _ => self.fail(i, now, addr, COMMAND_ERROR),
             },
             "is" => {
                 let mins = num("minutes").unwrap_or(0).max(0) as u64;
@@ -424,27 +582,32 @@ impl EllSim {
                     self.status(now, addr, BUSY);
                     return;
                 }
+                let model = m.model;
                 let from = m.position(now);
                 let to = match code {
                     "ho" => m.home_offset,
                     "ma" => match num("position") {
                         Some(p) => p,
-                        None => return self.status(now, addr, COMMAND_ERROR),
+                        None => return self.fail(i, now, addr, COMMAND_ERROR),
                     },
                     "mr" => match num("position") {
                         Some(d) => from.saturating_add(d),
-                        None => return self.status(now, addr, COMMAND_ERROR),
+                        None => return self.fail(i, now, addr, COMMAND_ERROR),
                     },
                     "fw" => from.saturating_add(m.jog),
                     _ => from.saturating_sub(m.jog),
                 };
-                if let Some((lo, hi)) = m.model.range() {
-                    if to < lo || to > hi {
-                        self.modules[i].error = OUT_OF_RANGE;
-                        return self.status(now, addr, OUT_OF_RANGE);
+                let to = match (model.range(), code) {
+                    // A slider's jog at its end stays there: ELL6 `fw` means "to position 2",
+                    // sent by the `elliptec` package's Shutter.open wherever the slider is.
+                    (Some((lo, hi)), "fw" | "bw") => to.clamp(lo, hi),
+                    (Some((lo, hi)), _) if to < lo || to > hi => {
+                        return self.fail(i, now, addr, OUT_OF_RANGE);
                     }
-                }
-                let pps = (m.model.pulses_per_s() * m.velocity as f64 / 100.0).max(1.0);
+                    _ => to,
+                };
+                let to = model.settle(to);
+                let pps = (model.pulses_per_s() * m.velocity as f64 / 100.0).max(1.0);
                 let secs = (to - from).unsigned_abs() as f64 / pps;
                 let end = now
                     .saturating_add(MOVE_OVERHEAD_NS)
@@ -459,7 +622,7 @@ impl EllSim {
                     reply_addr: addr,
                 });
             }
-            _ => self.status(now, addr, COMMAND_ERROR),
+            _ => self.fail(i, now, addr, COMMAND_ERROR),
         }
     }
 
@@ -469,22 +632,59 @@ impl EllSim {
                 .modules
                 .iter()
                 .enumerate()
-                .filter_map(|(i, m)| m.motion.map(|mo| (mo.end_ns, i)))
+                .filter_map(|(i, m)| m.next_event().map(|t| (t, i)))
                 .filter(|(t, _)| *t <= now)
                 .min();
             let Some((t, i)) = next else { break };
-            let Some(mo) = self.modules[i].motion.take() else {
-                break;
-            };
             let m = &mut self.modules[i];
-            m.pos = mo.to;
-            m.group = None;
-            let p = m.reported(mo.to);
-            // A rotary mount keeps its position within one turn.
-            m.pos = p;
-            self.reply(t, mo.reply_addr, "PO", &hex8(p));
+            if let Some(mo) = m.motion.filter(|mo| mo.end_ns == t) {
+                m.motion = None;
+                m.group = None;
+                // A rotary mount keeps its position within one turn.
+                m.pos = m.reported(mo.to);
+                let p = m.pos;
+                self.reply(t, mo.reply_addr, "PO", &hex8(p));
+            } else if let Some(sc) = m.scan.take() {
+                if sc.curve {
+                    let code = if sc.motor == 0 { "C1" } else { "C2" };
+                    let mut b = format!("{}{code}", addr_char(sc.reply_addr)).into_bytes();
+                    b.extend_from_slice(&current_curve(m.motors[sc.motor]));
+                    b.extend_from_slice(b"\r\n");
+                    self.line.send(t, b);
+                } else {
+                    m.motors[sc.motor] = Drive::default();
+                    self.status(t, sc.reply_addr, OK);
+                }
+            } else {
+                break;
+            }
         }
     }
+}
+
+/// The address character of `addr` (0–F).
+fn addr_char(addr: u8) -> char {
+    char::from_digit(addr as u32 & 15, 16).map_or('0', |c| c.to_ascii_uppercase())
+}
+
+/// A current curve as `C1`/`C2` carry it: [`CURVE_POINTS`] points from 70 kHz up (period 210
+/// down), the current peaking at the motor's forward and backward resonances.
+fn current_curve(d: Drive) -> Vec<u8> {
+    let peak = |period: u16, at: u16| {
+        let x = (period as f64 - at as f64) / 4.0;
+        DRIVE_CURRENT as f64 / (1.0 + x * x)
+    };
+    let points: Vec<CurvePoint> = (0..CURVE_POINTS as u16)
+        .map(|k| {
+            let period = 210 - k;
+            let amps = 120.0 + peak(period, d.forward_period) + peak(period, d.backward_period);
+            CurvePoint {
+                period,
+                current: amps.round() as u32,
+            }
+        })
+        .collect();
+    curve_bytes(&points)
 }
 
 impl Simulator for EllSim {
@@ -511,7 +711,7 @@ impl Simulator for EllSim {
     fn next_deadline(&self) -> Option<u64> {
         let mut d = self.line.next_due();
         for m in &self.modules {
-            d = earliest(d, m.motion.map(|mo| mo.end_ns));
+            d = earliest(d, m.next_event());
         }
         d
     }

@@ -14,7 +14,7 @@ mod ell;
 pub mod models;
 
 pub use apt::{model_list, AptModel, AptSim};
-pub use ell::{parse_modules, EllModel, EllSim, SimError};
+pub use ell::{model_list as ell_model_list, parse_modules, EllModel, EllSim, SimError};
 
 use std::collections::VecDeque;
 

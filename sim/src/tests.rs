@@ -555,7 +555,7 @@ fn ell_move_absolute_then_position() {
     let out = ell_text(&talk(&mut sim, b"2ma0000F000", 11 * SEC, 12 * SEC));
     assert_eq!(out[0].1, "2GS0C\r\n");
     let out = ell_text(&talk(&mut sim, b"1fw", 12 * SEC, 14 * SEC));
-    assert_eq!(out[0].1, "1PO00000020\r\n");
+    assert_eq!(out[0].1, "1PO0000001F\r\n");
     let out = ell_text(&talk(&mut sim, b"0zz\r\n", 14 * SEC, 15 * SEC));
     assert_eq!(out[0].1, "0GS03\r\n");
 }

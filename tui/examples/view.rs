@@ -10,10 +10,15 @@ fn main() -> std::io::Result<()> {
         .next()
         .and_then(|f| aptscope_capture::open::Format::parse(&f));
     aptscope_tui::run(
-        &path,
-        aptscope_capture::open::OpenOptions {
-            format,
-            ..Default::default()
+        aptscope_tui::Source::File {
+            path: &path,
+            opts: aptscope_capture::open::OpenOptions {
+                format,
+                ..Default::default()
+            },
+            proto: None,
+            units: Default::default(),
         },
+        Default::default(),
     )
 }

@@ -1,17 +1,26 @@
-//! Application state and event handling (no terminal needed): keys and mouse events change
-//! the state; [`crate::ui::draw`] renders it.
+//! Application state and event handling (no terminal needed): keys (looked up in the one key
+//! list, [`crate::keys`]) and mouse events change the state of the parts
+//! ([`crate::components`]); [`App::update`] fits it to the screen before each frame and
+//! [`crate::ui::draw`] renders it.
 
 use crate::as_filter;
+use crate::components::detail::Detail;
+use crate::components::filter_bar::FilterBar;
+use crate::components::help::Help;
+use crate::components::hex::Hex;
+use crate::components::plot::Plot;
+use crate::components::stats::{self, Stats};
+use crate::components::timeline::Timeline;
+use crate::components::Step;
 use crate::decode::{tree, Node};
 use crate::fields;
 use crate::index::Shared;
+use crate::keys::{self, Action, Ctx, Move};
 use crate::scan::Scan;
+use crate::ui::Screen;
 use aptscope_dissector::filter::{Filter, FilterError};
-use ratatui::crossterm::event::{
-    KeyCode, KeyEvent, KeyModifiers, MouseButton, MouseEvent, MouseEventKind,
-};
+use ratatui::crossterm::event::{KeyEvent, KeyEventKind, MouseButton, MouseEvent, MouseEventKind};
 use ratatui::layout::{Position, Rect};
-use std::collections::HashSet;
 use std::sync::Arc;
 
 /// Which screen is shown.
@@ -71,7 +80,7 @@ pub enum AsFilter {
     And,
 }
 
-/// Screen areas of the last draw, for mouse events.
+/// Screen areas of the timeline's panes at the last update, for mouse events.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Areas {
     /// Timeline rows (inside the border).
@@ -82,77 +91,39 @@ pub struct Areas {
     pub hex: Rect,
 }
 
-/// The whole UI state.
+/// The whole UI state: the parts ([`crate::components`]) and what they share.
 pub struct App {
     /// The capture index.
-    pub shared: Arc<Shared>,
+    shared: Arc<Shared>,
     /// The filter/statistics scan.
-    pub scan: Arc<Scan>,
+    scan: Arc<Scan>,
     /// Scans run in background threads (false in tests: synchronous).
-    pub background: bool,
+    background: bool,
     /// Screen.
-    pub view: View,
+    view: View,
     /// Focused pane.
-    pub focus: Pane,
-    /// Input line.
-    pub input: Input,
-    /// Position of the selected row in the shown list.
-    pub sel: usize,
-    /// First shown row of the timeline.
-    pub top: usize,
-    /// Keep the selection on the last record as the index grows (`f` toggles it; moving up
-    /// stops it, `G`/End resumes it).
-    pub follow: bool,
+    focus: Pane,
     /// The source is live: the status bar shows LIVE (following) or PAUSED with the count of
     /// records not yet seen.
-    pub live: bool,
-    /// Rows of the shown list seen so far: every row while following, else up to the last
-    /// row that was on screen.
-    pub seen: usize,
-    /// Time column mode.
-    pub time_mode: TimeMode,
-    /// The applied display filter text (empty: none).
-    pub filter_text: String,
-    /// The error of the filter being typed, if any.
-    pub filter_error: Option<FilterError>,
-    /// The search expression.
-    pub search: Option<(String, Filter)>,
-    /// Selected line of the detail tree (among visible lines).
-    pub detail_sel: usize,
-    /// First shown line of the detail tree.
-    pub detail_top: usize,
-    /// Collapsed tree node ids.
-    pub collapsed: HashSet<String>,
-    /// First shown hex row.
-    pub hex_top: usize,
-    /// Columns the detail tree is scrolled to the right (`<` `>`).
-    pub detail_left: usize,
-    /// Help overlay shown.
-    pub help: bool,
-    /// First shown line of the help overlay (it scrolls when the window is too small).
-    pub help_scroll: usize,
-    /// Lines of the help overlay at the last draw.
-    pub help_rows: usize,
+    live: bool,
     /// Quit requested.
-    pub quit: bool,
-    /// A one-line message for the status bar.
-    pub message: Option<String>,
-    /// Rows of the timeline at the last draw.
-    pub list_rows: usize,
-    /// Rows of the detail pane at the last draw.
-    pub detail_rows: usize,
-    /// Scroll of the statistics view.
-    pub stats_scroll: usize,
-    /// Which plot series page is shown.
-    pub plot_page: usize,
-    /// Screen areas of the last draw.
-    pub areas: Areas,
+    quit: bool,
     /// File name, for the title.
-    pub title: String,
+    title: String,
+    /// Screen areas of the timeline's panes at the last update.
+    areas: Areas,
+    timeline: Timeline,
+    detail: Detail,
+    hex: Hex,
+    bar: FilterBar,
+    stats: Stats,
+    plot: Plot,
+    help: Help,
 }
 
 impl App {
-    /// A new UI over an index (being built or complete).
+    /// A new UI over an index (being built or complete); `background`: scans run in threads
+    /// of their own (false: synchronously, as tests want).
     pub fn new(shared: Arc<Shared>, title: &str, background: bool) -> Self {
         let scan = Arc::new(Scan::default());
         let app = App {
@@ -161,32 +132,17 @@ impl App {
             background,
             view: View::Timeline,
             focus: Pane::List,
-            input: Input::None,
-            sel: 0,
-            top: 0,
-            follow: false,
             live: false,
-            seen: 0,
-            time_mode: TimeMode::Relative,
-            filter_text: String::new(),
-            filter_error: None,
-            search: None,
-            detail_sel: 0,
-            detail_top: 0,
-            collapsed: HashSet::new(),
-            hex_top: 0,
-            detail_left: 0,
-            help: false,
-            help_scroll: 0,
-            help_rows: 10,
             quit: false,
-            message: None,
-            list_rows: 10,
-            detail_rows: 8,
-            stats_scroll: 0,
-            plot_page: 0,
-            areas: Areas::default(),
             title: title.to_string(),
+            areas: Areas::default(),
+            timeline: Timeline::default(),
+            detail: Detail::default(),
+            hex: Hex::default(),
+            bar: FilterBar::default(),
+            stats: Stats::default(),
+            plot: Plot::default(),
+            help: Help::default(),
         };
         app.scan.start(app.shared.clone(), None, app.background);
         app
@@ -200,18 +156,143 @@ impl App {
             .live
             .store(live, std::sync::atomic::Ordering::Relaxed);
         if live {
-            self.follow = true;
+            self.timeline.follow = true;
         }
+    }
+
+    /// The capture index.
+    pub fn shared(&self) -> &Arc<Shared> {
+        &self.shared
+    }
+
+    /// The filter/statistics scan.
+    pub fn scan(&self) -> &Arc<Scan> {
+        &self.scan
+    }
+
+    /// The source's name, as the title shows it.
+    pub fn title(&self) -> &str {
+        &self.title
+    }
+
+    /// Which screen is shown.
+    pub fn view(&self) -> View {
+        self.view
+    }
+
+    /// Which pane of the timeline view has the focus.
+    pub fn focus(&self) -> Pane {
+        self.focus
+    }
+
+    /// Give `pane` the focus (as Tab or a click does).
+    pub fn set_focus(&mut self, pane: Pane) {
+        self.focus = pane;
+    }
+
+    /// The line being edited at the bottom of the screen.
+    pub fn input(&self) -> &Input {
+        &self.bar.input
+    }
+
+    /// The applied display filter (empty: none).
+    pub fn filter_text(&self) -> &str {
+        &self.bar.filter_text
+    }
+
+    /// The error of the filter being typed, if any.
+    pub fn filter_error(&self) -> Option<&FilterError> {
+        self.bar.filter_error.as_ref()
+    }
+
+    /// The status bar's message, if any.
+    pub fn message(&self) -> Option<&str> {
+        self.bar.message.as_deref()
+    }
+
+    /// How times are shown.
+    pub fn time_mode(&self) -> TimeMode {
+        self.timeline.time_mode
+    }
+
+    /// Whether the user asked to quit.
+    pub fn should_quit(&self) -> bool {
+        self.quit
+    }
+
+    /// Whether the help overlay is shown.
+    pub fn help_shown(&self) -> bool {
+        self.help.shown
+    }
+
+    /// Show or hide the help overlay (where it was scrolled to).
+    pub fn set_help(&mut self, shown: bool) {
+        self.help.shown = shown;
+    }
+
+    /// First shown line of the help overlay.
+    pub fn help_scroll(&self) -> usize {
+        self.help.scroll
+    }
+
+    /// Position of the selected row in the shown list.
+    pub fn position(&self) -> usize {
+        self.timeline.sel
+    }
+
+    /// Position of the first row on screen.
+    pub fn top(&self) -> usize {
+        self.timeline.top
+    }
+
+    /// Rows of the timeline on screen (as of the last [`App::update`]).
+    pub fn rows_on_screen(&self) -> usize {
+        self.timeline.rows
+    }
+
+    /// Whether the selection follows new records.
+    pub fn following(&self) -> bool {
+        self.timeline.follow
+    }
+
+    /// Whether the source is live.
+    pub fn live(&self) -> bool {
+        self.live
+    }
+
+    /// The selected line of the detail tree (among visible lines).
+    pub fn detail_selected(&self) -> usize {
+        self.detail.sel
+    }
+
+    /// Select line `i` of the detail tree (among visible lines).
+    pub fn select_detail(&mut self, i: usize) {
+        self.detail.sel = i;
+    }
+
+    /// Columns the detail tree is scrolled to the right.
+    pub fn detail_left(&self) -> usize {
+        self.detail.left
+    }
+
+    /// The detail tree's state.
+    pub(crate) fn detail(&self) -> &Detail {
+        &self.detail
+    }
+
+    /// Screen areas of the timeline's panes at the last update (for mouse events).
+    pub fn areas(&self) -> Areas {
+        self.areas
     }
 
     /// Rows of the shown list not seen yet (arrived below the screen while paused).
     pub fn unseen(&self) -> usize {
-        self.len().saturating_sub(self.seen)
+        self.len().saturating_sub(self.timeline.seen)
     }
 
     /// Number of rows in the shown list (all records, or those the filter matches).
     pub fn len(&self) -> usize {
-        if self.filter_text.is_empty() {
+        if self.bar.filter_text.is_empty() {
             self.shared.index.read().map_or(0, |ix| ix.recs.len())
         } else {
             self.scan.state.lock().map_or(0, |s| s.matches.len())
@@ -225,7 +306,7 @@ impl App {
 
     /// Record numbers of the shown rows `from..from+count`.
     pub fn rows(&self, from: usize, count: usize) -> Vec<u64> {
-        if self.filter_text.is_empty() {
+        if self.bar.filter_text.is_empty() {
             let len = self.len();
             (from..(from + count).min(len))
                 .map(|i| i as u64 + 1)
@@ -239,12 +320,12 @@ impl App {
 
     /// The selected record number.
     pub fn selected(&self) -> Option<u64> {
-        self.rows(self.sel, 1).first().copied()
+        self.rows(self.timeline.sel, 1).first().copied()
     }
 
     /// Position of record `n` in the shown list (or of the first shown record after it).
     fn position_of(&self, n: u64) -> Option<usize> {
-        if self.filter_text.is_empty() {
+        if self.bar.filter_text.is_empty() {
             let len = self.len() as u64;
             return (n >= 1 && n <= len).then_some(n as usize - 1);
         }
@@ -257,36 +338,26 @@ impl App {
     pub fn select(&mut self, pos: usize) {
         let len = self.len();
         let new = pos.min(len.saturating_sub(1));
-        if new != self.sel {
-            self.detail_sel = 0;
-            self.detail_top = 0;
-            self.hex_top = 0;
-            self.detail_left = 0;
+        if new != self.timeline.sel {
+            self.detail.reset();
+            self.hex.top = 0;
         }
-        self.sel = new;
-        self.scroll_into_view();
-    }
-
-    fn scroll_into_view(&mut self) {
-        let h = self.list_rows.max(1);
-        if self.sel < self.top {
-            self.top = self.sel;
-        } else if self.sel >= self.top + h {
-            self.top = self.sel + 1 - h;
-        }
+        self.timeline.sel = new;
+        self.timeline.scroll_into_view();
     }
 
     /// Go to record `n` (or the next shown one).
     pub fn goto(&mut self, n: u64) {
         match self.position_of(n) {
             Some(p) => {
-                self.follow = false;
+                self.timeline.follow = false;
                 self.select(p);
                 if self.selected() != Some(n) {
-                    self.message = Some(format!("#{n} is not shown; nearest after it selected"));
+                    self.bar.message =
+                        Some(format!("#{n} is not shown; nearest after it selected"));
                 }
             }
-            None => self.message = Some(format!("no record #{n}")),
+            None => self.bar.message = Some(format!("no record #{n}")),
         }
     }
 
@@ -297,16 +368,68 @@ impl App {
             self.scan.catch_up(&self.shared);
         }
         let len = self.len();
-        if self.follow {
+        if self.timeline.follow {
             if len > 0 {
                 self.select(len - 1);
             }
-            self.seen = len;
+            self.timeline.seen = len;
         } else {
             // The window may have shrunk since the last frame: keep the selected row on it.
-            self.scroll_into_view();
-            let shown = (self.top + self.list_rows.max(1)).min(len);
-            self.seen = self.seen.max(shown).min(len);
+            let t = &mut self.timeline;
+            t.scroll_into_view();
+            let shown = (t.top + t.rows.max(1)).min(len);
+            t.seen = t.seen.max(shown).min(len);
+        }
+    }
+
+    /// Before drawing on a screen `area`: the parts learn their sizes and keep their scrolls
+    /// in range; the timeline view also does its per-frame housekeeping ([`App::tick`]).
+    /// [`crate::ui::draw`] calls it; drawing then only reads the state.
+    pub fn update(&mut self, area: Rect) {
+        let screen = Screen::of(area, self.bar.height());
+        match self.view {
+            View::Timeline => {
+                // Below the border line (and, for the timeline, the column headers).
+                let below = |r: Rect, n: u16| Rect {
+                    y: r.y + n.min(r.height),
+                    height: r.height.saturating_sub(n),
+                    ..r
+                };
+                self.areas = Areas {
+                    list: below(screen.list, 2),
+                    detail: below(screen.detail, 1),
+                    hex: below(screen.hex, 1),
+                };
+                self.timeline.rows = self.areas.list.height as usize;
+                self.detail.rows = self.areas.detail.height as usize;
+                self.tick();
+                let lines = self.detail_lines();
+                self.detail.update(lines, screen.detail.width as usize);
+            }
+            View::Stats => {
+                let text = stats::text(self);
+                self.stats.update(text, screen.body);
+            }
+            View::Plot => {
+                let series = self.shared.index.read().map_or(0, |ix| ix.series.len());
+                self.plot.update(series);
+            }
+        }
+        if self.help.shown {
+            self.help.update(area);
+        }
+    }
+
+    /// The parts, for drawing.
+    pub(crate) fn parts(&self) -> Parts<'_> {
+        Parts {
+            timeline: &self.timeline,
+            detail: &self.detail,
+            hex: &self.hex,
+            bar: &self.bar,
+            stats: &self.stats,
+            plot: &self.plot,
+            help: &self.help,
         }
     }
 
@@ -321,21 +444,7 @@ impl App {
             };
             tree(&ix, n)
         };
-        let mut out = vec![];
-        let mut hide_below: Option<u16> = None;
-        for node in nodes.iter() {
-            if let Some(d) = hide_below {
-                if node.depth > d {
-                    continue;
-                }
-                hide_below = None;
-            }
-            if node.children && self.collapsed.contains(&node.id) {
-                hide_below = Some(node.depth);
-            }
-            out.push(node.clone());
-        }
-        out
+        self.detail.visible(&nodes)
     }
 
     /// The byte range of the frame highlighted in the hex pane (the selected tree line's).
@@ -344,7 +453,7 @@ impl App {
             return None;
         }
         self.detail_lines()
-            .get(self.detail_sel)
+            .get(self.detail.sel)
             .and_then(|n| n.range)
     }
 
@@ -353,19 +462,19 @@ impl App {
         match Filter::parse(text) {
             Ok(f) => {
                 let keep = self.selected();
-                self.filter_error = None;
-                self.filter_text = if text.trim().is_empty() {
+                self.bar.filter_error = None;
+                self.bar.filter_text = if text.trim().is_empty() {
                     String::new()
                 } else {
                     text.to_string()
                 };
-                let filter = (!self.filter_text.is_empty()).then_some(f);
+                let filter = (!self.bar.filter_text.is_empty()).then_some(f);
                 self.scan
                     .start(self.shared.clone(), filter, self.background);
-                self.top = 0;
-                self.sel = 0;
+                self.timeline.top = 0;
+                self.timeline.sel = 0;
                 // Another list: what was seen of the old one says nothing of it.
-                self.seen = 0;
+                self.timeline.seen = 0;
                 if let Some(n) = keep {
                     if let Some(p) = self.position_of(n) {
                         self.select(p);
@@ -373,7 +482,7 @@ impl App {
                 }
             }
             Err(e) => {
-                self.filter_error = Some(e);
+                self.bar.filter_error = Some(e);
             }
         }
     }
@@ -386,11 +495,11 @@ impl App {
             return;
         }
         let diag = Filter::parse("diag").ok();
-        let f = match self.search.as_ref().map(|(_, f)| f.clone()).or(diag) {
+        let f = match self.bar.search.as_ref().map(|(_, f)| f.clone()).or(diag) {
             Some(f) => f,
             None => return,
         };
-        let mut pos = self.sel;
+        let mut pos = self.timeline.sel;
         const CHUNK: usize = 4096;
         loop {
             let (from, ok) = if forward {
@@ -399,7 +508,7 @@ impl App {
                 (pos.saturating_sub(CHUNK), pos > 0)
             };
             if !ok {
-                self.message = Some("search: no more matches".into());
+                self.bar.message = Some("search: no more matches".into());
                 return;
             }
             let count = if forward { CHUNK } else { pos - from };
@@ -415,14 +524,14 @@ impl App {
             };
             drop(ix);
             if let Some(i) = found {
-                self.follow = false;
+                self.timeline.follow = false;
                 self.select(from + i);
-                self.message = None;
+                self.bar.message = None;
                 return;
             }
             pos = if forward { from + ns.len() - 1 } else { from };
             if forward && ns.is_empty() {
-                self.message = Some("search: no more matches".into());
+                self.bar.message = Some("search: no more matches".into());
                 return;
             }
         }
@@ -439,7 +548,7 @@ impl App {
             .and_then(|ix| ix.rec(n).map(|r| r.pair));
         match pair {
             Some(p) if p != 0 => self.goto(p as u64),
-            _ => self.message = Some(format!("#{n} has no pair")),
+            _ => self.bar.message = Some(format!("#{n} has no pair")),
         }
     }
 
@@ -454,314 +563,213 @@ impl App {
                 .ok()
                 .and_then(|ix| as_filter::for_record(&ix, n))
         } else {
-            let line = self.detail_lines().into_iter().nth(self.detail_sel);
+            let line = self.detail_lines().into_iter().nth(self.detail.sel);
             line.and_then(|node| {
                 let ix = index.read().ok()?;
                 as_filter::for_node(&ix, n, &node)
             })
         };
         let Some(expr) = expr else {
-            self.message =
+            self.bar.message =
                 Some("no filter for this line (pick a field, header or diagnostic)".into());
             return;
         };
         match what {
             AsFilter::Prepare => {
-                self.filter_error = Filter::parse(&expr).err();
-                self.input = Input::Filter(expr);
+                self.bar.filter_error = Filter::parse(&expr).err();
+                self.bar.input = Input::Filter(expr);
             }
             AsFilter::Apply | AsFilter::And => {
                 let text = if what == AsFilter::And {
-                    as_filter::and(&self.filter_text, &expr)
+                    as_filter::and(&self.bar.filter_text, &expr)
                 } else {
                     expr
                 };
                 self.apply_filter(&text);
-                self.message = Some(format!("filter: {text}"));
+                self.bar.message = Some(format!("filter: {text}"));
             }
         }
     }
 
-    fn on_help_key(&mut self, k: KeyEvent) {
-        let page = self.help_rows.max(1);
-        match k.code {
-            KeyCode::Char('q') | KeyCode::Char('?') | KeyCode::Esc | KeyCode::Enter => {
-                self.help = false
-            }
-            KeyCode::Char('j') | KeyCode::Down => self.help_scroll += 1,
-            KeyCode::Char('k') | KeyCode::Up => {
-                self.help_scroll = self.help_scroll.saturating_sub(1)
-            }
-            KeyCode::PageDown | KeyCode::Char(' ') => self.help_scroll += page,
-            KeyCode::PageUp => self.help_scroll = self.help_scroll.saturating_sub(page),
-            KeyCode::Char('g') | KeyCode::Home => self.help_scroll = 0,
-            // The view clamps it to the last page.
-            KeyCode::Char('G') | KeyCode::End => self.help_scroll = usize::MAX / 2,
-            _ => {}
-        }
-    }
-
-    /// Handle a key.
+    /// Handle a key: what the key list ([`keys::KEYS`]) says it does where it was pressed.
     pub fn on_key(&mut self, k: KeyEvent) {
-        if k.kind == ratatui::crossterm::event::KeyEventKind::Release {
+        if k.kind == KeyEventKind::Release {
             return;
         }
-        let ctrl = k.modifiers.contains(KeyModifiers::CONTROL);
-        if ctrl && matches!(k.code, KeyCode::Char('c') | KeyCode::Char('q')) {
-            self.quit = true;
+        if let Some(a) = keys::action(Ctx::Always, &k) {
+            self.act(a);
             return;
         }
-        if self.input != Input::None {
+        if self.bar.input != Input::None {
             self.on_input_key(k);
             return;
         }
-        if self.help {
-            self.on_help_key(k);
+        if self.help.shown {
+            if let Some(a) = keys::action(Ctx::Help, &k) {
+                self.help.on_action(a);
+            }
             return;
         }
-        self.message = None;
-        match k.code {
-            KeyCode::Char('q') => {
+        self.bar.message = None;
+        match keys::action(Ctx::Main, &k) {
+            Some(a) => self.act(a),
+            None => self.on_move(None),
+        }
+    }
+
+    /// Do what a key of the views and panes does.
+    fn act(&mut self, a: Action) {
+        match a {
+            Action::Quit => self.quit = true,
+            Action::QuitOrBack => {
                 if self.view == View::Timeline {
                     self.quit = true;
                 } else {
                     self.view = View::Timeline;
                 }
             }
-            KeyCode::Esc => self.view = View::Timeline,
-            KeyCode::Char('?') => {
-                self.help = true;
-                self.help_scroll = 0;
-            }
-            KeyCode::Char('/') => self.input = Input::Filter(self.filter_text.clone()),
-            KeyCode::Char(':') => self.input = Input::Goto(String::new()),
-            KeyCode::Char('s') => {
-                self.input = Input::Search(
-                    self.search
+            Action::Timeline => self.view = View::Timeline,
+            Action::Stats => self.view = View::Stats,
+            Action::Plot => self.view = View::Plot,
+            Action::Help => self.help.open(),
+            Action::CloseHelp => self.help.shown = false,
+            Action::EditFilter => self.bar.input = Input::Filter(self.bar.filter_text.clone()),
+            Action::Goto => self.bar.input = Input::Goto(String::new()),
+            Action::EditSearch => {
+                self.bar.input = Input::Search(
+                    self.bar
+                        .search
                         .as_ref()
                         .map(|s| s.0.clone())
                         .unwrap_or_default(),
                 )
             }
-            KeyCode::Char('n') => self.search_step(true),
-            KeyCode::Char('N') => self.search_step(false),
-            KeyCode::Char('p') => self.jump_pair(),
-            KeyCode::Char('a') => self.selected_as_filter(AsFilter::Apply),
-            KeyCode::Char('A') => self.selected_as_filter(AsFilter::Prepare),
-            KeyCode::Char('&') => self.selected_as_filter(AsFilter::And),
-            KeyCode::Char('>') => self.detail_left += 8,
-            KeyCode::Char('<') => self.detail_left = self.detail_left.saturating_sub(8),
-            KeyCode::Char('t') => {
-                self.time_mode = match self.time_mode {
-                    TimeMode::Relative => TimeMode::Delta,
-                    TimeMode::Delta => TimeMode::Absolute,
-                    TimeMode::Absolute => TimeMode::Relative,
-                }
-            }
-            KeyCode::Char('F') | KeyCode::Char('f') => {
-                self.follow = !self.follow;
+            Action::SearchNext => self.search_step(true),
+            Action::SearchPrev => self.search_step(false),
+            Action::JumpPair => self.jump_pair(),
+            Action::AsFilter(what) => self.selected_as_filter(what),
+            Action::ScrollRight => self.detail.left += 8,
+            Action::ScrollLeft => self.detail.left = self.detail.left.saturating_sub(8),
+            Action::CycleTime => self.timeline.cycle_time(),
+            Action::ToggleFollow => {
+                let t = &mut self.timeline;
+                t.follow = !t.follow;
                 if !self.live {
-                    self.message =
-                        Some(format!("follow {}", if self.follow { "on" } else { "off" }));
+                    self.bar.message =
+                        Some(format!("follow {}", if t.follow { "on" } else { "off" }));
                 }
                 self.tick();
             }
-            KeyCode::Char('1') => self.view = View::Timeline,
-            KeyCode::Char('2') | KeyCode::Char('S') => self.view = View::Stats,
-            KeyCode::Char('3') | KeyCode::Char('P') => self.view = View::Plot,
-            KeyCode::Tab => {
+            Action::NextPane => {
                 self.focus = match self.focus {
                     Pane::List => Pane::Detail,
                     Pane::Detail => Pane::Hex,
                     Pane::Hex => Pane::List,
                 }
             }
-            KeyCode::BackTab => {
+            Action::PrevPane => {
                 self.focus = match self.focus {
                     Pane::List => Pane::Hex,
                     Pane::Detail => Pane::List,
                     Pane::Hex => Pane::Detail,
                 }
             }
-            _ => self.on_move_key(k),
+            Action::Move(m) => self.on_move(Some(m)),
+            // The input line's keys: handled there.
+            Action::Cancel | Action::Commit | Action::DeleteChar | Action::ClearLine => {}
         }
     }
 
-    fn on_move_key(&mut self, k: KeyEvent) {
-        let ctrl = k.modifiers.contains(KeyModifiers::CONTROL);
+    /// A movement in the view or pane that has the focus (`None`: a key that does nothing,
+    /// but the detail tree still scrolls its selection into view).
+    fn on_move(&mut self, m: Option<Move>) {
         let page = match self.focus {
-            Pane::Detail => self.detail_rows.max(1),
-            _ => self.list_rows.max(1),
+            Pane::Detail => self.detail.rows.max(1),
+            _ => self.timeline.rows.max(1),
+        } as isize;
+        let step = match m {
+            None => Step::None,
+            Some(Move::Down) => Step::By(1),
+            Some(Move::Up) => Step::By(-1),
+            Some(Move::HalfDown) => Step::By(page / 2),
+            Some(Move::HalfUp) => Step::By(-page / 2),
+            Some(Move::PageDown) => Step::By(page),
+            Some(Move::PageUp) => Step::By(-page),
+            Some(Move::PageOrOpen) if self.focus != Pane::Detail => Step::By(page),
+            Some(Move::Open | Move::PageOrOpen) => Step::Toggle,
+            Some(Move::Top) => Step::Top,
+            Some(Move::Bottom) => Step::Bottom,
+            Some(Move::Collapse) => Step::Collapse,
+            Some(Move::Expand) => Step::Expand,
         };
-        #[derive(PartialEq)]
-        enum M {
-            By(isize),
-            Top,
-            Bottom,
-            Toggle,
-            Collapse,
-            Expand,
-            None,
-        }
-        let m = match k.code {
-            KeyCode::Char('j') | KeyCode::Down => M::By(1),
-            KeyCode::Char('k') | KeyCode::Up => M::By(-1),
-            KeyCode::Char('d') if ctrl => M::By(page as isize / 2),
-            KeyCode::Char('u') if ctrl => M::By(-(page as isize) / 2),
-            KeyCode::Char('f') if ctrl => M::By(page as isize),
-            KeyCode::Char('b') if ctrl => M::By(-(page as isize)),
-            KeyCode::PageDown | KeyCode::Char(' ') if self.focus != Pane::Detail => {
-                M::By(page as isize)
-            }
-            KeyCode::PageDown => M::By(page as isize),
-            KeyCode::PageUp => M::By(-(page as isize)),
-            KeyCode::Char('g') | KeyCode::Home => M::Top,
-            KeyCode::Char('G') | KeyCode::End => M::Bottom,
-            KeyCode::Enter | KeyCode::Char(' ') => M::Toggle,
-            KeyCode::Char('h') | KeyCode::Left => M::Collapse,
-            KeyCode::Char('l') | KeyCode::Right => M::Expand,
-            _ => M::None,
-        };
-        match self.view {
-            View::Stats => {
-                self.stats_scroll = match m {
-                    M::By(d) => self.stats_scroll.saturating_add_signed(d),
-                    M::Top => 0,
-                    M::Bottom => usize::MAX / 2,
-                    _ => self.stats_scroll,
-                };
-                return;
-            }
-            View::Plot => {
-                match m {
-                    M::By(d) if d > 0 => self.plot_page += 1,
-                    M::By(_) => self.plot_page = self.plot_page.saturating_sub(1),
-                    M::Top => self.plot_page = 0,
-                    _ => {}
+        match (self.view, self.focus) {
+            (View::Stats, _) => self.stats.on_step(step),
+            (View::Plot, _) => self.plot.on_step(step),
+            (View::Timeline, Pane::List) => match step {
+                Step::By(d) => {
+                    self.timeline.follow = false;
+                    self.select(self.timeline.sel.saturating_add_signed(d));
                 }
-                return;
-            }
-            View::Timeline => {}
-        }
-        match self.focus {
-            Pane::List => match m {
-                M::By(d) => {
-                    self.follow = false;
-                    self.select(self.sel.saturating_add_signed(d));
-                }
-                M::Top => {
-                    self.follow = false;
+                Step::Top => {
+                    self.timeline.follow = false;
                     self.select(0);
                 }
-                M::Bottom => {
+                Step::Bottom => {
                     // At the end of a live capture: follow it again (as `tail -f`).
                     if self.live {
-                        self.follow = true;
+                        self.timeline.follow = true;
                     }
                     self.select(self.len().saturating_sub(1));
                 }
-                M::Toggle => self.focus = Pane::Detail,
+                Step::Toggle => self.focus = Pane::Detail,
                 _ => {}
             },
-            Pane::Detail => {
+            (View::Timeline, Pane::Detail) => {
                 let lines = self.detail_lines();
-                let last = lines.len().saturating_sub(1);
-                match m {
-                    M::By(d) => {
-                        self.detail_sel = self.detail_sel.saturating_add_signed(d).min(last)
-                    }
-                    M::Top => self.detail_sel = 0,
-                    M::Bottom => self.detail_sel = last,
-                    M::Toggle | M::Collapse | M::Expand => {
-                        if let Some(node) = lines.get(self.detail_sel) {
-                            let id = node.id.clone();
-                            if m == M::Toggle && node.link.is_some() {
-                                self.jump_pair();
-                                return;
-                            }
-                            let collapsed = self.collapsed.contains(&id);
-                            match m {
-                                M::Toggle if collapsed => {
-                                    self.collapsed.remove(&id);
-                                }
-                                M::Toggle | M::Collapse => {
-                                    self.collapsed.insert(id);
-                                }
-                                _ => {
-                                    self.collapsed.remove(&id);
-                                }
-                            }
-                        }
-                    }
-                    M::None => {}
-                }
-                let h = self.detail_rows.max(1);
-                if self.detail_sel < self.detail_top {
-                    self.detail_top = self.detail_sel;
-                } else if self.detail_sel >= self.detail_top + h {
-                    self.detail_top = self.detail_sel + 1 - h;
+                if self.detail.on_step(step, &lines) {
+                    self.jump_pair();
                 }
             }
-            Pane::Hex => match m {
-                M::By(d) => self.hex_top = self.hex_top.saturating_add_signed(d.signum()),
-                M::Top => self.hex_top = 0,
-                _ => {}
-            },
+            (View::Timeline, Pane::Hex) => self.hex.on_step(step),
         }
     }
 
     fn on_input_key(&mut self, k: KeyEvent) {
-        let text = match &mut self.input {
-            Input::Filter(s) | Input::Goto(s) | Input::Search(s) => s,
-            Input::None => return,
-        };
-        match k.code {
-            KeyCode::Esc => {
-                self.input = Input::None;
-                self.filter_error = None;
-            }
-            KeyCode::Backspace => {
-                text.pop();
-            }
-            KeyCode::Char('u') if k.modifiers.contains(KeyModifiers::CONTROL) => text.clear(),
-            KeyCode::Char(c) => text.push(c),
-            KeyCode::Enter => {
-                let input = std::mem::replace(&mut self.input, Input::None);
-                match input {
-                    Input::Filter(s) => {
-                        self.apply_filter(&s);
-                        if self.filter_error.is_some() {
-                            self.input = Input::Filter(s);
-                        }
-                    }
-                    Input::Goto(s) => match s.trim().trim_start_matches('#').parse::<u64>() {
-                        Ok(n) => self.goto(n),
-                        Err(_) => self.message = Some(format!("not a record number: {s:?}")),
-                    },
-                    Input::Search(s) => {
-                        if s.trim().is_empty() {
-                            self.search = None;
-                        } else {
-                            match Filter::parse(&s) {
-                                Ok(f) => {
-                                    self.search = Some((s, f));
-                                    self.search_step(true);
-                                }
-                                Err(e) => {
-                                    self.message = Some(format!("search: {e}"));
-                                }
-                            }
-                        }
-                    }
-                    Input::None => {}
-                }
-                return;
-            }
-            _ => {}
+        if self.bar.edit(keys::action(Ctx::Input, &k), k.code) {
+            self.commit_input();
         }
-        // Live feedback on the filter being typed.
-        if let Input::Filter(s) = &self.input {
-            self.filter_error = Filter::parse(s).err();
+    }
+
+    /// Enter on the input line: apply the filter, go to the record or search.
+    fn commit_input(&mut self) {
+        let input = std::mem::replace(&mut self.bar.input, Input::None);
+        match input {
+            Input::Filter(s) => {
+                self.apply_filter(&s);
+                if self.bar.filter_error.is_some() {
+                    self.bar.input = Input::Filter(s);
+                }
+            }
+            Input::Goto(s) => match s.trim().trim_start_matches('#').parse::<u64>() {
+                Ok(n) => self.goto(n),
+                Err(_) => self.bar.message = Some(format!("not a record number: {s:?}")),
+            },
+            Input::Search(s) => {
+                if s.trim().is_empty() {
+                    self.bar.search = None;
+                } else {
+                    match Filter::parse(&s) {
+                        Ok(f) => {
+                            self.bar.search = Some((s, f));
+                            self.search_step(true);
+                        }
+                        Err(e) => {
+                            self.bar.message = Some(format!("search: {e}"));
+                        }
+                    }
+                }
+            }
+            Input::None => {}
         }
     }
 
@@ -777,54 +785,50 @@ impl App {
         } else {
             None
         };
-        let key = |c| KeyEvent::new(c, KeyModifiers::NONE);
-        if self.help {
+        if self.help.shown {
             match m.kind {
-                MouseEventKind::ScrollDown => self.help_scroll += 3,
-                MouseEventKind::ScrollUp => self.help_scroll = self.help_scroll.saturating_sub(3),
+                MouseEventKind::ScrollDown => self.help.scroll_by(3),
+                MouseEventKind::ScrollUp => self.help.scroll_by(-3),
                 _ => {}
             }
             return;
         }
         match m.kind {
             MouseEventKind::ScrollDown | MouseEventKind::ScrollUp => {
+                let way = if m.kind == MouseEventKind::ScrollDown {
+                    Move::Down
+                } else {
+                    Move::Up
+                };
                 if self.view != View::Timeline {
-                    self.on_move_key(key(if m.kind == MouseEventKind::ScrollDown {
-                        KeyCode::Down
-                    } else {
-                        KeyCode::Up
-                    }));
+                    self.on_move(Some(way));
                     return;
                 }
                 if let Some(p) = pane {
                     let old = self.focus;
                     self.focus = p;
                     for _ in 0..3 {
-                        self.on_move_key(key(if m.kind == MouseEventKind::ScrollDown {
-                            KeyCode::Down
-                        } else {
-                            KeyCode::Up
-                        }));
+                        self.on_move(Some(way));
                     }
                     self.focus = old;
                 }
             }
             MouseEventKind::ScrollLeft if pane == Some(Pane::Detail) => {
-                self.detail_left = self.detail_left.saturating_sub(8)
+                self.detail.left = self.detail.left.saturating_sub(8)
             }
-            MouseEventKind::ScrollRight if pane == Some(Pane::Detail) => self.detail_left += 8,
+            MouseEventKind::ScrollRight if pane == Some(Pane::Detail) => self.detail.left += 8,
             MouseEventKind::Down(MouseButton::Left) => match pane {
                 Some(Pane::List) => {
                     self.focus = Pane::List;
                     let row = (m.row - self.areas.list.y) as usize;
-                    self.follow = false;
-                    self.select(self.top + row);
+                    self.timeline.follow = false;
+                    self.select(self.timeline.top + row);
                 }
                 Some(Pane::Detail) => {
                     self.focus = Pane::Detail;
                     let row = (m.row - self.areas.detail.y) as usize;
                     let last = self.detail_lines().len().saturating_sub(1);
-                    self.detail_sel = (self.detail_top + row).min(last);
+                    self.detail.sel = (self.detail.top + row).min(last);
                 }
                 Some(Pane::Hex) => self.focus = Pane::Hex,
                 None => {}
@@ -832,4 +836,15 @@ impl App {
             _ => {}
         }
     }
+}
+
+/// The parts of the UI, read-only, for drawing.
+pub(crate) struct Parts<'a> {
+    pub(crate) timeline: &'a Timeline,
+    pub(crate) detail: &'a Detail,
+    pub(crate) hex: &'a Hex,
+    pub(crate) bar: &'a FilterBar,
+    pub(crate) stats: &'a Stats,
+    pub(crate) plot: &'a Plot,
+    pub(crate) help: &'a Help,
 }

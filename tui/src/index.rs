@@ -15,7 +15,7 @@ use aptscope_dissector::diag::DiagKind;
 use aptscope_dissector::ell::Module;
 use aptscope_dissector::hash::NumMap;
 use aptscope_dissector::record::{AptRec, Ctx, Decoder, EllRec, GarbageRec, Record};
-use aptscope_dissector::table::Dir;
+use aptscope_dissector::table::{Class, Dir};
 use aptscope_dissector::units::{Scale, UnitsOpts};
 use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -792,7 +792,7 @@ impl Sink {
                 self.plotted = vec![0; 1 << 16];
             }
             if self.plotted[id] == 0 {
-                let yes = msg.name.contains("STATUSUPDATE") || msg.name.ends_with("GET_POSCOUNTER");
+                let yes = msg.class.has(Class::STATUS) || msg.class.has(Class::READING);
                 self.plotted[id] = if yes { 1 } else { 2 };
             }
             if self.plotted[id] == 1 {

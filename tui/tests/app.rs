@@ -43,10 +43,12 @@ fn moves_with_vim_keys_and_arrows() {
     assert_eq!(a.selected(), Some(20));
     key(&mut a, KeyCode::Char('g'));
     assert_eq!(a.selected(), Some(1));
-    a.list_rows = 5;
+    // An 80×18 screen shows five rows of the timeline.
+    a.update(ratatui::layout::Rect::new(0, 0, 80, 18));
+    assert_eq!(a.rows_on_screen(), 5);
     key(&mut a, KeyCode::PageDown);
     assert_eq!(a.selected(), Some(6));
-    assert!(a.top <= a.sel && a.sel < a.top + 5);
+    assert!(a.top() <= a.position() && a.position() < a.top() + 5);
     key(&mut a, KeyCode::PageUp);
     assert_eq!(a.selected(), Some(1));
     key(&mut a, KeyCode::Up);
@@ -59,19 +61,19 @@ fn filter_goto_pair_search() {
     key(&mut a, KeyCode::Char('/'));
     typed(&mut a, "apt.name ==");
     let e = a
-        .filter_error
-        .clone()
+        .filter_error()
+        .cloned()
         .expect("incomplete filter is an error");
     assert_eq!(e.column, 12);
     key(&mut a, KeyCode::Enter);
     assert!(
-        matches!(a.input, Input::Filter(_)),
+        matches!(a.input(), Input::Filter(_)),
         "a bad filter stays open"
     );
     typed(&mut a, " MOT_GET_DCSTATUSUPDATE");
-    assert!(a.filter_error.is_none());
+    assert!(a.filter_error().is_none());
     key(&mut a, KeyCode::Enter);
-    assert_eq!(a.input, Input::None);
+    assert_eq!(*a.input(), Input::None);
     let n = a.len();
     assert!(n > 0 && n < 20, "filter selects status updates: {n}");
     let shown = a.rows(0, n);
@@ -95,7 +97,7 @@ fn filter_goto_pair_search() {
     assert_eq!(a.selected(), Some(1));
     key(&mut a, KeyCode::Char('p'));
     assert_eq!(a.selected(), Some(2));
-    let ix = a.shared.index.read().expect("lock");
+    let ix = a.shared().index.read().expect("lock");
     assert!(ix.rec(2).expect("rec").has(F_IS_REPLY));
     drop(ix);
 
@@ -105,12 +107,12 @@ fn filter_goto_pair_search() {
     typed(&mut a, "apt.name ~ MOVE_HOMED");
     key(&mut a, KeyCode::Enter);
     let hit = a.selected().expect("a hit");
-    let ix = a.shared.index.read().expect("lock");
+    let ix = a.shared().index.read().expect("lock");
     let v = json_value(&ix, hit).expect("json");
     drop(ix);
     assert_eq!(v["name"], "MOT_MOVE_HOMED");
     key(&mut a, KeyCode::Char('n'));
-    assert!(a.message.is_some(), "only one homed message");
+    assert!(a.message().is_some(), "only one homed message");
     key(&mut a, KeyCode::Char('N'));
     assert_eq!(a.selected(), Some(hit));
 }
@@ -128,7 +130,7 @@ fn panes_tree_collapse_and_views() {
     );
     assert!(lines.iter().any(|l| l.text.starts_with("status_bits")));
     key(&mut a, KeyCode::Tab);
-    assert_eq!(a.focus, Pane::Detail);
+    assert_eq!(a.focus(), Pane::Detail);
     // Select the header section and collapse it.
     key(&mut a, KeyCode::Char('j'));
     assert!(a.detail_lines()[1].text.starts_with("Header"));
@@ -138,23 +140,23 @@ fn panes_tree_collapse_and_views() {
     key(&mut a, KeyCode::Char('l'));
     assert_eq!(a.detail_lines().len(), lines.len());
     key(&mut a, KeyCode::Tab);
-    assert_eq!(a.focus, Pane::Hex);
+    assert_eq!(a.focus(), Pane::Hex);
     key(&mut a, KeyCode::BackTab);
     key(&mut a, KeyCode::BackTab);
-    assert_eq!(a.focus, Pane::List);
+    assert_eq!(a.focus(), Pane::List);
     key(&mut a, KeyCode::Char('t'));
-    assert_eq!(a.time_mode, TimeMode::Delta);
+    assert_eq!(a.time_mode(), TimeMode::Delta);
     key(&mut a, KeyCode::Char('2'));
-    assert_eq!(a.view, View::Stats);
+    assert_eq!(a.view(), View::Stats);
     key(&mut a, KeyCode::Char('q'));
-    assert_eq!(a.view, View::Timeline);
-    assert!(!a.quit);
+    assert_eq!(a.view(), View::Timeline);
+    assert!(!a.should_quit());
     key(&mut a, KeyCode::Char('?'));
-    assert!(a.help);
+    assert!(a.help_shown());
     key(&mut a, KeyCode::Esc);
-    assert!(!a.help);
+    assert!(!a.help_shown());
     a.on_key(KeyEvent::new(KeyCode::Char('c'), KeyModifiers::CONTROL));
-    assert!(a.quit);
+    assert!(a.should_quit());
 }
 
 #[test]
@@ -162,7 +164,7 @@ fn indexes_like_decode() {
     // Record numbers, pairs and diagnostics agree with the NDJSON of `decode --json`.
     for name in ["damaged.bin", "elliptec-bus.txt", "bsc203-rack.hex"] {
         let a = app(name);
-        let ix = a.shared.index.read().expect("lock");
+        let ix = a.shared().index.read().expect("lock");
         assert!(ix.done);
         for n in 1..=ix.recs.len() as u64 {
             let v = json_value(&ix, n).expect("json");
@@ -172,7 +174,7 @@ fn indexes_like_decode() {
         }
     }
     let a = app("damaged.bin");
-    let st = a.scan.state.lock().expect("lock");
+    let st = a.scan().state.lock().expect("lock");
     assert!(st.done);
     assert!(st.stats.garbage.count > 0);
     assert!(!st.stats.diags.is_empty());
@@ -184,8 +186,8 @@ fn background_index_and_follow() {
         .expect("opens");
     let mut a = App::new(shared, "bus", true);
     for _ in 0..200 {
-        if a.shared.index.read().is_ok_and(|ix| ix.done)
-            && a.scan.state.lock().is_ok_and(|s| s.done)
+        if a.shared().index.read().is_ok_and(|ix| ix.done)
+            && a.scan().state.lock().is_ok_and(|s| s.done)
         {
             break;
         }
@@ -193,8 +195,8 @@ fn background_index_and_follow() {
     }
     key(&mut a, KeyCode::Char('f'));
     a.tick();
-    assert_eq!(a.sel, a.len() - 1);
-    assert!(!a.shared.index.read().expect("lock").series.is_empty());
+    assert_eq!(a.position(), a.len() - 1);
+    assert!(!a.shared().index.read().expect("lock").series.is_empty());
 }
 
 #[test]
@@ -225,7 +227,7 @@ fn records_equal_the_pipeline_ndjson() {
         }
         p.finish(&mut emit).expect("finish");
         let a = app(name);
-        let ix = a.shared.index.read().expect("lock");
+        let ix = a.shared().index.read().expect("lock");
         let mut count = 0;
         for want in out.iter().filter(|v| v.get("n").is_some()) {
             let n = want["n"].as_u64().expect("n");
@@ -253,29 +255,29 @@ fn records_equal_the_pipeline_ndjson() {
 
 #[test]
 fn mouse_wheel_and_click() {
-    use aptscope_tui::app::Areas;
     use ratatui::crossterm::event::{MouseButton, MouseEvent, MouseEventKind};
     use ratatui::layout::Rect;
     let mut a = app("kdc101-session.pcapng");
-    a.areas = Areas {
-        list: Rect::new(0, 2, 80, 8),
-        detail: Rect::new(0, 11, 80, 7),
-        hex: Rect::new(0, 19, 80, 2),
-    };
-    a.list_rows = 8;
+    // The panes of an 80×24 screen: the timeline's rows start at line 3, the detail's at 12.
+    a.update(Rect::new(0, 0, 80, 24));
+    let areas = a.areas();
+    assert_eq!(
+        (areas.list.y, areas.detail.y, a.rows_on_screen()),
+        (3, 12, 8)
+    );
     let ev = |kind, row| MouseEvent {
         kind,
         column: 5,
         row,
         modifiers: KeyModifiers::NONE,
     };
-    a.on_mouse(ev(MouseEventKind::ScrollDown, 3));
+    a.on_mouse(ev(MouseEventKind::ScrollDown, 4));
     assert_eq!(a.selected(), Some(4));
-    a.on_mouse(ev(MouseEventKind::Down(MouseButton::Left), 2));
-    assert_eq!(a.selected(), Some(a.top as u64 + 1));
-    a.on_mouse(ev(MouseEventKind::Down(MouseButton::Left), 13));
-    assert_eq!(a.focus, Pane::Detail);
-    assert_eq!(a.detail_sel, 2);
+    a.on_mouse(ev(MouseEventKind::Down(MouseButton::Left), 3));
+    assert_eq!(a.selected(), Some(a.top() as u64 + 1));
+    a.on_mouse(ev(MouseEventKind::Down(MouseButton::Left), 14));
+    assert_eq!(a.focus(), Pane::Detail);
+    assert_eq!(a.detail_selected(), 2);
 }
 
 #[test]
@@ -391,12 +393,13 @@ fn a_stage_shows_motion_values_in_mm_everywhere() {
 
 /// Select detail line `id` of the selected record (focus on the detail pane).
 fn select_line(a: &mut App, id: &str) {
-    a.focus = Pane::Detail;
-    a.detail_sel = a
+    a.set_focus(Pane::Detail);
+    let i = a
         .detail_lines()
         .iter()
         .position(|l| l.id == id)
         .expect("line shown");
+    a.select_detail(i);
 }
 
 #[test]
@@ -408,40 +411,37 @@ fn apply_prepare_and_narrow_as_filter() {
     // Apply: the filter runs, the record stays selected.
     select_line(&mut a, "f.status_bits.HOMING");
     key(&mut a, KeyCode::Char('a'));
-    assert_eq!(a.filter_text, "apt.status_bits contains HOMING");
+    assert_eq!(a.filter_text(), "apt.status_bits contains HOMING");
     assert_eq!(a.rows(0, 100), [8, 9, 10, 11]);
     assert_eq!(a.selected(), Some(8));
-    assert_eq!(a.input, Input::None);
+    assert_eq!(*a.input(), Input::None);
     // … and Selected: narrowed by another line of the record.
     select_line(&mut a, "f.position");
     key(&mut a, KeyCode::Char('&'));
     assert_eq!(
-        a.filter_text,
+        a.filter_text(),
         "(apt.status_bits contains HOMING) && (apt.position == 0)"
     );
     assert_eq!(a.rows(0, 100), [8]);
     // Prepare: into the filter bar to edit, not applied yet.
     select_line(&mut a, "hdr.src");
     key(&mut a, KeyCode::Char('A'));
-    assert_eq!(a.input, Input::Filter("apt.src == usb".into()));
+    assert_eq!(*a.input(), Input::Filter("apt.src == usb".into()));
     assert_eq!(a.rows(0, 100), [8], "not applied before Enter");
     typed(&mut a, " && apt.position < 0");
     key(&mut a, KeyCode::Enter);
-    assert_eq!(a.filter_text, "apt.src == usb && apt.position < 0");
+    assert_eq!(a.filter_text(), "apt.src == usb && apt.position < 0");
     assert_eq!(a.rows(0, 100), [9, 10, 11]);
     // A heading has no value: nothing changes, the status line says why.
-    let before = a.filter_text.clone();
+    let before = a.filter_text().to_string();
     select_line(&mut a, "fields");
     key(&mut a, KeyCode::Char('a'));
-    assert_eq!(a.filter_text, before);
-    assert!(a
-        .message
-        .as_deref()
-        .is_some_and(|m| m.starts_with("no filter")));
+    assert_eq!(a.filter_text(), before);
+    assert!(a.message().is_some_and(|m| m.starts_with("no filter")));
     // In the timeline the action takes the row's message.
-    a.focus = Pane::List;
+    a.set_focus(Pane::List);
     key(&mut a, KeyCode::Char('a'));
-    assert_eq!(a.filter_text, "apt.name == MOT_GET_DCSTATUSUPDATE");
+    assert_eq!(a.filter_text(), "apt.name == MOT_GET_DCSTATUSUPDATE");
     assert_eq!(a.len(), 9);
 }
 
@@ -454,31 +454,31 @@ fn detail_scrolls_sideways_and_resets_on_another_record() {
     key(&mut a, KeyCode::Tab);
     key(&mut a, KeyCode::Char('>'));
     key(&mut a, KeyCode::Char('>'));
-    assert_eq!(a.detail_left, 16);
+    assert_eq!(a.detail_left(), 16);
     key(&mut a, KeyCode::Char('<'));
-    assert_eq!(a.detail_left, 8);
-    a.focus = Pane::List;
+    assert_eq!(a.detail_left(), 8);
+    a.set_focus(Pane::List);
     key(&mut a, KeyCode::Char('j'));
-    assert_eq!(a.detail_left, 0, "a new record starts at the left");
+    assert_eq!(a.detail_left(), 0, "a new record starts at the left");
 }
 
 #[test]
 fn help_scrolls_and_closes() {
     let mut a = app("kdc101-session.pcapng");
     key(&mut a, KeyCode::Char('?'));
-    assert!(a.help);
+    assert!(a.help_shown());
     key(&mut a, KeyCode::Char('j'));
     key(&mut a, KeyCode::Down);
-    assert_eq!(a.help_scroll, 2);
+    assert_eq!(a.help_scroll(), 2);
     key(&mut a, KeyCode::Char('k'));
-    assert_eq!(a.help_scroll, 1);
+    assert_eq!(a.help_scroll(), 1);
     // Keys do not reach the panes while the help is open.
     assert_eq!(a.selected(), Some(1));
     key(&mut a, KeyCode::Char('g'));
-    assert_eq!(a.help_scroll, 0);
+    assert_eq!(a.help_scroll(), 0);
     key(&mut a, KeyCode::Char('q'));
-    assert!(!a.help);
-    assert!(!a.quit, "q closes the help only");
+    assert!(!a.help_shown());
+    assert!(!a.should_quit(), "q closes the help only");
 }
 
 /// Shrinking the window (120×32 → 80×24) keeps the selected row on screen at the next frame,
@@ -492,7 +492,7 @@ fn the_selected_row_stays_visible_when_the_window_shrinks() {
     big.draw(|f| aptscope_tui::ui::draw(f, &mut a))
         .expect("draw");
     // The last row that fits the big window.
-    let last = a.top + a.list_rows - 1;
+    let last = a.top() + a.rows_on_screen() - 1;
     a.select(last);
     big.draw(|f| aptscope_tui::ui::draw(f, &mut a))
         .expect("draw");
@@ -500,13 +500,16 @@ fn the_selected_row_stays_visible_when_the_window_shrinks() {
     small
         .draw(|f| aptscope_tui::ui::draw(f, &mut a))
         .expect("draw");
-    assert!(a.list_rows < last + 1, "the small window shows fewer rows");
     assert!(
-        a.top <= a.sel && a.sel < a.top + a.list_rows,
+        a.rows_on_screen() < last + 1,
+        "the small window shows fewer rows"
+    );
+    assert!(
+        a.top() <= a.position() && a.position() < a.top() + a.rows_on_screen(),
         "row {} visible in {}..{}",
-        a.sel,
-        a.top,
-        a.top + a.list_rows
+        a.position(),
+        a.top(),
+        a.top() + a.rows_on_screen()
     );
     let screen = format!("{}", small.backend());
     assert!(screen.contains("2:stats 3:plot"), "{screen}");

@@ -114,7 +114,7 @@ fn live_view_follows_pauses_and_resumes() {
         key(&mut app, KeyCode::Char('k'));
     }
     let s = screen(&mut app, &mut t);
-    assert!(!app.follow);
+    assert!(!app.following());
     assert!(status_line(&s).contains("PAUSED · 0 new"), "{s}");
     src.exchanges(5);
     let s = screen(&mut app, &mut t);
@@ -128,7 +128,7 @@ fn live_view_follows_pauses_and_resumes() {
     key(&mut app, KeyCode::Char('G'));
     src.exchanges(1);
     let s = screen(&mut app, &mut t);
-    assert!(app.follow);
+    assert!(app.following());
     assert_eq!(app.selected(), Some(58));
     assert!(status_line(&s).contains("LIVE"), "{s}");
     // `f` toggles.
@@ -161,7 +161,7 @@ fn filters_statistics_and_plot_extend_as_records_arrive() {
     assert_eq!(app.rows(0, 100), vec![6, 8, 10, 12]);
     assert_eq!(app.selected(), Some(12), "the filtered view follows too");
     {
-        let st = app.scan.state.lock().expect("lock");
+        let st = app.scan().state.lock().expect("lock");
         assert_eq!(st.scanned, 12);
         assert_eq!(st.stats.frames.count, 4, "statistics of the matches");
         assert!(!st.done, "a live scan is not over");
@@ -200,7 +200,7 @@ fn statistics_count_a_no_reply_that_comes_after_its_row() {
         src.ix.flush();
         let _ = screen(&mut app, &mut t);
         let count = |app: &App| {
-            let st = app.scan.state.lock().expect("lock");
+            let st = app.scan().state.lock().expect("lock");
             st.stats.diags.get("no_reply").copied()
         };
         assert_eq!(count(&app), None);

@@ -27,7 +27,8 @@ fn keys(app: &mut App, s: &str) {
 
 fn screen(app: &mut App, w: u16, h: u16) -> String {
     let mut t = Terminal::new(TestBackend::new(w, h)).expect("terminal");
-    // Twice: the first draw learns the pane sizes (as in the real loop).
+    // Twice, as the real loop draws: a second frame shows the same (the update step before
+    // each draw fits the state to the screen).
     t.draw(|f| draw(f, app)).expect("draw");
     t.draw(|f| draw(f, app)).expect("draw");
     format!("{}", t.backend())
@@ -218,7 +219,7 @@ fn rows_are_coloured_by_rule() {
     let rule = |name: &str| COLOURS.iter().position(|c| c.name == name);
     // Which rule each record takes.
     let a = app("damaged.bin");
-    let ix = a.shared.index.read().expect("lock");
+    let ix = a.shared().index.read().expect("lock");
     let rules: Vec<Option<usize>> = (1..=9)
         .map(|n| {
             let r = row(&ix, n).expect("row");
@@ -239,7 +240,7 @@ fn rows_are_coloured_by_rule() {
          bad length, absurd header, move without reply, truncated"
     );
     let a = app("kdc101-session.pcapng");
-    let ix = a.shared.index.read().expect("lock");
+    let ix = a.shared().index.read().expect("lock");
     let rules: Vec<Option<usize>> = [1, 2, 8]
         .iter()
         .map(|&n| colour_rule(ix.rec(n).expect("rec"), row(&ix, n).expect("row").way))
@@ -250,7 +251,7 @@ fn rows_are_coloured_by_rule() {
     let mut a = app("kdc101-session.pcapng");
     let mut t = Terminal::new(TestBackend::new(80, 24)).expect("terminal");
     t.draw(|f| draw(f, &mut a)).expect("draw");
-    let y = a.areas.list.y + 1;
+    let y = a.areas().list.y + 1;
     let reply = COLOURS[rule("Replies").expect("rule")].style;
     for x in [0, 10, 40, 79] {
         let cell = t.backend().buffer().cell((x, y)).expect("cell");
@@ -262,7 +263,7 @@ fn rows_are_coloured_by_rule() {
     let cell = t
         .backend()
         .buffer()
-        .cell((5, a.areas.list.y + 2))
+        .cell((5, a.areas().list.y + 2))
         .expect("cell");
     assert_eq!(
         (cell.fg, cell.bg),
@@ -275,7 +276,7 @@ fn tiny_windows_draw_without_panic() {
     let mut a = app("kdc101-session.pcapng");
     for (w, h) in [(1, 1), (10, 3), (20, 4), (30, 6), (40, 8)] {
         for help in [false, true] {
-            a.help = help;
+            a.set_help(help);
             let s = screen(&mut a, w, h);
             assert_eq!(s.lines().count(), h as usize, "{w}x{h}");
         }

@@ -7,6 +7,7 @@
 //! I/O goes through a second, non-blocking descriptor of the same port, waited on with `poll`,
 //! which leaves the signal mask alone.
 
+use crate::live::error::PortError;
 use aptscope_dissector::detect::Proto;
 use nix::fcntl::OFlag;
 use std::fmt;
@@ -95,12 +96,9 @@ impl SerialFd {
     }
 }
 
-/// What a serial port looks like, for the messages that say a path is none.
-const PORTS: &str = "serial port (/dev/ttyUSB0, /dev/ttyACM0, /dev/serial/by-id/…)";
-
 /// A file or directory where a serial port was expected: say so, instead of the "Not a
 /// typewriter" (ENOTTY) that configuring it as a terminal gives.
-fn not_a_port(path: &str) -> io::Result<()> {
+fn not_a_port(path: &str) -> Result<(), PortError> {
     use std::os::unix::fs::FileTypeExt;
     let Ok(meta) = std::fs::metadata(path) else {
         // Missing or unreadable: opening it says why.
@@ -116,20 +114,19 @@ fn not_a_port(path: &str) -> io::Result<()> {
     } else {
         "not a device"
     };
-    Err(io::Error::new(
-        io::ErrorKind::InvalidInput,
-        format!("{path} is {what}, not a {PORTS}"),
-    ))
+    Err(PortError::NotAPort {
+        path: path.to_string(),
+        what,
+    })
 }
 
 /// Whether `path` can be a serial port to open now, before anything is asked or sent: it exists,
 /// is a terminal device, and no other program holds it exclusively. The error says which.
-pub fn check_port(path: &str) -> io::Result<()> {
+pub fn check_port(path: &str) -> Result<(), PortError> {
     if std::fs::symlink_metadata(path).is_err() && std::fs::metadata(path).is_err() {
-        return Err(io::Error::new(
-            io::ErrorKind::NotFound,
-            format!("no such port: {path} does not exist"),
-        ));
+        return Err(PortError::Missing {
+            path: path.to_string(),
+        });
     }
     not_a_port(path)?;
     let f = std::fs::OpenOptions::new()
@@ -137,25 +134,26 @@ pub fn check_port(path: &str) -> io::Result<()> {
         .write(true)
         .custom_flags((OFlag::O_NOCTTY | OFlag::O_NONBLOCK).bits())
         .open(path)
-        .map_err(|e| match e.raw_os_error() {
-            Some(libc_ebusy) if libc_ebusy == nix::errno::Errno::EBUSY as i32 => io::Error::new(
-                e.kind(),
-                format!("{path} is busy: another program has it open exclusively"),
-            ),
-            _ => io::Error::new(e.kind(), format!("{path}: {e}")),
+        .map_err(|source| {
+            let path = path.to_string();
+            match source.raw_os_error() {
+                Some(ebusy) if ebusy == nix::errno::Errno::EBUSY as i32 => {
+                    PortError::Busy { path, source }
+                }
+                _ => PortError::Open { path, source },
+            }
         })?;
     if !nix::unistd::isatty(&f).unwrap_or(false) {
-        return Err(io::Error::new(
-            io::ErrorKind::InvalidInput,
-            format!("{path} is not a terminal, so not a {PORTS}"),
-        ));
+        return Err(PortError::NotATerminal {
+            path: path.to_string(),
+        });
     }
     Ok(())
 }
 
 /// Open `path` exclusively with `settings` (8 data bits, no parity, one stop bit). What the
 /// device sent before is kept (a tap must not lose it).
-pub fn open_serial(path: &str, settings: &LineSettings) -> io::Result<SerialFd> {
+pub fn open_serial(path: &str, settings: &LineSettings) -> Result<SerialFd, PortError> {
     not_a_port(path)?;
     let mut port = serialport::new(path, settings.baud)
         .data_bits(serialport::DataBits::Eight)
@@ -164,26 +162,37 @@ pub fn open_serial(path: &str, settings: &LineSettings) -> io::Result<SerialFd> 
         .flow_control(settings.flow.to_serialport())
         .open_native()
         .map_err(|e| {
-            let kind = io::Error::from(e.clone()).kind();
+            let path = path.to_string();
             // A character device that is no terminal (/dev/null) fails with ENOTTY, which
             // strerror calls "Not a typewriter".
             let probe = std::fs::OpenOptions::new()
                 .read(true)
                 .custom_flags((OFlag::O_NOCTTY | OFlag::O_NONBLOCK).bits())
-                .open(path);
+                .open(&path);
             if probe.is_ok_and(|f| !nix::unistd::isatty(&f).unwrap_or(true)) {
-                return io::Error::new(kind, format!("{path} is not a terminal, so not a {PORTS}"));
+                return PortError::NotATerminal { path };
             }
-            io::Error::new(kind, format!("{path}: {e}"))
+            // (The library's message is its error's description, as the io::Error's is.)
+            PortError::Open {
+                path,
+                source: io::Error::from(e),
+            }
         })?;
+    let configure = |e: serialport::Error| PortError::Configure {
+        path: path.to_string(),
+        source: io::Error::from(e),
+    };
     // The second descriptor is opened while the exclusive lock is briefly lifted.
-    port.set_exclusive(false).map_err(io::Error::from)?;
+    port.set_exclusive(false).map_err(configure)?;
     let file = std::fs::OpenOptions::new()
         .read(true)
         .write(true)
         .custom_flags((OFlag::O_NOCTTY | OFlag::O_NONBLOCK).bits())
         .open(path)
-        .map_err(|e| io::Error::new(e.kind(), format!("{path}: {e}")));
-    port.set_exclusive(true).map_err(io::Error::from)?;
+        .map_err(|source| PortError::Open {
+            path: path.to_string(),
+            source,
+        });
+    port.set_exclusive(true).map_err(configure)?;
     Ok(SerialFd { file: file?, port })
 }

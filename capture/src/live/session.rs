@@ -14,6 +14,7 @@
 //! pty, and the host script writing to the tap's link. The tests compare the tap's capture with
 //! what the script sent and read, and with the virtual recording.
 
+use super::error::LiveError;
 use super::sim::{
     parse_modules, serve_pty, stop_pair, AptModel, AptSim, EllSim, Pty, SimError, Simulator,
 };
@@ -161,6 +162,9 @@ pub enum SessionError {
     /// Input or output failed.
     #[error("{0}")]
     Io(#[from] io::Error),
+    /// The tap failed.
+    #[error(transparent)]
+    Tap(#[from] LiveError),
     /// A thread of the run panicked.
     #[error("the {0} panicked")]
     Panicked(&'static str),
@@ -170,7 +174,7 @@ pub enum SessionError {
         /// What failed in the run.
         run: Box<SessionError>,
         /// The tap's error.
-        tap: io::Error,
+        tap: LiveError,
     },
     /// A part of a session failed.
     #[error("{session} ({port}): {error}")]
@@ -1144,7 +1148,9 @@ pub fn run_real(device: &Device, steps: &[Step], dir: &Path) -> Result<RealRun, 
         (Ok(r), _) => r,
         (Err(e), Ok(_)) => return Err(e),
         (Err(e), Err(_)) => {
-            let tap = stats.err().unwrap_or_else(|| io::Error::other("?"));
+            let tap = stats
+                .err()
+                .unwrap_or_else(|| LiveError::Io(io::Error::other("?")));
             return Err(SessionError::AndTap {
                 run: Box::new(e),
                 tap,

@@ -289,7 +289,17 @@ impl Cmd {
     }
 
     /// How the reply `code` (with its status, for `GS`) answers this command.
+    ///
+    /// `GS` 3, "command error or not supported" (p.10), answers any host command that expects a
+    /// reply: a module that lacks a command (an ELL6 asked `gv`) says so instead of replying.
     pub fn answer(&self, code: &str, status: Option<u64>) -> Answer {
+        if code == "GS"
+            && status == Some(STATUS_COMMAND_ERROR as u64)
+            && self.dir == Dir::HostToDevice
+            && !self.replies.is_empty()
+        {
+            return Answer::Final;
+        }
         if !self.replies.contains(&code) {
             return Answer::No;
         }
@@ -514,7 +524,71 @@ pub fn by_name(name: &str) -> Option<&'static Cmd> {
     COMMANDS.iter().find(|c| c.name.eq_ignore_ascii_case(name))
 }
 
-/// What the manual and real modules say about an ELL model number (the `IN` reply's type).
+/// How a module moves: decides which commands it has beyond the common ones (see
+/// [`Model::supports`]) and how positions read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mechanism {
+    /// Rotation: `IN` gives pulses per revolution; any position, reported within one turn.
+    Rotary,
+    /// Linear stage (and the iris): `IN` gives pulses per mm; positions 0 to travel × pulses.
+    Linear,
+    /// Bi-positional slider (the manual's "shutter devices", ELL6): two positions, moved by
+    /// `fw`/`bw`.
+    Shutter,
+    /// Multi-position slider (ELL9, ELL12): `slots` positions, moved by `fw`/`bw` or `ma`.
+    Indexed,
+    /// Open loop, no encoder (ELL5 actuator): jogs only, the position always reads 0.
+    OpenLoop,
+}
+
+impl Mechanism {
+    /// snake_case name (listings, JSON).
+    pub fn name(self) -> &'static str {
+        match self {
+            Mechanism::Rotary => "rotary",
+            Mechanism::Linear => "linear",
+            Mechanism::Shutter => "shutter",
+            Mechanism::Indexed => "indexed",
+            Mechanism::OpenLoop => "open_loop",
+        }
+    }
+
+    /// The host commands a module of this mechanism has beyond [`COMMON_COMMANDS`] and the
+    /// motor commands.
+    ///
+    /// Rotary and linear: the manual's "Messages Applicable to Rotation/Linear Devices" (p.46,
+    /// p.47). Shutter: its "Shutter Devices" list (p.45) plus `ho`, which the manual says does
+    /// not apply to bi-positional sliders, but the `elliptec` package homes its ELL6 (its
+    /// device table lists "home") and Thorlabs' own ELL6 example homes it. Indexed: the
+    /// shutter's plus `ma`, with which the `elliptec` package's `Slider.set_slot` moves an
+    /// ELL9 (the manual predates the multi-position sliders).
+    pub fn commands(self) -> &'static [&'static str] {
+        match self {
+            Mechanism::Rotary | Mechanism::Linear => {
+                &["ho", "ma", "mr", "go", "so", "gj", "sj", "gv", "sv"]
+            }
+            Mechanism::Shutter => &["ho"],
+            Mechanism::Indexed => &["ho", "ma"],
+            Mechanism::OpenLoop => &[],
+        }
+    }
+}
+
+/// Host commands every module answers (the manual's shutter list, p.45, which the rotation and
+/// linear lists contain): identify, status, save, reboot, addressing, isolation, jogs,
+/// position.
+pub static COMMON_COMMANDS: &[&str] = &["in", "gs", "us", "re", "ca", "is", "ga", "fw", "bw", "gp"];
+
+/// Host commands of one motor, by motor (1, 2): what "THIS MESSAGE APPLIES ONLY TO DEVICES WITH
+/// 2 MOTORS" (p.23–31) leaves out of single-motor modules.
+pub static MOTOR_COMMANDS: [&[&str]; 2] = [
+    &["i1", "f1", "b1", "e1", "h1", "s1", "c1"],
+    &["i2", "f2", "b2", "e2", "h2", "s2", "c2"],
+];
+
+/// What the manual, real modules and the client libraries say about an ELL model number (the
+/// `IN` reply's type): one row per model, read by the dissector (units) and the simulator
+/// (what `IN` answers, how the module moves, which commands it has).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Model {
     /// ELL number (6 = ELL6).
@@ -526,25 +600,81 @@ pub struct Model {
     pub unit: &'static str,
     /// Number of positions of an indexed slider or wheel (0 for the others).
     pub slots: u8,
+    /// How it moves.
+    pub mechanism: Mechanism,
+    /// Travel as `IN` gives it: mm, degrees (360), or a slider's travel.
+    pub travel: u16,
+    /// Pulses per unit as `IN` gives it: per mm, per revolution, per slider position (0: the
+    /// slider's positions are `travel` apart, as on an ELL6). An ELL9's positions are 0x1F
+    /// apart in Micro-Manager's adapter ("experimentally determined") and 32 in the `elliptec`
+    /// package, which accepts ±5: 31 serves both.
+    pub pulses: u32,
+    /// Piezo motors (1 or 2): a single-motor module has no `i2` … `c2`.
+    pub motors: u8,
+    /// Where travel, pulses and motors come from.
+    pub source: &'static str,
 }
 
-/// Known ELL models.
+impl Model {
+    /// Whether the module answers host command `code` (anything else gets `GS` 3, "command
+    /// error or not supported", p.10).
+    pub fn supports(&self, code: &str) -> bool {
+        COMMON_COMMANDS.contains(&code)
+            || self.mechanism.commands().contains(&code)
+            || MOTOR_COMMANDS
+                .iter()
+                .take(self.motors as usize)
+                .any(|m| m.contains(&code))
+    }
+
+    /// The host commands it answers, in table order.
+    pub fn commands(&self) -> impl Iterator<Item = &'static Cmd> + '_ {
+        COMMANDS
+            .iter()
+            .filter(move |c| c.dir == Dir::HostToDevice && self.supports(c.code))
+    }
+}
+
+/// Source of the manual's model table (p.7).
+const MANUAL: &str = "manual p.7";
+/// Source of values no document gives: a rotation stage a client library names, as an ELL18.
+const AS_ELL18: &str = "assumed (ELL18's)";
+
+/// Known ELL models: the manual's (ELL4–ELL8) and those the client libraries drive (`elliptec`:
+/// ELL6, ELL9, ELL14, ELL15, ELL18, ELL20; thorlabs-elliptec: ELL7, ELL8, ELL10, ELL12, ELL16,
+/// ELL17, ELL21 too).
 #[rustfmt::skip]
 pub static MODELS: &[Model] = &[
-    Model { number: 4, what: "rotator", unit: "deg", slots: 0 },
-    Model { number: 5, what: "actuator", unit: "pulses", slots: 0 },
-    Model { number: 6, what: "bi-positional slider", unit: "slot", slots: 2 },
-    Model { number: 7, what: "linear stage", unit: "mm", slots: 0 },
-    Model { number: 8, what: "rotary stage", unit: "deg", slots: 0 },
-    Model { number: 9, what: "four-position slider", unit: "slot", slots: 4 },
-    Model { number: 10, what: "linear stage", unit: "mm", slots: 0 },
-    Model { number: 12, what: "six-position slider", unit: "slot", slots: 6 },
-    Model { number: 14, what: "rotation mount", unit: "deg", slots: 0 },
-    Model { number: 15, what: "motorized iris", unit: "pulses", slots: 0 },
-    Model { number: 16, what: "rotation stage", unit: "deg", slots: 0 },
-    Model { number: 17, what: "linear stage", unit: "mm", slots: 0 },
-    Model { number: 18, what: "rotation stage", unit: "deg", slots: 0 },
-    Model { number: 20, what: "linear stage", unit: "mm", slots: 0 },
+    Model { number: 4, what: "rotator", unit: "deg", slots: 0, mechanism: Mechanism::Rotary,
+        travel: 360, pulses: 0x40000, motors: 2, source: MANUAL },
+    Model { number: 5, what: "actuator", unit: "pulses", slots: 0, mechanism: Mechanism::OpenLoop,
+        travel: 0, pulses: 0, motors: 1, source: MANUAL },
+    Model { number: 6, what: "bi-positional slider", unit: "slot", slots: 2, mechanism: Mechanism::Shutter,
+        travel: 31, pulses: 0, motors: 1, source: "manual p.7 (an ELL6K answers IN with these)" },
+    Model { number: 7, what: "linear stage", unit: "mm", slots: 0, mechanism: Mechanism::Linear,
+        travel: 26, pulses: 2048, motors: 2, source: MANUAL },
+    Model { number: 8, what: "rotary stage", unit: "deg", slots: 0, mechanism: Mechanism::Rotary,
+        travel: 360, pulses: 0x40000, motors: 2, source: MANUAL },
+    Model { number: 9, what: "four-position slider", unit: "slot", slots: 4, mechanism: Mechanism::Indexed,
+        travel: 19, pulses: 31, motors: 1, source: "Micro-Manager's measured positions 0, 0x1F, 0x3E, 0x5D" },
+    Model { number: 10, what: "linear stage", unit: "mm", slots: 0, mechanism: Mechanism::Linear,
+        travel: 60, pulses: 1024, motors: 2, source: "assumed (ELL20's)" },
+    Model { number: 12, what: "six-position slider", unit: "slot", slots: 6, mechanism: Mechanism::Indexed,
+        travel: 31, pulses: 31, motors: 1, source: "assumed (ELL9's spacing)" },
+    Model { number: 14, what: "rotation mount", unit: "deg", slots: 0, mechanism: Mechanism::Rotary,
+        travel: 360, pulses: 0x23000, motors: 2, source: "ELL14s' IN replies" },
+    Model { number: 15, what: "motorized iris", unit: "mm", slots: 0, mechanism: Mechanism::Linear,
+        travel: 12, pulses: 1024, motors: 2, source: "assumed (elliptec package: 1-11.5 mm aperture)" },
+    Model { number: 16, what: "rotation stage", unit: "deg", slots: 0, mechanism: Mechanism::Rotary,
+        travel: 360, pulses: 0x40000, motors: 2, source: AS_ELL18 },
+    Model { number: 17, what: "linear stage", unit: "mm", slots: 0, mechanism: Mechanism::Linear,
+        travel: 28, pulses: 2048, motors: 2, source: "manual p.7 (ELL7's 2048 pulses/mm)" },
+    Model { number: 18, what: "rotation stage", unit: "deg", slots: 0, mechanism: Mechanism::Rotary,
+        travel: 360, pulses: 0x40000, motors: 2, source: "manual p.7 (ELL8's pulses/rev)" },
+    Model { number: 20, what: "linear stage", unit: "mm", slots: 0, mechanism: Mechanism::Linear,
+        travel: 60, pulses: 1024, motors: 2, source: "60 mm travel; 1024 pulses/mm assumed" },
+    Model { number: 21, what: "rotation stage", unit: "deg", slots: 0, mechanism: Mechanism::Rotary,
+        travel: 360, pulses: 0x40000, motors: 2, source: AS_ELL18 },
 ];
 
 /// The model with this ELL number.

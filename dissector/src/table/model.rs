@@ -503,12 +503,16 @@ impl Class {
     pub const END_OF_MOVE: Class = Class(8);
     /// Stops a move.
     pub const STOP: Class = Class(16);
-    const NAMES: [(Class, &'static str); 5] = [
+    /// A reading of the device's state outside a status stream (a position counter): the
+    /// terminal UI's plot draws it beside the status messages.
+    pub const READING: Class = Class(32);
+    const NAMES: [(Class, &'static str); 6] = [
         (Class::STATUS, "status"),
         (Class::SPONTANEOUS, "spontaneous"),
         (Class::MOTION, "motion"),
         (Class::END_OF_MOVE, "end_of_move"),
         (Class::STOP, "stop"),
+        (Class::READING, "reading"),
     ];
     /// Parse a `class=` value (`motion`, `status,spontaneous`).
     pub fn parse(s: &str) -> Option<Class> {

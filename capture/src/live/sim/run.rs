@@ -1,85 +1,34 @@
 //! Serving a simulator on a pseudo-terminal or a serial port.
 
 use super::Simulator;
+use crate::live::error::LiveError;
+use crate::live::pty::Link;
 use crate::live::serial::open_serial;
 use crate::live::serial::{Flow, LineSettings};
+use crate::live::signals::{Signals, TERMINATE};
 use nix::errno::Errno;
-use nix::fcntl::{fcntl, FcntlArg, OFlag};
+use nix::fcntl::OFlag;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
-use nix::pty::openpty;
-use nix::sys::signal::{SigSet, Signal};
-use nix::sys::signalfd::{SfdFlags, SignalFd};
-use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
 use std::io::{self, Write};
 use std::os::fd::{AsFd, BorrowedFd, OwnedFd};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 /// Output not yet taken by the peer is dropped beyond this (like a full FTDI buffer).
 const MAX_PENDING: usize = 64 * 1024;
 
-fn io_err(e: Errno) -> io::Error {
-    io::Error::from(e)
-}
+pub use crate::live::pty::Pty;
+pub use crate::live::stop::StopHandle;
 
-/// A pseudo-terminal pair in raw mode: the simulator holds the master; programs open
-/// [`path`](Self::path) as if it were the controller's serial port.
-#[derive(Debug)]
-pub struct Pty {
-    master: OwnedFd,
-    slave: Option<OwnedFd>,
-    path: PathBuf,
-}
+/// What [`serve_pty`] watches: the same [`StopHandle`] as the one that stops it (a clone).
+pub type StopSignal = StopHandle;
 
-impl Pty {
-    /// Open a new pair, put it in raw mode (no echo, no line editing, 8-bit clean).
-    pub fn open() -> io::Result<Pty> {
-        let r = openpty(None, None).map_err(io_err)?;
-        let mut t = tcgetattr(&r.slave).map_err(io_err)?;
-        cfmakeraw(&mut t);
-        tcsetattr(&r.slave, SetArg::TCSANOW, &t).map_err(io_err)?;
-        let path = nix::unistd::ttyname(&r.slave).map_err(io_err)?;
-        let fl = fcntl(&r.master, FcntlArg::F_GETFL).map_err(io_err)?;
-        let fl = OFlag::from_bits_truncate(fl) | OFlag::O_NONBLOCK;
-        fcntl(&r.master, FcntlArg::F_SETFL(fl)).map_err(io_err)?;
-        Ok(Pty {
-            master: r.master,
-            slave: Some(r.slave),
-            path,
-        })
-    }
-
-    /// The slave's path (`/dev/pts/N`).
-    pub fn path(&self) -> &Path {
-        &self.path
-    }
-
-    /// Take the pair apart: the master (non-blocking), our copy of the slave (kept open so the
-    /// line stays up until a program opens the path) and the slave's path.
-    pub fn into_parts(self) -> (OwnedFd, Option<OwnedFd>, PathBuf) {
-        (self.master, self.slave, self.path)
-    }
-}
-
-/// Asks a running [`serve_pty`] to return (from another thread).
-#[derive(Debug)]
-pub struct StopHandle(OwnedFd);
-
-/// The receiving end of a [`StopHandle`], given to [`serve_pty`].
-#[derive(Debug)]
-pub struct StopSignal(OwnedFd);
-
-/// A connected stop handle and signal (a pipe).
+/// A stop handle and a clone of it to give to [`serve_pty`] (its descriptor already made, so
+/// the runner cannot fail for want of one).
 pub fn stop_pair() -> io::Result<(StopHandle, StopSignal)> {
-    let (r, w) = nix::unistd::pipe().map_err(io_err)?;
-    Ok((StopHandle(w), StopSignal(r)))
-}
-
-impl StopHandle {
-    /// Make the runner return (idempotent).
-    pub fn stop(&self) {
-        let _ = nix::unistd::write(&self.0, b"x");
-    }
+    let stop = StopHandle::new();
+    stop.pollable()?;
+    Ok((stop.clone(), stop))
 }
 
 /// Poll timeout until `deadline_ns` on the clock of `start` (rounded up to whole ms).
@@ -107,17 +56,15 @@ pub fn serve_pty<S: Simulator + ?Sized>(
     stop: Option<&StopSignal>,
     extra_stops: &[BorrowedFd<'_>],
 ) -> io::Result<()> {
-    let mut stops: Vec<BorrowedFd<'_>> = stop.iter().map(|s| s.0.as_fd()).collect();
+    let mut stops: Vec<BorrowedFd<'_>> = vec![];
+    if let Some(s) = stop {
+        stops.push(s.pollable()?);
+    }
     stops.extend_from_slice(extra_stops);
-    serve_fd(
-        sim,
-        &pty.master,
-        pty.slave,
-        &stops,
-        Line::Pty,
-        Instant::now(),
-    )
-    .map(|_| ())
+    let (master, slave, _) = pty.into_parts();
+    serve_fd(sim, &master, slave, &stops, Line::Pty, Instant::now())
+        .map(|_| ())
+        .map_err(io::Error::from)
 }
 
 /// Why serving ended.
@@ -131,11 +78,11 @@ enum End {
 
 /// What the simulator serves on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Line {
+enum Line<'a> {
     /// A pseudo-terminal's master: the peer closing its end is the normal end.
     Pty,
-    /// A real serial port: it vanishing is an error.
-    Port,
+    /// A real serial port (this one): it vanishing is an error.
+    Port(&'a Path),
 }
 
 /// Serve `sim` on the non-blocking descriptor `fd` until one of `stops` becomes readable or
@@ -148,13 +95,12 @@ fn serve_fd<S: Simulator + ?Sized>(
     stops: &[BorrowedFd<'_>],
     line: Line,
     start: Instant,
-) -> io::Result<End> {
+) -> Result<End, LiveError> {
     let gone = || match line {
         Line::Pty => Ok(End::HungUp),
-        Line::Port => Err(io::Error::new(
-            io::ErrorKind::BrokenPipe,
-            "the serial port went away",
-        )),
+        Line::Port(path) => Err(LiveError::PortGone {
+            path: path.display().to_string(),
+        }),
     };
     let mut pending: Vec<u8> = vec![];
     let mut buf = [0u8; 4096];
@@ -175,7 +121,7 @@ fn serve_fd<S: Simulator + ?Sized>(
                 }
                 Err(Errno::EAGAIN) | Err(Errno::EINTR) => break,
                 Err(Errno::EIO) => return gone(), // peer gone
-                Err(e) => return Err(io_err(e)),
+                Err(e) => return Err(e.into()),
             }
         }
         let timeout = timeout_until(sim.next_deadline(), elapsed_ns(start));
@@ -189,7 +135,7 @@ fn serve_fd<S: Simulator + ?Sized>(
         }
         match poll(&mut fds, timeout) {
             Ok(_) | Err(Errno::EINTR) => {}
-            Err(e) => return Err(io_err(e)),
+            Err(e) => return Err(e.into()),
         }
         let revents: Vec<PollFlags> = fds
             .iter()
@@ -213,7 +159,7 @@ fn serve_fd<S: Simulator + ?Sized>(
                     slave = None;
                 }
                 Err(Errno::EAGAIN) | Err(Errno::EINTR) => {}
-                Err(e) => return Err(io_err(e)),
+                Err(e) => return Err(e.into()),
             }
         } else if m.intersects(PollFlags::POLLHUP | PollFlags::POLLERR) && slave.is_none() {
             return gone();
@@ -222,13 +168,9 @@ fn serve_fd<S: Simulator + ?Sized>(
 }
 
 /// SIGINT and SIGTERM, blocked in this thread (threads started later inherit it) and readable
-/// from a descriptor, so the runner can end cleanly on them.
-pub fn termination_signals() -> io::Result<SignalFd> {
-    let mut set = SigSet::empty();
-    set.add(Signal::SIGINT);
-    set.add(Signal::SIGTERM);
-    set.thread_block().map_err(io_err)?;
-    SignalFd::with_flags(&set, SfdFlags::SFD_NONBLOCK | SfdFlags::SFD_CLOEXEC).map_err(io_err)
+/// from a descriptor, so the runner can end cleanly on them (see [`crate::live::signals`]).
+pub fn termination_signals() -> io::Result<Signals> {
+    Signals::install(TERMINATE)
 }
 
 /// Serve `sim` on a new pseudo-terminal: print its path on stdout (and make `link` a symlink to
@@ -237,16 +179,25 @@ pub fn termination_signals() -> io::Result<SignalFd> {
 /// program after another (with `once`, it ends when the first one hangs up). Call it from the
 /// main thread before starting others: it blocks SIGINT/SIGTERM in the calling thread to
 /// receive them through a descriptor.
-pub fn run_on_pty<S: Simulator>(mut sim: S, link: Option<&Path>, once: bool) -> io::Result<()> {
+pub fn run_on_pty<S: Simulator>(sim: S, link: Option<&Path>, once: bool) -> io::Result<()> {
+    Ok(serve_on_pty(sim, link, once)?)
+}
+
+/// [`run_on_pty`], its error saying what it concerns.
+fn serve_on_pty<S: Simulator>(
+    mut sim: S,
+    link: Option<&Path>,
+    once: bool,
+) -> Result<(), LiveError> {
     let sigs = termination_signals()?;
     let pty = Pty::open()?;
     let path = pty.path().to_path_buf();
-    if let Some(l) = link {
-        if std::fs::symlink_metadata(l).is_ok_and(|m| m.file_type().is_symlink()) {
-            std::fs::remove_file(l)?;
-        }
-        std::os::unix::fs::symlink(&path, l)?;
-    }
+    // Removed on return while it is still ours (a simulator started since at the same path
+    // has replaced it otherwise).
+    let _link = match link {
+        Some(l) => Some(Link::create(l, &path)?),
+        None => None,
+    };
     {
         let mut out = io::stdout().lock();
         match link {
@@ -277,22 +228,17 @@ pub fn run_on_pty<S: Simulator>(mut sim: S, link: Option<&Path>, once: bool) -> 
             r => break r.map(|_| ()),
         }
     };
-    // Only while it is still ours: a simulator started since at the same path has replaced it.
-    if let Some(l) = link.filter(|l| std::fs::read_link(l).is_ok_and(|t| t == path)) {
-        let _ = std::fs::remove_file(l);
-    }
     r
 }
 
 /// Open our own copy of a pseudo-terminal's slave again (so the master sees no hang-up while no
 /// program has it open), dropping what the last program left unread.
-fn reopen_slave(path: &Path) -> io::Result<OwnedFd> {
+fn reopen_slave(path: &Path) -> Result<OwnedFd, LiveError> {
     let fd = nix::fcntl::open(
         path,
         OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_NONBLOCK | OFlag::O_CLOEXEC,
         nix::sys::stat::Mode::empty(),
-    )
-    .map_err(io_err)?;
+    )?;
     let _ = nix::sys::termios::tcflush(&fd, nix::sys::termios::FlushArg::TCIOFLUSH);
     Ok(fd)
 }
@@ -300,7 +246,12 @@ fn reopen_slave(path: &Path) -> io::Result<OwnedFd> {
 /// Serve `sim` on a real serial port `dev` at `baud` (8N1, no flow control), until SIGINT or
 /// SIGTERM; the port vanishing is an error. The port's I/O is polled on our own descriptor
 /// (see [`crate::live::serial`]), so the signals reach the signalfd.
-pub fn run_on_port<S: Simulator>(mut sim: S, dev: &Path, baud: u32) -> io::Result<()> {
+pub fn run_on_port<S: Simulator>(sim: S, dev: &Path, baud: u32) -> io::Result<()> {
+    Ok(serve_on_port(sim, dev, baud)?)
+}
+
+/// [`run_on_port`], its error saying what it concerns.
+fn serve_on_port<S: Simulator>(mut sim: S, dev: &Path, baud: u32) -> Result<(), LiveError> {
     let sigs = termination_signals()?;
     let settings = LineSettings {
         baud,
@@ -313,7 +264,7 @@ pub fn run_on_port<S: Simulator>(mut sim: S, dev: &Path, baud: u32) -> io::Resul
         &fd,
         None,
         &[sigs.as_fd()],
-        Line::Port,
+        Line::Port(dev),
         Instant::now(),
     )
     .map(|_| ())
@@ -323,6 +274,9 @@ pub fn run_on_port<S: Simulator>(mut sim: S, dev: &Path, baud: u32) -> io::Resul
 mod port_tests {
     use super::*;
     use crate::live::sim::{AptModel, AptSim};
+    use nix::fcntl::{fcntl, FcntlArg};
+    use nix::pty::openpty;
+    use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
     use std::sync::mpsc;
     use std::time::Duration;
 
