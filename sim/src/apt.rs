@@ -10,7 +10,7 @@
 
 use crate::models::{self, Family, ModelSpec};
 use crate::{earliest, Line, Simulator, MS, SEC};
-use aptscope_dissector::apt::{encode, AptFrame, AptFramer, FieldValue, Item};
+use aptscope_dissector::apt::{encode, AptFrame, AptFramer, FieldValue, Item, Value};
 use aptscope_dissector::msg;
 use aptscope_dissector::table::{
     example_bytes, Access, DeviceProfile, FormKind, Loc, MsgDef, Table,
@@ -62,6 +62,9 @@ const LD_OUTPUT: u32 = 0x1;
 const LD_KEYSWITCH: u32 = 0x2;
 const LD_PSU_OK: u32 = 0x1000;
 const LD_STABLE: u32 = 0x8000_0000;
+// nt_status bits: tracking with a signal; both channels connected.
+const NT_TRACKING: u32 = 0x3;
+const NT_CHANS: u32 = 0x3_0000;
 // tec_status bits.
 const TEC_OUTPUT_ENABLED: u32 = 0x1;
 const TEC_DISP_TACT: u32 = 0x10;
@@ -382,6 +385,8 @@ struct Unit {
     next_update: Option<u64>,
     /// Status updates sent since the host's last ACK.
     unacked: u32,
+    /// Updates stopped for want of the host's ACK (they resume with it).
+    starved: bool,
     /// Where its status updates come from (0x50 or 0x21: where the host started them).
     update_src: u8,
     store: Vec<Stored>,
@@ -451,6 +456,7 @@ impl AptSim {
             motion: None,
             next_update: None,
             unacked: 0,
+            starved: false,
             update_src: addr,
             store: vec![],
         };
@@ -823,6 +829,7 @@ impl AptSim {
                 let addr = self.units[ui].addr;
                 for u in self.units.iter_mut().filter(|u| u.addr == addr) {
                     u.next_update = None;
+                    u.starved = false;
                 }
             }
             msg::MOT_ACK_DCSTATUSUPDATE
@@ -833,9 +840,14 @@ impl AptSim {
             | msg::TEC_ACK_STATUSUPDATE
             | msg::QUAD_ACK_STATUSUPDATE
             | msg::PZMOT_ACK_STATUSUPDATE => {
+                // The host is alive: the count starts again, and updates stopped for want of
+                // it resume (thorlabs-apt-device's first ACK can come after the 50th update).
                 let addr = self.units[ui].addr;
                 for u in self.units.iter_mut().filter(|u| u.addr == addr) {
                     u.unacked = 0;
+                    if std::mem::take(&mut u.starved) {
+                        u.next_update = Some(now + UPDATE_NS);
+                    }
                 }
             }
             msg::MOD_SET_CHANENABLESTATE => {
@@ -1114,6 +1126,20 @@ impl AptSim {
                     }
                 }
             }
+            msg::PZ_SET_NTMODE => {
+                // The mode set (piezo, latch, track on both axes or one) as PZ_GET_NTMODE
+                // reports it: a tracking NanoTrak has a signal here.
+                let (state, mode) = match f.field("state").and_then(|(_, v)| v.as_i64()) {
+                    Some(1) => (1, 1),
+                    Some(2) => (2, 1),
+                    Some(3) => (4, 1),
+                    Some(4) => (4, 2),
+                    Some(5) => (4, 3),
+                    _ => return true,
+                };
+                let b = frame(msg::PZ_GET_NTMODE, [state, mode], None, HOST, USB);
+                self.keep(ui, msg::PZ_GET_NTMODE, 0, &b);
+            }
             msg::PZ_SET_ZERO if self.model.0.family == Family::StrainGauge => {
                 // The gauge takes its present reading as zero.
                 self.set_field(ui, msg::PZ_GET_TSG_READING, "reading", 0);
@@ -1177,11 +1203,8 @@ impl AptSim {
         let live = self.live(ui, gm.id, sub, now);
         if !live.is_empty() {
             if let Some(fr) = AptFrame::decode(t, 0, &b, false) {
-                let mut vals: Vec<(&str, FieldValue)> = fr
-                    .fields()
-                    .filter(|(fd, _)| fd.name != "sub_id")
-                    .filter_map(|(fd, v)| Some((fd.name, int(v.as_i64()?))))
-                    .collect();
+                let mut vals = values_of(&fr);
+                vals.retain(|(n, _)| *n != "sub_id");
                 for (name, v) in live {
                     if let Some(s) = vals.iter_mut().find(|(n, _)| *n == name) {
                         s.1 = v;
@@ -1192,7 +1215,7 @@ impl AptSim {
                 }
             }
         }
-        set_chan(gm, &mut b, r.chan);
+        set_chan(&mut b, r.chan);
         self.line.send(now, b);
     }
 
@@ -1455,13 +1478,33 @@ impl AptSim {
                 // is on; key switch, supply and stability bits set.
                 let (c, _, _) = self.laser(ui);
                 let on = self.units[ui].output;
-                let bits = LD_KEYSWITCH | LD_PSU_OK | LD_STABLE | (u32::from(on) * LD_OUTPUT);
+                let out = if on { LD_OUTPUT } else { 0 };
+                let bits = LD_KEYSWITCH | LD_PSU_OK | LD_STABLE | out;
                 vec![
                     ("laser_current", int(c)),
                     ("photo_current", int(c / 2)),
                     ("laser_voltage", int(if on { 1800 } else { 0 })),
                     ("status_bits", int(i64::from(bits))),
                 ]
+            }
+            msg::PZ_GET_NTSTATUSUPDATE => {
+                // The spec's example status, with the tracking bits of the mode set.
+                let m = Table::global().msg(get)?;
+                let b = self.held(ui, m, 0, src)?;
+                let f = AptFrame::decode(Table::global(), 0, &b, false)?;
+                let mut vals = values_of(&f);
+                let tracking = self.units[ui]
+                    .store
+                    .iter()
+                    .find(|s| s.get == msg::PZ_GET_NTMODE)
+                    .is_some_and(|s| s.params[0] >= 3);
+                let bits = NT_CHANS | if tracking { NT_TRACKING } else { 0 };
+                for (n, v) in &mut vals {
+                    if *n == "status_bits" {
+                        *v = int(i64::from(bits));
+                    }
+                }
+                vals
             }
             msg::TEC_GET_STATUSUPDATE => {
                 let (i, ta, ts, bits) = self.tec(ui);
@@ -1509,7 +1552,7 @@ impl AptSim {
                 // No live values: the defaults (NanoTrak, laser diode readings).
                 let m = Table::global().msg(get)?;
                 let mut b = self.held(ui, m, 0, src)?;
-                set_chan(m, &mut b, chan);
+                set_chan(&mut b, chan);
                 return Some(b);
             }
         };
@@ -1603,6 +1646,7 @@ impl AptSim {
                 if u.unacked > KEEPALIVE_UPDATES {
                     // The host has not said it is alive: the controller stops its updates.
                     u.next_update = None;
+                    u.starved = true;
                     let addr = u.addr;
                     self.note(format!(
                         "status updates of 0x{addr:02X} stopped: {KEEPALIVE_UPDATES} sent \
@@ -1661,6 +1705,16 @@ impl Simulator for AptSim {
     }
 }
 
+/// The numeric fields of a frame as the encoder takes them back.
+fn values_of(f: &AptFrame<'_, '_>) -> Params {
+    f.fields()
+        .filter_map(|(fd, v)| match v {
+            Value::F(x) => Some((fd.name, FieldValue::Float(x))),
+            v => Some((fd.name, int(v.as_i64()?))),
+        })
+        .collect()
+}
+
 /// A frame of message `id` with these param bytes, or this data packet.
 fn frame(id: u16, params: [u8; 2], data: Option<&[u8]>, dst: u8, src: u8) -> Vec<u8> {
     let mut b = Vec::with_capacity(6 + data.map_or(0, <[u8]>::len));
@@ -1683,7 +1737,7 @@ fn frame(id: u16, params: [u8; 2], data: Option<&[u8]>, dst: u8, src: u8) -> Vec
 }
 
 /// Write the host's channel ident into `b`'s `chan_ident` field, where its form has one.
-fn set_chan(m: &MsgDef, b: &mut [u8], chan: i64) {
+fn set_chan(b: &mut [u8], chan: i64) {
     let Some(f) = AptFrame::decode(Table::global(), 0, b, false) else {
         return;
     };
@@ -1691,7 +1745,6 @@ fn set_chan(m: &MsgDef, b: &mut [u8], chan: i64) {
         return;
     };
     let (at, w) = (fd.loc.frame_offset(), fd.ty.width());
-    let _ = m;
     if at + w <= b.len() && (1..=2).contains(&w) {
         b[at..at + w].copy_from_slice(&chan.to_le_bytes()[..w]);
     }
