@@ -344,7 +344,7 @@ impl AptPairer {
         );
         if from_host {
             let expects = table.reply_ids(m);
-            if !expects.is_empty() {
+            if !expects.is_empty() && !self.silent(table, h.dst_byte(), m.id) {
                 let p = Pending {
                     n,
                     offset: f.offset,
@@ -540,6 +540,15 @@ impl AptPairer {
                 info.not_for_model = Some(*name);
             }
         }
+    }
+
+    /// Whether the model `device` named in HW_GET_INFO sends no reply to message `id` (a
+    /// `silent` line of its table profile).
+    fn silent(&self, table: &Table, device: u8, id: u16) -> bool {
+        matches!(
+            self.models.get(usize::from(device)),
+            Some(Some((_, Some(p)))) if !table.answers(p, id)
+        )
     }
 
     /// End of stream: every request still waiting got no reply.

@@ -266,6 +266,9 @@ struct Motion {
     t3: f64,
     /// Channel the host named, for the completion message.
     chan: i64,
+    /// Ends without a completion message: the model's table profile says it sends none for
+    /// the request that started it (`silent`: a flipper's MOT_MOVE_JOG).
+    silent: bool,
 }
 
 impl Motion {
@@ -291,6 +294,7 @@ impl Motion {
             t2,
             t3: t1,
             chan,
+            silent: false,
         }
     }
 
@@ -310,6 +314,7 @@ impl Motion {
             t2: secs,
             t3: 0.0,
             chan,
+            silent: false,
         }
     }
 
@@ -1068,7 +1073,12 @@ impl AptSim {
                 } else {
                     to
                 };
-                self.units[ui].motion = Some(Motion::trapezoid(kind, now, from, to, v, a, chan));
+                let mut mo = Motion::trapezoid(kind, now, from, to, v, a, chan);
+                mo.silent = self
+                    .profile
+                    .as_ref()
+                    .is_some_and(|p| !Table::global().answers(p, m.id));
+                self.units[ui].motion = Some(mo);
             }
             _ => {
                 // MOT_MOVE_STOP.
@@ -1097,6 +1107,7 @@ impl AptSim {
                         t2: 0.0,
                         t3: t,
                         chan,
+                        silent: false,
                     });
                 } else {
                     u.motion = None;
@@ -1602,9 +1613,10 @@ impl AptSim {
                         src,
                         &[("chan_ident", int(m.chan))],
                     )
-                } else if self.model.0.family == Family::Flipper {
+                } else if m.silent {
                     // pylablib's MFF class (written against the hardware) polls the status
-                    // bits and takes a MOT_MOVE_COMPLETED for an error: a flipper sends none.
+                    // bits and takes a MOT_MOVE_COMPLETED for an error: a flipper sends none
+                    // (the table's `silent` line for MFF101/MFF102).
                     None
                 } else if self.model.0.family == Family::InertiaMotor {
                     let bits = i64::from(self.status_bits(ui, t) & 0x7FF);
