@@ -7,8 +7,8 @@ mod common;
 
 use aptscope_capture::open::{open, Format, OpenOptions};
 use aptscope_capture::{Direction, Event};
-use common::host::{ask_info, open_host, ready, start_sim, start_sim_with, HW_GET_INFO_LEN};
 use common::clients::client_python;
+use common::host::{ask_info, open_host, ready, start_sim, start_sim_with, HW_GET_INFO_LEN};
 use common::proc::{lock, wait_for, Proc, DEADLINE, POLL};
 use common::term::Term;
 use common::{apt_frames as frames, scratch};
