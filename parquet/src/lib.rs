@@ -37,10 +37,12 @@ use arrow_array::RecordBatch;
 use buf::TableBuf;
 use parquet::arrow::ArrowWriter;
 use parquet::basic::Compression;
+use arrow_schema::{DataType, Schema};
 use parquet::file::properties::WriterProperties;
+use parquet::schema::types::ColumnPath;
 use schema::{Fill, KindSchema, Kinds, RECORDS};
 use std::borrow::Cow;
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{BTreeMap, HashMap};
 use std::io;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -63,11 +65,22 @@ impl Default for Options {
     }
 }
 
-fn props(rows: usize) -> WriterProperties {
-    WriterProperties::builder()
+/// How a table of `schema` is written. Snappy: the files are about as small as with zstd's
+/// fastest level for a fraction of its time (see docs/parquet.md). Dictionary encoding only for
+/// the text columns (names, labels, units: few distinct values); numbers, times and raw bytes
+/// are mostly distinct, and hashing each value for a dictionary that overflows was a sixth of
+/// the writer's time.
+fn props(rows: usize, schema: &Schema) -> WriterProperties {
+    let mut b = WriterProperties::builder()
         .set_compression(Compression::SNAPPY)
         .set_max_row_group_row_count(Some(rows.max(1)))
-        .build()
+        .set_dictionary_enabled(false);
+    for f in schema.fields() {
+        if f.data_type() == &DataType::Utf8 {
+            b = b.set_column_dictionary_enabled(ColumnPath::from(f.name().as_str()), true);
+        }
+    }
+    b.build()
 }
 
 fn perr(e: impl std::fmt::Display) -> io::Error {
@@ -84,8 +97,9 @@ pub trait Sink {
 pub struct DirSink {
     root: PathBuf,
     index: usize,
-    props: WriterProperties,
-    made: HashSet<String>,
+    rows: usize,
+    /// Writer properties of each table written (a table's directory exists once it is here).
+    props: HashMap<String, WriterProperties>,
 }
 
 impl DirSink {
@@ -95,8 +109,8 @@ impl DirSink {
         DirSink {
             root: root.to_path_buf(),
             index,
-            props: props(opts.rows_per_group),
-            made: HashSet::new(),
+            rows: opts.rows_per_group,
+            props: HashMap::new(),
         }
     }
 }
@@ -104,17 +118,20 @@ impl DirSink {
 impl Sink for DirSink {
     fn write(&mut self, table: &str, part: u32, batch: &RecordBatch) -> io::Result<()> {
         let dir = self.root.join(table);
-        if self.made.insert(table.to_string()) {
+        if !self.props.contains_key(table) {
             std::fs::create_dir_all(&dir)
                 .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", dir.display())))?;
+            let p = props(self.rows, &batch.schema());
+            self.props.insert(table.to_string(), p);
         }
+        let props = self.props.get(table).cloned();
         let name = format!("part-{:05}-{part:05}.parquet", self.index);
         let done = dir.join(&name);
         let tmp = dir.join(format!("{name}.partial"));
         let f = std::fs::File::create(&tmp)
             .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", tmp.display())))?;
         let mut w =
-            ArrowWriter::try_new(f, batch.schema(), Some(self.props.clone())).map_err(perr)?;
+            ArrowWriter::try_new(f, batch.schema(), props).map_err(perr)?;
         w.write(batch).map_err(perr)?;
         // Renamed once complete: a killed run leaves no torn `.parquet`. (No fsync: a killed
         // process loses nothing the kernel has; a power cut may, and costs a sync per part.)
@@ -125,7 +142,7 @@ impl Sink for DirSink {
 
 /// Keeps one in-memory Parquet file per table.
 pub struct MemSink {
-    props: WriterProperties,
+    rows: usize,
     tables: BTreeMap<String, ArrowWriter<Vec<u8>>>,
 }
 
@@ -133,7 +150,7 @@ impl MemSink {
     /// An empty sink.
     pub fn new(opts: Options) -> Self {
         MemSink {
-            props: props(opts.rows_per_group),
+            rows: opts.rows_per_group,
             tables: BTreeMap::new(),
         }
     }
@@ -150,8 +167,8 @@ impl MemSink {
 impl Sink for MemSink {
     fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
         if !self.tables.contains_key(table) {
-            let w = ArrowWriter::try_new(Vec::new(), batch.schema(), Some(self.props.clone()))
-                .map_err(perr)?;
+            let p = props(self.rows, &batch.schema());
+            let w = ArrowWriter::try_new(Vec::new(), batch.schema(), Some(p)).map_err(perr)?;
             self.tables.insert(table.to_string(), w);
         }
         let w = self
@@ -224,6 +241,10 @@ pub struct CaptureWriter<S: Sink> {
     parts: HashMap<String, u32>,
     clock: u64,
     summary: Summary,
+    /// Kind table names and schemas by message (the address of its table entry, and of its
+    /// sub-message's).
+    kind_names: HashMap<(usize, usize), (Arc<str>, Option<Arc<KindSchema>>)>,
+    layouts: Layouts,
 }
 
 fn diag_v(d: &Diag) -> (Cow<'static, str>, u64, String) {
@@ -261,11 +282,14 @@ impl<S: Sink> CaptureWriter<S> {
             parts: HashMap::new(),
             clock: 0,
             summary: Summary::default(),
+            kind_names: HashMap::new(),
+            layouts: Layouts::default(),
         }
     }
 
     /// Add one record.
     pub fn record(&mut self, rec: &Record<'_>) -> io::Result<()> {
+        let (kname, kind) = self.kind_of(rec);
         // Columns of `records`, in schema order.
         let file = self.file.clone();
         let mut row: [V<'_>; 25] = Default::default();
@@ -302,7 +326,6 @@ impl<S: Sink> CaptureWriter<S> {
             row[TIME] = opt_u(m.ts_ns);
             row[REL] = m.rel_s.map_or(V::Null, V::F);
         }
-        let mut kind: Option<Arc<KindSchema>> = None;
         let mut diags: Vec<(Cow<'_, str>, u64, String)> = vec![];
         match rec {
             Record::Detect {
@@ -357,9 +380,7 @@ impl<S: Sink> CaptureWriter<S> {
                 row[MSGID] = V::U(h.msg_id() as u64);
                 if let Some(m) = f.msg {
                     row[NAME] = s(m.name);
-                    let k = schema::apt_kind_name(m, f.sub);
-                    kind = Kinds::global().get(&k).cloned();
-                    row[KIND] = V::S(Cow::Owned(k));
+                    row[KIND] = kname.as_deref().map_or(V::Null, s);
                 }
                 if let Some(x) = f.sub {
                     row[SUB] = s(x.name);
@@ -384,9 +405,7 @@ impl<S: Sink> CaptureWriter<S> {
                 row[CODE] = s(f.code_str());
                 if let Some(c) = f.cmd {
                     row[NAME] = s(c.name);
-                    let k = schema::ell_kind_name(c);
-                    kind = Kinds::global().get(&k).cloned();
-                    row[KIND] = V::S(Cow::Owned(k));
+                    row[KIND] = kname.as_deref().map_or(V::Null, s);
                 }
                 // The module's address is the destination of a command, the source of a reply.
                 let at = if d == Dir::HostToDevice { DST } else { SRC };
@@ -440,14 +459,43 @@ impl<S: Sink> CaptureWriter<S> {
         if let (Some(k), Some(m)) = (kind, rec.meta()) {
             let keys = [s(&file), V::U(m.n), V::U(m.stream as u64), opt_u(m.ts_ns)];
             let vals = match rec {
-                Record::Apt(a) => apt_values(&k, a),
-                Record::Ell(e) => ell_values(&k, e),
+                Record::Apt(a) => apt_values(&mut self.layouts, &k, a),
+                Record::Ell(e) => ell_values(&mut self.layouts, &k, e),
                 _ => vec![],
             };
             let row: Vec<V<'_>> = keys.into_iter().chain(vals).collect();
             self.kind_row(&k, &row)?;
         }
         Ok(())
+    }
+
+    /// The kind table of a frame's message (its name, and its schema when it has one), looked
+    /// up once per message rather than by a name made for every frame.
+    fn kind_of(&mut self, rec: &Record<'_>) -> (Option<Arc<str>>, Option<Arc<KindSchema>>) {
+        let (key, name): ((usize, usize), &dyn Fn() -> String) = match rec {
+            Record::Apt(a) => match a.frame.msg {
+                Some(m) => {
+                    let sub = a.frame.sub;
+                    let key = (
+                        m as *const _ as usize,
+                        sub.map_or(0, |x| x as *const _ as usize),
+                    );
+                    (key, &move || schema::apt_kind_name(m, sub))
+                }
+                None => return (None, None),
+            },
+            Record::Ell(e) => match e.frame.cmd {
+                Some(c) => ((c as *const _ as usize, 1), &move || schema::ell_kind_name(c)),
+                None => return (None, None),
+            },
+            _ => return (None, None),
+        };
+        let (n, k) = self.kind_names.entry(key).or_insert_with(|| {
+            let n = name();
+            let k = Kinds::global().get(&n).cloned();
+            (Arc::from(n), k)
+        });
+        (Some(n.clone()), k.clone())
     }
 
     fn kind_row(&mut self, k: &Arc<KindSchema>, row: &[V<'_>]) -> io::Result<()> {
@@ -538,15 +586,47 @@ impl<S: Sink> CaptureWriter<S> {
     }
 }
 
+/// Which of a frame's fields fills each column of its kind table, by layout of fields: the
+/// kind, the first and last field's table entries and their count identify the form (and
+/// sub-message form), so each is worked out once (by name, the first field of that name)
+/// rather than searched for in every frame.
+#[derive(Default)]
+struct Layouts(HashMap<(usize, usize, usize, usize), Vec<Option<usize>>>);
+
+impl Layouts {
+    fn get<T, F: 'static>(
+        &mut self,
+        k: &KindSchema,
+        fields: &[(&'static F, T)],
+        name: impl Fn(&F) -> &'static str,
+    ) -> &[Option<usize>] {
+        let addr = |f: Option<&(&'static F, T)>| f.map_or(0, |(fd, _)| *fd as *const F as usize);
+        let key = (
+            k as *const KindSchema as usize,
+            addr(fields.first()),
+            addr(fields.last()),
+            fields.len(),
+        );
+        self.0.entry(key).or_insert_with(|| {
+            k.cols
+                .iter()
+                .map(|c| fields.iter().position(|(fd, _)| name(fd) == c.field))
+                .collect()
+        })
+    }
+}
+
 /// The field columns of an APT frame's kind row.
-fn apt_values<'a>(k: &KindSchema, a: &'a AptRec<'a>) -> Vec<V<'a>> {
+fn apt_values<'a>(lay: &mut Layouts, k: &KindSchema, a: &'a AptRec<'a>) -> Vec<V<'a>> {
     let f = a.frame;
     let t = f.table();
     let fields: Vec<_> = f.fields().collect();
+    let idx = lay.get(k, &fields, |fd| fd.name);
     k.cols
         .iter()
-        .map(|c| {
-            let Some((fd, v)) = fields.iter().find(|(fd, _)| fd.name == c.field) else {
+        .zip(idx)
+        .map(|(c, i)| {
+            let Some((fd, v)) = i.map(|i| &fields[i]) else {
                 return V::Null;
             };
             use aptscope_dissector::apt::Value;
@@ -603,14 +683,16 @@ fn apt_values<'a>(k: &KindSchema, a: &'a AptRec<'a>) -> Vec<V<'a>> {
 }
 
 /// The field columns of an Elliptec frame's kind row.
-fn ell_values<'a>(k: &KindSchema, e: &'a EllRec<'a>) -> Vec<V<'a>> {
+fn ell_values<'a>(lay: &mut Layouts, k: &KindSchema, e: &'a EllRec<'a>) -> Vec<V<'a>> {
     let f = e.frame;
     let fields: Vec<_> = f.fields().collect();
     let scale = e.obs.module.as_ref().and_then(|m| m.scale());
+    let idx = lay.get(k, &fields, |fd| fd.name);
     k.cols
         .iter()
-        .map(|c| {
-            let Some((fd, v)) = fields.iter().find(|(fd, _)| fd.name == c.field) else {
+        .zip(idx)
+        .map(|(c, i)| {
+            let Some((fd, v)) = i.map(|i| &fields[i]) else {
                 return V::Null;
             };
             match (c.fill, *v) {
