@@ -7,7 +7,8 @@
 //!
 //! Memory is bounded: each table buffers at most [`Options::rows_per_group`] rows, at most
 //! [`Options::max_open_kinds`] kind tables buffer at once (the least recently used is flushed
-//! when another opens), and all kind buffers together hold at most four row groups' worth.
+//! when another opens; the default is more than there are kinds), and all kind buffers
+//! together hold at most one row group's worth (the biggest is written when they reach it).
 //! A [`DirSink`] writes every flushed buffer as one Parquet file of one row group
 //! (`TABLE/part-FFFFF-SSSSS.parquet`, F the capture's index in the run, S a sequence number),
 //! first under a `.partial` name then renamed: a killed run leaves every complete row group
@@ -30,15 +31,16 @@ use aptscope_dissector::apt::phys_or_scaled;
 use aptscope_dissector::diag::{Diag, DiagKind};
 use aptscope_dissector::ell::table::{status_name, Kind as EllKind};
 use aptscope_dissector::ell::EllValue;
+use aptscope_dissector::hash::NumMap;
 use aptscope_dissector::json;
 use aptscope_dissector::record::{AptRec, EllRec, Record};
 use aptscope_dissector::table::Dir;
 use arrow_array::RecordBatch;
+use arrow_schema::{DataType, Schema};
 use buf::TableBuf;
 use parquet::arrow::ArrowWriter;
 use parquet::basic::Compression;
-use arrow_schema::{DataType, Schema};
-use parquet::file::properties::WriterProperties;
+use parquet::file::properties::{EnabledStatistics, WriterProperties};
 use parquet::schema::types::ColumnPath;
 use schema::{Fill, KindSchema, Kinds, RECORDS};
 use std::borrow::Cow;
@@ -60,13 +62,17 @@ impl Default for Options {
     fn default() -> Self {
         Options {
             rows_per_group: 65_536,
-            max_open_kinds: 64,
+            // More than there are kinds (544): a kind's rows are written when it has a row
+            // group's worth or is the biggest when all together reach the budget, not when
+            // another opens (which wrote a part file of a few rows each time a stream of many
+            // kinds brought a new one).
+            max_open_kinds: 1024,
         }
     }
 }
 
-/// How a table of `schema` is written. Snappy: the files are about as small as with zstd's
-/// fastest level for a fraction of its time (see docs/parquet.md). Dictionary encoding only for
+/// How a table of `schema` is written. Snappy: fast, and read everywhere (see
+/// docs/parquet.md for why not zstd). Dictionary encoding only for
 /// the text columns (names, labels, units: few distinct values); numbers, times and raw bytes
 /// are mostly distinct, and hashing each value for a dictionary that overflows was a sixth of
 /// the writer's time.
@@ -76,8 +82,13 @@ fn props(rows: usize, schema: &Schema) -> WriterProperties {
         .set_max_row_group_row_count(Some(rows.max(1)))
         .set_dictionary_enabled(false);
     for f in schema.fields() {
-        if f.data_type() == &DataType::Utf8 {
-            b = b.set_column_dictionary_enabled(ColumnPath::from(f.name().as_str()), true);
+        let col = || ColumnPath::from(f.name().as_str());
+        match f.data_type() {
+            DataType::Utf8 => b = b.set_column_dictionary_enabled(col(), true),
+            // Raw frames: a minimum and maximum of random bytes prune nothing, and comparing
+            // every value for them cost a twentieth of the run.
+            DataType::Binary => b = b.set_column_statistics_enabled(col(), EnabledStatistics::None),
+            _ => {}
         }
     }
     b.build()
@@ -130,8 +141,7 @@ impl Sink for DirSink {
         let tmp = dir.join(format!("{name}.partial"));
         let f = std::fs::File::create(&tmp)
             .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", tmp.display())))?;
-        let mut w =
-            ArrowWriter::try_new(f, batch.schema(), props).map_err(perr)?;
+        let mut w = ArrowWriter::try_new(f, batch.schema(), props).map_err(perr)?;
         w.write(batch).map_err(perr)?;
         // Renamed once complete: a killed run leaves no torn `.parquet`. (No fsync: a killed
         // process loses nothing the kernel has; a power cut may, and costs a sync per part.)
@@ -224,6 +234,9 @@ pub struct Summary {
     pub row_groups: u64,
 }
 
+/// A message's kind table: its name, and its schema when it has one.
+type KindOf = (Arc<str>, Option<Arc<KindSchema>>);
+
 struct Open {
     buf: TableBuf,
     part: u32,
@@ -236,15 +249,17 @@ pub struct CaptureWriter<S: Sink> {
     file: Arc<str>,
     opts: Options,
     records: Open,
-    kinds: HashMap<String, Open>,
+    kinds: NumMap<String, Open>,
     /// Part numbers of kind tables flushed and closed, to continue from when they reopen.
     parts: HashMap<String, u32>,
     clock: u64,
     summary: Summary,
     /// Kind table names and schemas by message (the address of its table entry, and of its
     /// sub-message's).
-    kind_names: HashMap<(usize, usize), (Arc<str>, Option<Arc<KindSchema>>)>,
+    kind_names: NumMap<(usize, usize), KindOf>,
     layouts: Layouts,
+    /// Rows the kind tables buffer, together.
+    kind_rows: usize,
 }
 
 fn diag_v(d: &Diag) -> (Cow<'static, str>, u64, String) {
@@ -278,12 +293,13 @@ impl<S: Sink> CaptureWriter<S> {
                 part: 0,
                 used: 0,
             },
-            kinds: HashMap::new(),
+            kinds: NumMap::default(),
             parts: HashMap::new(),
             clock: 0,
             summary: Summary::default(),
-            kind_names: HashMap::new(),
+            kind_names: NumMap::default(),
             layouts: Layouts::default(),
+            kind_rows: 0,
         }
     }
 
@@ -457,13 +473,13 @@ impl<S: Sink> CaptureWriter<S> {
             self.flush_records()?;
         }
         if let (Some(k), Some(m)) = (kind, rec.meta()) {
-            let keys = [s(&file), V::U(m.n), V::U(m.stream as u64), opt_u(m.ts_ns)];
-            let vals = match rec {
-                Record::Apt(a) => apt_values(&mut self.layouts, &k, a),
-                Record::Ell(e) => ell_values(&mut self.layouts, &k, e),
-                _ => vec![],
-            };
-            let row: Vec<V<'_>> = keys.into_iter().chain(vals).collect();
+            let mut row = Vec::with_capacity(4 + k.cols.len());
+            row.extend([s(&file), V::U(m.n), V::U(m.stream as u64), opt_u(m.ts_ns)]);
+            match rec {
+                Record::Apt(a) => apt_values(&mut self.layouts, &k, a, &mut row),
+                Record::Ell(e) => ell_values(&mut self.layouts, &k, e, &mut row),
+                _ => {}
+            }
             self.kind_row(&k, &row)?;
         }
         Ok(())
@@ -485,7 +501,9 @@ impl<S: Sink> CaptureWriter<S> {
                 None => return (None, None),
             },
             Record::Ell(e) => match e.frame.cmd {
-                Some(c) => ((c as *const _ as usize, 1), &move || schema::ell_kind_name(c)),
+                Some(c) => ((c as *const _ as usize, 1), &move || {
+                    schema::ell_kind_name(c)
+                }),
                 None => return (None, None),
             },
             _ => return (None, None),
@@ -522,17 +540,20 @@ impl<S: Sink> CaptureWriter<S> {
                 },
             );
         }
-        let budget = self.opts.rows_per_group.saturating_mul(4);
+        // One row group's worth across kinds (with the records table's own, the writer stays
+        // under 64 MiB; four row groups' worth peaked at 100 MiB).
+        let budget = self.opts.rows_per_group;
         let Some(o) = self.kinds.get_mut(&k.name) else {
             return Ok(());
         };
         o.used = self.clock;
         o.buf.push(row);
+        self.kind_rows += 1;
         if o.buf.rows() >= self.opts.rows_per_group {
+            self.kind_rows -= o.buf.rows();
             Self::flush(&mut self.sink, &k.name, o, &mut self.summary)?;
         }
-        let total: usize = self.kinds.values().map(|o| o.buf.rows()).sum();
-        if total > budget {
+        if self.kind_rows > budget {
             // Many kinds each short of a row group: the biggest is written early.
             let big = self
                 .kinds
@@ -548,6 +569,7 @@ impl<S: Sink> CaptureWriter<S> {
 
     fn close_kind(&mut self, name: &str) -> io::Result<()> {
         if let Some(mut o) = self.kinds.remove(name) {
+            self.kind_rows -= o.buf.rows();
             Self::flush(&mut self.sink, name, &mut o, &mut self.summary)?;
             self.parts.insert(name.to_string(), o.part);
         }
@@ -591,7 +613,7 @@ impl<S: Sink> CaptureWriter<S> {
 /// sub-message form), so each is worked out once (by name, the first field of that name)
 /// rather than searched for in every frame.
 #[derive(Default)]
-struct Layouts(HashMap<(usize, usize, usize, usize), Vec<Option<usize>>>);
+struct Layouts(NumMap<(usize, usize, usize, usize), Vec<Option<usize>>>);
 
 impl Layouts {
     fn get<T, F: 'static>(
@@ -617,102 +639,97 @@ impl Layouts {
 }
 
 /// The field columns of an APT frame's kind row.
-fn apt_values<'a>(lay: &mut Layouts, k: &KindSchema, a: &'a AptRec<'a>) -> Vec<V<'a>> {
+fn apt_values<'a>(lay: &mut Layouts, k: &KindSchema, a: &'a AptRec<'a>, out: &mut Vec<V<'a>>) {
     let f = a.frame;
     let t = f.table();
-    let fields: Vec<_> = f.fields().collect();
+    // Sized once: the iterator does not know its length, and growing by doubling was a
+    // reallocation or two per frame.
+    let mut fields = Vec::with_capacity(32);
+    fields.extend(f.fields());
     let idx = lay.get(k, &fields, |fd| fd.name);
-    k.cols
-        .iter()
-        .zip(idx)
-        .map(|(c, i)| {
-            let Some((fd, v)) = i.map(|i| &fields[i]) else {
-                return V::Null;
-            };
-            use aptscope_dissector::apt::Value;
-            match c.fill {
-                Fill::Int => match *v {
-                    Value::U(x) => V::U(x),
-                    Value::I(x) => V::I(x),
-                    _ => V::Null,
-                },
-                Fill::Float => v.as_f64().map_or(V::Null, V::F),
-                Fill::EnumLabel => {
-                    let label = fd
-                        .enumeration
-                        .zip(v.as_i64())
-                        .and_then(|(e, x)| t.enum_def(e).label(x));
-                    label.map_or(V::Null, s)
-                }
-                Fill::FlagNames => match (fd.flags, *v) {
-                    (Some(fl), Value::U(x)) => V::ListS(
-                        t.flags_def(fl)
-                            .items
-                            .iter()
-                            .filter(|(m, _)| x & m == *m)
-                            .map(|(_, l)| *l)
-                            .collect(),
-                    ),
-                    _ => V::Null,
-                },
-                Fill::Text => match *v {
-                    Value::Str(b) => {
-                        V::S(Cow::Owned(aptscope_dissector::apt::text_of(b).into_owned()))
-                    }
-                    _ => V::Null,
-                },
-                Fill::Bytes => match *v {
-                    Value::Bytes(b) => V::B(b),
-                    _ => V::Null,
-                },
-                Fill::List => {
-                    let els = v.elements();
-                    if matches!(v, Value::Array(aptscope_dissector::table::Prim::F32, _)) {
-                        V::ListF(els.filter_map(|e| e.as_f64()).collect())
-                    } else {
-                        V::ListI(els.filter_map(|e| e.as_i64()).collect())
-                    }
-                }
-                Fill::Phys => phys_or_scaled(fd, v, a.scale).map_or(V::Null, |(x, _)| V::F(x)),
-                Fill::PhysUnit => phys_or_scaled(fd, v, a.scale)
-                    .map_or(V::Null, |(_, u)| V::S(Cow::Owned(u.to_string()))),
-                Fill::StatusName => V::Null,
+    let vals = k.cols.iter().zip(idx).map(|(c, i)| {
+        let Some((fd, v)) = i.map(|i| &fields[i]) else {
+            return V::Null;
+        };
+        use aptscope_dissector::apt::Value;
+        match c.fill {
+            Fill::Int => match *v {
+                Value::U(x) => V::U(x),
+                Value::I(x) => V::I(x),
+                _ => V::Null,
+            },
+            Fill::Float => v.as_f64().map_or(V::Null, V::F),
+            Fill::EnumLabel => {
+                let label = fd
+                    .enumeration
+                    .zip(v.as_i64())
+                    .and_then(|(e, x)| t.enum_def(e).label(x));
+                label.map_or(V::Null, s)
             }
-        })
-        .collect()
+            Fill::FlagNames => match (fd.flags, *v) {
+                (Some(fl), Value::U(x)) => V::ListS(
+                    t.flags_def(fl)
+                        .items
+                        .iter()
+                        .filter(|(m, _)| x & m == *m)
+                        .map(|(_, l)| *l)
+                        .collect(),
+                ),
+                _ => V::Null,
+            },
+            Fill::Text => match *v {
+                Value::Str(b) => V::S(Cow::Owned(aptscope_dissector::apt::text_of(b).into_owned())),
+                _ => V::Null,
+            },
+            Fill::Bytes => match *v {
+                Value::Bytes(b) => V::B(b),
+                _ => V::Null,
+            },
+            Fill::List => {
+                let els = v.elements();
+                if matches!(v, Value::Array(aptscope_dissector::table::Prim::F32, _)) {
+                    V::ListF(els.filter_map(|e| e.as_f64()).collect())
+                } else {
+                    V::ListI(els.filter_map(|e| e.as_i64()).collect())
+                }
+            }
+            Fill::Phys => phys_or_scaled(fd, v, a.scale).map_or(V::Null, |(x, _)| V::F(x)),
+            Fill::PhysUnit => phys_or_scaled(fd, v, a.scale).map_or(V::Null, |(_, u)| s(u)),
+            Fill::StatusName => V::Null,
+        }
+    });
+    out.extend(vals);
 }
 
 /// The field columns of an Elliptec frame's kind row.
-fn ell_values<'a>(lay: &mut Layouts, k: &KindSchema, e: &'a EllRec<'a>) -> Vec<V<'a>> {
+fn ell_values<'a>(lay: &mut Layouts, k: &KindSchema, e: &'a EllRec<'a>, out: &mut Vec<V<'a>>) {
     let f = e.frame;
-    let fields: Vec<_> = f.fields().collect();
+    let mut fields = Vec::with_capacity(16);
+    fields.extend(f.fields());
     let scale = e.obs.module.as_ref().and_then(|m| m.scale());
     let idx = lay.get(k, &fields, |fd| fd.name);
-    k.cols
-        .iter()
-        .zip(idx)
-        .map(|(c, i)| {
-            let Some((fd, v)) = i.map(|i| &fields[i]) else {
-                return V::Null;
-            };
-            match (c.fill, *v) {
-                (Fill::StatusName, EllValue::U(x)) => s(status_name(x as u32)),
-                (Fill::Int, EllValue::U(x)) => V::U(x),
-                (Fill::Int, EllValue::I(x)) => V::I(x),
-                (Fill::Text, EllValue::Char(ch)) => V::S(Cow::Owned(ch.to_string())),
-                (Fill::Text, EllValue::Digits(d)) => V::S(Cow::Owned(d.to_string())),
-                (Fill::Bytes, EllValue::Raw(b)) => V::B(b),
-                (Fill::Phys | Fill::PhysUnit, EllValue::I(p)) if fd.kind == EllKind::Position => {
-                    match scale.filter(|(ppu, _)| *ppu > 0.0) {
-                        Some((ppu, _)) if c.fill == Fill::Phys => {
-                            V::F(aptscope_dissector::apt::round_sig(p as f64 / ppu))
-                        }
-                        Some((_, unit)) => s(unit),
-                        None => V::Null,
+    let vals = k.cols.iter().zip(idx).map(|(c, i)| {
+        let Some((fd, v)) = i.map(|i| &fields[i]) else {
+            return V::Null;
+        };
+        match (c.fill, *v) {
+            (Fill::StatusName, EllValue::U(x)) => s(status_name(x as u32)),
+            (Fill::Int, EllValue::U(x)) => V::U(x),
+            (Fill::Int, EllValue::I(x)) => V::I(x),
+            (Fill::Text, EllValue::Char(ch)) => V::S(Cow::Owned(ch.to_string())),
+            (Fill::Text, EllValue::Digits(d)) => V::S(Cow::Owned(d.to_string())),
+            (Fill::Bytes, EllValue::Raw(b)) => V::B(b),
+            (Fill::Phys | Fill::PhysUnit, EllValue::I(p)) if fd.kind == EllKind::Position => {
+                match scale.filter(|(ppu, _)| *ppu > 0.0) {
+                    Some((ppu, _)) if c.fill == Fill::Phys => {
+                        V::F(aptscope_dissector::apt::round_sig(p as f64 / ppu))
                     }
+                    Some((_, unit)) => s(unit),
+                    None => V::Null,
                 }
-                _ => V::Null,
             }
-        })
-        .collect()
+            _ => V::Null,
+        }
+    });
+    out.extend(vals);
 }
