@@ -65,25 +65,9 @@ fn parallel_output_is_the_sequential_output() {
     }
 }
 
-/// `aptscope ARGS`'s standard output as bytes (the run must succeed).
-fn stdout_of(args: &[&str]) -> Vec<u8> {
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_aptscope"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdin(std::process::Stdio::null())
-        .output()
-        .expect("run aptscope");
-    assert!(
-        o.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    o.stdout
-}
-
 /// Random streams large enough that a file's rendering runs far ahead of the writer (megabytes
 /// of NDJSON each, beyond what its channel holds, so it spills), beside every sample: `-j 2`
-/// and `-j 4` write exactly the bytes `-j 1` writes.
+/// and `-j 4` write exactly what `-j 1` writes.
 #[test]
 fn every_worker_renders_and_the_output_is_that_of_one() {
     let dir = common::Scratch::new("batch-random");
@@ -99,11 +83,14 @@ fn every_worker_renders_and_the_output_is_that_of_one() {
     for fmt in ["--json", "--to=text"] {
         let mut a = vec!["decode", fmt, "-j", "1"];
         a.extend(files.iter().map(String::as_str));
-        let one = stdout_of(&a);
+        // Text and NDJSON are UTF-8: equal strings are equal bytes.
+        let (one, err, ok) = aptscope(&a, None);
+        assert!(ok, "{err}");
         assert!(one.len() > 4 << 20, "{} bytes", one.len());
         for j in ["2", "4"] {
             a[3] = j;
-            let many = stdout_of(&a);
+            let (many, err, ok) = aptscope(&a, None);
+            assert!(ok, "{err}");
             assert!(
                 one == many,
                 "{fmt} -j {j}: {} vs {} bytes",
