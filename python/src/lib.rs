@@ -14,11 +14,16 @@ use aptscope_dissector::json;
 use aptscope_dissector::record::{Ctx, Decoder, Record};
 use aptscope_dissector::table::Dir;
 use aptscope_dissector::Table;
-use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, DirSink, MemSink, Options};
+use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, DirSink, MemSink, Options, Sink};
+use arrow_array::{Array, RecordBatch, StructArray};
+use arrow_data::ffi::FFI_ArrowArray;
+use arrow_schema::ffi::FFI_ArrowSchema;
 use pyo3::create_exception;
 use pyo3::exceptions::{PyFileNotFoundError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString};
+use pyo3::types::{PyBool, PyBytes, PyCapsule, PyDict, PyFloat, PyInt, PyList, PyString};
+use std::cell::RefCell;
+use std::rc::Rc;
 use std::collections::{HashMap, VecDeque};
 use std::convert::Infallible;
 use std::io;
@@ -312,6 +317,143 @@ impl json::Sink for PySink<'_, '_> {
     }
 }
 
+/// Row groups as the writer flushes them, by table, for [`Batches`] to hand out.
+type BatchQueue = Rc<RefCell<VecDeque<(String, RecordBatch)>>>;
+
+/// A [`Sink`] that queues each row group as an Arrow record batch (no Parquet encoding).
+struct QueueSink(BatchQueue);
+
+impl Sink for QueueSink {
+    fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
+        self.0
+            .borrow_mut()
+            .push_back((table.to_string(), batch.clone()));
+        Ok(())
+    }
+}
+
+/// The tables of one source as `(table, batch)` pairs, each batch a row group of the Parquet
+/// output's schema, produced as the source is decoded (memory stays that of one row group per
+/// table, whatever the source's size).
+#[pyclass(unsendable)]
+struct Batches {
+    reader: Option<Box<dyn Reader>>,
+    bytes: Option<Vec<u8>>,
+    dec: Decoder,
+    w: Option<CaptureWriter<QueueSink>>,
+    queue: BatchQueue,
+}
+
+#[pymethods]
+impl Batches {
+    #[new]
+    #[pyo3(signature = (source_obj, proto = "auto", name = None))]
+    fn new(source_obj: &Bound<'_, PyAny>, proto: &str, name: Option<String>) -> PyResult<Self> {
+        let proto = proto_of(proto)?;
+        let (reader, bytes, label) = match source(source_obj)? {
+            Source::Path(p) => (
+                Some(
+                    open(&p, OpenOptions::default())
+                        .map_err(|e| err(e.into()))?
+                        .0,
+                ),
+                None,
+                name.unwrap_or(p),
+            ),
+            Source::Bytes(b) => (None, Some(b), name.unwrap_or_else(|| "<bytes>".into())),
+        };
+        let queue = BatchQueue::default();
+        let opts = Options::default();
+        let w = CaptureWriter::new(QueueSink(queue.clone()), &label, opts);
+        Ok(Batches {
+            reader,
+            bytes,
+            dec: Decoder::new(proto),
+            w: Some(w),
+            queue,
+        })
+    }
+
+    fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
+        slf
+    }
+
+    fn __next__(&mut self) -> PyResult<Option<(String, ArrowBatch)>> {
+        loop {
+            if let Some((t, b)) = self.queue.borrow_mut().pop_front() {
+                return Ok(Some((t, ArrowBatch(b))));
+            }
+            if self.w.is_none() {
+                return Ok(None);
+            }
+            self.step().map_err(err)?;
+        }
+    }
+}
+
+impl Batches {
+    /// Decode the next event (or all the bytes); at the end, flush what the writer holds.
+    fn step(&mut self) -> io::Result<()> {
+        let Some(w) = self.w.as_mut() else {
+            return Ok(());
+        };
+        let mut emit = |r: &Record<'_>| w.record(r);
+        let more = if let Some(b) = self.bytes.take() {
+            self.dec.push(Ctx::default(), &b, &mut emit)?;
+            false
+        } else if let Some(ev) = self.reader.as_mut().and_then(|r| r.next_event()) {
+            // A USB capture without the device asked for has nothing to decode.
+            if let aptscope_capture::Event::Diag(d) = &ev {
+                if d.kind() == aptscope_capture::usb::NOT_FOUND {
+                    return Err(io::Error::new(io::ErrorKind::InvalidInput, d.msg()));
+                }
+            }
+            ev.feed(&mut self.dec, &mut emit)?;
+            true
+        } else {
+            false
+        };
+        if !more {
+            self.dec.finish(&mut emit)?;
+            if let Some(w) = self.w.take() {
+                w.finish()?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One record batch, handed to pyarrow through the Arrow PyCapsule interface
+/// (`pyarrow.record_batch(b)`): the columns are shared, not copied or re-encoded.
+#[pyclass]
+struct ArrowBatch(RecordBatch);
+
+#[pymethods]
+impl ArrowBatch {
+    /// The batch as a struct array: `(schema capsule, array capsule)`.
+    #[pyo3(signature = (requested_schema = None))]
+    fn __arrow_c_array__<'py>(
+        &self,
+        py: Python<'py>,
+        requested_schema: Option<Bound<'py, PyAny>>,
+    ) -> PyResult<(Bound<'py, PyCapsule>, Bound<'py, PyCapsule>)> {
+        // The schema is the Parquet output's; a requested one is not cast to.
+        let _ = requested_schema;
+        let schema = FFI_ArrowSchema::try_from(self.0.schema().as_ref())
+            .map_err(|e| AptscopeError::new_err(e.to_string()))?;
+        let array = FFI_ArrowArray::new(&StructArray::from(self.0.clone()).into_data());
+        Ok((
+            PyCapsule::new_with_value(py, schema, c"arrow_schema")?,
+            PyCapsule::new_with_value(py, array, c"arrow_array")?,
+        ))
+    }
+
+    /// Rows in the batch.
+    fn __len__(&self) -> usize {
+        self.0.num_rows()
+    }
+}
+
 /// Every table of one source as Parquet bytes: `[(table, bytes)]`, `records` first.
 #[pyfunction]
 #[pyo3(signature = (source_obj, proto = "auto", name = None))]
@@ -469,6 +611,8 @@ fn encode<'py>(
 #[pymodule]
 fn _aptscope(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Records>()?;
+    m.add_class::<Batches>()?;
+    m.add_class::<ArrowBatch>()?;
     m.add_function(wrap_pyfunction!(parquet_tables, m)?)?;
     m.add_function(wrap_pyfunction!(write_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(prepare_dataset, m)?)?;

@@ -129,6 +129,25 @@ def test_to_arrow_has_the_parquet_schema(aptscope_bin, samples, tmp_path):
     assert (joined["name"] == "MOT_GET_DCSTATUSUPDATE").all() and len(joined) == st.num_rows
 
 
+def test_batches_are_the_tables_in_row_groups(samples):
+    path = samples / "kdc101-session.pcapng"
+    tables = aptscope.to_arrow(path)
+    seen = {}
+    for table, batch in aptscope.batches(path):
+        assert isinstance(batch, pa.RecordBatch)
+        assert batch.schema.equals(tables[table].schema, check_metadata=True), table
+        seen.setdefault(table, []).append(batch)
+    assert sorted(seen) == sorted(tables)
+    for t, bs in seen.items():
+        assert pa.Table.from_batches(bs).equals(tables[t]), t
+    # Bytes of one stream, and a missing file.
+    frame = aptscope.encode("MOT_MOVE_ABSOLUTE", chan_ident=1, absolute_position=4096)
+    got = dict(aptscope.batches(frame, proto="apt"))
+    assert got["MOT_MOVE_ABSOLUTE"].column("absolute_position").to_pylist() == [4096]
+    with pytest.raises(FileNotFoundError):
+        list(aptscope.batches(samples / "nope.bin"))
+
+
 def test_write_dataset_equals_the_command(aptscope_bin, samples, tmp_path):
     files = [str(samples / "kdc101-session.bin"), str(samples / "elliptec-bus.txt")]
     a, b = tmp_path / "cli", tmp_path / "py"
