@@ -187,7 +187,7 @@ struct ChanWriter<'a> {
     /// rather than spill.
     head: &'a AtomicUsize,
     spill: Option<Spill>,
-    /// No spill file could be made: wait for the writer.
+    /// No spill file could be made, or written: wait for the writer.
     no_spill: bool,
 }
 
@@ -237,18 +237,23 @@ impl ChanWriter<'_> {
     }
 
     /// Append `b` to the spill file (made now if need be); false: it cannot take it.
-    fn spill(&mut self, b: &[u8]) -> io::Result<bool> {
+    fn spill(&mut self, b: &[u8]) -> bool {
         if self.spill.is_none() && !self.no_spill {
             self.spill = Spill::create(self.index);
             self.no_spill = self.spill.is_none();
         }
         match self.spill.as_mut() {
-            Some(sp) if sp.len + b.len() as u64 <= SPILL_MAX => {
-                sp.file.write_all_at(b, sp.len)?;
+            Some(sp) if !self.no_spill && sp.len + b.len() as u64 <= SPILL_MAX => {
+                // A full disk is no reason to fail: from then on the worker waits instead
+                // (what was spilled before is still announced and copied out).
+                if sp.file.write_all_at(b, sp.len).is_err() {
+                    self.no_spill = true;
+                    return false;
+                }
                 sp.len += b.len() as u64;
-                Ok(true)
+                true
             }
-            _ => Ok(false),
+            _ => false,
         }
     }
 
@@ -266,7 +271,7 @@ impl ChanWriter<'_> {
         }
         // Blocks after spilled bytes follow them into the spill until those are announced.
         if !self.announce(now)? {
-            if self.spill(&b)? {
+            if self.spill(&b) {
                 return Ok(());
             }
             self.announce(true)?;
@@ -278,7 +283,7 @@ impl ChanWriter<'_> {
                 let Msg::Data(b, _) = m else {
                     return Ok(());
                 };
-                if self.spill(&b)? {
+                if self.spill(&b) {
                     Ok(())
                 } else {
                     self.tx.send(Msg::Data(b, false)).map_err(|_| Self::gone())

@@ -23,11 +23,11 @@ use pyo3::exceptions::{PyFileNotFoundError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyBytes, PyCapsule, PyDict, PyFloat, PyInt, PyList, PyString};
 use std::cell::RefCell;
-use std::rc::Rc;
 use std::collections::{HashMap, VecDeque};
 use std::convert::Infallible;
 use std::io;
 use std::path::Path;
+use std::rc::Rc;
 
 create_exception!(
     _aptscope,

@@ -148,6 +148,27 @@ def test_batches_are_the_tables_in_row_groups(samples):
         list(aptscope.batches(samples / "nope.bin"))
 
 
+def test_batches_stream_into_duckdb(samples):
+    duckdb = pytest.importorskip("duckdb")
+    path = samples / "kdc101-session.pcapng"
+    con = duckdb.connect()
+    made = set()
+    for table, batch in aptscope.batches(path):
+        if table != "MOT_GET_DCSTATUSUPDATE":
+            continue
+        con.register("b", batch)
+        if table in made:
+            con.execute("INSERT INTO st SELECT * FROM b")
+        else:
+            con.execute("CREATE TABLE st AS SELECT * FROM b")
+            made.add(table)
+        con.unregister("b")
+    st = aptscope.to_arrow(path)["MOT_GET_DCSTATUSUPDATE"]
+    n, lo, hi = con.execute("SELECT count(*), min(position), max(position) FROM st").fetchone()
+    pos = st.column("position").to_pylist()
+    assert (n, lo, hi) == (st.num_rows, min(pos), max(pos))
+
+
 def test_write_dataset_equals_the_command(aptscope_bin, samples, tmp_path):
     files = [str(samples / "kdc101-session.bin"), str(samples / "elliptec-bus.txt")]
     a, b = tmp_path / "cli", tmp_path / "py"
