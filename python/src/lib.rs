@@ -3,8 +3,9 @@
 //!
 //! Everything decodes through `record::Decoder` (directly or inside
 //! `aptscope_parquet::decode_file`): records as dicts built by `json::record` straight into
-//! Python objects (the documented NDJSON shape, no text in between), tables as Parquet bytes
-//! (the dataset's schema exactly).
+//! Python objects (the documented NDJSON shape, no text in between), tables as the Arrow record
+//! batches the Parquet writer would encode (the dataset's schema exactly), handed to pyarrow
+//! through the Arrow C data interface.
 
 use aptscope_capture::open::{open, OpenOptions};
 use aptscope_capture::Reader;
@@ -14,7 +15,7 @@ use aptscope_dissector::json;
 use aptscope_dissector::record::{Ctx, Decoder, Record};
 use aptscope_dissector::table::Dir;
 use aptscope_dissector::Table;
-use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, DirSink, MemSink, Options, Sink};
+use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, DirSink, Options, Sink};
 use arrow_array::{Array, RecordBatch, StructArray};
 use arrow_data::ffi::FFI_ArrowArray;
 use arrow_schema::ffi::FFI_ArrowSchema;
@@ -454,50 +455,6 @@ impl ArrowBatch {
     }
 }
 
-/// Every table of one source as Parquet bytes: `[(table, bytes)]`, `records` first.
-#[pyfunction]
-#[pyo3(signature = (source_obj, proto = "auto", name = None))]
-fn parquet_tables<'py>(
-    py: Python<'py>,
-    source_obj: &Bound<'py, PyAny>,
-    proto: &str,
-    name: Option<String>,
-) -> PyResult<Vec<(String, Bound<'py, PyBytes>)>> {
-    let proto = proto_of(proto)?;
-    let src = source(source_obj)?;
-    let opts = Options::default();
-    let tables = py
-        .detach(|| -> io::Result<Vec<(String, Vec<u8>)>> {
-            let sink = match src {
-                Source::Path(p) => {
-                    let label = name.unwrap_or_else(|| p.clone());
-                    let w = CaptureWriter::new(MemSink::new(opts), &label, opts);
-                    let o = DecodeOpts {
-                        proto,
-                        ..Default::default()
-                    };
-                    decode_file(&p, &o, w, &mut |_| {})?.0
-                }
-                Source::Bytes(b) => {
-                    let label = name.unwrap_or_else(|| "<bytes>".into());
-                    let mut w = CaptureWriter::new(MemSink::new(opts), &label, opts);
-                    let mut d = Decoder::new(proto);
-                    d.push(Ctx::default(), &b, &mut |r| w.record(r))?;
-                    d.finish(&mut |r| w.record(r))?;
-                    w.finish()?.0
-                }
-            };
-            let mut t = sink.finish()?;
-            t.sort_by_key(|(n, _)| n != aptscope_parquet::schema::RECORDS);
-            Ok(t)
-        })
-        .map_err(err)?;
-    Ok(tables
-        .into_iter()
-        .map(|(n, b)| (n, PyBytes::new(py, &b)))
-        .collect())
-}
-
 /// Decode capture `path` into dataset directory `out` as input number `index` (its part files
 /// are `TABLE/part-INDEX-*.parquet`), as `aptscope decode --to parquet` does. Returns counts.
 #[pyfunction]
@@ -613,7 +570,6 @@ fn _aptscope(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Records>()?;
     m.add_class::<Batches>()?;
     m.add_class::<ArrowBatch>()?;
-    m.add_function(wrap_pyfunction!(parquet_tables, m)?)?;
     m.add_function(wrap_pyfunction!(write_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(prepare_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(encode, m)?)?;
