@@ -81,12 +81,45 @@ fn source(obj: &Bound<'_, PyAny>) -> PyResult<Source> {
     Ok(Source::Path(p.extract()?))
 }
 
-/// The records of one source as dicts, produced as they are read.
-#[pyclass(unsendable)]
-struct Records {
+/// A source being decoded: a capture file's reader, or the bytes of one stream.
+struct Input {
     reader: Option<Box<dyn Reader>>,
     bytes: Option<Vec<u8>>,
     dec: Decoder,
+}
+
+impl Input {
+    /// Open `source_obj`; with the name of the source (its path, or `<bytes>`).
+    fn open(source_obj: &Bound<'_, PyAny>, proto: &str) -> PyResult<(Input, String)> {
+        let dec = Decoder::new(proto_of(proto)?);
+        Ok(match source(source_obj)? {
+            Source::Path(p) => {
+                let reader = open(&p, OpenOptions::default())
+                    .map_err(|e| err(e.into()))?
+                    .0;
+                let i = Input {
+                    reader: Some(reader),
+                    bytes: None,
+                    dec,
+                };
+                (i, p)
+            }
+            Source::Bytes(b) => {
+                let i = Input {
+                    reader: None,
+                    bytes: Some(b),
+                    dec,
+                };
+                (i, "<bytes>".into())
+            }
+        })
+    }
+}
+
+/// The records of one source as dicts, produced as they are read.
+#[pyclass(unsendable)]
+struct Records {
+    input: Input,
     queue: VecDeque<Py<PyAny>>,
     done: bool,
     keys: Keys,
@@ -97,22 +130,8 @@ impl Records {
     #[new]
     #[pyo3(signature = (source_obj, proto = "auto"))]
     fn new(source_obj: &Bound<'_, PyAny>, proto: &str) -> PyResult<Self> {
-        let proto = proto_of(proto)?;
-        let (reader, bytes) = match source(source_obj)? {
-            Source::Path(p) => (
-                Some(
-                    open(&p, OpenOptions::default())
-                        .map_err(|e| err(e.into()))?
-                        .0,
-                ),
-                None,
-            ),
-            Source::Bytes(b) => (None, Some(b)),
-        };
         Ok(Records {
-            reader,
-            bytes,
-            dec: Decoder::new(proto),
+            input: Input::open(source_obj, proto)?.0,
             queue: VecDeque::new(),
             done: false,
             keys: Keys::default(),
@@ -141,21 +160,22 @@ impl Records {
             q.push_back(sink.finish()?);
             Ok(())
         };
-        if let Some(b) = self.bytes.take() {
-            self.dec.push(Ctx::default(), &b, &mut emit)?;
-            self.dec.finish(&mut emit)?;
+        let i = &mut self.input;
+        if let Some(b) = i.bytes.take() {
+            i.dec.push(Ctx::default(), &b, &mut emit)?;
+            i.dec.finish(&mut emit)?;
             self.done = true;
             return Ok(());
         }
-        let Some(r) = self.reader.as_mut() else {
+        let Some(r) = i.reader.as_mut() else {
             self.done = true;
             return Ok(());
         };
         match r.next_event() {
-            Some(ev) => ev.feed(&mut self.dec, &mut emit),
+            Some(ev) => ev.feed(&mut i.dec, &mut emit),
             None => {
                 self.done = true;
-                self.dec.finish(&mut emit)
+                i.dec.finish(&mut emit)
             }
         }
     }
@@ -338,9 +358,7 @@ impl Sink for QueueSink {
 /// table, whatever the source's size).
 #[pyclass(unsendable)]
 struct Batches {
-    reader: Option<Box<dyn Reader>>,
-    bytes: Option<Vec<u8>>,
-    dec: Decoder,
+    input: Input,
     w: Option<CaptureWriter<QueueSink>>,
     queue: BatchQueue,
 }
@@ -350,26 +368,13 @@ impl Batches {
     #[new]
     #[pyo3(signature = (source_obj, proto = "auto", name = None))]
     fn new(source_obj: &Bound<'_, PyAny>, proto: &str, name: Option<String>) -> PyResult<Self> {
-        let proto = proto_of(proto)?;
-        let (reader, bytes, label) = match source(source_obj)? {
-            Source::Path(p) => (
-                Some(
-                    open(&p, OpenOptions::default())
-                        .map_err(|e| err(e.into()))?
-                        .0,
-                ),
-                None,
-                name.unwrap_or(p),
-            ),
-            Source::Bytes(b) => (None, Some(b), name.unwrap_or_else(|| "<bytes>".into())),
-        };
+        let (input, label) = Input::open(source_obj, proto)?;
+        let label = name.unwrap_or(label);
         let queue = BatchQueue::default();
         let opts = Options::default();
         let w = CaptureWriter::new(QueueSink(queue.clone()), &label, opts);
         Ok(Batches {
-            reader,
-            bytes,
-            dec: Decoder::new(proto),
+            input,
             w: Some(w),
             queue,
         })
@@ -399,23 +404,24 @@ impl Batches {
             return Ok(());
         };
         let mut emit = |r: &Record<'_>| w.record(r);
-        let more = if let Some(b) = self.bytes.take() {
-            self.dec.push(Ctx::default(), &b, &mut emit)?;
+        let i = &mut self.input;
+        let more = if let Some(b) = i.bytes.take() {
+            i.dec.push(Ctx::default(), &b, &mut emit)?;
             false
-        } else if let Some(ev) = self.reader.as_mut().and_then(|r| r.next_event()) {
+        } else if let Some(ev) = i.reader.as_mut().and_then(|r| r.next_event()) {
             // A USB capture without the device asked for has nothing to decode.
             if let aptscope_capture::Event::Diag(d) = &ev {
                 if d.kind() == aptscope_capture::usb::NOT_FOUND {
                     return Err(io::Error::new(io::ErrorKind::InvalidInput, d.msg()));
                 }
             }
-            ev.feed(&mut self.dec, &mut emit)?;
+            ev.feed(&mut i.dec, &mut emit)?;
             true
         } else {
             false
         };
         if !more {
-            self.dec.finish(&mut emit)?;
+            i.dec.finish(&mut emit)?;
             if let Some(w) = self.w.take() {
                 w.finish()?;
             }
