@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# `aptscope decode` over many files on 1 and 2 threads: throughput and peak RSS, for NDJSON and
-# Parquet output. Usage: bench/batch.sh   (env: FILES=50 files of MB=4.2 MB each, ≥ 200 MB)
+# `aptscope decode` over many files on 1 and 2 threads: throughput, CPU time and peak RSS, for
+# text, NDJSON and Parquet output, each -j 2 figure beside its -j 1 and Parquet beside NDJSON.
+# Usage: bench/batch.sh   (env: FILES=50 files of MB=4.2 MB each, ≥ 200 MB)
 #
 # The files are device→host streams of 27 common message forms with random field values
 # (dissector/examples/gen_d2h.rs, one seed per file): what a controller's status logs look
@@ -20,18 +21,31 @@ done
 total=$(du -cb "$tmp"/in/*.bin | tail -n1 | cut -f1)
 printf 'input: %d files, %.1f MB; %s, %d cores\n' "$FILES" "$(echo "$total / 1000000" | bc -l)" \
   "$(lscpu | sed -n 's/^Model name: *//p' | head -n1)" "$(nproc)"
+declare -A rate
 run() { # label, jobs, command...
   local label=$1 jobs=$2
   shift 2
-  local start end rss
-  start=$(date +%s.%N)
-  rss=$( { /usr/bin/time -f %M "$@" > /dev/null; } 2>&1 | tail -n1 )
-  end=$(date +%s.%N)
-  printf '%-8s -j %s: %6.1f MB/s, peak RSS %6d KiB\n' "$label" "$jobs" \
-    "$(echo "$total / 1000000 / ($end - $start)" | bc -l)" "$rss"
+  local out wall cpu rss
+  # Whole process: wall and CPU seconds (user + system), peak RSS.
+  out=$( { /usr/bin/time -f '%e %U %S %M' "$@" > /dev/null; } 2>&1 | tail -n1 )
+  read -r wall user sys rss <<< "$out"
+  cpu=$(echo "$user + $sys" | bc -l)
+  rate[$label.$jobs]=$(echo "$total / 1000000 / $wall" | bc -l)
+  printf '%-7s -j %s: %6.1f MB/s (%5.2f s wall, %5.2f CPU-s), peak RSS %6d KiB' "$label" "$jobs" \
+    "${rate[$label.$jobs]}" "$wall" "$cpu" "$rss"
+  if [ "$jobs" != 1 ]; then
+    printf ', %.2f× -j 1' "$(echo "${rate[$label.$jobs]} / ${rate[$label.1]}" | bc -l)"
+  fi
+  printf '\n'
 }
+echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
 for j in 1 2; do
+  run text "$j" target/release/aptscope decode -j "$j" "$tmp"/in/*.bin
   run ndjson "$j" target/release/aptscope decode --json -j "$j" "$tmp"/in/*.bin
   run parquet "$j" target/release/aptscope decode --to parquet --force -o "$tmp/out" -j "$j" "$tmp"/in/*.bin
 done
+for j in 1 2; do
+  printf 'parquet/ndjson -j %s: %.2f\n' "$j" "$(echo "${rate[parquet.$j]} / ${rate[ndjson.$j]}" | bc -l)"
+done
+echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
 printf 'dataset: %s in %d files\n' "$(du -sh "$tmp/out" | cut -f1)" "$(find "$tmp/out" -name '*.parquet' | wc -l)"

@@ -1,11 +1,15 @@
 //! `decode` over many files: files decoded in parallel, text and NDJSON written per file in
 //! input order, or a Parquet dataset; a progress bar on a terminal.
 //!
-//! Text and NDJSON: each worker decodes whole files into a bounded channel of its own (a few
-//! 64 KiB blocks); the main thread copies file 0's channel to standard output, then file 1's,
-//! and so on. A worker ahead of the writer blocks on its full channel, so memory stays bounded
-//! whatever the files' sizes. Parquet: each worker writes its file's row groups as part files
-//! of their own (named by the file's index), so nothing is ordered or merged.
+//! Text and NDJSON: each worker decodes and renders whole files into a bounded channel of its
+//! own (64 KiB blocks); the main thread copies file 0's channel to standard output, then file
+//! 1's, and so on. A worker ahead of the writer does not wait for it: when its channel is full
+//! it appends its blocks to a spill file of its own (unlinked temporary file) and announces
+//! each spilled range through the channel, so the order stays that of `-j 1` while every core
+//! renders, and memory stays bounded whatever the files' sizes (disk holds what is ahead, at
+//! most [`SPILL_MAX`] per file, beyond which the worker waits). Parquet: each worker writes its
+//! file's row groups as part files of their own (named by the file's index), so nothing is
+//! ordered or merged.
 
 use crate::common::{compile_filter, fatal, proto_of, ProtoArg};
 use aptscope_capture::judge::{not_a_capture, not_a_capture_error, refuse};
@@ -19,11 +23,13 @@ use aptscope_dissector::units::UnitsOpts;
 use aptscope_parquet::{decode_file, CaptureWriter, DirSink};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::cell::{Cell, RefCell};
-use std::io::{self, IsTerminal, Write};
+use std::fs::File;
+use std::io::{self, IsTerminal, Read, Seek, SeekFrom, Write};
+use std::os::unix::fs::FileExt;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
-use std::sync::Mutex;
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
+use std::sync::{Arc, Mutex};
 
 /// What `decode` writes.
 pub enum Output {
@@ -115,9 +121,11 @@ impl Bar {
 }
 
 /// Output of one file's worker: blocks of bytes (with whether to flush them out now: a live
-/// input's records as they come), then its result.
+/// input's records as they come), ranges of its spill file, then its result.
 enum Msg {
     Data(Vec<u8>, bool),
+    /// Bytes `start..end` of the worker's spill file, in order with the blocks.
+    Spilled(Arc<File>, u64, u64),
     Done(io::Result<Stats>),
 }
 
@@ -128,26 +136,170 @@ struct Stats {
     row_groups: u64,
 }
 
+/// Blocks a file's channel holds (1 MiB): enough to ride out the writer's pauses; a file
+/// further ahead spills.
+const CHANNEL_BLOCKS: usize = 16;
+
+const BLOCK: usize = 1 << 16;
+
+/// Bytes one file spills at most before its worker waits for the writer instead.
+const SPILL_MAX: u64 = 1 << 30;
+
+/// A file's spill: an unlinked temporary file, and what of it is not yet announced.
+struct Spill {
+    file: Arc<File>,
+    len: u64,
+    announced: u64,
+}
+
+impl Spill {
+    /// A new spill file, or `None` where none can be made (the worker then waits instead).
+    fn create(i: usize) -> Option<Spill> {
+        static SEQ: AtomicUsize = AtomicUsize::new(0);
+        let seq = SEQ.fetch_add(1, Ordering::Relaxed);
+        let path =
+            std::env::temp_dir().join(format!("aptscope-{}-{i}-{seq}.spill", std::process::id()));
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(&path)
+            .ok()?;
+        // Unlinked at once: it goes when the last handle closes, however the run ends.
+        std::fs::remove_file(&path).ok()?;
+        Some(Spill {
+            file: Arc::new(file),
+            len: 0,
+            announced: 0,
+        })
+    }
+}
+
 /// A writer into a file's channel, in 64 KiB blocks. Held back until released: what a file
 /// that turns out not to be a capture wrote is dropped.
 struct ChanWriter<'a> {
     tx: &'a SyncSender<Msg>,
     buf: Vec<u8>,
     held: &'a Cell<bool>,
+    /// The file's index in the run (names its spill file).
+    index: usize,
+    /// The index of the file the writer is copying out: that file's worker waits for it
+    /// rather than spill.
+    head: &'a AtomicUsize,
+    spill: Option<Spill>,
+    /// No spill file could be made, or written: wait for the writer.
+    no_spill: bool,
 }
 
-const BLOCK: usize = 1 << 16;
-
 impl ChanWriter<'_> {
-    /// Send the block; `now`: and have it written out at once.
+    fn new<'a>(
+        tx: &'a SyncSender<Msg>,
+        held: &'a Cell<bool>,
+        index: usize,
+        head: &'a AtomicUsize,
+    ) -> ChanWriter<'a> {
+        ChanWriter {
+            tx,
+            buf: Vec::with_capacity(BLOCK),
+            held,
+            index,
+            head,
+            spill: None,
+            no_spill: false,
+        }
+    }
+
+    fn gone() -> io::Error {
+        io::Error::from(io::ErrorKind::BrokenPipe)
+    }
+
+    /// Announce the spilled bytes not yet announced; `wait`: even if the channel is full.
+    /// Whether none is left unannounced.
+    fn announce(&mut self, wait: bool) -> io::Result<bool> {
+        let Some(sp) = self.spill.as_mut() else {
+            return Ok(true);
+        };
+        if sp.announced == sp.len {
+            return Ok(true);
+        }
+        let m = Msg::Spilled(sp.file.clone(), sp.announced, sp.len);
+        if wait {
+            self.tx.send(m).map_err(|_| Self::gone())?;
+        } else {
+            match self.tx.try_send(m) {
+                Ok(()) => {}
+                Err(TrySendError::Full(_)) => return Ok(false),
+                Err(TrySendError::Disconnected(_)) => return Err(Self::gone()),
+            }
+        }
+        sp.announced = sp.len;
+        Ok(true)
+    }
+
+    /// Append `b` to the spill file (made now if need be); false: it cannot take it.
+    fn spill(&mut self, b: &[u8]) -> bool {
+        if self.spill.is_none() && !self.no_spill {
+            self.spill = Spill::create(self.index);
+            self.no_spill = self.spill.is_none();
+        }
+        match self.spill.as_mut() {
+            Some(sp) if !self.no_spill && sp.len + b.len() as u64 <= SPILL_MAX => {
+                // A full disk is no reason to fail: from then on the worker waits instead
+                // (what was spilled before is still announced and copied out).
+                if sp.file.write_all_at(b, sp.len).is_err() {
+                    self.no_spill = true;
+                    return false;
+                }
+                sp.len += b.len() as u64;
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Send the block; `now`: and have it written out at once (waiting for the writer).
     fn send(&mut self, now: bool) -> io::Result<()> {
         if self.held.get() || self.buf.is_empty() {
             return Ok(());
         }
         let b = std::mem::replace(&mut self.buf, Vec::with_capacity(BLOCK));
-        self.tx
-            .send(Msg::Data(b, now))
-            .map_err(|_| io::Error::from(io::ErrorKind::BrokenPipe))
+        // The file being written out: the writer is reading this channel, so waiting costs
+        // nothing and spilling would only copy the bytes twice.
+        if now || self.head.load(Ordering::Relaxed) == self.index {
+            self.announce(true)?;
+            return self.tx.send(Msg::Data(b, now)).map_err(|_| Self::gone());
+        }
+        // Blocks after spilled bytes follow them into the spill until those are announced.
+        if !self.announce(now)? {
+            if self.spill(&b) {
+                return Ok(());
+            }
+            self.announce(true)?;
+        }
+        match self.tx.try_send(Msg::Data(b, false)) {
+            Ok(()) => Ok(()),
+            Err(TrySendError::Disconnected(_)) => Err(Self::gone()),
+            Err(TrySendError::Full(m)) => {
+                let Msg::Data(b, _) = m else {
+                    return Ok(());
+                };
+                if self.spill(&b) {
+                    Ok(())
+                } else {
+                    self.tx.send(Msg::Data(b, false)).map_err(|_| Self::gone())
+                }
+            }
+        }
+    }
+}
+
+impl Drop for ChanWriter<'_> {
+    /// What was spilled is announced however the worker ends: it was written as a sent block
+    /// would have been.
+    fn drop(&mut self) {
+        if !self.held.get() {
+            let _ = self.announce(true);
+        }
     }
 }
 
@@ -160,8 +312,21 @@ impl Write for ChanWriter<'_> {
         Ok(b.len())
     }
     fn flush(&mut self) -> io::Result<()> {
-        self.send(true)
+        self.send(true)?;
+        self.announce(true).map(|_| ())
     }
+}
+
+/// Copy bytes `start..end` of a spill file to `out`. The writer alone moves the file's cursor
+/// (the worker writes at positions); `io::copy` from a file to standard output is a kernel
+/// copy (`copy_file_range`, `sendfile`) where the kernel can.
+fn copy_spill(mut f: &File, start: u64, end: u64, out: &mut impl Write) -> io::Result<()> {
+    f.seek(SeekFrom::Start(start))?;
+    let n = io::copy(&mut f.take(end - start), out)?;
+    if n < end - start {
+        return Err(io::Error::other("the spill file is shorter than written"));
+    }
+    Ok(())
 }
 
 /// Run the job. Several inputs: a file that cannot be read, or is not a capture, is reported
@@ -181,16 +346,17 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
     let bar = Bar::new(&job);
     let stop = AtomicBool::new(false);
     let next = AtomicUsize::new(0);
+    let head = AtomicUsize::new(0);
     let mut txs = Vec::with_capacity(n);
     let mut rxs: Vec<Receiver<Msg>> = Vec::with_capacity(n);
     for _ in 0..n {
-        let (tx, rx) = sync_channel(4);
+        let (tx, rx) = sync_channel(CHANNEL_BLOCKS);
         txs.push(Mutex::new(Some(tx)));
         rxs.push(rx);
     }
     let jobs = job.jobs.clamp(1, n.max(1));
     let job = &job;
-    let (bar, stop, next, txs) = (&bar, &stop, &next, &txs);
+    let (bar, stop, next, txs, head) = (&bar, &stop, &next, &txs, &head);
     let result = std::thread::scope(|sc| {
         for _ in 0..jobs {
             sc.spawn(move || loop {
@@ -201,7 +367,7 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
                 let Some(tx) = txs[i].lock().ok().and_then(|mut t| t.take()) else {
                     break;
                 };
-                let r = one(job, i, &tx, bar);
+                let r = one(job, i, &tx, bar, head);
                 bar.file_done();
                 // The receiver is gone only when the writer stopped: nothing left to do.
                 if tx.send(Msg::Done(r)).is_err() {
@@ -209,19 +375,26 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
                 }
             });
         }
-        collect(job, rxs, bar, stop)
+        collect(job, rxs, bar, stop, head)
     });
     bar.finish();
     result
 }
 
 /// The writer side: every file's output in input order; errors reported by name.
-fn collect(job: &Job<'_>, rxs: Vec<Receiver<Msg>>, bar: &Bar, stop: &AtomicBool) -> io::Result<()> {
+fn collect(
+    job: &Job<'_>,
+    rxs: Vec<Receiver<Msg>>,
+    bar: &Bar,
+    stop: &AtomicBool,
+    head: &AtomicUsize,
+) -> io::Result<()> {
     let n = job.files.len();
     let mut out = io::stdout().lock();
     let (mut failed, mut records, mut groups) = (0usize, 0u64, 0u64);
     for (i, rx) in rxs.into_iter().enumerate() {
         let file = &job.files[i];
+        head.store(i, Ordering::Relaxed);
         loop {
             match rx.recv() {
                 Ok(Msg::Data(b, now)) => {
@@ -229,6 +402,12 @@ fn collect(job: &Job<'_>, rxs: Vec<Receiver<Msg>>, bar: &Bar, stop: &AtomicBool)
                         .write_all(&b)
                         .and_then(|_| if now { out.flush() } else { Ok(()) });
                     if let Err(e) = w {
+                        stop.store(true, Ordering::Relaxed);
+                        return Err(e);
+                    }
+                }
+                Ok(Msg::Spilled(f, start, end)) => {
+                    if let Err(e) = copy_spill(&f, start, end, &mut out) {
                         stop.store(true, Ordering::Relaxed);
                         return Err(e);
                     }
@@ -275,7 +454,13 @@ fn collect(job: &Job<'_>, rxs: Vec<Receiver<Msg>>, bar: &Bar, stop: &AtomicBool)
 }
 
 /// Decode file `i` of the job into its channel (text, NDJSON) or dataset parts (Parquet).
-fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<Stats> {
+fn one(
+    job: &Job<'_>,
+    i: usize,
+    tx: &SyncSender<Msg>,
+    bar: &Bar,
+    head: &AtomicUsize,
+) -> io::Result<Stats> {
     let file = job.files[i].as_str();
     let mut seen = 0u64;
     match &job.out {
@@ -302,11 +487,7 @@ fn one(job: &Job<'_>, i: usize, tx: &SyncSender<Msg>, bar: &Bar) -> io::Result<S
             // Held until the detector has judged the first 4 KiB, so that what is not a capture
             // prints nothing (a given protocol: nothing to judge).
             let held = Cell::new(job.proto == ProtoArg::Auto);
-            let mut out = ChanWriter {
-                tx,
-                buf: Vec::with_capacity(BLOCK),
-                held: &held,
-            };
+            let mut out = ChanWriter::new(tx, &held, i, head);
             let tag = (job.files.len() > 1).then_some((i, file));
             if let Some((i, name)) = tag {
                 if *as_json {

@@ -65,6 +65,42 @@ fn parallel_output_is_the_sequential_output() {
     }
 }
 
+/// Random streams large enough that a file's rendering runs far ahead of the writer (megabytes
+/// of NDJSON each, beyond what its channel holds, so it spills), beside every sample: `-j 2`
+/// and `-j 4` write exactly what `-j 1` writes.
+#[test]
+fn every_worker_renders_and_the_output_is_that_of_one() {
+    let dir = common::Scratch::new("batch-random");
+    let table = aptscope_dissector::Table::global();
+    let mut files: Vec<String> = vec![];
+    for (seed, frames, garbage) in [(1u64, 40_000, true), (2, 40_000, false), (3, 300, true)] {
+        let f = dir.join(&format!("random{seed}.bin"));
+        let s = aptscope_dissector::synth::stream(table, seed, frames, garbage);
+        std::fs::write(&f, s).expect("write stream");
+        files.push(f.to_str().expect("utf-8 path").to_string());
+    }
+    files.splice(1..1, SAMPLES.iter().map(|s| s.to_string()));
+    for fmt in ["--json", "--to=text"] {
+        let mut a = vec!["decode", fmt, "-j", "1"];
+        a.extend(files.iter().map(String::as_str));
+        // Text and NDJSON are UTF-8: equal strings are equal bytes.
+        let (one, err, ok) = aptscope(&a, None);
+        assert!(ok, "{err}");
+        assert!(one.len() > 4 << 20, "{} bytes", one.len());
+        for j in ["2", "4"] {
+            a[3] = j;
+            let (many, err, ok) = aptscope(&a, None);
+            assert!(ok, "{err}");
+            assert!(
+                one == many,
+                "{fmt} -j {j}: {} vs {} bytes",
+                one.len(),
+                many.len()
+            );
+        }
+    }
+}
+
 #[test]
 fn parquet_dataset_has_every_record_with_its_file() {
     let out = tmp("ds");

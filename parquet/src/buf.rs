@@ -1,13 +1,11 @@
 //! Column buffers: rows of [`V`] values in, Arrow arrays out.
 
 use arrow_array::builder::{
-    BinaryBuilder, Float64Builder, Int64Builder, ListBuilder, StringBuilder, StructBuilder,
-    UInt64Builder,
+    BinaryBuilder, Float32Builder, Float64Builder, Int16Builder, Int32Builder, Int64Builder,
+    Int8Builder, ListBuilder, StringBuilder, StructBuilder, TimestampNanosecondBuilder,
+    UInt16Builder, UInt32Builder, UInt64Builder, UInt8Builder,
 };
-use arrow_array::{
-    ArrayRef, Float32Array, Float64Array, Int16Array, Int32Array, Int64Array, Int8Array,
-    RecordBatch, TimestampNanosecondArray, UInt16Array, UInt32Array, UInt64Array, UInt8Array,
-};
+use arrow_array::{ArrayRef, RecordBatch};
 use arrow_schema::{ArrowError, DataType, Field, SchemaRef};
 use std::borrow::Cow;
 use std::sync::Arc;
@@ -38,11 +36,20 @@ pub enum V<'a> {
     Diags(Vec<(Cow<'a, str>, u64, String)>),
 }
 
+/// A column being built, in its own Arrow type (values stored at their width, no conversion
+/// when the batch is taken).
 enum Buf {
-    Signed(DataType, Vec<Option<i64>>),
-    Unsigned(DataType, Vec<Option<u64>>),
-    Float(DataType, Vec<Option<f64>>),
-    Ts(Option<Arc<str>>, Vec<Option<i64>>),
+    I8(Int8Builder),
+    I16(Int16Builder),
+    I32(Int32Builder),
+    I64(Int64Builder),
+    U8(UInt8Builder),
+    U16(UInt16Builder),
+    U32(UInt32Builder),
+    U64(UInt64Builder),
+    F32(Float32Builder),
+    F64(Float64Builder),
+    Ts(TimestampNanosecondBuilder),
     Str(StringBuilder),
     Bin(BinaryBuilder),
     ListS(ListBuilder<StringBuilder>),
@@ -55,18 +62,61 @@ fn item(dt: DataType) -> Arc<Field> {
     Arc::new(Field::new("item", dt, true))
 }
 
+/// A value for a signed column (an unsigned one beyond i64 is null).
+fn signed(v: &V<'_>) -> Option<i64> {
+    match *v {
+        V::I(i) => Some(i),
+        V::U(u) => i64::try_from(u).ok(),
+        _ => None,
+    }
+}
+
+/// A value for an unsigned column (a negative one is null).
+fn unsigned(v: &V<'_>) -> Option<u64> {
+    match *v {
+        V::U(u) => Some(u),
+        V::I(i) => u64::try_from(i).ok(),
+        _ => None,
+    }
+}
+
+fn float(v: &V<'_>) -> Option<f64> {
+    match *v {
+        V::F(f) => Some(f),
+        V::I(i) => Some(i as f64),
+        V::U(u) => Some(u as f64),
+        _ => None,
+    }
+}
+
+/// Append `x` (or null) to builder `b`, cast to the column's width as before (`as`).
+macro_rules! put {
+    ($b:expr, $x:expr, $t:ty) => {
+        match $x {
+            Some(x) => $b.append_value(x as $t),
+            None => $b.append_null(),
+        }
+    };
+}
+
 impl Buf {
-    fn new(dt: &DataType) -> Buf {
+    /// A column for about `cap` values (it grows beyond).
+    fn new(dt: &DataType, cap: usize) -> Buf {
         match dt {
-            DataType::Int8 | DataType::Int16 | DataType::Int32 | DataType::Int64 => {
-                Buf::Signed(dt.clone(), vec![])
+            DataType::Int8 => Buf::I8(Int8Builder::with_capacity(cap)),
+            DataType::Int16 => Buf::I16(Int16Builder::with_capacity(cap)),
+            DataType::Int32 => Buf::I32(Int32Builder::with_capacity(cap)),
+            DataType::Int64 => Buf::I64(Int64Builder::with_capacity(cap)),
+            DataType::UInt8 => Buf::U8(UInt8Builder::with_capacity(cap)),
+            DataType::UInt16 => Buf::U16(UInt16Builder::with_capacity(cap)),
+            DataType::UInt32 => Buf::U32(UInt32Builder::with_capacity(cap)),
+            DataType::UInt64 => Buf::U64(UInt64Builder::with_capacity(cap)),
+            DataType::Float32 => Buf::F32(Float32Builder::with_capacity(cap)),
+            DataType::Float64 => Buf::F64(Float64Builder::with_capacity(cap)),
+            DataType::Timestamp(_, _) => {
+                Buf::Ts(TimestampNanosecondBuilder::with_capacity(cap).with_data_type(dt.clone()))
             }
-            DataType::UInt8 | DataType::UInt16 | DataType::UInt32 | DataType::UInt64 => {
-                Buf::Unsigned(dt.clone(), vec![])
-            }
-            DataType::Float32 | DataType::Float64 => Buf::Float(dt.clone(), vec![]),
-            DataType::Timestamp(_, tz) => Buf::Ts(tz.clone(), vec![]),
-            DataType::Binary => Buf::Bin(BinaryBuilder::new()),
+            DataType::Binary => Buf::Bin(BinaryBuilder::with_capacity(cap, cap * 16)),
             DataType::List(f) => match f.data_type() {
                 DataType::Utf8 => Buf::ListS(
                     ListBuilder::new(StringBuilder::new()).with_field(item(DataType::Utf8)),
@@ -81,35 +131,33 @@ impl Buf {
                     ListBuilder::new(StructBuilder::from_fields(fs.clone(), 0))
                         .with_field(item(DataType::Struct(fs.clone()))),
                 ),
-                _ => Buf::Str(StringBuilder::new()),
+                _ => Buf::Str(StringBuilder::with_capacity(cap, cap * 8)),
             },
-            _ => Buf::Str(StringBuilder::new()),
+            _ => Buf::Str(StringBuilder::with_capacity(cap, cap * 8)),
         }
     }
 
     fn push(&mut self, v: &V<'_>) {
         match self {
-            Buf::Signed(_, x) => x.push(match *v {
-                V::I(i) => Some(i),
-                V::U(u) => i64::try_from(u).ok(),
-                _ => None,
-            }),
-            Buf::Unsigned(_, x) => x.push(match *v {
-                V::U(u) => Some(u),
-                V::I(i) => u64::try_from(i).ok(),
-                _ => None,
-            }),
-            Buf::Float(_, x) => x.push(match *v {
-                V::F(f) => Some(f),
-                V::I(i) => Some(i as f64),
-                V::U(u) => Some(u as f64),
-                _ => None,
-            }),
-            Buf::Ts(_, x) => x.push(match *v {
-                V::U(u) => i64::try_from(u).ok(),
-                V::I(i) => Some(i),
-                _ => None,
-            }),
+            Buf::I8(b) => put!(b, signed(v), i8),
+            Buf::I16(b) => put!(b, signed(v), i16),
+            Buf::I32(b) => put!(b, signed(v), i32),
+            Buf::I64(b) => put!(b, signed(v), i64),
+            Buf::U8(b) => put!(b, unsigned(v), u8),
+            Buf::U16(b) => put!(b, unsigned(v), u16),
+            Buf::U32(b) => put!(b, unsigned(v), u32),
+            Buf::U64(b) => put!(b, unsigned(v), u64),
+            Buf::F32(b) => put!(b, float(v), f32),
+            Buf::F64(b) => put!(b, float(v), f64),
+            Buf::Ts(b) => put!(
+                b,
+                match *v {
+                    V::U(u) => i64::try_from(u).ok(),
+                    V::I(i) => Some(i),
+                    _ => None,
+                },
+                i64
+            ),
             Buf::Str(b) => match v {
                 V::S(s) => b.append_value(s),
                 V::I(i) => b.append_value(i.to_string()),
@@ -167,70 +215,18 @@ impl Buf {
     }
 
     fn finish(&mut self) -> ArrayRef {
-        fn take<T>(v: &mut Vec<T>) -> Vec<T> {
-            std::mem::take(v)
-        }
         match self {
-            Buf::Signed(dt, x) => {
-                let x = take(x);
-                match dt {
-                    DataType::Int8 => Arc::new(
-                        x.into_iter()
-                            .map(|v| v.map(|v| v as i8))
-                            .collect::<Int8Array>(),
-                    ),
-                    DataType::Int16 => Arc::new(
-                        x.into_iter()
-                            .map(|v| v.map(|v| v as i16))
-                            .collect::<Int16Array>(),
-                    ),
-                    DataType::Int32 => Arc::new(
-                        x.into_iter()
-                            .map(|v| v.map(|v| v as i32))
-                            .collect::<Int32Array>(),
-                    ),
-                    _ => Arc::new(x.into_iter().collect::<Int64Array>()),
-                }
-            }
-            Buf::Unsigned(dt, x) => {
-                let x = take(x);
-                match dt {
-                    DataType::UInt8 => Arc::new(
-                        x.into_iter()
-                            .map(|v| v.map(|v| v as u8))
-                            .collect::<UInt8Array>(),
-                    ),
-                    DataType::UInt16 => Arc::new(
-                        x.into_iter()
-                            .map(|v| v.map(|v| v as u16))
-                            .collect::<UInt16Array>(),
-                    ),
-                    DataType::UInt32 => Arc::new(
-                        x.into_iter()
-                            .map(|v| v.map(|v| v as u32))
-                            .collect::<UInt32Array>(),
-                    ),
-                    _ => Arc::new(x.into_iter().collect::<UInt64Array>()),
-                }
-            }
-            Buf::Float(dt, x) => {
-                let x = take(x);
-                match dt {
-                    DataType::Float32 => Arc::new(
-                        x.into_iter()
-                            .map(|v| v.map(|v| v as f32))
-                            .collect::<Float32Array>(),
-                    ),
-                    _ => Arc::new(x.into_iter().collect::<Float64Array>()),
-                }
-            }
-            Buf::Ts(tz, x) => {
-                let a = TimestampNanosecondArray::from(take(x));
-                Arc::new(match tz {
-                    Some(tz) => a.with_timezone(tz.clone()),
-                    None => a,
-                })
-            }
+            Buf::I8(b) => Arc::new(b.finish()),
+            Buf::I16(b) => Arc::new(b.finish()),
+            Buf::I32(b) => Arc::new(b.finish()),
+            Buf::I64(b) => Arc::new(b.finish()),
+            Buf::U8(b) => Arc::new(b.finish()),
+            Buf::U16(b) => Arc::new(b.finish()),
+            Buf::U32(b) => Arc::new(b.finish()),
+            Buf::U64(b) => Arc::new(b.finish()),
+            Buf::F32(b) => Arc::new(b.finish()),
+            Buf::F64(b) => Arc::new(b.finish()),
+            Buf::Ts(b) => Arc::new(b.finish()),
             Buf::Str(b) => Arc::new(b.finish()),
             Buf::Bin(b) => Arc::new(b.finish()),
             Buf::ListS(b) => Arc::new(b.finish()),
@@ -251,10 +247,12 @@ pub struct TableBuf {
 impl TableBuf {
     /// An empty buffer for `schema`.
     pub fn new(schema: SchemaRef) -> Self {
+        // Small to start with: hundreds of kind tables may be open with a few rows each (the
+        // builders' default, 1024 values a column, was 8 KiB a column before any row).
         let bufs = schema
             .fields()
             .iter()
-            .map(|f| Buf::new(f.data_type()))
+            .map(|f| Buf::new(f.data_type(), 64))
             .collect();
         TableBuf {
             schema,
@@ -279,6 +277,12 @@ impl TableBuf {
     /// The buffered rows as a batch; the buffer is empty afterwards.
     pub fn take(&mut self) -> Result<RecordBatch, ArrowError> {
         let cols: Vec<ArrayRef> = self.bufs.iter_mut().map(Buf::finish).collect();
+        // A table that filled a batch will likely fill the next: room for as many rows again
+        // (a finished builder starts empty, and growing it by doubling was a tenth of the
+        // run in reallocations).
+        for (b, f) in self.bufs.iter_mut().zip(self.schema.fields()) {
+            *b = Buf::new(f.data_type(), self.rows.min(8192));
+        }
         self.rows = 0;
         RecordBatch::try_new(self.schema.clone(), cols)
     }

@@ -7,7 +7,8 @@
 //!
 //! Memory is bounded: each table buffers at most [`Options::rows_per_group`] rows, at most
 //! [`Options::max_open_kinds`] kind tables buffer at once (the least recently used is flushed
-//! when another opens), and all kind buffers together hold at most four row groups' worth.
+//! when another opens; the default is more than there are kinds), and all kind buffers
+//! together hold at most one row group's worth (the biggest is written when they reach it).
 //! A [`DirSink`] writes every flushed buffer as one Parquet file of one row group
 //! (`TABLE/part-FFFFF-SSSSS.parquet`, F the capture's index in the run, S a sequence number),
 //! first under a `.partial` name then renamed: a killed run leaves every complete row group
@@ -30,17 +31,20 @@ use aptscope_dissector::apt::phys_or_scaled;
 use aptscope_dissector::diag::{Diag, DiagKind};
 use aptscope_dissector::ell::table::{status_name, Kind as EllKind};
 use aptscope_dissector::ell::EllValue;
+use aptscope_dissector::hash::NumMap;
 use aptscope_dissector::json;
 use aptscope_dissector::record::{AptRec, EllRec, Record};
 use aptscope_dissector::table::Dir;
 use arrow_array::RecordBatch;
+use arrow_schema::{DataType, Schema};
 use buf::TableBuf;
 use parquet::arrow::ArrowWriter;
 use parquet::basic::Compression;
-use parquet::file::properties::WriterProperties;
+use parquet::file::properties::{EnabledStatistics, WriterProperties};
+use parquet::schema::types::ColumnPath;
 use schema::{Fill, KindSchema, Kinds, RECORDS};
 use std::borrow::Cow;
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{BTreeMap, HashMap};
 use std::io;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -58,16 +62,36 @@ impl Default for Options {
     fn default() -> Self {
         Options {
             rows_per_group: 65_536,
-            max_open_kinds: 64,
+            // More than there are kinds (544): a kind's rows are written when it has a row
+            // group's worth or is the biggest when all together reach the budget, not when
+            // another opens (which wrote a part file of a few rows each time a stream of many
+            // kinds brought a new one).
+            max_open_kinds: 1024,
         }
     }
 }
 
-fn props(rows: usize) -> WriterProperties {
-    WriterProperties::builder()
+/// How a table of `schema` is written. Snappy: fast, and read everywhere (see
+/// docs/parquet.md for why not zstd). Dictionary encoding only for
+/// the text columns (names, labels, units: few distinct values); numbers, times and raw bytes
+/// are mostly distinct, and hashing each value for a dictionary that overflows was a sixth of
+/// the writer's time.
+fn props(rows: usize, schema: &Schema) -> WriterProperties {
+    let mut b = WriterProperties::builder()
         .set_compression(Compression::SNAPPY)
         .set_max_row_group_row_count(Some(rows.max(1)))
-        .build()
+        .set_dictionary_enabled(false);
+    for f in schema.fields() {
+        let col = || ColumnPath::from(f.name().as_str());
+        match f.data_type() {
+            DataType::Utf8 => b = b.set_column_dictionary_enabled(col(), true),
+            // Raw frames: a minimum and maximum of random bytes prune nothing, and comparing
+            // every value for them cost a twentieth of the run.
+            DataType::Binary => b = b.set_column_statistics_enabled(col(), EnabledStatistics::None),
+            _ => {}
+        }
+    }
+    b.build()
 }
 
 fn perr(e: impl std::fmt::Display) -> io::Error {
@@ -84,8 +108,9 @@ pub trait Sink {
 pub struct DirSink {
     root: PathBuf,
     index: usize,
-    props: WriterProperties,
-    made: HashSet<String>,
+    rows: usize,
+    /// Writer properties of each table written (a table's directory exists once it is here).
+    props: HashMap<String, WriterProperties>,
 }
 
 impl DirSink {
@@ -95,8 +120,8 @@ impl DirSink {
         DirSink {
             root: root.to_path_buf(),
             index,
-            props: props(opts.rows_per_group),
-            made: HashSet::new(),
+            rows: opts.rows_per_group,
+            props: HashMap::new(),
         }
     }
 }
@@ -104,17 +129,19 @@ impl DirSink {
 impl Sink for DirSink {
     fn write(&mut self, table: &str, part: u32, batch: &RecordBatch) -> io::Result<()> {
         let dir = self.root.join(table);
-        if self.made.insert(table.to_string()) {
+        if !self.props.contains_key(table) {
             std::fs::create_dir_all(&dir)
                 .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", dir.display())))?;
+            let p = props(self.rows, &batch.schema());
+            self.props.insert(table.to_string(), p);
         }
+        let props = self.props.get(table).cloned();
         let name = format!("part-{:05}-{part:05}.parquet", self.index);
         let done = dir.join(&name);
         let tmp = dir.join(format!("{name}.partial"));
         let f = std::fs::File::create(&tmp)
             .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", tmp.display())))?;
-        let mut w =
-            ArrowWriter::try_new(f, batch.schema(), Some(self.props.clone())).map_err(perr)?;
+        let mut w = ArrowWriter::try_new(f, batch.schema(), props).map_err(perr)?;
         w.write(batch).map_err(perr)?;
         // Renamed once complete: a killed run leaves no torn `.parquet`. (No fsync: a killed
         // process loses nothing the kernel has; a power cut may, and costs a sync per part.)
@@ -125,7 +152,7 @@ impl Sink for DirSink {
 
 /// Keeps one in-memory Parquet file per table.
 pub struct MemSink {
-    props: WriterProperties,
+    rows: usize,
     tables: BTreeMap<String, ArrowWriter<Vec<u8>>>,
 }
 
@@ -133,7 +160,7 @@ impl MemSink {
     /// An empty sink.
     pub fn new(opts: Options) -> Self {
         MemSink {
-            props: props(opts.rows_per_group),
+            rows: opts.rows_per_group,
             tables: BTreeMap::new(),
         }
     }
@@ -150,8 +177,8 @@ impl MemSink {
 impl Sink for MemSink {
     fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
         if !self.tables.contains_key(table) {
-            let w = ArrowWriter::try_new(Vec::new(), batch.schema(), Some(self.props.clone()))
-                .map_err(perr)?;
+            let p = props(self.rows, &batch.schema());
+            let w = ArrowWriter::try_new(Vec::new(), batch.schema(), Some(p)).map_err(perr)?;
             self.tables.insert(table.to_string(), w);
         }
         let w = self
@@ -207,6 +234,9 @@ pub struct Summary {
     pub row_groups: u64,
 }
 
+/// A message's kind table: its name, and its schema when it has one.
+type KindOf = (Arc<str>, Option<Arc<KindSchema>>);
+
 struct Open {
     buf: TableBuf,
     part: u32,
@@ -219,11 +249,17 @@ pub struct CaptureWriter<S: Sink> {
     file: Arc<str>,
     opts: Options,
     records: Open,
-    kinds: HashMap<String, Open>,
+    kinds: NumMap<String, Open>,
     /// Part numbers of kind tables flushed and closed, to continue from when they reopen.
     parts: HashMap<String, u32>,
     clock: u64,
     summary: Summary,
+    /// Kind table names and schemas by message (the address of its table entry, and of its
+    /// sub-message's).
+    kind_names: NumMap<(usize, usize), KindOf>,
+    layouts: Layouts,
+    /// Rows the kind tables buffer, together.
+    kind_rows: usize,
 }
 
 fn diag_v(d: &Diag) -> (Cow<'static, str>, u64, String) {
@@ -257,15 +293,19 @@ impl<S: Sink> CaptureWriter<S> {
                 part: 0,
                 used: 0,
             },
-            kinds: HashMap::new(),
+            kinds: NumMap::default(),
             parts: HashMap::new(),
             clock: 0,
             summary: Summary::default(),
+            kind_names: NumMap::default(),
+            layouts: Layouts::default(),
+            kind_rows: 0,
         }
     }
 
     /// Add one record.
     pub fn record(&mut self, rec: &Record<'_>) -> io::Result<()> {
+        let (kname, kind) = self.kind_of(rec);
         // Columns of `records`, in schema order.
         let file = self.file.clone();
         let mut row: [V<'_>; 25] = Default::default();
@@ -302,7 +342,6 @@ impl<S: Sink> CaptureWriter<S> {
             row[TIME] = opt_u(m.ts_ns);
             row[REL] = m.rel_s.map_or(V::Null, V::F);
         }
-        let mut kind: Option<Arc<KindSchema>> = None;
         let mut diags: Vec<(Cow<'_, str>, u64, String)> = vec![];
         match rec {
             Record::Detect {
@@ -357,9 +396,7 @@ impl<S: Sink> CaptureWriter<S> {
                 row[MSGID] = V::U(h.msg_id() as u64);
                 if let Some(m) = f.msg {
                     row[NAME] = s(m.name);
-                    let k = schema::apt_kind_name(m, f.sub);
-                    kind = Kinds::global().get(&k).cloned();
-                    row[KIND] = V::S(Cow::Owned(k));
+                    row[KIND] = kname.as_deref().map_or(V::Null, s);
                 }
                 if let Some(x) = f.sub {
                     row[SUB] = s(x.name);
@@ -384,9 +421,7 @@ impl<S: Sink> CaptureWriter<S> {
                 row[CODE] = s(f.code_str());
                 if let Some(c) = f.cmd {
                     row[NAME] = s(c.name);
-                    let k = schema::ell_kind_name(c);
-                    kind = Kinds::global().get(&k).cloned();
-                    row[KIND] = V::S(Cow::Owned(k));
+                    row[KIND] = kname.as_deref().map_or(V::Null, s);
                 }
                 // The module's address is the destination of a command, the source of a reply.
                 let at = if d == Dir::HostToDevice { DST } else { SRC };
@@ -438,16 +473,47 @@ impl<S: Sink> CaptureWriter<S> {
             self.flush_records()?;
         }
         if let (Some(k), Some(m)) = (kind, rec.meta()) {
-            let keys = [s(&file), V::U(m.n), V::U(m.stream as u64), opt_u(m.ts_ns)];
-            let vals = match rec {
-                Record::Apt(a) => apt_values(&k, a),
-                Record::Ell(e) => ell_values(&k, e),
-                _ => vec![],
-            };
-            let row: Vec<V<'_>> = keys.into_iter().chain(vals).collect();
+            let mut row = Vec::with_capacity(4 + k.cols.len());
+            row.extend([s(&file), V::U(m.n), V::U(m.stream as u64), opt_u(m.ts_ns)]);
+            match rec {
+                Record::Apt(a) => apt_values(&mut self.layouts, &k, a, &mut row),
+                Record::Ell(e) => ell_values(&mut self.layouts, &k, e, &mut row),
+                _ => {}
+            }
             self.kind_row(&k, &row)?;
         }
         Ok(())
+    }
+
+    /// The kind table of a frame's message (its name, and its schema when it has one), looked
+    /// up once per message rather than by a name made for every frame.
+    fn kind_of(&mut self, rec: &Record<'_>) -> (Option<Arc<str>>, Option<Arc<KindSchema>>) {
+        let (key, name): ((usize, usize), &dyn Fn() -> String) = match rec {
+            Record::Apt(a) => match a.frame.msg {
+                Some(m) => {
+                    let sub = a.frame.sub;
+                    let key = (
+                        m as *const _ as usize,
+                        sub.map_or(0, |x| x as *const _ as usize),
+                    );
+                    (key, &move || schema::apt_kind_name(m, sub))
+                }
+                None => return (None, None),
+            },
+            Record::Ell(e) => match e.frame.cmd {
+                Some(c) => ((c as *const _ as usize, 1), &move || {
+                    schema::ell_kind_name(c)
+                }),
+                None => return (None, None),
+            },
+            _ => return (None, None),
+        };
+        let (n, k) = self.kind_names.entry(key).or_insert_with(|| {
+            let n = name();
+            let k = Kinds::global().get(&n).cloned();
+            (Arc::from(n), k)
+        });
+        (Some(n.clone()), k.clone())
     }
 
     fn kind_row(&mut self, k: &Arc<KindSchema>, row: &[V<'_>]) -> io::Result<()> {
@@ -474,17 +540,20 @@ impl<S: Sink> CaptureWriter<S> {
                 },
             );
         }
-        let budget = self.opts.rows_per_group.saturating_mul(4);
+        // One row group's worth across kinds (with the records table's own, the writer stays
+        // under 64 MiB; four row groups' worth peaked at 100 MiB).
+        let budget = self.opts.rows_per_group;
         let Some(o) = self.kinds.get_mut(&k.name) else {
             return Ok(());
         };
         o.used = self.clock;
         o.buf.push(row);
+        self.kind_rows += 1;
         if o.buf.rows() >= self.opts.rows_per_group {
+            self.kind_rows -= o.buf.rows();
             Self::flush(&mut self.sink, &k.name, o, &mut self.summary)?;
         }
-        let total: usize = self.kinds.values().map(|o| o.buf.rows()).sum();
-        if total > budget {
+        if self.kind_rows > budget {
             // Many kinds each short of a row group: the biggest is written early.
             let big = self
                 .kinds
@@ -500,6 +569,7 @@ impl<S: Sink> CaptureWriter<S> {
 
     fn close_kind(&mut self, name: &str) -> io::Result<()> {
         if let Some(mut o) = self.kinds.remove(name) {
+            self.kind_rows -= o.buf.rows();
             Self::flush(&mut self.sink, name, &mut o, &mut self.summary)?;
             self.parts.insert(name.to_string(), o.part);
         }
@@ -538,99 +608,128 @@ impl<S: Sink> CaptureWriter<S> {
     }
 }
 
+/// Which of a frame's fields fills each column of its kind table, by layout of fields: the
+/// kind, the first and last field's table entries and their count identify the form (and
+/// sub-message form), so each is worked out once (by name, the first field of that name)
+/// rather than searched for in every frame.
+#[derive(Default)]
+struct Layouts(NumMap<(usize, usize, usize, usize), Vec<Option<usize>>>);
+
+impl Layouts {
+    fn get<T, F: 'static>(
+        &mut self,
+        k: &KindSchema,
+        fields: &[(&'static F, T)],
+        name: impl Fn(&F) -> &'static str,
+    ) -> &[Option<usize>] {
+        let addr = |f: Option<&(&'static F, T)>| f.map_or(0, |(fd, _)| *fd as *const F as usize);
+        let key = (
+            k as *const KindSchema as usize,
+            addr(fields.first()),
+            addr(fields.last()),
+            fields.len(),
+        );
+        self.0.entry(key).or_insert_with(|| {
+            k.cols
+                .iter()
+                .map(|c| fields.iter().position(|(fd, _)| name(fd) == c.field))
+                .collect()
+        })
+    }
+}
+
 /// The field columns of an APT frame's kind row.
-fn apt_values<'a>(k: &KindSchema, a: &'a AptRec<'a>) -> Vec<V<'a>> {
+fn apt_values<'a>(lay: &mut Layouts, k: &KindSchema, a: &'a AptRec<'a>, out: &mut Vec<V<'a>>) {
     let f = a.frame;
     let t = f.table();
-    let fields: Vec<_> = f.fields().collect();
-    k.cols
-        .iter()
-        .map(|c| {
-            let Some((fd, v)) = fields.iter().find(|(fd, _)| fd.name == c.field) else {
-                return V::Null;
-            };
-            use aptscope_dissector::apt::Value;
-            match c.fill {
-                Fill::Int => match *v {
-                    Value::U(x) => V::U(x),
-                    Value::I(x) => V::I(x),
-                    _ => V::Null,
-                },
-                Fill::Float => v.as_f64().map_or(V::Null, V::F),
-                Fill::EnumLabel => {
-                    let label = fd
-                        .enumeration
-                        .zip(v.as_i64())
-                        .and_then(|(e, x)| t.enum_def(e).label(x));
-                    label.map_or(V::Null, s)
-                }
-                Fill::FlagNames => match (fd.flags, *v) {
-                    (Some(fl), Value::U(x)) => V::ListS(
-                        t.flags_def(fl)
-                            .items
-                            .iter()
-                            .filter(|(m, _)| x & m == *m)
-                            .map(|(_, l)| *l)
-                            .collect(),
-                    ),
-                    _ => V::Null,
-                },
-                Fill::Text => match *v {
-                    Value::Str(b) => {
-                        V::S(Cow::Owned(aptscope_dissector::apt::text_of(b).into_owned()))
-                    }
-                    _ => V::Null,
-                },
-                Fill::Bytes => match *v {
-                    Value::Bytes(b) => V::B(b),
-                    _ => V::Null,
-                },
-                Fill::List => {
-                    let els = v.elements();
-                    if matches!(v, Value::Array(aptscope_dissector::table::Prim::F32, _)) {
-                        V::ListF(els.filter_map(|e| e.as_f64()).collect())
-                    } else {
-                        V::ListI(els.filter_map(|e| e.as_i64()).collect())
-                    }
-                }
-                Fill::Phys => phys_or_scaled(fd, v, a.scale).map_or(V::Null, |(x, _)| V::F(x)),
-                Fill::PhysUnit => phys_or_scaled(fd, v, a.scale)
-                    .map_or(V::Null, |(_, u)| V::S(Cow::Owned(u.to_string()))),
-                Fill::StatusName => V::Null,
+    // Sized once: the iterator does not know its length, and growing by doubling was a
+    // reallocation or two per frame.
+    let mut fields = Vec::with_capacity(32);
+    fields.extend(f.fields());
+    let idx = lay.get(k, &fields, |fd| fd.name);
+    let vals = k.cols.iter().zip(idx).map(|(c, i)| {
+        let Some((fd, v)) = i.map(|i| &fields[i]) else {
+            return V::Null;
+        };
+        use aptscope_dissector::apt::Value;
+        match c.fill {
+            Fill::Int => match *v {
+                Value::U(x) => V::U(x),
+                Value::I(x) => V::I(x),
+                _ => V::Null,
+            },
+            Fill::Float => v.as_f64().map_or(V::Null, V::F),
+            Fill::EnumLabel => {
+                let label = fd
+                    .enumeration
+                    .zip(v.as_i64())
+                    .and_then(|(e, x)| t.enum_def(e).label(x));
+                label.map_or(V::Null, s)
             }
-        })
-        .collect()
+            Fill::FlagNames => match (fd.flags, *v) {
+                (Some(fl), Value::U(x)) => V::ListS(
+                    t.flags_def(fl)
+                        .items
+                        .iter()
+                        .filter(|(m, _)| x & m == *m)
+                        .map(|(_, l)| *l)
+                        .collect(),
+                ),
+                _ => V::Null,
+            },
+            Fill::Text => match *v {
+                Value::Str(b) => V::S(Cow::Owned(aptscope_dissector::apt::text_of(b).into_owned())),
+                _ => V::Null,
+            },
+            Fill::Bytes => match *v {
+                Value::Bytes(b) => V::B(b),
+                _ => V::Null,
+            },
+            Fill::List => {
+                let els = v.elements();
+                if matches!(v, Value::Array(aptscope_dissector::table::Prim::F32, _)) {
+                    V::ListF(els.filter_map(|e| e.as_f64()).collect())
+                } else {
+                    V::ListI(els.filter_map(|e| e.as_i64()).collect())
+                }
+            }
+            Fill::Phys => phys_or_scaled(fd, v, a.scale).map_or(V::Null, |(x, _)| V::F(x)),
+            Fill::PhysUnit => phys_or_scaled(fd, v, a.scale).map_or(V::Null, |(_, u)| s(u)),
+            Fill::StatusName => V::Null,
+        }
+    });
+    out.extend(vals);
 }
 
 /// The field columns of an Elliptec frame's kind row.
-fn ell_values<'a>(k: &KindSchema, e: &'a EllRec<'a>) -> Vec<V<'a>> {
+fn ell_values<'a>(lay: &mut Layouts, k: &KindSchema, e: &'a EllRec<'a>, out: &mut Vec<V<'a>>) {
     let f = e.frame;
-    let fields: Vec<_> = f.fields().collect();
+    let mut fields = Vec::with_capacity(16);
+    fields.extend(f.fields());
     let scale = e.obs.module.as_ref().and_then(|m| m.scale());
-    k.cols
-        .iter()
-        .map(|c| {
-            let Some((fd, v)) = fields.iter().find(|(fd, _)| fd.name == c.field) else {
-                return V::Null;
-            };
-            match (c.fill, *v) {
-                (Fill::StatusName, EllValue::U(x)) => s(status_name(x as u32)),
-                (Fill::Int, EllValue::U(x)) => V::U(x),
-                (Fill::Int, EllValue::I(x)) => V::I(x),
-                (Fill::Text, EllValue::Char(ch)) => V::S(Cow::Owned(ch.to_string())),
-                (Fill::Text, EllValue::Digits(d)) => V::S(Cow::Owned(d.to_string())),
-                (Fill::Bytes, EllValue::Raw(b)) => V::B(b),
-                (Fill::Phys | Fill::PhysUnit, EllValue::I(p)) if fd.kind == EllKind::Position => {
-                    match scale.filter(|(ppu, _)| *ppu > 0.0) {
-                        Some((ppu, _)) if c.fill == Fill::Phys => {
-                            V::F(aptscope_dissector::apt::round_sig(p as f64 / ppu))
-                        }
-                        Some((_, unit)) => s(unit),
-                        None => V::Null,
+    let idx = lay.get(k, &fields, |fd| fd.name);
+    let vals = k.cols.iter().zip(idx).map(|(c, i)| {
+        let Some((fd, v)) = i.map(|i| &fields[i]) else {
+            return V::Null;
+        };
+        match (c.fill, *v) {
+            (Fill::StatusName, EllValue::U(x)) => s(status_name(x as u32)),
+            (Fill::Int, EllValue::U(x)) => V::U(x),
+            (Fill::Int, EllValue::I(x)) => V::I(x),
+            (Fill::Text, EllValue::Char(ch)) => V::S(Cow::Owned(ch.to_string())),
+            (Fill::Text, EllValue::Digits(d)) => V::S(Cow::Owned(d.to_string())),
+            (Fill::Bytes, EllValue::Raw(b)) => V::B(b),
+            (Fill::Phys | Fill::PhysUnit, EllValue::I(p)) if fd.kind == EllKind::Position => {
+                match scale.filter(|(ppu, _)| *ppu > 0.0) {
+                    Some((ppu, _)) if c.fill == Fill::Phys => {
+                        V::F(aptscope_dissector::apt::round_sig(p as f64 / ppu))
                     }
+                    Some((_, unit)) => s(unit),
+                    None => V::Null,
                 }
-                _ => V::Null,
             }
-        })
-        .collect()
+            _ => V::Null,
+        }
+    });
+    out.extend(vals);
 }

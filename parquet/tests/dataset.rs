@@ -242,3 +242,34 @@ fn bounded_buffers_keep_every_row() -> io::Result<()> {
     assert_eq!(std::fs::read_dir(&tmp)?.count(), 0, "force replaced it");
     std::fs::remove_dir_all(&tmp)
 }
+
+/// Counts the row groups written, by table.
+#[derive(Default)]
+struct Count(std::collections::BTreeMap<String, u32>);
+
+impl aptscope_parquet::Sink for Count {
+    fn write(&mut self, table: &str, _part: u32, _batch: &RecordBatch) -> io::Result<()> {
+        *self.0.entry(table.to_string()).or_default() += 1;
+        Ok(())
+    }
+}
+
+/// A stream of every form brings hundreds of kinds in random order: each kind's rows are
+/// written once they are many, not whenever another kind comes along (which wrote a row group
+/// of a few rows for nearly every frame).
+#[test]
+fn many_kinds_do_not_make_a_row_group_per_few_rows() {
+    let bytes = synth::stream(Table::global(), 11, 20_000, false);
+    let opts = Options::default();
+    let mut w = CaptureWriter::new(Count::default(), "cap.bin", opts);
+    let mut d = Decoder::new(Some(Proto::Apt));
+    d.push(Ctx::default(), &bytes, &mut |r| w.record(r))
+        .expect("push");
+    d.finish(&mut |r| w.record(r)).expect("finish");
+    let (count, sum) = w.finish().expect("finish writer");
+    let kinds = count.0.len();
+    assert!(kinds > 100, "{kinds} kinds");
+    // 20,000 frames, fewer than a row group's worth: one row group per table.
+    assert!(count.0.values().all(|&n| n == 1), "{:?}", count.0);
+    assert_eq!(sum.row_groups, kinds as u64);
+}

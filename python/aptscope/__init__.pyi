@@ -1,7 +1,7 @@
 """Type stubs of the aptscope package (see ``__init__.py`` for the documentation)."""
 
 import os
-from typing import Any, Dict, Iterator, Optional, Union
+from typing import Any, Dict, Iterator, Optional, Tuple, Union
 
 import pyarrow
 
@@ -21,6 +21,11 @@ def to_arrow(
     source: Source, proto: str = "auto", name: Optional[str] = None
 ) -> Dict[str, pyarrow.Table]:
     """Decode a capture into pyarrow tables with the schemas of ``aptscope decode --to parquet``."""
+
+def batches(
+    source: Source, proto: str = "auto", name: Optional[str] = None
+) -> Iterator[Tuple[str, pyarrow.RecordBatch]]:
+    """Yield ``(table, record batch)`` pairs of :func:`to_arrow`'s tables as the capture is decoded."""
 
 def prepare_dataset(out: PathArg, force: bool = False) -> None:
     """Create the dataset directory ``out``; with ``force`` replace an earlier dataset there."""

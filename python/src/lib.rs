@@ -3,8 +3,9 @@
 //!
 //! Everything decodes through `record::Decoder` (directly or inside
 //! `aptscope_parquet::decode_file`): records as dicts built by `json::record` straight into
-//! Python objects (the documented NDJSON shape, no text in between), tables as Parquet bytes
-//! (the dataset's schema exactly).
+//! Python objects (the documented NDJSON shape, no text in between), tables as the Arrow record
+//! batches the Parquet writer would encode (the dataset's schema exactly), handed to pyarrow
+//! through the Arrow C data interface.
 
 use aptscope_capture::open::{open, OpenOptions};
 use aptscope_capture::Reader;
@@ -14,15 +15,20 @@ use aptscope_dissector::json;
 use aptscope_dissector::record::{Ctx, Decoder, Record};
 use aptscope_dissector::table::Dir;
 use aptscope_dissector::Table;
-use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, DirSink, MemSink, Options};
+use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, DirSink, Options, Sink};
+use arrow_array::{Array, RecordBatch, StructArray};
+use arrow_data::ffi::FFI_ArrowArray;
+use arrow_schema::ffi::FFI_ArrowSchema;
 use pyo3::create_exception;
 use pyo3::exceptions::{PyFileNotFoundError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString};
+use pyo3::types::{PyBool, PyBytes, PyCapsule, PyDict, PyFloat, PyInt, PyList, PyString};
+use std::cell::RefCell;
 use std::collections::{HashMap, VecDeque};
 use std::convert::Infallible;
 use std::io;
 use std::path::Path;
+use std::rc::Rc;
 
 create_exception!(
     _aptscope,
@@ -75,12 +81,45 @@ fn source(obj: &Bound<'_, PyAny>) -> PyResult<Source> {
     Ok(Source::Path(p.extract()?))
 }
 
-/// The records of one source as dicts, produced as they are read.
-#[pyclass(unsendable)]
-struct Records {
+/// A source being decoded: a capture file's reader, or the bytes of one stream.
+struct Input {
     reader: Option<Box<dyn Reader>>,
     bytes: Option<Vec<u8>>,
     dec: Decoder,
+}
+
+impl Input {
+    /// Open `source_obj`; with the name of the source (its path, or `<bytes>`).
+    fn open(source_obj: &Bound<'_, PyAny>, proto: &str) -> PyResult<(Input, String)> {
+        let dec = Decoder::new(proto_of(proto)?);
+        Ok(match source(source_obj)? {
+            Source::Path(p) => {
+                let reader = open(&p, OpenOptions::default())
+                    .map_err(|e| err(e.into()))?
+                    .0;
+                let i = Input {
+                    reader: Some(reader),
+                    bytes: None,
+                    dec,
+                };
+                (i, p)
+            }
+            Source::Bytes(b) => {
+                let i = Input {
+                    reader: None,
+                    bytes: Some(b),
+                    dec,
+                };
+                (i, "<bytes>".into())
+            }
+        })
+    }
+}
+
+/// The records of one source as dicts, produced as they are read.
+#[pyclass(unsendable)]
+struct Records {
+    input: Input,
     queue: VecDeque<Py<PyAny>>,
     done: bool,
     keys: Keys,
@@ -91,22 +130,8 @@ impl Records {
     #[new]
     #[pyo3(signature = (source_obj, proto = "auto"))]
     fn new(source_obj: &Bound<'_, PyAny>, proto: &str) -> PyResult<Self> {
-        let proto = proto_of(proto)?;
-        let (reader, bytes) = match source(source_obj)? {
-            Source::Path(p) => (
-                Some(
-                    open(&p, OpenOptions::default())
-                        .map_err(|e| err(e.into()))?
-                        .0,
-                ),
-                None,
-            ),
-            Source::Bytes(b) => (None, Some(b)),
-        };
         Ok(Records {
-            reader,
-            bytes,
-            dec: Decoder::new(proto),
+            input: Input::open(source_obj, proto)?.0,
             queue: VecDeque::new(),
             done: false,
             keys: Keys::default(),
@@ -135,21 +160,22 @@ impl Records {
             q.push_back(sink.finish()?);
             Ok(())
         };
-        if let Some(b) = self.bytes.take() {
-            self.dec.push(Ctx::default(), &b, &mut emit)?;
-            self.dec.finish(&mut emit)?;
+        let i = &mut self.input;
+        if let Some(b) = i.bytes.take() {
+            i.dec.push(Ctx::default(), &b, &mut emit)?;
+            i.dec.finish(&mut emit)?;
             self.done = true;
             return Ok(());
         }
-        let Some(r) = self.reader.as_mut() else {
+        let Some(r) = i.reader.as_mut() else {
             self.done = true;
             return Ok(());
         };
         match r.next_event() {
-            Some(ev) => ev.feed(&mut self.dec, &mut emit),
+            Some(ev) => ev.feed(&mut i.dec, &mut emit),
             None => {
                 self.done = true;
-                self.dec.finish(&mut emit)
+                i.dec.finish(&mut emit)
             }
         }
     }
@@ -312,48 +338,127 @@ impl json::Sink for PySink<'_, '_> {
     }
 }
 
-/// Every table of one source as Parquet bytes: `[(table, bytes)]`, `records` first.
-#[pyfunction]
-#[pyo3(signature = (source_obj, proto = "auto", name = None))]
-fn parquet_tables<'py>(
-    py: Python<'py>,
-    source_obj: &Bound<'py, PyAny>,
-    proto: &str,
-    name: Option<String>,
-) -> PyResult<Vec<(String, Bound<'py, PyBytes>)>> {
-    let proto = proto_of(proto)?;
-    let src = source(source_obj)?;
-    let opts = Options::default();
-    let tables = py
-        .detach(|| -> io::Result<Vec<(String, Vec<u8>)>> {
-            let sink = match src {
-                Source::Path(p) => {
-                    let label = name.unwrap_or_else(|| p.clone());
-                    let w = CaptureWriter::new(MemSink::new(opts), &label, opts);
-                    let o = DecodeOpts {
-                        proto,
-                        ..Default::default()
-                    };
-                    decode_file(&p, &o, w, &mut |_| {})?.0
-                }
-                Source::Bytes(b) => {
-                    let label = name.unwrap_or_else(|| "<bytes>".into());
-                    let mut w = CaptureWriter::new(MemSink::new(opts), &label, opts);
-                    let mut d = Decoder::new(proto);
-                    d.push(Ctx::default(), &b, &mut |r| w.record(r))?;
-                    d.finish(&mut |r| w.record(r))?;
-                    w.finish()?.0
-                }
-            };
-            let mut t = sink.finish()?;
-            t.sort_by_key(|(n, _)| n != aptscope_parquet::schema::RECORDS);
-            Ok(t)
+/// Row groups as the writer flushes them, by table, for [`Batches`] to hand out.
+type BatchQueue = Rc<RefCell<VecDeque<(String, RecordBatch)>>>;
+
+/// A [`Sink`] that queues each row group as an Arrow record batch (no Parquet encoding).
+struct QueueSink(BatchQueue);
+
+impl Sink for QueueSink {
+    fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
+        self.0
+            .borrow_mut()
+            .push_back((table.to_string(), batch.clone()));
+        Ok(())
+    }
+}
+
+/// The tables of one source as `(table, batch)` pairs, each batch a row group of the Parquet
+/// output's schema, produced as the source is decoded (memory stays that of one row group per
+/// table, whatever the source's size).
+#[pyclass(unsendable)]
+struct Batches {
+    input: Input,
+    w: Option<CaptureWriter<QueueSink>>,
+    queue: BatchQueue,
+}
+
+#[pymethods]
+impl Batches {
+    #[new]
+    #[pyo3(signature = (source_obj, proto = "auto", name = None))]
+    fn new(source_obj: &Bound<'_, PyAny>, proto: &str, name: Option<String>) -> PyResult<Self> {
+        let (input, label) = Input::open(source_obj, proto)?;
+        let label = name.unwrap_or(label);
+        let queue = BatchQueue::default();
+        let opts = Options::default();
+        let w = CaptureWriter::new(QueueSink(queue.clone()), &label, opts);
+        Ok(Batches {
+            input,
+            w: Some(w),
+            queue,
         })
-        .map_err(err)?;
-    Ok(tables
-        .into_iter()
-        .map(|(n, b)| (n, PyBytes::new(py, &b)))
-        .collect())
+    }
+
+    fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
+        slf
+    }
+
+    fn __next__(&mut self) -> PyResult<Option<(String, ArrowBatch)>> {
+        loop {
+            if let Some((t, b)) = self.queue.borrow_mut().pop_front() {
+                return Ok(Some((t, ArrowBatch(b))));
+            }
+            if self.w.is_none() {
+                return Ok(None);
+            }
+            self.step().map_err(err)?;
+        }
+    }
+}
+
+impl Batches {
+    /// Decode the next event (or all the bytes); at the end, flush what the writer holds.
+    fn step(&mut self) -> io::Result<()> {
+        let Some(w) = self.w.as_mut() else {
+            return Ok(());
+        };
+        let mut emit = |r: &Record<'_>| w.record(r);
+        let i = &mut self.input;
+        let more = if let Some(b) = i.bytes.take() {
+            i.dec.push(Ctx::default(), &b, &mut emit)?;
+            false
+        } else if let Some(ev) = i.reader.as_mut().and_then(|r| r.next_event()) {
+            // A USB capture without the device asked for has nothing to decode.
+            if let aptscope_capture::Event::Diag(d) = &ev {
+                if d.kind() == aptscope_capture::usb::NOT_FOUND {
+                    return Err(io::Error::new(io::ErrorKind::InvalidInput, d.msg()));
+                }
+            }
+            ev.feed(&mut i.dec, &mut emit)?;
+            true
+        } else {
+            false
+        };
+        if !more {
+            i.dec.finish(&mut emit)?;
+            if let Some(w) = self.w.take() {
+                w.finish()?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One record batch, handed to pyarrow through the Arrow PyCapsule interface
+/// (`pyarrow.record_batch(b)`): the columns are shared, not copied or re-encoded.
+#[pyclass]
+struct ArrowBatch(RecordBatch);
+
+#[pymethods]
+impl ArrowBatch {
+    /// The batch as a struct array: `(schema capsule, array capsule)`.
+    #[pyo3(signature = (requested_schema = None))]
+    fn __arrow_c_array__<'py>(
+        &self,
+        py: Python<'py>,
+        requested_schema: Option<Bound<'py, PyAny>>,
+    ) -> PyResult<(Bound<'py, PyCapsule>, Bound<'py, PyCapsule>)> {
+        // The schema is the Parquet output's; a requested one is not cast to.
+        let _ = requested_schema;
+        let schema = FFI_ArrowSchema::try_from(self.0.schema().as_ref())
+            .map_err(|e| AptscopeError::new_err(e.to_string()))?;
+        let array = FFI_ArrowArray::new(&StructArray::from(self.0.clone()).into_data());
+        Ok((
+            PyCapsule::new_with_value(py, schema, c"arrow_schema")?,
+            PyCapsule::new_with_value(py, array, c"arrow_array")?,
+        ))
+    }
+
+    /// Rows in the batch.
+    fn __len__(&self) -> usize {
+        self.0.num_rows()
+    }
 }
 
 /// Decode capture `path` into dataset directory `out` as input number `index` (its part files
@@ -469,7 +574,8 @@ fn encode<'py>(
 #[pymodule]
 fn _aptscope(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Records>()?;
-    m.add_function(wrap_pyfunction!(parquet_tables, m)?)?;
+    m.add_class::<Batches>()?;
+    m.add_class::<ArrowBatch>()?;
     m.add_function(wrap_pyfunction!(write_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(prepare_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(encode, m)?)?;

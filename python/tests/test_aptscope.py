@@ -129,6 +129,46 @@ def test_to_arrow_has_the_parquet_schema(aptscope_bin, samples, tmp_path):
     assert (joined["name"] == "MOT_GET_DCSTATUSUPDATE").all() and len(joined) == st.num_rows
 
 
+def test_batches_are_the_tables_in_row_groups(samples):
+    path = samples / "kdc101-session.pcapng"
+    tables = aptscope.to_arrow(path)
+    seen = {}
+    for table, batch in aptscope.batches(path):
+        assert isinstance(batch, pa.RecordBatch)
+        assert batch.schema.equals(tables[table].schema, check_metadata=True), table
+        seen.setdefault(table, []).append(batch)
+    assert sorted(seen) == sorted(tables)
+    for t, bs in seen.items():
+        assert pa.Table.from_batches(bs).equals(tables[t]), t
+    # Bytes of one stream, and a missing file.
+    frame = aptscope.encode("MOT_MOVE_ABSOLUTE", chan_ident=1, absolute_position=4096)
+    got = dict(aptscope.batches(frame, proto="apt"))
+    assert got["MOT_MOVE_ABSOLUTE"].column("absolute_position").to_pylist() == [4096]
+    with pytest.raises(FileNotFoundError):
+        list(aptscope.batches(samples / "nope.bin"))
+
+
+def test_batches_stream_into_duckdb(samples):
+    duckdb = pytest.importorskip("duckdb")
+    path = samples / "kdc101-session.pcapng"
+    con = duckdb.connect()
+    made = set()
+    for table, batch in aptscope.batches(path):
+        if table != "MOT_GET_DCSTATUSUPDATE":
+            continue
+        con.register("b", batch)
+        if table in made:
+            con.execute("INSERT INTO st SELECT * FROM b")
+        else:
+            con.execute("CREATE TABLE st AS SELECT * FROM b")
+            made.add(table)
+        con.unregister("b")
+    st = aptscope.to_arrow(path)["MOT_GET_DCSTATUSUPDATE"]
+    n, lo, hi = con.execute("SELECT count(*), min(position), max(position) FROM st").fetchone()
+    pos = st.column("position").to_pylist()
+    assert (n, lo, hi) == (st.num_rows, min(pos), max(pos))
+
+
 def test_write_dataset_equals_the_command(aptscope_bin, samples, tmp_path):
     files = [str(samples / "kdc101-session.bin"), str(samples / "elliptec-bus.txt")]
     a, b = tmp_path / "cli", tmp_path / "py"
