@@ -312,10 +312,7 @@ impl json::Sink for PySink<'_, '_> {
                 return self.put_int(x as i64);
             }
             // Beyond 64 bits: the int of the digits NDJSON writes (`{x}` pads with zeros).
-            let int = self
-                .py
-                .get_type::<PyInt>()
-                .call1((format!("{x}"),));
+            let int = self.py.get_type::<PyInt>().call1((format!("{x}"),));
             return match int {
                 Ok(v) => self.put(v),
                 Err(e) => {
