@@ -24,7 +24,7 @@ use std::borrow::Cow;
 /// Does record `n` pass `filter`? (The terminal UI's one call of the display filter.)
 pub fn matches(filter: &Filter, ix: &Index, n: u64) -> bool {
     match ix.rec(n) {
-        Some(r) => filter.matches(&View { ix, n, r }),
+        Some(r) => filter.matches(&View { ix, n, r: &r }),
         None => false,
     }
 }
@@ -95,8 +95,9 @@ fn reply_to(r: &Rec) -> Option<u64> {
 /// Re-decode record `n` from the arena into the [`Record`] the decode chain gave for it (its
 /// pairing from the index), and pass it to `f`. `None` when there is no such record.
 pub fn with_record<T>(ix: &Index, n: u64, f: impl FnOnce(&Record<'_>) -> T) -> Option<T> {
-    let r = ix.rec(n)?;
+    let r = &ix.rec(n)?;
     let bytes = ix.bytes(r);
+    let bytes = &*bytes;
     let meta = meta(ix, n, r);
     let ell = r.has(F_ELL);
     if r.has(F_GARBAGE) {
@@ -164,7 +165,8 @@ pub fn diag_kinds(ix: &Index, n: u64, r: &Rec, f: &mut dyn FnMut(&'static str)) 
         let d = if r.has(F_ELL) {
             DiagKind::Garbage { len: len as u32 }
         } else {
-            aptscope_dissector::json::garbage_diag(r.offset, len, garbage_kind(r, ix.bytes(r))).kind
+            aptscope_dissector::json::garbage_diag(r.offset, len, garbage_kind(r, &ix.bytes(r)))
+                .kind
         };
         return f(d.name());
     }

@@ -17,6 +17,7 @@ use aptscope_dissector::hash::NumMap;
 use aptscope_dissector::record::{AptRec, Ctx, Decoder, EllRec, GarbageRec, Record};
 use aptscope_dissector::table::{Class, Dir};
 use aptscope_dissector::units::{Scale, UnitsOpts};
+use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, RwLock};
@@ -93,8 +94,218 @@ pub struct Rec {
 /// [`Rec::chan`] of a channel outside 0–253.
 pub const CHAN_OTHER: u8 = u8::MAX;
 
-// The compact record stays one 56-byte slot (memory per record of the index).
-const _: () = assert!(std::mem::size_of::<Rec>() == 56);
+/// A record as the index stores it, 32 bytes: [`Rec`] without its arena position and stream
+/// offset (kept beside it only once they differ from its capture offset: they never do in a
+/// raw capture, one stream whose every byte is a record's), its direction in the flags, and
+/// narrower fields whose rare larger values ([`Wide`]) are kept beside it.
+#[derive(Debug, Clone, Copy, Default)]
+struct Packed {
+    ts: u64,
+    /// Capture offset, low 32 bits.
+    cap_lo: u32,
+    pair: u32,
+    /// Capture offset, bits 32–47.
+    cap_hi: u16,
+    /// Length; [`NARROW`]: this record's values are in [`Recs::wide`].
+    len: u16,
+    /// Module or scale entry.
+    module: u16,
+    /// `F_*` flags, and the direction at [`DIR_SHIFT`].
+    flags: u16,
+    id: u16,
+    /// Stream.
+    stream: u8,
+    /// Diagnostic kinds entry.
+    diags: u8,
+    src: u8,
+    dst: u8,
+    chan: u8,
+}
+
+// Memory per record of the index (a raw capture's: nothing beside it).
+const _: () = assert!(std::mem::size_of::<Packed>() == 32);
+
+/// [`Packed::len`] of a record with a value too large for its slot (in [`Recs::wide`]).
+const NARROW: u16 = u16::MAX;
+
+/// Where [`Packed::flags`] keeps the direction (the `F_*` flags use the bits below).
+const DIR_SHIFT: u16 = 13;
+
+/// The values of a record that do not fit its [`Packed`] slot.
+#[derive(Debug, Clone, Copy)]
+struct Wide {
+    cap_offset: u64,
+    len: u32,
+    module: u32,
+    stream: u16,
+    diags: u16,
+}
+
+/// The records of the index in timeline order, stored packed ([`Recs::get`] gives a [`Rec`]).
+#[derive(Debug, Default, Clone)]
+pub struct Recs {
+    packed: Vec<Packed>,
+    /// (arena start, stream offset) of every record, once one has them apart from its capture
+    /// offset; empty until then.
+    apart: Vec<[u64; 2]>,
+    /// Records (by index, in order) with a value too large for their slot.
+    wide: Vec<(u64, Wide)>,
+}
+
+impl Recs {
+    /// Number of records.
+    pub fn len(&self) -> usize {
+        self.packed.len()
+    }
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.packed.is_empty()
+    }
+    /// Record at index `i` (record number `i + 1`).
+    pub fn get(&self, i: usize) -> Option<Rec> {
+        let p = self.packed.get(i)?;
+        let mut r = Rec {
+            start: 0,
+            offset: 0,
+            cap_offset: u64::from(p.cap_hi) << 32 | u64::from(p.cap_lo),
+            ts: p.ts,
+            pair: p.pair,
+            len: u32::from(p.len),
+            module: u32::from(p.module),
+            stream: u16::from(p.stream),
+            flags: p.flags & ((1 << DIR_SHIFT) - 1),
+            dir: (p.flags >> DIR_SHIFT) as u8,
+            src: p.src,
+            dst: p.dst,
+            id: p.id,
+            diags: u16::from(p.diags),
+            chan: p.chan,
+        };
+        if p.len == NARROW {
+            let w = self.wide.binary_search_by_key(&(i as u64), |(j, _)| *j);
+            if let Some((_, w)) = w.ok().and_then(|k| self.wide.get(k)) {
+                r.cap_offset = w.cap_offset;
+                r.len = w.len;
+                r.module = w.module;
+                r.stream = w.stream;
+                r.diags = w.diags;
+            }
+        }
+        [r.start, r.offset] = self
+            .apart
+            .get(i)
+            .copied()
+            .unwrap_or([r.cap_offset, r.cap_offset]);
+        Some(r)
+    }
+    /// The last record.
+    pub fn last(&self) -> Option<Rec> {
+        self.get(self.len().checked_sub(1)?)
+    }
+    /// Records from index `from` (record number `from + 1`) to the end.
+    pub fn iter_from(&self, from: usize) -> impl Iterator<Item = Rec> + '_ {
+        (from..self.len()).filter_map(|i| self.get(i))
+    }
+    /// All records.
+    pub fn iter(&self) -> impl Iterator<Item = Rec> + '_ {
+        self.iter_from(0)
+    }
+    /// Append a record.
+    pub fn push(&mut self, r: Rec) {
+        let i = self.packed.len();
+        let apart = r.start != r.cap_offset || r.offset != r.cap_offset;
+        if apart && self.apart.len() < i {
+            // The first record kept apart: the ones before are given theirs.
+            self.apart = (0..i)
+                .filter_map(|j| self.get(j))
+                .map(|r| [r.cap_offset, r.cap_offset])
+                .collect();
+        }
+        if apart || !self.apart.is_empty() {
+            self.apart.push([r.start, r.offset]);
+        }
+        let narrow = |x: u32, max: u16| u16::try_from(x).ok().filter(|&x| x < max);
+        let len = narrow(r.len, NARROW);
+        let module = narrow(r.module, NARROW);
+        let stream = narrow(r.stream.into(), 256);
+        let diags = narrow(r.diags.into(), 256);
+        let cap_hi = u16::try_from(r.cap_offset >> 32).ok();
+        let (Some(len), Some(module), Some(stream), Some(diags), Some(cap_hi)) =
+            (len, module, stream, diags, cap_hi)
+        else {
+            self.wide.push((
+                i as u64,
+                Wide {
+                    cap_offset: r.cap_offset,
+                    len: r.len,
+                    module: r.module,
+                    stream: r.stream,
+                    diags: r.diags,
+                },
+            ));
+            self.packed.push(Packed {
+                ts: r.ts,
+                pair: r.pair,
+                len: NARROW,
+                flags: r.flags | u16::from(r.dir) << DIR_SHIFT,
+                id: r.id,
+                src: r.src,
+                dst: r.dst,
+                chan: r.chan,
+                ..Packed::default()
+            });
+            return;
+        };
+        self.packed.push(Packed {
+            ts: r.ts,
+            cap_lo: r.cap_offset as u32,
+            pair: r.pair,
+            cap_hi,
+            len,
+            module,
+            flags: r.flags | u16::from(r.dir) << DIR_SHIFT,
+            id: r.id,
+            stream: stream as u8,
+            diags: diags as u8,
+            src: r.src,
+            dst: r.dst,
+            chan: r.chan,
+        });
+    }
+    /// Set the pair link of record index `i` (when it has none) and add `flags`; gives the
+    /// flags it had.
+    fn patch(&mut self, i: usize, pair: u32, flags: u16) -> Option<u16> {
+        let p = self.packed.get_mut(i)?;
+        if p.pair == 0 {
+            p.pair = pair;
+        }
+        let was = p.flags & ((1 << DIR_SHIFT) - 1);
+        p.flags |= flags;
+        Some(was)
+    }
+    /// Bytes the records take in memory (their capacity).
+    pub fn memory(&self) -> usize {
+        self.packed.capacity() * std::mem::size_of::<Packed>()
+            + self.apart.capacity() * std::mem::size_of::<[u64; 2]>()
+            + self.wide.capacity() * std::mem::size_of::<(u64, Wide)>()
+    }
+}
+
+impl Extend<Rec> for Recs {
+    fn extend<I: IntoIterator<Item = Rec>>(&mut self, it: I) {
+        for r in it {
+            self.push(r);
+        }
+    }
+}
+
+impl FromIterator<Rec> for Recs {
+    fn from_iter<I: IntoIterator<Item = Rec>>(it: I) -> Self {
+        let mut recs = Recs::default();
+        recs.extend(it);
+        recs
+    }
+}
 
 /// An APT record's channel as the index kept it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -167,9 +378,12 @@ pub type Point = (f64, f64);
 #[derive(Debug, Default)]
 pub struct Index {
     /// Records, in timeline order (record number = index + 1).
-    pub recs: Vec<Rec>,
-    /// Bytes of all records.
+    pub recs: Recs,
+    /// Bytes of all records, when they are not read from [`Index::file`].
     pub arena: Vec<u8>,
+    /// The capture file records' bytes are read from (by capture offset) instead of the
+    /// arena: a raw capture, whose capture offsets are file positions.
+    pub file: Option<std::fs::File>,
     /// Elliptec modules as the bus knew them (indexed by `Rec::module - 1`).
     pub modules: Vec<Module>,
     /// APT: the stage conversions records use (indexed by `Rec::module - 1`).
@@ -212,13 +426,22 @@ pub struct Index {
 }
 
 impl Index {
-    /// The bytes of a record.
-    pub fn bytes(&self, r: &Rec) -> &[u8] {
+    /// The bytes of a record: from the arena, or read from the capture file (empty when the
+    /// file can no longer give them).
+    pub fn bytes(&self, r: &Rec) -> Cow<'_, [u8]> {
+        if let Some(f) = &self.file {
+            use std::os::unix::fs::FileExt;
+            let mut buf = vec![0; r.len as usize];
+            return match f.read_exact_at(&mut buf, r.cap_offset) {
+                Ok(()) => Cow::Owned(buf),
+                Err(_) => Cow::Borrowed(&[]),
+            };
+        }
         let s = r.start as usize;
-        self.arena.get(s..s + r.len as usize).unwrap_or(&[])
+        Cow::Borrowed(self.arena.get(s..s + r.len as usize).unwrap_or(&[]))
     }
     /// A record by number (1-based).
-    pub fn rec(&self, n: u64) -> Option<&Rec> {
+    pub fn rec(&self, n: u64) -> Option<Rec> {
         self.recs.get((n as usize).checked_sub(1)?)
     }
     /// Whether records were seen on more than one stream.
@@ -270,6 +493,9 @@ pub struct IndexOpts {
     /// is certain; Elliptec host chunks are host writes (a command is framed without waiting
     /// for its terminator).
     pub follow: Option<String>,
+    /// The capture file the source reads, when it stays put: a raw capture's record bytes are
+    /// then read back from it ([`Index::file`]) instead of being kept in memory.
+    pub file: Option<String>,
 }
 
 /// Open a capture and index it in a background thread. The returned [`Shared`] fills as the
@@ -302,6 +528,7 @@ pub fn spawn_with(
         // standard input (a pipe a live capture writes: its reader blocks until more comes).
         live: opts.follow.is_some() || path == "-",
         follow: opts.follow.is_some().then(|| path.clone()),
+        file: (opts.follow.is_none() && path != "-").then(|| path.clone()),
         ..IndexOpts::default()
     };
     spawn_source(
@@ -330,8 +557,10 @@ where
             Ok((reader, progress)) => {
                 let input = progress.clone();
                 let shared = shared_for(reader.as_ref(), progress, &opts);
+                let from_file = read_back(&shared, reader.as_ref(), opts.file.as_deref());
                 let _ = tx.send(Ok(shared.clone()));
                 let mut ix = Indexer::new(shared, opts.proto, opts.units);
+                ix.sink.from_file = from_file;
                 ix.follow = opts.follow.and_then(|p| std::fs::File::open(p).ok());
                 ix.input = input;
                 ix.run(reader);
@@ -364,21 +593,63 @@ fn shared_for(
     shared
 }
 
-fn opened(path: &str, opts: OpenOptions) -> std::io::Result<(Arc<Shared>, Box<dyn Reader>)> {
-    let (reader, _, progress) = open_with_progress(path, opts)?;
-    let shared = shared_for(reader.as_ref(), Some(progress), &IndexOpts::default());
-    Ok((shared, reader))
+/// Whether the records' bytes can be read back from `file` (a raw capture, whose capture
+/// offsets are its file positions) rather than kept: if so, the index is given the file.
+fn read_back(shared: &Shared, reader: &dyn Reader, file: Option<&str>) -> bool {
+    if reader.format() != "raw bytes" {
+        return false;
+    }
+    let Some(f) = file.and_then(|p| std::fs::File::open(p).ok()) else {
+        return false;
+    };
+    match shared.index.write() {
+        Ok(mut ix) => {
+            ix.file = Some(f);
+            true
+        }
+        Err(_) => false,
+    }
 }
 
-/// Open and index a capture completely, in the calling thread (tests, small files).
+fn opened(
+    path: &str,
+    opts: OpenOptions,
+    in_memory: bool,
+) -> std::io::Result<(Arc<Shared>, Box<dyn Reader>, bool)> {
+    let (reader, _, progress) = open_with_progress(path, opts)?;
+    let shared = shared_for(reader.as_ref(), Some(progress), &IndexOpts::default());
+    let file = (!in_memory && opts.follow.is_none() && path != "-").then_some(path);
+    let from_file = read_back(&shared, reader.as_ref(), file);
+    Ok((shared, reader, from_file))
+}
+
+/// Open and index a capture completely, in the calling thread (tests, small files). A raw
+/// capture's bytes are read back from the file, as the viewer does.
 pub fn load(path: &str, opts: OpenOptions) -> std::io::Result<Arc<Shared>> {
     load_with(path, opts, UnitsOpts::default())
 }
 
 /// [`load`] with a stage or scale for APT motion values.
 pub fn load_with(path: &str, opts: OpenOptions, units: UnitsOpts) -> std::io::Result<Arc<Shared>> {
-    let (shared, reader) = opened(path, opts)?;
-    Indexer::new(shared.clone(), None, units).run(reader);
+    load_inner(path, opts, units, false)
+}
+
+/// [`load`] keeping every record's bytes in memory (the index live sources build): tests
+/// compare it with the index that reads them back from the file.
+pub fn load_in_memory(path: &str, opts: OpenOptions) -> std::io::Result<Arc<Shared>> {
+    load_inner(path, opts, UnitsOpts::default(), true)
+}
+
+fn load_inner(
+    path: &str,
+    opts: OpenOptions,
+    units: UnitsOpts,
+    in_memory: bool,
+) -> std::io::Result<Arc<Shared>> {
+    let (shared, reader, from_file) = opened(path, opts, in_memory)?;
+    let mut ix = Indexer::new(shared.clone(), None, units);
+    ix.sink.from_file = from_file;
+    ix.run(reader);
     Ok(shared)
 }
 
@@ -574,6 +845,8 @@ struct Sink {
     arena: Vec<u8>,
     /// Arena bytes already published.
     arena_base: u64,
+    /// Records' bytes are read back from the capture file ([`Index::file`]): none kept.
+    from_file: bool,
     /// Records already published.
     base: u64,
     proto: Option<(Proto, bool, f64)>,
@@ -677,12 +950,16 @@ impl Sink {
                 ..rec
             });
         }
-        rec.start = self.arena_base + self.arena.len() as u64;
         rec.len = bytes.len() as u32;
         if rec.stream < 64 {
             self.streams_seen |= 1 << rec.stream;
         }
-        self.arena.extend_from_slice(bytes);
+        if self.from_file {
+            rec.start = rec.cap_offset;
+        } else {
+            rec.start = self.arena_base + self.arena.len() as u64;
+            self.arena.extend_from_slice(bytes);
+        }
         self.batch.push(rec);
     }
 
@@ -1037,20 +1314,17 @@ impl Publication {
             ix.proto_certain = certain;
             ix.proto_share = Some(share);
         }
-        ix.recs.append(&mut self.recs);
+        ix.recs.extend(self.recs.drain(..));
         ix.arena.append(&mut self.arena);
         ix.modules.append(&mut self.modules);
         ix.scales.append(&mut self.scales);
         ix.units_notes.append(&mut self.units_notes);
         for (n, pair, flags) in self.patches {
-            if let Some(r) = (n as usize).checked_sub(1).and_then(|i| ix.recs.get_mut(i)) {
-                if r.pair == 0 {
-                    r.pair = pair;
-                }
-                if flags & !r.flags & F_NO_REPLY != 0 {
-                    ix.late_no_reply.push(n);
-                }
-                r.flags |= flags;
+            let was = (n as usize)
+                .checked_sub(1)
+                .and_then(|i| ix.recs.patch(i, pair, flags));
+            if was.is_some_and(|was| flags & !was & F_NO_REPLY != 0) {
+                ix.late_no_reply.push(n);
             }
         }
         ix.diag_sets.append(&mut self.diag_sets);
