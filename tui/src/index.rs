@@ -94,27 +94,27 @@ pub struct Rec {
 /// [`Rec::chan`] of a channel outside 0–253.
 pub const CHAN_OTHER: u8 = u8::MAX;
 
-/// A record as the index stores it, 32 bytes: [`Rec`] without its arena position and stream
+/// A record as the index stores it, 24 bytes: [`Rec`] without its arena position and stream
 /// offset (kept beside it only once they differ from its capture offset: they never do in a
-/// raw capture, one stream whose every byte is a record's), its direction in the flags, and
-/// narrower fields whose rare larger values ([`Wide`]) are kept beside it.
+/// raw capture, one stream whose every byte is a record's), its direction in the flags, its
+/// capture offset, time and module relative to those of its [`Block`], and narrower fields
+/// whose rare larger values ([`Wide`]) are kept beside it.
 #[derive(Debug, Clone, Copy, Default)]
 struct Packed {
-    ts: u64,
-    /// Capture offset, low 32 bits.
-    cap_lo: u32,
+    /// Time since the block's; [`NO_TS`]: not recorded.
+    ts: u32,
     pair: u32,
-    /// Capture offset, bits 32–47.
-    cap_hi: u16,
+    /// Capture offset after the block's (24 bits, little-endian).
+    cap: [u8; 3],
+    /// Stream.
+    stream: u8,
     /// Length; [`NARROW`]: this record's values are in [`Recs::wide`].
     len: u16,
-    /// Module or scale entry.
+    /// Module or scale entry: 0 none, else after the block's (+ 1).
     module: u16,
     /// `F_*` flags, and the direction at [`DIR_SHIFT`].
     flags: u16,
     id: u16,
-    /// Stream.
-    stream: u8,
     /// Diagnostic kinds entry.
     diags: u8,
     src: u8,
@@ -122,21 +122,82 @@ struct Packed {
     chan: u8,
 }
 
-// Memory per record of the index (a raw capture's: nothing beside it).
-const _: () = assert!(std::mem::size_of::<Packed>() == 32);
+// Memory per record of the index (a raw capture's: nothing beside it but a few blocks).
+const _: () = assert!(std::mem::size_of::<Packed>() == 24);
 
 /// [`Packed::len`] of a record with a value too large for its slot (in [`Recs::wide`]).
 const NARROW: u16 = u16::MAX;
 
+/// Records in a chunk of [`Recs::packed`] (1.5 MB).
+const CHUNK: usize = 1 << 16;
+
+/// [`Packed::ts`] of a record without time.
+const NO_TS: u32 = u32::MAX;
+
+/// Capture offsets a block spans.
+const CAP_SPAN: u64 = 1 << 24;
+
+/// How much earlier than its first record's time a block's time is (records of several
+/// streams come a little out of time order).
+const TS_BACK: u64 = 1 << 30;
+
 /// Where [`Packed::flags`] keeps the direction (the `F_*` flags use the bits below).
 const DIR_SHIFT: u16 = 13;
+
+/// What the records from `first` on (to the next block) count their capture offset, time and
+/// module from. A record that does not fit its block's ranges starts a new one.
+#[derive(Debug, Clone, Copy)]
+struct Block {
+    first: u64,
+    cap: u64,
+    ts: u64,
+    module: u32,
+}
+
+impl Block {
+    /// The block a record would start.
+    fn of(r: &Rec, prev: Option<&Block>) -> Block {
+        Block {
+            first: 0,
+            // Room for records a little out of order (other streams, other directions).
+            cap: r.cap_offset.saturating_sub(CAP_SPAN / 4),
+            ts: r
+                .ts()
+                .map(|t| t.saturating_sub(TS_BACK))
+                .or(prev.map(|b| b.ts))
+                .unwrap_or(0),
+            // Room for older entries than the record's (other devices' conversions).
+            module: match r.module {
+                0 => prev.map_or(1, |b| b.module),
+                m => m.saturating_sub(u32::from(u16::MAX / 2)).max(1),
+            },
+        }
+    }
+    /// A record's capture offset, time and module relative to the block, when they fit.
+    fn fit(&self, r: &Rec) -> Option<([u8; 3], u32, u16)> {
+        let cap = r
+            .cap_offset
+            .checked_sub(self.cap)
+            .filter(|&c| c < CAP_SPAN)?;
+        let ts = match r.ts() {
+            None => NO_TS,
+            Some(t) => u32::try_from(t.checked_sub(self.ts)?)
+                .ok()
+                .filter(|&t| t != NO_TS)?,
+        };
+        let module = match r.module {
+            0 => 0,
+            m => u16::try_from(m.checked_sub(self.module)? + 1).ok()?,
+        };
+        let [a, b, c, _] = (cap as u32).to_le_bytes();
+        Some(([a, b, c], ts, module))
+    }
+}
 
 /// The values of a record that do not fit its [`Packed`] slot.
 #[derive(Debug, Clone, Copy)]
 struct Wide {
-    cap_offset: u64,
     len: u32,
-    module: u32,
     stream: u16,
     diags: u16,
 }
@@ -144,7 +205,12 @@ struct Wide {
 /// The records of the index in timeline order, stored packed ([`Recs::get`] gives a [`Rec`]).
 #[derive(Debug, Default, Clone)]
 pub struct Recs {
-    packed: Vec<Packed>,
+    /// The records in chunks of [`CHUNK`]: growing never copies them (nor needs twice
+    /// their memory for a moment, as a doubling vector does).
+    packed: Vec<Vec<Packed>>,
+    len: usize,
+    /// The blocks, by first record.
+    blocks: Vec<Block>,
     /// (arena start, stream offset) of every record, once one has them apart from its capture
     /// offset; empty until then.
     apart: Vec<[u64; 2]>,
@@ -155,23 +221,42 @@ pub struct Recs {
 impl Recs {
     /// Number of records.
     pub fn len(&self) -> usize {
-        self.packed.len()
+        self.len
     }
     /// Whether there are none.
     pub fn is_empty(&self) -> bool {
-        self.packed.is_empty()
+        self.len == 0
+    }
+    /// The block of record index `i`.
+    fn block_of(&self, i: usize) -> usize {
+        self.blocks
+            .partition_point(|b| b.first <= i as u64)
+            .saturating_sub(1)
     }
     /// Record at index `i` (record number `i + 1`).
     pub fn get(&self, i: usize) -> Option<Rec> {
-        let p = self.packed.get(i)?;
+        self.unpack(i, self.block_of(i))
+    }
+    /// Record at index `i` of block `b`.
+    fn unpack(&self, i: usize, b: usize) -> Option<Rec> {
+        let p = self.packed.get(i / CHUNK)?.get(i % CHUNK)?;
+        let b = self.blocks.get(b)?;
+        let [x, y, z] = p.cap;
+        let cap_offset = b.cap + u64::from(u32::from_le_bytes([x, y, z, 0]));
         let mut r = Rec {
-            start: 0,
-            offset: 0,
-            cap_offset: u64::from(p.cap_hi) << 32 | u64::from(p.cap_lo),
-            ts: p.ts,
+            start: cap_offset,
+            offset: cap_offset,
+            cap_offset,
+            ts: match p.ts {
+                NO_TS => u64::MAX,
+                t => b.ts + u64::from(t),
+            },
             pair: p.pair,
             len: u32::from(p.len),
-            module: u32::from(p.module),
+            module: match p.module {
+                0 => 0,
+                m => b.module + u32::from(m) - 1,
+            },
             stream: u16::from(p.stream),
             flags: p.flags & ((1 << DIR_SHIFT) - 1),
             dir: (p.flags >> DIR_SHIFT) as u8,
@@ -184,18 +269,14 @@ impl Recs {
         if p.len == NARROW {
             let w = self.wide.binary_search_by_key(&(i as u64), |(j, _)| *j);
             if let Some((_, w)) = w.ok().and_then(|k| self.wide.get(k)) {
-                r.cap_offset = w.cap_offset;
                 r.len = w.len;
-                r.module = w.module;
                 r.stream = w.stream;
                 r.diags = w.diags;
             }
         }
-        [r.start, r.offset] = self
-            .apart
-            .get(i)
-            .copied()
-            .unwrap_or([r.cap_offset, r.cap_offset]);
+        if let Some(&[start, offset]) = self.apart.get(i) {
+            (r.start, r.offset) = (start, offset);
+        }
         Some(r)
     }
     /// The last record.
@@ -204,7 +285,13 @@ impl Recs {
     }
     /// Records from index `from` (record number `from + 1`) to the end.
     pub fn iter_from(&self, from: usize) -> impl Iterator<Item = Rec> + '_ {
-        (from..self.len()).filter_map(|i| self.get(i))
+        let mut b = self.block_of(from);
+        (from..self.len()).filter_map(move |i| {
+            while self.blocks.get(b + 1).is_some_and(|x| x.first <= i as u64) {
+                b += 1;
+            }
+            self.unpack(i, b)
+        })
     }
     /// All records.
     pub fn iter(&self) -> impl Iterator<Item = Rec> + '_ {
@@ -212,61 +299,58 @@ impl Recs {
     }
     /// Append a record.
     pub fn push(&mut self, r: Rec) {
-        let i = self.packed.len();
+        let i = self.len;
         let apart = r.start != r.cap_offset || r.offset != r.cap_offset;
         if apart && self.apart.len() < i {
             // The first record kept apart: the ones before are given theirs.
-            self.apart = (0..i)
-                .filter_map(|j| self.get(j))
-                .map(|r| [r.cap_offset, r.cap_offset])
-                .collect();
+            self.apart = self.iter().map(|r| [r.cap_offset, r.cap_offset]).collect();
         }
         if apart || !self.apart.is_empty() {
             self.apart.push([r.start, r.offset]);
         }
-        let narrow = |x: u32, max: u16| u16::try_from(x).ok().filter(|&x| x < max);
-        let len = narrow(r.len, NARROW);
-        let module = narrow(r.module, NARROW);
-        let stream = narrow(r.stream.into(), 256);
-        let diags = narrow(r.diags.into(), 256);
-        let cap_hi = u16::try_from(r.cap_offset >> 32).ok();
-        let (Some(len), Some(module), Some(stream), Some(diags), Some(cap_hi)) =
-            (len, module, stream, diags, cap_hi)
-        else {
+        let fit = self.blocks.last().and_then(|b| b.fit(&r));
+        let Some((cap, ts, module)) = fit.or_else(|| {
+            let b = Block {
+                first: i as u64,
+                ..Block::of(&r, self.blocks.last())
+            };
+            self.blocks.push(b);
+            b.fit(&r)
+        }) else {
+            // A new block always fits its first record.
+            return;
+        };
+        let narrow = |x: u32, max: u32| x < max;
+        let fits = narrow(r.len, u32::from(NARROW))
+            && narrow(r.stream.into(), 256)
+            && narrow(r.diags.into(), 256);
+        if !fits {
             self.wide.push((
                 i as u64,
                 Wide {
-                    cap_offset: r.cap_offset,
                     len: r.len,
-                    module: r.module,
                     stream: r.stream,
                     diags: r.diags,
                 },
             ));
-            self.packed.push(Packed {
-                ts: r.ts,
-                pair: r.pair,
-                len: NARROW,
-                flags: r.flags | u16::from(r.dir) << DIR_SHIFT,
-                id: r.id,
-                src: r.src,
-                dst: r.dst,
-                chan: r.chan,
-                ..Packed::default()
-            });
+        }
+        if self.packed.last().is_none_or(|c| c.len() == CHUNK) {
+            self.packed.push(Vec::with_capacity(CHUNK));
+        }
+        let Some(chunk) = self.packed.last_mut() else {
             return;
         };
-        self.packed.push(Packed {
-            ts: r.ts,
-            cap_lo: r.cap_offset as u32,
+        self.len += 1;
+        chunk.push(Packed {
+            ts,
             pair: r.pair,
-            cap_hi,
-            len,
+            cap,
+            stream: if fits { r.stream as u8 } else { 0 },
+            len: if fits { r.len as u16 } else { NARROW },
             module,
             flags: r.flags | u16::from(r.dir) << DIR_SHIFT,
             id: r.id,
-            stream: stream as u8,
-            diags: diags as u8,
+            diags: if fits { r.diags as u8 } else { 0 },
             src: r.src,
             dst: r.dst,
             chan: r.chan,
@@ -275,7 +359,7 @@ impl Recs {
     /// Set the pair link of record index `i` (when it has none) and add `flags`; gives the
     /// flags it had.
     fn patch(&mut self, i: usize, pair: u32, flags: u16) -> Option<u16> {
-        let p = self.packed.get_mut(i)?;
+        let p = self.packed.get_mut(i / CHUNK)?.get_mut(i % CHUNK)?;
         if p.pair == 0 {
             p.pair = pair;
         }
@@ -285,9 +369,14 @@ impl Recs {
     }
     /// Bytes the records take in memory (their capacity).
     pub fn memory(&self) -> usize {
-        self.packed.capacity() * std::mem::size_of::<Packed>()
+        self.packed.iter().map(Vec::capacity).sum::<usize>() * std::mem::size_of::<Packed>()
+            + self.blocks.capacity() * std::mem::size_of::<Block>()
             + self.apart.capacity() * std::mem::size_of::<[u64; 2]>()
             + self.wide.capacity() * std::mem::size_of::<(u64, Wide)>()
+    }
+    /// Number of blocks (the records' bases).
+    pub fn blocks(&self) -> usize {
+        self.blocks.len()
     }
 }
 
@@ -738,7 +827,9 @@ impl Indexer {
                 }
                 // A live source's reader blocks until more comes: publish what it gave now.
                 let live = self.follow.is_none() && self.shared.live.load(Ordering::Relaxed);
-                if caught_up || live || self.last_flush.elapsed() > Duration::from_millis(50) {
+                // A full batch goes too: the batches in flight stay a few MB.
+                let full = self.sink.batch.len() >= MAX_BATCH;
+                if caught_up || live || full || self.last_flush.elapsed() > FLUSH_EVERY {
                     self.flush();
                 }
             }
@@ -826,6 +917,13 @@ impl Indexer {
         self.publish(true);
     }
 }
+
+/// Records published at once at most (their [`Rec`]s take 3.7 MB): the indexer's batch, the
+/// ones in flight to the publishing thread and the spare stay small beside the index.
+const MAX_BATCH: usize = 1 << 16;
+
+/// How long read records may wait before they are published.
+const FLUSH_EVERY: Duration = Duration::from_millis(50);
 
 /// Conversions remembered for reuse (one per device).
 const MAX_SCALE_AT: usize = 4096;
@@ -1350,5 +1448,105 @@ impl Publication {
             ix.done = true;
         }
         (self.recs, self.arena)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Records of every shape (offsets and times going back and far ahead, no time, old and
+    /// new module entries, values too wide for their slot, offsets apart from the capture's
+    /// from some record on) come back from the packed store as they went in, by index, by
+    /// iteration from any record, and after their pair link and flags are patched.
+    #[test]
+    fn packed_records_read_back_as_pushed() {
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let (mut cap, mut ts) = (0u64, 1_000u64);
+        let mut recs = vec![];
+        for i in 0..(CHUNK as u64 * 2 + 777) {
+            let r = next();
+            cap = match r % 50 {
+                0 => cap.saturating_sub(r >> 40),
+                1 => cap + (r >> 20),
+                _ => cap + r % 300,
+            };
+            ts = match (r >> 8) % 40 {
+                0 => ts.saturating_sub((r >> 30) % 5_000_000_000),
+                1 => ts + (r >> 16),
+                _ => ts + (r >> 12) % 100_000,
+            };
+            let apart = i > CHUNK as u64 + 5;
+            recs.push(Rec {
+                start: if apart { cap / 2 } else { cap },
+                offset: if apart && r % 3 == 0 { cap + 1 } else { cap },
+                cap_offset: cap,
+                ts: if (r >> 20) % 9 == 0 { u64::MAX } else { ts },
+                pair: (r >> 24) as u32,
+                len: if (r >> 4) % 500 == 0 {
+                    70_000 + (r % 9) as u32
+                } else {
+                    (r % 300) as u32
+                },
+                module: match (r >> 6) % 5 {
+                    0 => 0,
+                    1 => 1,
+                    2 => (r >> 40) as u32,
+                    _ => (i / 100) as u32,
+                },
+                stream: if (r >> 9) % 300 == 0 {
+                    300
+                } else {
+                    ((r >> 9) % 4) as u16
+                },
+                flags: (r >> 32) as u16 & ((1 << DIR_SHIFT) - 1),
+                dir: ((r >> 50) % 3) as u8,
+                src: (r >> 13) as u8,
+                dst: (r >> 21) as u8,
+                id: (r >> 29) as u16,
+                diags: if (r >> 3) % 700 == 0 {
+                    999
+                } else {
+                    ((r >> 3) % 5) as u16
+                },
+                chan: (r >> 45) as u8,
+            });
+        }
+        let mut packed: Recs = recs.iter().copied().collect();
+        assert_eq!(packed.len(), recs.len());
+        for (i, r) in recs.iter().enumerate() {
+            assert_eq!(packed.get(i).as_ref(), Some(r), "#{i}");
+        }
+        for from in [
+            0,
+            1,
+            CHUNK - 1,
+            CHUNK,
+            CHUNK + 6,
+            recs.len() - 1,
+            recs.len(),
+        ] {
+            assert!(
+                packed.iter_from(from).eq(recs[from..].iter().copied()),
+                "from {from}"
+            );
+        }
+        assert_eq!(packed.last(), recs.last().copied());
+        for i in [0, 5, CHUNK + 3, recs.len() - 1] {
+            let was = packed.patch(i, 42, F_NO_REPLY);
+            assert_eq!(was, Some(recs[i].flags));
+            recs[i].flags |= F_NO_REPLY;
+            if recs[i].pair == 0 {
+                recs[i].pair = 42;
+            }
+            assert_eq!(packed.get(i), Some(recs[i]), "patched #{i}");
+        }
+        assert_eq!(packed.get(recs.len()), None);
     }
 }
