@@ -1,11 +1,12 @@
-//! The capture index: every record (frame or garbage) of a capture, stored compactly (a small
-//! fixed-size record plus its bytes in one arena), built by a background thread while the UI
-//! already shows what has been read.
+//! The capture index: every record (frame or garbage) of a capture, stored compactly (24 bytes
+//! a record, [`Recs`]), built by a background thread while the UI already shows what has been
+//! read.
 //!
 //! The records come from the one decode chain ([`aptscope_dissector::record::Decoder`]): the
 //! indexer keeps of each [`Record`] what the timeline, filters and statistics read without
-//! decoding (a [`Rec`]) and its bytes. Nothing rendered is stored: the UI decodes the rows it
-//! shows from the arena.
+//! decoding (a [`Rec`]). Its bytes are read back from the capture file by position (a raw
+//! capture) or kept in an arena (other formats, live sources). Nothing rendered is stored: the
+//! UI decodes the rows it shows from those bytes.
 
 use aptscope_capture::model::{Event, Reader};
 use aptscope_capture::open::{open_with_progress, OpenOptions};
@@ -51,8 +52,8 @@ pub const F_IS_REPLY: u16 = 2048;
 /// [`Index::not_for_model`]).
 pub const F_NOT_FOR_MODEL: u16 = 4096;
 
-/// One record of the capture (a frame or a garbage run), 56 bytes: what the timeline, filters
-/// and statistics read without decoding the frame.
+/// One record of the capture (a frame or a garbage run): what the timeline, filters and
+/// statistics read without decoding the frame. [`Recs`] stores it packed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Rec {
     /// Start of the bytes in the arena.
