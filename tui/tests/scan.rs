@@ -46,6 +46,14 @@ const FILTERS: &[&str] = &[
     "dir == H2D || len < 8 || offset > 1.5",
 ];
 
+/// [`FILTERS`] parsed.
+fn filters() -> Vec<Filter> {
+    FILTERS
+        .iter()
+        .map(|t| Filter::parse(t).expect("filter"))
+        .collect()
+}
+
 fn sample(name: &str) -> String {
     format!("{}/../samples/{name}", env!("CARGO_MANIFEST_DIR"))
 }
@@ -187,10 +195,7 @@ fn reference(recs: &[Value], filter: Option<&Filter>) -> (Vec<u64>, String) {
 
 #[test]
 fn scan_equals_the_pipeline_selection_and_its_statistics() {
-    let filters: Vec<Filter> = FILTERS
-        .iter()
-        .map(|t| Filter::parse(t).expect("filter"))
-        .collect();
+    let filters = filters();
     let mut total = vec![0; filters.len()];
     let (_dir, synth) = synthetic();
     for path in samples().into_iter().chain([synth]) {
@@ -301,10 +306,7 @@ fn the_compact_view_reads_like_the_decoded_record() {
 /// the index that keeps them in memory (as live sources do).
 #[test]
 fn reading_bytes_back_from_the_file_changes_no_answer() {
-    let filters: Vec<Filter> = FILTERS
-        .iter()
-        .map(|t| Filter::parse(t).expect("filter"))
-        .collect();
+    let filters = filters();
     let (_dir, synth) = synthetic();
     let paths = [sample("damaged.bin"), sample("sessions/damaged.bin"), synth];
     for path in paths {
