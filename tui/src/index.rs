@@ -473,7 +473,7 @@ pub struct Index {
     pub arena: Vec<u8>,
     /// The capture file records' bytes are read from (by capture offset) instead of the
     /// arena: a raw capture, whose capture offsets are file positions.
-    pub file: Option<std::fs::File>,
+    pub file: Option<ReadBack>,
     /// Elliptec modules as the bus knew them (indexed by `Rec::module - 1`).
     pub modules: Vec<Module>,
     /// APT: the stage conversions records use (indexed by `Rec::module - 1`).
@@ -520,12 +520,9 @@ impl Index {
     /// file can no longer give them).
     pub fn bytes(&self, r: &Rec) -> Cow<'_, [u8]> {
         if let Some(f) = &self.file {
-            use std::os::unix::fs::FileExt;
-            let mut buf = vec![0; r.len as usize];
-            return match f.read_exact_at(&mut buf, r.cap_offset) {
-                Ok(()) => Cow::Owned(buf),
-                Err(_) => Cow::Borrowed(&[]),
-            };
+            return f
+                .read(r.cap_offset, r.len as usize)
+                .map_or(Cow::Borrowed(&[]), Cow::Owned);
         }
         let s = r.start as usize;
         Cow::Borrowed(self.arena.get(s..s + r.len as usize).unwrap_or(&[]))
@@ -537,6 +534,65 @@ impl Index {
     /// Whether records were seen on more than one stream.
     pub fn multi_stream(&self) -> bool {
         self.streams_seen.count_ones() > 1
+    }
+}
+
+/// A capture file records' bytes are read back from ([`Index::file`]).
+#[derive(Debug)]
+pub struct ReadBack {
+    file: std::fs::File,
+    /// Tells this file's [`WINDOW`] from another index's.
+    id: u64,
+}
+
+/// Bytes read back at once: records read in order (a filter's scan, a screen of rows) cost one
+/// read of the file per window, not one each.
+const WINDOW_LEN: usize = 64 << 10;
+
+thread_local! {
+    /// The part of a file this thread read back last: ([`ReadBack::id`], its file position,
+    /// its bytes).
+    static WINDOW: std::cell::RefCell<(u64, u64, Vec<u8>)> =
+        const { std::cell::RefCell::new((0, 0, Vec::new())) };
+}
+
+impl ReadBack {
+    /// Read records' bytes back from the file at `path`.
+    pub fn open(path: &str) -> std::io::Result<Self> {
+        static NEXT: AtomicU64 = AtomicU64::new(1);
+        Ok(ReadBack {
+            file: std::fs::File::open(path)?,
+            id: NEXT.fetch_add(1, Ordering::Relaxed),
+        })
+    }
+
+    /// The `len` bytes at `at`, when the file has them.
+    fn read(&self, at: u64, len: usize) -> Option<Vec<u8>> {
+        use std::os::unix::fs::FileExt;
+        if len > WINDOW_LEN {
+            let mut buf = vec![0; len];
+            return self.file.read_exact_at(&mut buf, at).ok().map(|()| buf);
+        }
+        WINDOW.with_borrow_mut(|(id, start, buf)| {
+            let end = at.checked_add(len as u64)?;
+            let inside = *id == self.id && at >= *start && end <= *start + buf.len() as u64;
+            if !inside {
+                buf.resize(WINDOW_LEN, 0);
+                let mut got = 0;
+                while got < WINDOW_LEN {
+                    match self.file.read_at(&mut buf[got..], at + got as u64) {
+                        Ok(0) => break,
+                        Ok(n) => got += n,
+                        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                        Err(_) => break,
+                    }
+                }
+                buf.truncate(got);
+                (*id, *start) = (self.id, at);
+            }
+            let from = usize::try_from(at - *start).ok()?;
+            buf.get(from..from + len).map(<[u8]>::to_vec)
+        })
     }
 }
 
@@ -689,7 +745,7 @@ fn read_back(shared: &Shared, reader: &dyn Reader, file: Option<&str>) -> bool {
     if reader.format() != "raw bytes" {
         return false;
     }
-    let Some(f) = file.and_then(|p| std::fs::File::open(p).ok()) else {
+    let Some(f) = file.and_then(|p| ReadBack::open(p).ok()) else {
         return false;
     };
     match shared.index.write() {
@@ -1455,6 +1511,43 @@ impl Publication {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Two files read back in turn on one thread give their own bytes (each read misses the
+    /// other's window), across windows and up to their ends.
+    #[test]
+    fn files_read_back_give_their_own_bytes() {
+        let dir = std::env::temp_dir().join(format!("aptscope-readback-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let data: Vec<Vec<u8>> = (0..2u8)
+            .map(|k| {
+                (0..WINDOW_LEN * 2 + 100)
+                    .map(|i| (i % 251) as u8 ^ k)
+                    .collect()
+            })
+            .collect();
+        let files: Vec<ReadBack> = data
+            .iter()
+            .enumerate()
+            .map(|(k, d)| {
+                let p = dir.join(format!("{k}.bin"));
+                std::fs::write(&p, d).expect("write");
+                ReadBack::open(&p.to_string_lossy()).expect("open")
+            })
+            .collect();
+        let _ = std::fs::remove_dir_all(&dir);
+        let end = data[0].len();
+        for (at, len) in [
+            (0, 10),
+            (WINDOW_LEN - 3, 6),
+            (5, WINDOW_LEN + 7),
+            (end - 4, 4),
+        ] {
+            for (f, d) in files.iter().zip(&data) {
+                assert_eq!(f.read(at as u64, len).as_deref(), d.get(at..at + len));
+            }
+        }
+        assert_eq!(files[0].read(end as u64 - 2, 4), None);
+    }
 
     /// Records of every shape (offsets and times going back and far ahead, no time, old and
     /// new module entries, values too wide for their slot, offsets apart from the capture's
