@@ -1097,7 +1097,12 @@ impl Sink {
     #[inline(always)]
     fn add(&mut self, n: u64, mut rec: Rec, bytes: &[u8]) {
         while self.base + (self.batch.len() as u64) + 1 < n {
-            let start = self.arena_base + self.arena.len() as u64;
+            // Read back from the file, a record starts at its capture offset (and is then
+            // stored without a position apart from it).
+            let start = match self.from_file {
+                true => rec.cap_offset,
+                false => self.arena_base + self.arena.len() as u64,
+            };
             self.batch.push(Rec {
                 start,
                 len: 0,
