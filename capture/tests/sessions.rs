@@ -14,6 +14,7 @@ use aptscope_capture::live::session::{
 use aptscope_capture::{Direction, OwnedChunk};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::pipeline::{Format as OutFormat, Pipeline};
+use aptscope_dissector::Table;
 use scratch::scratch;
 use std::path::{Path, PathBuf};
 
@@ -165,7 +166,11 @@ fn sessions_show_what_their_readme_says() {
 fn exchange(proto: Proto, chunks: &[OwnedChunk]) -> Vec<(Direction, String)> {
     frame_names(proto, chunks)
         .into_iter()
-        .filter(|(_, n)| !STATUS_UPDATES.contains(&n.as_str()))
+        .filter(|(_, n)| {
+            !STATUS_UPDATES
+                .iter()
+                .any(|&id| Table::global().msg(id).is_some_and(|m| m.name == n))
+        })
         .collect()
 }
 

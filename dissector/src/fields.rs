@@ -12,139 +12,12 @@ use crate::apt::{text_of, AptFrame, Value as AptValue};
 use crate::diag::Diag;
 use crate::ell::table::Kind as EllKind;
 use crate::ell::EllValue;
-use crate::record::{AptRec, EllRec, Record};
+use crate::record::{AptRec, EllRec, GarbageRec, Record};
+use crate::shape::{self, curve_members, ell_derived, CurveNum, DerivedVal, EllDerived, Head};
 use std::borrow::Cow;
 
-/// The top-level keys of records, as filters and statistics name them.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-#[allow(missing_docs)]
-pub enum Key {
-    File,
-    N,
-    Proto,
-    Type,
-    Offset,
-    CapOffset,
-    Len,
-    Raw,
-    Msgid,
-    MsgidHex,
-    Name,
-    MsgDir,
-    Src,
-    Dst,
-    DataFlag,
-    DataLen,
-    FormNote,
-    Channel,
-    Sub,
-    Fields,
-    Phys,
-    Codes,
-    Pair,
-    LatencyMs,
-    PairOtherAddress,
-    Interim,
-    Diag,
-    Dir,
-    TsNs,
-    Stream,
-    StreamName,
-    Ref,
-    Unpaired,
-    Paired,
-    Text,
-    Addr,
-    Cmd,
-    Module,
-}
-
-/// Usable without a protocol prefix.
-pub const TOP: u8 = 1;
-/// A key of APT records (`apt.` prefix).
-pub const APT: u8 = 2;
-/// A key of Elliptec records (`ell.` prefix).
-pub const ELL: u8 = 4;
-
-/// One name a filter may use: the key it reads and where it is valid.
-#[derive(Clone, Copy, Debug)]
-pub struct KeyDef {
-    /// The name as written in a filter (an NDJSON key, or an alias of one).
-    pub name: &'static str,
-    /// The key read.
-    pub key: Key,
-    /// [`TOP`], [`APT`], [`ELL`] bits.
-    pub scope: u8,
-}
-
-const fn k(name: &'static str, key: Key, scope: u8) -> KeyDef {
-    KeyDef { name, key, scope }
-}
-
-/// Every name of the filter language: NDJSON keys and the aliases `chan` (`channel`), `ts`
-/// (`ts_ns`, in seconds), `latency` (`latency_ms`). The one list the name check, the
-/// suggestions and the accessors share.
-pub const KEYS: &[KeyDef] = &[
-    k("file", Key::File, TOP),
-    k("n", Key::N, TOP | APT | ELL),
-    k("proto", Key::Proto, TOP | APT | ELL),
-    k("type", Key::Type, TOP | APT | ELL),
-    k("offset", Key::Offset, TOP | APT | ELL),
-    k("cap_offset", Key::CapOffset, TOP | APT | ELL),
-    k("len", Key::Len, TOP | APT | ELL),
-    k("raw", Key::Raw, TOP | APT | ELL),
-    k("msgid", Key::Msgid, APT),
-    k("msgid_hex", Key::MsgidHex, APT),
-    k("name", Key::Name, APT | ELL),
-    k("msg_dir", Key::MsgDir, APT),
-    k("src", Key::Src, APT),
-    k("dst", Key::Dst, APT),
-    k("data_flag", Key::DataFlag, APT),
-    k("data_len", Key::DataLen, APT),
-    k("form_note", Key::FormNote, APT),
-    k("channel", Key::Channel, APT),
-    k("chan", Key::Channel, APT),
-    k("sub", Key::Sub, APT),
-    k("text", Key::Text, ELL),
-    k("addr", Key::Addr, ELL),
-    k("cmd", Key::Cmd, ELL),
-    k("fields", Key::Fields, APT | ELL),
-    k("phys", Key::Phys, APT | ELL),
-    k("codes", Key::Codes, APT | ELL),
-    k("module", Key::Module, ELL),
-    k("pair", Key::Pair, TOP | APT | ELL),
-    k("latency", Key::LatencyMs, TOP | APT | ELL),
-    k("latency_ms", Key::LatencyMs, TOP | APT | ELL),
-    k("pair_other_address", Key::PairOtherAddress, APT),
-    k("interim", Key::Interim, TOP | ELL),
-    k("diag", Key::Diag, TOP | APT | ELL),
-    k("dir", Key::Dir, TOP | APT | ELL),
-    k("ts", Key::TsNs, TOP | APT | ELL),
-    k("ts_ns", Key::TsNs, TOP | APT | ELL),
-    k("stream", Key::Stream, TOP | APT | ELL),
-    // Read by statistics, not offered to filters (it would be suggested for `name`).
-    k("stream_name", Key::StreamName, 0),
-    k("ref", Key::Ref, TOP | APT | ELL),
-    k("unpaired", Key::Unpaired, TOP | APT | ELL),
-    k("paired", Key::Paired, TOP | APT | ELL),
-];
-
-impl Key {
-    /// The key's NDJSON name.
-    pub fn json_name(self) -> &'static str {
-        match self {
-            Key::Channel => "channel",
-            Key::LatencyMs => "latency_ms",
-            Key::TsNs => "ts_ns",
-            other => KEYS.iter().find(|d| d.key == other).map_or("", |d| d.name),
-        }
-    }
-
-    /// The definition of a filter name valid in `scope`.
-    pub fn lookup(name: &str, scope: u8) -> Option<&'static KeyDef> {
-        KEYS.iter().find(|d| d.name == name && d.scope & scope != 0)
-    }
-}
+// The key list and the `codes` rules live with the rest of the record's shape.
+pub use crate::shape::{apt_code, ell_code, Key, KeyDef, APT, ELL, KEYS, TOP};
 
 /// A number: integers stay exact.
 #[derive(Clone, Copy, Debug)]
@@ -390,9 +263,9 @@ fn float(x: f64) -> Option<Val<'static>> {
 }
 
 fn hex(b: &[u8]) -> Val<'static> {
-    let mut s = String::with_capacity(b.len() * 2 + 2);
-    crate::json::hex(&mut s, b);
-    Val::Str(Cow::Owned(s.trim_matches('"').to_string()))
+    let mut s = String::with_capacity(b.len() * 2);
+    crate::shape::hex_digits(&mut s, b);
+    Val::Str(Cow::Owned(s))
 }
 
 /// A member object given as `(name, value)` pairs: the path below it, or itself.
@@ -503,40 +376,19 @@ impl Fields for Record<'_> {
     // What `visit` gives as one plain number or word for the commonest keys of frames and
     // garbage (statistics and filters read them for every record).
     fn number(&self, key: Key) -> Option<i64> {
-        let (m, offset, len, pair) = match self {
-            Record::Apt(a) => (&a.meta, a.frame.offset, a.frame.bytes.len(), a.pair.pair),
-            Record::Ell(e) => (&e.meta, e.frame.offset, e.frame.bytes.len(), e.obs.pair),
-            Record::Garbage(g) => (&g.meta, g.offset, g.bytes.len(), None),
-            _ => return None,
-        };
-        let frame = !matches!(self, Record::Garbage(_));
-        let x: u64 = match key {
-            Key::N => m.n,
-            Key::Offset => offset,
-            Key::CapOffset => m.cap_offset,
-            Key::Len => len as u64,
-            Key::Stream => u64::from(m.stream),
-            Key::TsNs => m.ts_ns?,
-            Key::Pair if frame => pair?,
-            Key::Msgid => match self {
-                Record::Apt(a) => u64::from(a.frame.header().msg_id()),
-                _ => return None,
-            },
-            Key::Channel => match self {
-                Record::Apt(a) => return a.frame.channel(),
-                _ => return None,
-            },
-            _ => return None,
-        };
-        i64::try_from(x).ok()
+        match self {
+            Record::Apt(a) => shape::number(a, key),
+            Record::Ell(e) => shape::number(e, key),
+            Record::Garbage(g) => shape::number(g, key),
+            _ => None,
+        }
     }
 
     fn word(&self, key: Key) -> Option<&'static str> {
-        match (self, key) {
-            (Record::Apt(_) | Record::Ell(_), Key::Type) => Some("frame"),
-            (Record::Garbage(_), Key::Type) => Some("garbage"),
-            (Record::Apt(a), Key::Dir) => Some(a.dir().map_or("unknown", |d| d.as_str())),
-            (Record::Apt(a), Key::Name) => a.frame.msg.map(|m| m.name),
+        match self {
+            Record::Apt(a) => shape::word(a, key),
+            Record::Ell(e) => shape::word(e, key),
+            Record::Garbage(g) => shape::word(g, key),
             _ => None,
         }
     }
@@ -545,130 +397,224 @@ impl Fields for Record<'_> {
         match self {
             Record::Apt(a) => apt_visit(a, key, rest, f),
             Record::Ell(e) => ell_visit(e, key, rest, f),
-            Record::Garbage(g) => {
-                let m = &g.meta;
-                let v = match key {
-                    Key::N => num(m.n),
-                    Key::Proto => str_val(g.proto.code()),
-                    Key::Type => str_val("garbage"),
-                    Key::Offset => num(g.offset),
-                    Key::CapOffset => num(m.cap_offset),
-                    Key::Len => num(g.bytes.len() as u64),
-                    Key::Raw => hex(g.bytes),
-                    Key::Text if g.kind.is_none() => Val::Str(String::from_utf8_lossy(g.bytes)),
-                    Key::Diag => {
-                        let d = match g.kind {
-                            Some(kind) => crate::json::garbage_diag(g.offset, g.bytes.len(), kind),
-                            None => Diag {
-                                offset: g.offset,
-                                kind: crate::DiagKind::Garbage {
-                                    len: g.bytes.len() as u32,
-                                },
-                            },
-                        };
-                        diag_list(rest, std::iter::once(d), f);
-                        return true;
-                    }
-                    // Elliptec garbage has no direction (the bus tells none).
-                    Key::Dir if g.kind.is_some() => {
-                        str_val(m.cap_dir.map_or("unknown", |d| d.as_str()))
-                    }
-                    Key::TsNs => match m.ts_ns {
-                        Some(t) => num(t),
-                        None => return false,
-                    },
-                    Key::Stream => num(m.stream),
-                    _ => return false,
-                };
-                scalar(rest, v, f);
-                true
-            }
-            Record::NoReply(e) => {
-                let v = match key {
-                    Key::Proto => str_val(e.proto.code()),
-                    Key::Type => str_val("diag"),
-                    Key::Ref => num(e.n),
-                    Key::Stream => num(e.stream),
-                    Key::Diag => {
-                        diag_list(rest, std::iter::once(e.diag()), f);
-                        return true;
-                    }
-                    _ => return false,
-                };
-                scalar(rest, v, f);
-                true
-            }
-            Record::Detect {
-                proto, detection, ..
-            } => {
-                let v = match key {
-                    Key::Type => str_val("detect"),
-                    Key::Proto => str_val(proto.code()),
-                    _ => return false,
-                };
-                let _ = detection;
-                scalar(rest, v, f);
-                true
-            }
-            Record::Stream { id, name, .. } => {
-                let v = match key {
-                    Key::Type => str_val("stream"),
-                    Key::Stream => num(*id),
-                    Key::StreamName => str_val(name),
-                    _ => return false,
-                };
-                scalar(rest, v, f);
-                true
-            }
-            Record::Input(d) => match key {
-                Key::Type => {
-                    scalar(rest, str_val("input"), f);
-                    true
-                }
-                Key::Diag => {
-                    diag_list(rest, std::iter::once(*d), f);
-                    true
-                }
-                _ => false,
-            },
-            Record::FileDiag { offset, kind, msg } => match key {
-                Key::Type => {
-                    scalar(rest, str_val("input"), f);
-                    true
-                }
-                Key::Diag => {
-                    let members = [
-                        ("kind", Some(str_val(kind))),
-                        ("offset", Some(num(*offset))),
-                        ("msg", Some(str_val(msg))),
-                    ];
-                    object(rest, &members, Role::Member, f);
-                    true
-                }
-                _ => false,
-            },
-            Record::Units(nt) => match key {
-                Key::Type => {
-                    scalar(rest, str_val("units"), f);
-                    true
-                }
-                Key::Stream => {
-                    scalar(rest, num(nt.stream), f);
-                    true
-                }
-                Key::Raw => {
-                    use crate::units::Resolution;
-                    let why = match &nt.resolution {
-                        Resolution::Scale(_) => return false,
-                        Resolution::Raw(why) => Cow::Borrowed(why.as_ref()),
-                        Resolution::None => Cow::Borrowed("no stage"),
-                    };
-                    scalar(rest, Val::Str(why), f);
-                    true
-                }
-                _ => false,
-            },
+            _ => other_visit(self, key, rest, f),
         }
+    }
+}
+
+/// [`Fields::visit`] of the records that are not frames. Out of line: it keeps the frames'
+/// path, which statistics and filters take for every record, small enough to be inlined.
+#[inline(never)]
+fn other_visit(
+    rec: &Record<'_>,
+    key: Key,
+    rest: &[String],
+    f: &mut dyn FnMut(Val<'_>, Role),
+) -> bool {
+    match rec {
+        Record::Apt(_) | Record::Ell(_) => {
+            unreachable!("frames are visited by apt_visit and ell_visit")
+        }
+        Record::Garbage(g) => {
+            let m = &g.meta;
+            let v = match key {
+                Key::N => num(m.n),
+                Key::Proto => str_val(g.proto.code()),
+                Key::Type => str_val("garbage"),
+                Key::Offset => num(g.offset),
+                Key::CapOffset => num(m.cap_offset),
+                Key::Len => num(g.bytes.len() as u64),
+                Key::Raw => hex(g.bytes),
+                Key::Text if g.kind.is_none() => Val::Str(String::from_utf8_lossy(g.bytes)),
+                Key::Diag => {
+                    let d = match g.kind {
+                        Some(kind) => crate::shape::garbage_diag(g.offset, g.bytes.len(), kind),
+                        None => Diag {
+                            offset: g.offset,
+                            kind: crate::DiagKind::Garbage {
+                                len: g.bytes.len() as u32,
+                            },
+                        },
+                    };
+                    diag_list(rest, std::iter::once(d), f);
+                    return true;
+                }
+                // Elliptec garbage has no direction (the bus tells none).
+                Key::Dir if g.kind.is_some() => {
+                    str_val(m.cap_dir.map_or("unknown", |d| d.as_str()))
+                }
+                Key::TsNs => match m.ts_ns {
+                    Some(t) => num(t),
+                    None => return false,
+                },
+                Key::Stream => num(m.stream),
+                _ => return false,
+            };
+            scalar(rest, v, f);
+            true
+        }
+        Record::NoReply(e) => {
+            let v = match key {
+                Key::Proto => str_val(e.proto.code()),
+                Key::Type => str_val("diag"),
+                Key::Ref => num(e.n),
+                Key::Stream => num(e.stream),
+                Key::Diag => {
+                    diag_list(rest, std::iter::once(e.diag()), f);
+                    return true;
+                }
+                _ => return false,
+            };
+            scalar(rest, v, f);
+            true
+        }
+        Record::Detect {
+            proto, detection, ..
+        } => {
+            let v = match key {
+                Key::Type => str_val("detect"),
+                Key::Proto => str_val(proto.code()),
+                _ => return false,
+            };
+            let _ = detection;
+            scalar(rest, v, f);
+            true
+        }
+        Record::Stream { id, name, .. } => {
+            let v = match key {
+                Key::Type => str_val("stream"),
+                Key::Stream => num(*id),
+                Key::StreamName => str_val(name),
+                _ => return false,
+            };
+            scalar(rest, v, f);
+            true
+        }
+        Record::Input(d) => match key {
+            Key::Type => {
+                scalar(rest, str_val("input"), f);
+                true
+            }
+            Key::Diag => {
+                diag_list(rest, std::iter::once(*d), f);
+                true
+            }
+            _ => false,
+        },
+        Record::FileDiag { offset, kind, msg } => match key {
+            Key::Type => {
+                scalar(rest, str_val("input"), f);
+                true
+            }
+            Key::Diag => {
+                let members = [
+                    ("kind", Some(str_val(kind))),
+                    ("offset", Some(num(*offset))),
+                    ("msg", Some(str_val(msg))),
+                ];
+                object(rest, &members, Role::Member, f);
+                true
+            }
+            _ => false,
+        },
+        Record::Units(nt) => match key {
+            Key::Type => {
+                scalar(rest, str_val("units"), f);
+                true
+            }
+            Key::Stream => {
+                scalar(rest, num(nt.stream), f);
+                true
+            }
+            Key::Raw => {
+                use crate::units::Resolution;
+                let why = match &nt.resolution {
+                    Resolution::Scale(_) => return false,
+                    Resolution::Raw(why) => Cow::Borrowed(why.as_ref()),
+                    Resolution::None => Cow::Borrowed("no stage"),
+                };
+                scalar(rest, Val::Str(why), f);
+                true
+            }
+            _ => false,
+        },
+    }
+}
+
+/// The [`Head`] values APT and Elliptec frames give alike, from their context and bytes.
+macro_rules! frame_head {
+    () => {
+        fn n(&self) -> u64 {
+            self.meta.n
+        }
+        fn kind(&self) -> &'static str {
+            "frame"
+        }
+        fn offset(&self) -> u64 {
+            self.frame.offset
+        }
+        fn cap_offset(&self) -> u64 {
+            self.meta.cap_offset
+        }
+        fn len_bytes(&self) -> u64 {
+            self.frame.bytes.len() as u64
+        }
+        fn stream(&self) -> u32 {
+            self.meta.stream
+        }
+        fn ts_ns(&self) -> Option<u64> {
+            self.meta.ts_ns
+        }
+    };
+}
+
+impl Head for AptRec<'_> {
+    frame_head!();
+    fn pair(&self) -> Option<u64> {
+        self.pair.pair
+    }
+    fn msgid(&self) -> Option<u16> {
+        Some(self.frame.header().msg_id())
+    }
+    fn channel(&self) -> Option<i64> {
+        self.frame.channel()
+    }
+    fn dir(&self) -> Option<&'static str> {
+        Some(AptRec::dir(self).map_or("unknown", |d| d.as_str()))
+    }
+    fn name(&self) -> Option<&'static str> {
+        self.frame.msg.map(|m| m.name)
+    }
+}
+
+impl Head for EllRec<'_> {
+    frame_head!();
+    fn pair(&self) -> Option<u64> {
+        self.obs.pair
+    }
+}
+
+impl Head for GarbageRec<'_> {
+    fn n(&self) -> u64 {
+        self.meta.n
+    }
+    fn kind(&self) -> &'static str {
+        "garbage"
+    }
+    fn offset(&self) -> u64 {
+        self.offset
+    }
+    fn cap_offset(&self) -> u64 {
+        self.meta.cap_offset
+    }
+    fn len_bytes(&self) -> u64 {
+        self.bytes.len() as u64
+    }
+    fn stream(&self) -> u32 {
+        self.meta.stream
+    }
+    fn ts_ns(&self) -> Option<u64> {
+        self.meta.ts_ns
     }
 }
 
@@ -728,26 +674,6 @@ fn apt_value<'v>(
     }
 }
 
-/// The numeric code of an enum or flag field (what `codes` holds).
-pub fn apt_code(fd: &crate::table::Field, v: &AptValue<'_>) -> Option<i128> {
-    if fd.enumeration.is_none() && fd.flags.is_none() {
-        return None;
-    }
-    match v {
-        AptValue::U(x) => Some(i128::from(*x)),
-        AptValue::I(x) => Some(i128::from(*x)),
-        _ => None,
-    }
-}
-
-/// The numeric code of an Elliptec field shown by name (status codes).
-pub fn ell_code(fd: &crate::ell::table::Field, v: &EllValue<'_>) -> Option<u64> {
-    match (fd.kind, v) {
-        (EllKind::Status, EllValue::U(c)) => Some(*c),
-        _ => None,
-    }
-}
-
 fn apt_visit(a: &AptRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
     let fr = a.frame;
     let h = fr.header();
@@ -760,7 +686,7 @@ fn apt_visit(a: &AptRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_
     };
     if let Some(found) = frame_key(
         &common,
-        || crate::json::apt_diags(fr, a.pair),
+        || crate::shape::apt_diags(fr, a.pair),
         || {
             fr.fields()
                 .filter_map(|(fd, v)| Some((fd.name, crate::apt::phys_or_scaled(fd, &v, a.scale)?)))
@@ -864,8 +790,8 @@ fn own(v: Val<'_>) -> Val<'static> {
     }
 }
 
-/// The value of an Elliptec field, or of a key NDJSON derives beside it (`curve_points`,
-/// `<name>_name`, `<name>_version`, `thread`, `hw_release`), by name.
+/// The value of an Elliptec field, or of a key NDJSON derives beside it
+/// ([`crate::shape::ell_derived`]), by name.
 fn ell_field(
     fr: &crate::ell::EllFrame<'_>,
     name: &str,
@@ -873,74 +799,52 @@ fn ell_field(
     f: &mut dyn FnMut(Val<'_>, Role),
 ) {
     // The last key of that name wins, as in a JSON object with a repeated key.
-    let mut last: Option<(&crate::ell::table::Field, EllValue<'_>, u8)> = None;
+    let mut last: Option<(&crate::ell::table::Field, EllValue<'_>, Option<&EllDerived>)> = None;
     for (fd, v) in fr.fields() {
-        let which = if fd.name == name {
-            1
-        } else {
-            match (fd.kind, v) {
-                (EllKind::Raw, EllValue::Raw(_)) if name == "curve_points" => 2,
-                (EllKind::Model, EllValue::U(_)) if name.strip_suffix("_name") == Some(fd.name) => {
-                    3
-                }
-                (EllKind::Firmware, EllValue::U(_))
-                    if name.strip_suffix("_version") == Some(fd.name) =>
-                {
-                    4
-                }
-                (EllKind::ThreadHw, EllValue::U(_)) if name == "thread" => 5,
-                (EllKind::ThreadHw, EllValue::U(_)) if name == "hw_release" => 6,
-                _ => 0,
-            }
-        };
-        if which > 0 {
-            last = Some((fd, v, which));
+        if fd.name == name {
+            last = Some((fd, v, None));
+        } else if let Some(d) = ell_derived(fd.kind)
+            .iter()
+            .find(|d| d.name.is(name, fd.name) && (d.value)(&v).is_some())
+        {
+            last = Some((fd, v, Some(d)));
         }
     }
-    let Some((fd, v, which)) = last else { return };
-    match (which, v) {
-        (1, v) => {
-            let x = match (fd.kind, v) {
-                (EllKind::Status, EllValue::U(c)) => {
-                    str_val(crate::ell::table::status_name(c as u32))
-                }
-                (_, EllValue::U(x)) => num(x),
-                (_, EllValue::I(x)) => num(x),
-                (_, EllValue::Char(c)) => Val::Str(Cow::Owned(c.to_string())),
-                (_, EllValue::Digits(d)) => Val::Str(Cow::Owned(d.to_string())),
-                (_, EllValue::Raw(b)) => hex(b),
-            };
-            scalar(rest, x, f);
-            if rest.is_empty() {
-                if let Some(c) = ell_code(fd, &v) {
-                    f(num(c), Role::Code);
-                }
+    let Some((fd, v, derived)) = last else { return };
+    let Some(d) = derived else {
+        let x = match (fd.kind, v) {
+            (EllKind::Status, EllValue::U(c)) => str_val(crate::ell::table::status_name(c as u32)),
+            (_, EllValue::U(x)) => num(x),
+            (_, EllValue::I(x)) => num(x),
+            (_, EllValue::Char(c)) => Val::Str(Cow::Owned(c.to_string())),
+            (_, EllValue::Digits(d)) => Val::Str(Cow::Owned(d.to_string())),
+            (_, EllValue::Raw(b)) => hex(b),
+        };
+        scalar(rest, x, f);
+        if rest.is_empty() {
+            if let Some(c) = ell_code(fd, &v) {
+                f(num(c), Role::Code);
             }
         }
-        (2, EllValue::Raw(b)) => {
+        return;
+    };
+    match (d.value)(&v) {
+        Some(DerivedVal::Curve(b)) => {
             for p in crate::ell::curve_points(b) {
-                let members = [
-                    ("period", Some(num(p.period))),
-                    ("current", Some(num(p.current))),
-                    ("hz", float(p.hz().round())),
-                    ("amps", float(crate::apt::round_sig(p.amps()))),
-                ];
+                let members = curve_members(&p).map(|(n, x)| {
+                    let x = match x {
+                        CurveNum::U(u) => Some(num(u)),
+                        CurveNum::F(x) => float(x),
+                    };
+                    (n, x)
+                });
                 object(rest, &members, Role::Member, f);
             }
         }
-        (3, EllValue::U(x)) => scalar(rest, Val::Str(Cow::Owned(format!("ELL{x}"))), f),
-        (4, EllValue::U(x)) => scalar(
-            rest,
-            Val::Str(Cow::Owned(format!("{}.{}", x >> 4, x & 15))),
-            f,
-        ),
-        (5, EllValue::U(x)) => scalar(
-            rest,
-            str_val(if x & 0x80 != 0 { "imperial" } else { "metric" }),
-            f,
-        ),
-        (6, EllValue::U(x)) => scalar(rest, num(x & 0x7F), f),
-        _ => {}
+        Some(DerivedVal::Word(w)) => scalar(rest, str_val(w), f),
+        Some(DerivedVal::Uint(x)) => scalar(rest, num(x), f),
+        Some(x) => scalar(rest, Val::Str(Cow::Owned(x.to_string())), f),
+        None => {}
     }
 }
 
@@ -959,7 +863,7 @@ fn ell_visit(e: &EllRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_
         || fr.diags().iter().copied(),
         || {
             fr.fields()
-                .filter_map(move |(fd, v)| Some((fd.name, crate::json::ell_phys(fd, &v, scale)?)))
+                .filter_map(move |(fd, v)| Some((fd.name, crate::shape::ell_phys(fd, &v, scale)?)))
         },
         || {
             fr.fields()
@@ -1006,7 +910,9 @@ fn ell_visit(e: &EllRec<'_>, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_
                     ("first_addr", Some(num(md.first_addr))),
                     (
                         "model",
-                        md.model.map(|x| Val::Str(Cow::Owned(format!("ELL{x}")))),
+                        md.model.map(|x| {
+                            Val::Str(Cow::Owned(DerivedVal::Model(u64::from(x)).to_string()))
+                        }),
                     ),
                     ("serial", md.serial.as_deref().map(str_val)),
                 ];

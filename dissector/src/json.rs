@@ -8,8 +8,12 @@ use crate::diag::{Diag, DiagKind};
 use crate::ell::{EllFrame, EllValue, Observation};
 use crate::pair::PairInfo;
 use crate::record::{Meta, Record};
+use crate::shape::{curve_members, ell_derived, CurveNum, DerivedName, DerivedVal};
 use crate::table::{Field, Table};
 use crate::units::{Notice, Scale};
+
+// Kept here too, where callers found them before [`crate::shape`] held them.
+pub use crate::shape::{apt_diags, ell_phys, garbage_diag, hex_digits};
 use std::fmt::Write;
 
 /// Where a record's shape is written: objects, lists and scalars, in document order. A value
@@ -206,20 +210,6 @@ pub fn hex(out: &mut String, b: &[u8]) {
     out.push('"');
     hex_digits(out, b);
     out.push('"');
-}
-
-/// Append bytes as lower-case hex digits (no quotes).
-pub fn hex_digits(out: &mut String, b: &[u8]) {
-    const H: &[u8; 16] = b"0123456789abcdef";
-    // Through a stack buffer: pushing chars one by one costs a UTF-8 encode each.
-    let mut buf = [0u8; 128];
-    for part in b.chunks(buf.len() / 2) {
-        for (i, &x) in part.iter().enumerate() {
-            buf[2 * i] = H[(x >> 4) as usize];
-            buf[2 * i + 1] = H[(x & 15) as usize];
-        }
-        out.push_str(std::str::from_utf8(&buf[..2 * part.len()]).unwrap_or_default());
-    }
 }
 
 /// Append a float (non-finite as `null`).
@@ -588,7 +578,7 @@ fn apt_members<S: Sink + ?Sized>(
         codes(
             out,
             f.fields()
-                .filter_map(|(fd, v)| Some((fd.name, crate::fields::apt_code(fd, &v)?))),
+                .filter_map(|(fd, v)| Some((fd.name, crate::shape::apt_code(fd, &v)?))),
         );
     }
     pairing(out, p.pair, p.latency_ns);
@@ -657,12 +647,6 @@ fn codes<S: Sink + ?Sized>(out: &mut S, items: impl Iterator<Item = (&'static st
     }
 }
 
-/// The diagnostics of an APT frame: the decoder's, then pairing's (`unsolicited`,
-/// `duplicate_reply`, `not_for_model`).
-pub fn apt_diags<'x>(f: &'x AptFrame<'_, '_>, p: &'x PairInfo) -> impl Iterator<Item = Diag> + 'x {
-    f.diags().chain(p.diags(f.offset))
-}
-
 /// The object of a units notice: what converts a device's motion values from now on
 /// (`{"type":"units","stream":0,"addr":{…},"model":"KDC101","stage":"MTS25-Z8",
 /// "family":"dc_servo","counts_per_unit":34554.96,"unit":"mm"}`), or why they stay raw
@@ -706,18 +690,6 @@ fn units_members<S: Sink + ?Sized>(out: &mut S, n: &Notice) {
             key!(out, "raw");
             out.plain("no stage");
         }
-    }
-}
-
-/// The diagnostic of a garbage record.
-pub fn garbage_diag(offset: u64, len: usize, kind: GarbageKind) -> Diag {
-    Diag {
-        offset,
-        kind: match kind {
-            GarbageKind::NoHeader => DiagKind::Garbage { len: len as u32 },
-            GarbageKind::AbsurdLength { msg_id, len } => DiagKind::AbsurdLength { msg_id, len },
-            GarbageKind::TrailingBytes => DiagKind::TrailingBytes { len: len as u32 },
-        },
     }
 }
 
@@ -773,21 +745,6 @@ fn apt_garbage_members<S: Sink + ?Sized>(
     );
 }
 
-/// An Elliptec position in the module's physical unit (rounded to 6 significant digits), when
-/// its pulses per unit are known: what `phys` gives beside the raw count.
-pub fn ell_phys(
-    fd: &crate::ell::table::Field,
-    v: &EllValue<'_>,
-    scale: Option<(f64, &'static str)>,
-) -> Option<(f64, &'static str)> {
-    match (fd.kind, v, scale) {
-        (crate::ell::table::Kind::Position, EllValue::I(p), Some((ppu, unit))) if ppu > 0.0 => {
-            Some((crate::apt::round_sig(*p as f64 / ppu), unit))
-        }
-        _ => None,
-    }
-}
-
 /// The `fields` object of an Elliptec frame: status codes by name, and the keys derived beside
 /// a field (`curve_points`, `<name>_name`, `<name>_version`, `thread`, `hw_release`).
 pub fn ell_fields<S: Sink + ?Sized>(out: &mut S, f: &EllFrame<'_>) {
@@ -803,42 +760,34 @@ pub fn ell_fields<S: Sink + ?Sized>(out: &mut S, f: &EllFrame<'_>) {
             (_, EllValue::Digits(d)) => out.str(d),
             (_, EllValue::Raw(b)) => out.hex(b),
         }
-        match (fd.kind, v) {
-            // The binary current curve, point by point.
-            (Kind::Raw, EllValue::Raw(b)) => {
-                key!(out, "curve_points");
-                out.begin_list();
-                for p in crate::ell::curve_points(b) {
-                    out.begin_obj();
-                    key!(out, "period");
-                    out.uint(u64::from(p.period));
-                    key!(out, "current");
-                    out.uint(u64::from(p.current));
-                    key!(out, "hz");
-                    out.float(p.hz().round());
-                    key!(out, "amps");
-                    out.float(crate::apt::round_sig(p.amps()));
-                    out.end_obj();
+        for d in ell_derived(fd.kind) {
+            let Some(x) = (d.value)(&v) else { continue };
+            match d.name {
+                DerivedName::Fixed(name) => out.key_static(name),
+                DerivedName::Suffix(s) => out.key(small(format_args!("{}{s}", fd.name)).as_str()),
+            }
+            match x {
+                DerivedVal::Word(w) => out.plain(w),
+                DerivedVal::Uint(x) => out.uint(x),
+                DerivedVal::Model(_) | DerivedVal::Version(_) => {
+                    out.plain(small(format_args!("{x}")).as_str())
                 }
-                out.end_list();
+                DerivedVal::Curve(b) => {
+                    out.begin_list();
+                    for p in crate::ell::curve_points(b) {
+                        out.begin_obj();
+                        for (name, v) in curve_members(&p) {
+                            out.key_static(name);
+                            match v {
+                                CurveNum::U(x) => out.uint(x),
+                                CurveNum::F(x) => out.float(x),
+                            }
+                        }
+                        out.end_obj();
+                    }
+                    out.end_list();
+                }
             }
-            // Coded numbers also as the text shows them (the number stays for scripts).
-            (Kind::Model, EllValue::U(x)) => {
-                out.key(small(format_args!("{}_name", fd.name)).as_str());
-                out.plain(small(format_args!("ELL{x}")).as_str());
-            }
-            (Kind::Firmware, EllValue::U(x)) => {
-                out.key(small(format_args!("{}_version", fd.name)).as_str());
-                out.plain(small(format_args!("{}.{}", x >> 4, x & 15)).as_str());
-            }
-            // The manual packs two facts into this byte: give each its own key too.
-            (Kind::ThreadHw, EllValue::U(x)) => {
-                key!(out, "thread");
-                out.plain(if x & 0x80 != 0 { "imperial" } else { "metric" });
-                key!(out, "hw_release");
-                out.uint(x & 0x7F);
-            }
-            _ => {}
         }
     }
     out.end_obj();
@@ -877,7 +826,7 @@ fn ell_members<S: Sink + ?Sized>(out: &mut S, n: u64, f: &EllFrame<'_>, o: &Obse
     codes(
         out,
         f.fields()
-            .filter_map(|(fd, v)| Some((fd.name, i128::from(crate::fields::ell_code(fd, &v)?)))),
+            .filter_map(|(fd, v)| Some((fd.name, i128::from(crate::shape::ell_code(fd, &v)?)))),
     );
     if let Some(m) = &o.module {
         key!(out, "module");
@@ -886,7 +835,7 @@ fn ell_members<S: Sink + ?Sized>(out: &mut S, n: u64, f: &EllFrame<'_>, o: &Obse
         out.uint(u64::from(m.first_addr));
         if let Some(x) = m.model {
             key!(out, "model");
-            out.plain(small(format_args!("ELL{x}")).as_str());
+            out.plain(small(format_args!("{}", DerivedVal::Model(u64::from(x)))).as_str());
         }
         if let Some(s) = &m.serial {
             key!(out, "serial");

@@ -21,6 +21,7 @@ pub mod msg;
 pub mod pair;
 pub mod pipeline;
 pub mod record;
+pub mod shape;
 pub mod spec_examples;
 pub mod stats;
 pub mod suggest;

@@ -305,7 +305,9 @@ impl AptPairer {
 
     /// Observe frame `n` (time of its first byte `ts`; `dir` when the capture records it): what
     /// pairing made of it goes into `info` (overwritten; its `expired` keeps its allocation, so
-    /// a decoder reuses one for every frame).
+    /// a decoder reuses one for every frame). The steps: expire what waited too long, check the
+    /// message against the device's model, then a request waits for its reply, and a reply is
+    /// matched to its request or else told a duplicate or unsolicited.
     pub fn observe(
         &mut self,
         table: &Table,
@@ -342,36 +344,48 @@ impl AptPairer {
         );
         if from_host {
             let expects = table.reply_ids(m);
-            if !expects.is_empty() {
-                let expects = Expects::new(expects);
-                if self.pending.len() >= MAX_PENDING {
-                    if let Some(p) = self.oldest().and_then(|k| self.remove(k)) {
-                        info.expired.push(Unanswered {
-                            n: p.n,
-                            offset: p.offset,
-                            name: p.name,
-                        });
-                    }
-                }
-                self.insert(Pending {
+            if !expects.is_empty() && !self.silent(table, h.dst_byte(), m.id) {
+                let p = Pending {
                     n,
                     offset: f.offset,
                     ts,
                     name: m.name,
                     id: m.id,
-                    expects,
+                    expects: Expects::new(expects),
                     device: h.dst_byte(),
                     chan,
                     timeout_ns: default_timeout_ns(m),
                     stop: m.class.has(Class::STOP),
-                });
+                };
+                self.wait(p, info);
             }
             return;
         }
         let src = h.src_byte();
-        let chan_ok = |c: Option<i64>| c.is_none() || chan.is_none() || c == chan;
-        // The oldest usable request (on the reply's channel, or naming none; any when the
-        // reply names none) to the replying address, else the oldest usable one.
+        match self.take_request(m, src, chan) {
+            Some(p) => self.answer(table, m, p, src, ts, info),
+            None => self.duplicate(m, src, chan, info),
+        }
+    }
+
+    /// A request waits for its replies (the oldest waiting one given up when too many wait).
+    fn wait(&mut self, p: Pending, info: &mut PairInfo) {
+        if self.pending.len() >= MAX_PENDING {
+            if let Some(old) = self.oldest().and_then(|k| self.remove(k)) {
+                info.expired.push(Unanswered {
+                    n: old.n,
+                    offset: old.offset,
+                    name: old.name,
+                });
+            }
+        }
+        self.insert(p);
+    }
+
+    /// The request a reply `m` from address `src` on `chan` answers, taken from the waiting
+    /// ones: the oldest usable request (on the reply's channel, or naming none; any when the
+    /// reply names none) to the replying address, else the oldest usable one.
+    fn take_request(&mut self, m: &MsgDef, src: u8, chan: Option<i64>) -> Option<Pending> {
         let (found, any) = match chan {
             None => oldest_in(self.by_reply.get(&m.id), src),
             Some(c) => {
@@ -384,93 +398,112 @@ impl AptPairer {
                 (older(f1, f2), older(a1, a2))
             }
         };
-        let found = found.or(any);
-        match found.and_then(|k| self.remove(k)) {
-            Some(p) => {
-                // Requests are answered first in, first out per (device, channel, reply). An
-                // end-of-move reply (`class=end_of_move`) also ends what the move it reports
-                // superseded: the other moves waiting on that device and channel (one
-                // MOVE_COMPLETED ends a move and the moves sent over it) and, when it answers a
-                // move, the oldest stop that ended it (MOVE_STOPPED completes a move and its
-                // stop). A stop is never swept by another stop's reply: a host that stops twice
-                // (thorlabs-apt-device's `close()` does) gets a MOVE_STOPPED for each. Any other
-                // reply (a GET) answers one request: repeated requests wait for their own.
-                let end_of_move = m.class.has(Class::END_OF_MOVE);
-                let mut also = std::mem::take(&mut self.also);
-                also.clear();
-                // A reply only one kind of request expects answers one request of that kind.
-                let several = end_of_move || table.requesters(m) > 1;
-                if let Some(v) = self.by_reply.get(&m.id).filter(|_| several) {
-                    let mut stop_taken = p.stop;
-                    for q in v.iter().take(SCAN) {
-                        if q.device != p.device || q.chan != p.chan || q.n == p.n {
-                            continue;
-                        }
-                        let take = if !end_of_move {
-                            q.id != p.id
-                        } else if p.stop {
-                            false
-                        } else if q.stop {
-                            !std::mem::replace(&mut stop_taken, true)
-                        } else {
-                            true
-                        };
-                        if take {
-                            also.push(q.n);
-                        }
-                    }
+        found.or(any).and_then(|k| self.remove(k))
+    }
+
+    /// Reply `m` from `src` answers request `p`: the other requests it also ends are dropped,
+    /// the pair goes into `info` and is remembered for [`AptPairer::duplicate`].
+    fn answer(
+        &mut self,
+        table: &Table,
+        m: &MsgDef,
+        p: Pending,
+        src: u8,
+        ts: Option<u64>,
+        info: &mut PairInfo,
+    ) {
+        self.sweep(table, m, &p);
+        info.pair = Some(p.n);
+        info.other_address = p.device != src;
+        info.latency_ns = match (p.ts, ts) {
+            (Some(a), Some(b)) => Some(b.saturating_sub(a)),
+            _ => None,
+        };
+        if self.recent_keys.is_empty() {
+            self.recent_keys = vec![0; 1 << 16];
+        }
+        if self.recent.len() == RECENT {
+            if let Some(old) = self.recent.pop_front() {
+                let c = &mut self.recent_keys[recent_key(old.reply_id, old.device)];
+                *c = c.saturating_sub(1);
+            }
+        }
+        self.recent_keys[recent_key(m.id, p.device)] += 1;
+        self.recent.push_back(Answered {
+            n: p.n,
+            reply_id: m.id,
+            device: p.device,
+            chan: p.chan,
+        });
+    }
+
+    /// The other requests reply `m` also ends besides `p`, dropped.
+    fn sweep(&mut self, table: &Table, m: &MsgDef, p: &Pending) {
+        // Requests are answered first in, first out per (device, channel, reply). An
+        // end-of-move reply (`class=end_of_move`) also ends what the move it reports
+        // superseded: the other moves waiting on that device and channel (one
+        // MOVE_COMPLETED ends a move and the moves sent over it) and, when it answers a
+        // move, the oldest stop that ended it (MOVE_STOPPED completes a move and its
+        // stop). A stop is never swept by another stop's reply: a host that stops twice
+        // (thorlabs-apt-device's `close()` does) gets a MOVE_STOPPED for each. Any other
+        // reply (a GET) answers one request: repeated requests wait for their own.
+        let end_of_move = m.class.has(Class::END_OF_MOVE);
+        let mut also = std::mem::take(&mut self.also);
+        also.clear();
+        // A reply only one kind of request expects answers one request of that kind.
+        let several = end_of_move || table.requesters(m) > 1;
+        if let Some(v) = self.by_reply.get(&m.id).filter(|_| several) {
+            let mut stop_taken = p.stop;
+            for q in v.iter().take(SCAN) {
+                if q.device != p.device || q.chan != p.chan || q.n == p.n {
+                    continue;
                 }
-                for &k in &also {
-                    self.remove(k);
-                }
-                self.also = also;
-                info.pair = Some(p.n);
-                info.other_address = p.device != src;
-                info.latency_ns = match (p.ts, ts) {
-                    (Some(a), Some(b)) => Some(b.saturating_sub(a)),
-                    _ => None,
+                let take = if !end_of_move {
+                    q.id != p.id
+                } else if p.stop {
+                    false
+                } else if q.stop {
+                    !std::mem::replace(&mut stop_taken, true)
+                } else {
+                    true
                 };
-                if self.recent_keys.is_empty() {
-                    self.recent_keys = vec![0; 1 << 16];
-                }
-                if self.recent.len() == RECENT {
-                    if let Some(old) = self.recent.pop_front() {
-                        let c = &mut self.recent_keys[recent_key(old.reply_id, old.device)];
-                        *c = c.saturating_sub(1);
-                    }
-                }
-                self.recent_keys[recent_key(m.id, p.device)] += 1;
-                self.recent.push_back(Answered {
-                    n: p.n,
-                    reply_id: m.id,
-                    device: p.device,
-                    chan: p.chan,
-                });
-            }
-            None => {
-                if comes_unasked(m) {
-                    return;
-                }
-                let seen = self
-                    .recent_keys
-                    .get(recent_key(m.id, src))
-                    .is_some_and(|&c| c > 0);
-                match seen
-                    .then(|| {
-                        self.recent
-                            .iter()
-                            .rev()
-                            .find(|a| a.reply_id == m.id && a.device == src && chan_ok(a.chan))
-                    })
-                    .flatten()
-                {
-                    Some(a) => {
-                        info.pair = Some(a.n);
-                        info.duplicate = true;
-                    }
-                    None => info.unsolicited = true,
+                if take {
+                    also.push(q.n);
                 }
             }
+        }
+        for &k in &also {
+            self.remove(k);
+        }
+        self.also = also;
+    }
+
+    /// A reply no waiting request expects: a repeat of a reply already paired (the same id
+    /// from the same device, on a channel that fits), else unsolicited (a status update that
+    /// comes unasked is neither).
+    fn duplicate(&self, m: &MsgDef, src: u8, chan: Option<i64>, info: &mut PairInfo) {
+        let chan_ok = |c: Option<i64>| c.is_none() || chan.is_none() || c == chan;
+        if comes_unasked(m) {
+            return;
+        }
+        let seen = self
+            .recent_keys
+            .get(recent_key(m.id, src))
+            .is_some_and(|&c| c > 0);
+        match seen
+            .then(|| {
+                self.recent
+                    .iter()
+                    .rev()
+                    .find(|a| a.reply_id == m.id && a.device == src && chan_ok(a.chan))
+            })
+            .flatten()
+        {
+            Some(a) => {
+                info.pair = Some(a.n);
+                info.duplicate = true;
+            }
+            None => info.unsolicited = true,
         }
     }
 
@@ -507,6 +540,15 @@ impl AptPairer {
                 info.not_for_model = Some(*name);
             }
         }
+    }
+
+    /// Whether the model `device` named in HW_GET_INFO sends no reply to message `id` (a
+    /// `silent` line of its table profile).
+    fn silent(&self, table: &Table, device: u8, id: u16) -> bool {
+        matches!(
+            self.models.get(usize::from(device)),
+            Some(Some((_, Some(p)))) if !table.answers(p, id)
+        )
     }
 
     /// End of stream: every request still waiting got no reply.

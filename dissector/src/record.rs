@@ -191,11 +191,16 @@ enum Held {
     },
 }
 
+/// A lane's two framers: the protocol detected says which one is fed.
+struct Framers {
+    apt: AptFramer<'static>,
+    ell: EllFramer,
+}
+
 struct Lane {
     stream: u32,
     dir: Option<Dir>,
-    apt: AptFramer<'static>,
-    ell: EllFramer,
+    framers: Framers,
     /// Time of the latest chunk: the time a frame completing now gets.
     ts: Option<u64>,
     /// Bytes pushed so far, and the (first offset, time) of each timed chunk not yet behind
@@ -242,20 +247,11 @@ pub struct Decoder {
     /// chunks before them: emitted in their place among the sample's records.
     held: Vec<(usize, Held)>,
     lanes: Vec<Lane>,
-    buses: Vec<(u32, Bus)>,
-    pairers: Vec<(u32, AptPairer)>,
+    track: Track,
     first_ts: Option<u64>,
     n: u64,
     /// Bytes fed so far, all lanes.
     cap_pushed: u64,
-    /// Frames emitted so far (APT and Elliptec).
-    frames: u64,
-    reply_timeout: Option<u64>,
-    /// Models seen per device and the stage conversion of motion values.
-    units: Tracker,
-    expired: Vec<NoReply>,
-    /// Pairing of the current APT frame (one reused for every frame).
-    pinfo: PairInfo,
     /// The detector's verdict, once the protocol was detected.
     detection: Option<Detection>,
 }
@@ -269,16 +265,18 @@ impl Decoder {
             sample_len: 0,
             held: vec![],
             lanes: vec![],
-            buses: vec![],
-            pairers: vec![],
+            track: Track {
+                buses: vec![],
+                pairers: vec![],
+                frames: 0,
+                reply_timeout: None,
+                units: Tracker::new(UnitsOpts::default()),
+                expired: vec![],
+                pinfo: PairInfo::default(),
+            },
             first_ts: None,
             n: 0,
             cap_pushed: 0,
-            frames: 0,
-            reply_timeout: None,
-            units: Tracker::new(UnitsOpts::default()),
-            expired: vec![],
-            pinfo: PairInfo::default(),
             detection: None,
         }
     }
@@ -286,12 +284,12 @@ impl Decoder {
     /// Convert APT motion values to physical units with this stage or scale (see
     /// [`crate::units`]). Without it only devices with a built-in stage convert.
     pub fn set_units(&mut self, opts: UnitsOpts) {
-        self.units = Tracker::new(opts);
+        self.track.units = Tracker::new(opts);
     }
 
     /// Use one reply timeout for every request instead of the per-message defaults.
     pub fn set_reply_timeout(&mut self, ns: u64) {
-        self.reply_timeout = Some(ns);
+        self.track.reply_timeout = Some(ns);
     }
 
     /// The protocol in use (after detection).
@@ -311,7 +309,7 @@ impl Decoder {
 
     /// Frames emitted so far (a capture in which none frames is not one of these protocols).
     pub fn frames(&self) -> u64 {
-        self.frames
+        self.track.frames
     }
 
     /// Captured bytes fed so far, every stream and direction.
@@ -357,7 +355,7 @@ impl Decoder {
         }
         for j in 0..self.lanes.len() {
             if self.lanes[j].stream == stream && self.lanes[j].dir == Some(dir) {
-                self.lanes[j].ell.cut();
+                self.lanes[j].framers.ell.cut();
                 self.drain(j, emit)?;
             }
         }
@@ -425,15 +423,15 @@ impl Decoder {
             self.replay_sample(emit)?;
         }
         for i in 0..self.lanes.len() {
-            self.lanes[i].apt.finish();
-            self.lanes[i].ell.finish();
+            self.lanes[i].framers.apt.finish();
+            self.lanes[i].framers.ell.finish();
             self.drain(i, emit)?;
         }
         let mut left = vec![];
-        for (stream, bus) in self.buses.iter_mut() {
+        for (stream, bus) in self.track.buses.iter_mut() {
             left.extend(bus.finish().into_iter().map(|e| ell_no_reply(*stream, &e)));
         }
-        for (stream, p) in self.pairers.iter_mut() {
+        for (stream, p) in self.track.pairers.iter_mut() {
             left.extend(p.finish().into_iter().map(|u| NoReply {
                 proto: Proto::Apt,
                 stream: *stream,
@@ -540,8 +538,10 @@ impl Decoder {
         self.lanes.push(Lane {
             stream: ctx.stream,
             dir: ctx.dir,
-            apt: AptFramer::new(Table::global()),
-            ell: EllFramer::new(),
+            framers: Framers {
+                apt: AptFramer::new(Table::global()),
+                ell: EllFramer::new(),
+            },
             ts: None,
             pushed: 0,
             times: Default::default(),
@@ -565,7 +565,7 @@ impl Decoder {
             for j in 0..self.lanes.len() {
                 let l = &self.lanes[j];
                 if j != i && l.stream == ctx.stream && l.dir.is_some() && l.dir != ctx.dir {
-                    self.lanes[j].ell.cut();
+                    self.lanes[j].framers.ell.cut();
                     self.drain(j, emit)?;
                 }
             }
@@ -581,28 +581,33 @@ impl Decoder {
         lane.pushed += chunk.len() as u64;
         self.cap_pushed += chunk.len() as u64;
         match self.proto {
-            Some(Proto::Apt) => lane.apt.push(chunk),
-            _ => lane.ell.push(chunk),
+            Some(Proto::Apt) => lane.framers.apt.push(chunk),
+            _ => lane.framers.ell.push(chunk),
         }
         self.drain(i, emit)
     }
 
-    fn emit_expired<E>(
-        &mut self,
-        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
-    ) -> Result<(), E> {
-        for e in std::mem::take(&mut self.expired) {
-            emit(&Record::NoReply(e))?;
-        }
-        Ok(())
-    }
-
+    /// Emits the records of what lane `i`'s framer has completed, with the protocol's
+    /// [`Framer`].
     fn drain<E>(
         &mut self,
         i: usize,
         emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
     ) -> Result<(), E> {
-        let t = Table::global();
+        if self.proto == Some(Proto::Apt) {
+            self.drain_with::<AptSide, E>(i, emit)
+        } else {
+            self.drain_with::<EllSide, E>(i, emit)
+        }
+    }
+
+    /// The one decode loop: each item of the lane's framer numbered, timed and placed, a frame
+    /// handed to `P`, a garbage run emitted, then the requests that expired meanwhile.
+    fn drain_with<P: Framer, E>(
+        &mut self,
+        i: usize,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
         let first = self.first_ts;
         let (ts, stream, cap_dir) = (self.lanes[i].ts, self.lanes[i].stream, self.lanes[i].dir);
         // A record's context: the time of its first byte.
@@ -617,142 +622,271 @@ impl Decoder {
             },
             cap_offset,
         };
-        if self.proto == Some(Proto::Apt) {
-            let pi_idx = match self.pairers.iter().position(|(s, _)| *s == stream) {
-                Some(p) => p,
-                None => {
-                    let mut p = AptPairer::new();
-                    p.timeout_ns = self.reply_timeout;
-                    self.pairers.push((stream, p));
-                    self.pairers.len() - 1
-                }
-            };
-            loop {
-                let lane = &mut self.lanes[i];
-                let Some(item) = lane.apt.next_item() else {
-                    break;
-                };
-                let (AptItem::Frame { offset: at, .. } | AptItem::Garbage { offset: at, .. }) =
-                    item;
-                let first_ts = Lane::time_at(&mut lane.times, ts, at);
-                let cap_offset = Lane::cap_at(&mut lane.starts, at);
-                self.n += 1;
-                let n = self.n;
-                match item {
-                    AptItem::Frame {
-                        offset,
-                        bytes,
-                        truncated,
-                    } => {
-                        // Used where it was returned: copying it out would read words just
-                        // stored by other widths (a store-forwarding stall per frame).
-                        let decoded = AptFrame::decode(t, offset, bytes, truncated);
-                        let Some(f) = decoded.as_ref() else {
-                            continue;
-                        };
-                        let pinfo = &mut self.pinfo;
-                        self.pairers[pi_idx]
-                            .1
-                            .observe(t, n, f, cap_dir, first_ts, pinfo);
-                        self.expired.extend(pinfo.expired.iter().map(|u| NoReply {
-                            proto: Proto::Apt,
-                            stream,
-                            n: u.n,
-                            offset: u.offset,
-                            name: u.name,
-                        }));
-                        let (scale, notice) = self.units.observe(stream, f);
-                        if let Some(nt) = notice {
-                            // Before the frame: what its values are converted with.
-                            emit(&Record::Units(&nt))?;
-                        }
-                        let meta = meta(n, first_ts, cap_offset);
-                        self.frames += 1;
-                        emit(&Record::Apt(AptRec {
-                            meta,
-                            frame: f,
-                            pair: pinfo,
-                            scale,
-                        }))?;
-                    }
-                    AptItem::Garbage {
-                        offset,
-                        bytes,
-                        kind,
-                    } => {
-                        let meta = meta(n, first_ts, cap_offset);
-                        emit(&Record::Garbage(GarbageRec {
-                            meta,
-                            proto: Proto::Apt,
-                            offset,
-                            bytes,
-                            kind: Some(kind),
-                        }))?;
-                    }
-                }
-                self.emit_expired(emit)?;
-            }
-            return Ok(());
-        }
-        let bus_idx = match self.buses.iter().position(|(s, _)| *s == stream) {
-            Some(b) => b,
-            None => {
-                let mut b = Bus::new();
-                b.timeout_ns = self.reply_timeout;
-                self.buses.push((stream, b));
-                self.buses.len() - 1
-            }
-        };
+        let state = P::state(&mut self.track, stream);
         loop {
             let lane = &mut self.lanes[i];
-            let Some(item) = lane.ell.next_item() else {
+            let Some(item) = P::next_item(&mut lane.framers) else {
                 break;
             };
-            let (EllItem::Frame { offset: at, .. } | EllItem::Garbage { offset: at, .. }) = item;
+            let (Item::Frame { offset: at, .. } | Item::Garbage { offset: at, .. }) = item;
             let first_ts = Lane::time_at(&mut lane.times, ts, at);
             let cap_offset = Lane::cap_at(&mut lane.starts, at);
             self.n += 1;
-            let n = self.n;
+            let meta = meta(self.n, first_ts, cap_offset);
             match item {
-                EllItem::Frame {
+                Item::Frame {
                     offset,
                     bytes,
                     truncated,
                 } => {
-                    let Some(mut f) = EllFrame::decode(offset, bytes, truncated) else {
-                        continue;
-                    };
-                    let o = self.buses[bus_idx].1.observe(n, &f, first_ts);
-                    if o.unsolicited {
-                        f.push_diag(Diag {
-                            offset,
-                            kind: DiagKind::Unsolicited,
-                        });
-                    }
-                    self.expired
-                        .extend(o.expired.iter().map(|e| ell_no_reply(stream, e)));
-                    let meta = meta(n, first_ts, cap_offset);
-                    self.frames += 1;
-                    emit(&Record::Ell(EllRec {
-                        meta,
-                        frame: &f,
-                        obs: &o,
-                    }))?;
-                }
-                EllItem::Garbage { offset, bytes, .. } => {
-                    let meta = meta(n, first_ts, cap_offset);
-                    emit(&Record::Garbage(GarbageRec {
-                        meta,
-                        proto: Proto::Elliptec,
+                    let frame = RawFrame {
                         offset,
                         bytes,
-                        kind: None,
+                        truncated,
+                    };
+                    if !P::frame(&mut self.track, state, meta, frame, emit)? {
+                        continue;
+                    }
+                }
+                Item::Garbage {
+                    offset,
+                    bytes,
+                    kind,
+                } => {
+                    emit(&Record::Garbage(GarbageRec {
+                        meta,
+                        proto: P::PROTO,
+                        offset,
+                        bytes,
+                        kind,
                     }))?;
                 }
             }
-            self.emit_expired(emit)?;
+            self.track.emit_expired(emit)?;
         }
         Ok(())
+    }
+}
+
+/// What the chain keeps besides the lanes: each stream's pairing (APT pairer, Elliptec bus),
+/// the devices' units, and the records waiting to be emitted.
+struct Track {
+    buses: Vec<(u32, Bus)>,
+    pairers: Vec<(u32, AptPairer)>,
+    /// Frames emitted so far (APT and Elliptec).
+    frames: u64,
+    reply_timeout: Option<u64>,
+    /// Models seen per device and the stage conversion of motion values.
+    units: Tracker,
+    expired: Vec<NoReply>,
+    /// Pairing of the current APT frame (one reused for every frame).
+    pinfo: PairInfo,
+}
+
+impl Track {
+    fn emit_expired<E>(
+        &mut self,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        for e in std::mem::take(&mut self.expired) {
+            emit(&Record::NoReply(e))?;
+        }
+        Ok(())
+    }
+}
+
+/// A frame or a garbage run of either protocol's framer, as the decode loop reads it.
+enum Item<'a> {
+    Frame {
+        offset: u64,
+        bytes: &'a [u8],
+        truncated: bool,
+    },
+    Garbage {
+        offset: u64,
+        bytes: &'a [u8],
+        /// What the APT framer saw (APT only).
+        kind: Option<GarbageKind>,
+    },
+}
+
+/// A protocol's framer item (`AptItem`, `EllItem`: the same variants) as an [`Item`], its
+/// garbage kind mapped by `kind`.
+macro_rules! item {
+    ($it:expr, $ty:ident, $kind:expr) => {
+        match $it {
+            $ty::Frame {
+                offset,
+                bytes,
+                truncated,
+            } => Item::Frame {
+                offset,
+                bytes,
+                truncated,
+            },
+            $ty::Garbage {
+                offset,
+                bytes,
+                kind,
+            } => Item::Garbage {
+                offset,
+                bytes,
+                kind: $kind(kind),
+            },
+        }
+    };
+}
+
+/// A frame's bytes as its framer found them, before decoding.
+struct RawFrame<'a> {
+    offset: u64,
+    bytes: &'a [u8],
+    truncated: bool,
+}
+
+/// One protocol's part of the decode loop ([`Decoder::drain_with`]): the framer it reads in a
+/// lane, and what it makes of a frame (decode, pairing, units).
+trait Framer {
+    /// The protocol, named by its garbage records.
+    const PROTO: Proto;
+    /// The index of `stream`'s pairing state in `track`, made on first use.
+    fn state(track: &mut Track, stream: u32) -> usize;
+    /// The next frame or garbage run the lane's framer of this protocol has completed.
+    fn next_item(framers: &mut Framers) -> Option<Item<'_>>;
+    /// Decodes, pairs and emits one frame (with its record's context `meta`); `false` when the
+    /// bytes do not decode (nothing emitted).
+    fn frame<E>(
+        track: &mut Track,
+        state: usize,
+        meta: Meta,
+        raw: RawFrame<'_>,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<bool, E>;
+}
+
+/// The index of `stream`'s entry in `list`, made with `make` on first use.
+fn slot<T>(list: &mut Vec<(u32, T)>, stream: u32, make: impl FnOnce() -> T) -> usize {
+    match list.iter().position(|(s, _)| *s == stream) {
+        Some(i) => i,
+        None => {
+            list.push((stream, make()));
+            list.len() - 1
+        }
+    }
+}
+
+/// APT: the pairer and the units tracker see every frame.
+struct AptSide;
+
+impl Framer for AptSide {
+    const PROTO: Proto = Proto::Apt;
+
+    fn state(track: &mut Track, stream: u32) -> usize {
+        let timeout_ns = track.reply_timeout;
+        slot(&mut track.pairers, stream, || {
+            let mut p = AptPairer::new();
+            p.timeout_ns = timeout_ns;
+            p
+        })
+    }
+
+    #[inline]
+    fn next_item(framers: &mut Framers) -> Option<Item<'_>> {
+        Some(item!(framers.apt.next_item()?, AptItem, Some))
+    }
+
+    #[inline]
+    fn frame<E>(
+        track: &mut Track,
+        state: usize,
+        meta: Meta,
+        raw: RawFrame<'_>,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<bool, E> {
+        let t = Table::global();
+        // Used where it was returned: copying it out would read words just stored by other
+        // widths (a store-forwarding stall per frame).
+        let decoded = AptFrame::decode(t, raw.offset, raw.bytes, raw.truncated);
+        let Some(f) = decoded.as_ref() else {
+            return Ok(false);
+        };
+        let (stream, pinfo) = (meta.stream, &mut track.pinfo);
+        track.pairers[state]
+            .1
+            .observe(t, meta.n, f, meta.cap_dir, meta.ts_ns, pinfo);
+        track.expired.extend(pinfo.expired.iter().map(|u| NoReply {
+            proto: Proto::Apt,
+            stream,
+            n: u.n,
+            offset: u.offset,
+            name: u.name,
+        }));
+        let (scale, notice) = track.units.observe(stream, f);
+        if let Some(nt) = notice {
+            // Before the frame: what its values are converted with.
+            emit(&Record::Units(&nt))?;
+        }
+        track.frames += 1;
+        emit(&Record::Apt(AptRec {
+            meta,
+            frame: f,
+            pair: pinfo,
+            scale,
+        }))?;
+        Ok(true)
+    }
+}
+
+/// Elliptec: the bus pairs commands with replies and flags unsolicited replies.
+struct EllSide;
+
+impl Framer for EllSide {
+    const PROTO: Proto = Proto::Elliptec;
+
+    fn state(track: &mut Track, stream: u32) -> usize {
+        let timeout_ns = track.reply_timeout;
+        slot(&mut track.buses, stream, || {
+            let mut b = Bus::new();
+            b.timeout_ns = timeout_ns;
+            b
+        })
+    }
+
+    #[inline]
+    fn next_item(framers: &mut Framers) -> Option<Item<'_>> {
+        // The Elliptec framer's kinds of garbage are not reported.
+        Some(item!(framers.ell.next_item()?, EllItem, |_| None))
+    }
+
+    #[inline]
+    fn frame<E>(
+        track: &mut Track,
+        state: usize,
+        meta: Meta,
+        raw: RawFrame<'_>,
+        emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<bool, E> {
+        let Some(mut f) = EllFrame::decode(raw.offset, raw.bytes, raw.truncated) else {
+            return Ok(false);
+        };
+        let o = track.buses[state].1.observe(meta.n, &f, meta.ts_ns);
+        if o.unsolicited {
+            f.push_diag(Diag {
+                offset: raw.offset,
+                kind: DiagKind::Unsolicited,
+            });
+        }
+        let stream = meta.stream;
+        track
+            .expired
+            .extend(o.expired.iter().map(|e| ell_no_reply(stream, e)));
+        track.frames += 1;
+        emit(&Record::Ell(EllRec {
+            meta,
+            frame: &f,
+            obs: &o,
+        }))?;
+        Ok(true)
     }
 }
 

@@ -78,7 +78,7 @@ fn float_json(x: f64) -> Value {
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Decoded {
     /// The fields in frame order, with the keys `decode --json` derives beside Elliptec fields
-    /// (`curve_points`, `<name>_name`, `<name>_version`, `thread`, `hw_release`).
+    /// ([`aptscope_dissector::shape::ell_derived`]).
     pub fields: Vec<(Cow<'static, str>, FieldVal)>,
     /// APT: the sender's address (`{addr, name, bay}`).
     pub src: Option<FieldVal>,
@@ -131,7 +131,8 @@ impl Decoded {
     }
 }
 
-/// Builds owned [`FieldVal`]s from the record shape's writer.
+/// Builds owned [`FieldVal`]s from the record shape's writer ([`json`], which writes what
+/// [`aptscope_dissector::shape`] describes): the one spelling of the shape, read back here.
 #[derive(Default)]
 struct Build {
     /// Open objects and lists, innermost last, each with the key it goes under.

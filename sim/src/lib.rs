@@ -116,3 +116,6 @@ mod tests;
 
 #[cfg(test)]
 mod tests_models;
+
+#[cfg(test)]
+mod ell_tests;

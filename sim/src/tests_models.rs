@@ -209,3 +209,115 @@ fn a_strain_gauge_zeroes_its_reading() {
     );
     assert_eq!(reading(&after), Some(0));
 }
+
+/// Send `req` at `now` and decode what comes back within 50 ms: (message id, source).
+fn exchange(sim: &mut AptSim, req: &[u8], now: u64) -> Vec<(u16, u8)> {
+    sim.input(req, now);
+    let mut out = vec![];
+    while let Some(d) = sim.next_deadline().filter(|d| *d <= now + 50 * MS) {
+        out.extend(sim.poll(d).unwrap_or_default());
+    }
+    frames(&out)
+        .iter()
+        .map(|f| (u16::from_le_bytes([f[0], f[1]]), f[5]))
+        .collect()
+}
+
+#[test]
+fn a_single_unit_answers_at_0x50_and_0x21_from_the_address_named_and_ignores_the_rest() {
+    use aptscope_dissector::msg;
+    let mut sim = AptSim::new(AptModel::Tdc001);
+    let vel = |dst| build(msg::MOT_REQ_VELPARAMS, None, dst, 0x01, &[]).expect("req");
+    assert_eq!(
+        exchange(&mut sim, &vel(0x50), 1000),
+        [(msg::MOT_GET_VELPARAMS, 0x50)]
+    );
+    assert_eq!(
+        exchange(&mut sim, &vel(0x21), 100 * MS),
+        [(msg::MOT_GET_VELPARAMS, 0x21)]
+    );
+    assert_eq!(exchange(&mut sim, &vel(0x22), 200 * MS), []);
+    // Not a TDC001's message: ignored, and the log says so.
+    let pz = build(msg::PZ_REQ_OUTPUTVOLTS, None, 0x50, 0x01, &[]).expect("req");
+    assert_eq!(exchange(&mut sim, &pz, 300 * MS), []);
+    let log = sim.take_log();
+    assert_eq!(log.len(), 2, "{log:?}");
+    assert!(log[0].contains("no such unit"), "{log:?}");
+    assert!(
+        log[1].contains("PZ_REQ_OUTPUTVOLTS") && log[1].contains("not a message the TDC001"),
+        "{log:?}"
+    );
+}
+
+#[test]
+fn status_updates_stop_after_50_without_the_hosts_ack_and_resume_with_it() {
+    use aptscope_dissector::msg;
+    let count = |sim: &mut AptSim, from: u64, to: u64| {
+        let mut out = vec![];
+        let mut t = from;
+        while let Some(d) = sim.next_deadline().filter(|d| *d <= to) {
+            t = t.max(d);
+            out.extend(sim.poll(t).unwrap_or_default());
+        }
+        frames(&out).len()
+    };
+    // Without ACK: 50 updates, then silence.
+    let mut sim = AptSim::new(AptModel::Kdc101);
+    let start = build(msg::HW_START_UPDATEMSGS, None, 0x50, 0x01, &[]).expect("start");
+    sim.input(&start, 0);
+    assert_eq!(count(&mut sim, 0, 20 * SEC), 50);
+    assert!(sim.take_log().iter().any(|l| l.contains("stopped")));
+    // A late ACK: they resume.
+    let ack = build(msg::MOT_ACK_DCSTATUSUPDATE, None, 0x50, 0x01, &[]).expect("ack");
+    sim.input(&ack, 20 * SEC);
+    // 20.1 s … 21.0 s; the last is still on the line at 21 s.
+    assert_eq!(count(&mut sim, 20 * SEC, 21 * SEC), 9);
+    // With an ACK every second (as thorlabs-apt-device sends it): they go on.
+    let mut sim = AptSim::new(AptModel::Kdc101);
+    sim.input(&start, 0);
+    let mut n = 0;
+    for s in 0..20 {
+        n += count(&mut sim, s * SEC, (s + 1) * SEC - 1);
+        sim.input(&ack, (s + 1) * SEC - 1);
+    }
+    assert_eq!(n, 199, "updates in 20 s");
+}
+
+#[test]
+fn a_nanotrak_reports_the_mode_it_was_set_to() {
+    use aptscope_dissector::msg;
+    let t = Table::global();
+    let mut sim = AptSim::new(AptModel::parse("kna101").expect("model"));
+    let track = build(
+        msg::PZ_SET_NTMODE,
+        None,
+        0x50,
+        0x01,
+        &[("state", FieldValue::Int(3))],
+    );
+    sim.input(&track.expect("set"), 1000);
+    let req = |id| build(id, None, 0x50, 0x01, &[]).expect("req");
+    let mut out = vec![];
+    for (i, id) in [msg::PZ_REQ_NTMODE, msg::PZ_REQ_NTSTATUSUPDATE]
+        .into_iter()
+        .enumerate()
+    {
+        let now = (i as u64 + 1) * 100 * MS;
+        sim.input(&req(id), now);
+        while let Some(d) = sim.next_deadline().filter(|d| *d <= now + 50 * MS) {
+            out.extend(sim.poll(d).unwrap_or_default());
+        }
+    }
+    let fs = frames(&out);
+    assert_eq!(fs.len(), 2);
+    let get = |b: &[u8], n: &str| {
+        let f = AptFrame::decode(t, 0, b, false).expect("frame");
+        f.field(n).and_then(|(_, v)| v.as_i64())
+    };
+    // TRACKING_SIGNAL, DUAL_AXIS; TRACKING | TRACKING_WITH_SIGNAL and both channels.
+    assert_eq!(
+        (get(&fs[0], "state"), get(&fs[0], "mode")),
+        (Some(4), Some(1))
+    );
+    assert_eq!(get(&fs[1], "status_bits"), Some(0x3_0003));
+}

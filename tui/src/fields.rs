@@ -16,6 +16,7 @@ use aptscope_dissector::fields::{Fields, Key, Num, Role, Val};
 use aptscope_dissector::filter::Filter;
 use aptscope_dissector::pair::PairInfo;
 use aptscope_dissector::record::{AptRec, EllRec, GarbageRec, Meta, NoReply, Record};
+use aptscope_dissector::shape::{self, Head};
 use aptscope_dissector::table::Dir;
 use aptscope_dissector::units::Scale;
 use aptscope_dissector::Table;
@@ -165,7 +166,7 @@ pub fn diag_kinds(ix: &Index, n: u64, r: &Rec, f: &mut dyn FnMut(&'static str)) 
         let d = if r.has(F_ELL) {
             DiagKind::Garbage { len: len as u32 }
         } else {
-            aptscope_dissector::json::garbage_diag(r.offset, len, garbage_kind(r, &ix.bytes(r)))
+            aptscope_dissector::shape::garbage_diag(r.offset, len, garbage_kind(r, &ix.bytes(r)))
                 .kind
         };
         return f(d.name());
@@ -264,8 +265,62 @@ impl View<'_> {
         Some(slot(table))
     }
 
+    /// An APT frame (not Elliptec, not garbage).
+    fn apt_frame(&self) -> bool {
+        !self.r.has(F_ELL) && !self.r.has(F_GARBAGE)
+    }
+
     fn decoded(&self, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
         with_record(self.ix, self.n, |rec| rec.visit(key, rest, f)).unwrap_or(false)
+    }
+}
+
+/// What the compact record has at hand ([`shape::number`], [`shape::word`]).
+impl Head for View<'_> {
+    fn n(&self) -> u64 {
+        self.n
+    }
+    fn kind(&self) -> &'static str {
+        if self.r.has(F_GARBAGE) {
+            "garbage"
+        } else {
+            "frame"
+        }
+    }
+    fn offset(&self) -> u64 {
+        self.r.offset
+    }
+    fn cap_offset(&self) -> u64 {
+        self.r.cap_offset
+    }
+    fn len_bytes(&self) -> u64 {
+        u64::from(self.r.len)
+    }
+    fn stream(&self) -> u32 {
+        u32::from(self.r.stream)
+    }
+    fn ts_ns(&self) -> Option<u64> {
+        self.r.ts()
+    }
+    fn pair(&self) -> Option<u64> {
+        reply_to(self.r).filter(|_| !self.r.has(F_GARBAGE))
+    }
+    fn msgid(&self) -> Option<u16> {
+        self.apt_frame().then_some(self.r.id)
+    }
+    fn channel(&self) -> Option<i64> {
+        match self.r.chan() {
+            KeptChan::Chan(c) if self.apt_frame() => Some(c),
+            _ => None,
+        }
+    }
+    fn dir(&self) -> Option<&'static str> {
+        View::dir(self)
+    }
+    fn name(&self) -> Option<&'static str> {
+        self.apt_frame()
+            .then(|| Table::global().msg(self.r.id).map(|m| m.name))
+            .flatten()
     }
 }
 
@@ -275,91 +330,61 @@ impl Fields for View<'_> {
     }
 
     fn number(&self, key: Key) -> Option<i64> {
-        let r = self.r;
-        let x: u64 = match key {
-            Key::N => self.n,
-            Key::Offset => r.offset,
-            Key::CapOffset => r.cap_offset,
-            Key::Len => u64::from(r.len),
-            Key::Stream => u64::from(r.stream),
-            Key::TsNs => r.ts()?,
-            Key::Msgid if !r.has(F_ELL) && !r.has(F_GARBAGE) => u64::from(r.id),
-            Key::Channel if !r.has(F_ELL) && !r.has(F_GARBAGE) => match r.chan() {
-                KeptChan::Chan(c) => return Some(c),
-                KeptChan::None | KeptChan::InFrame => return None,
-            },
-            _ => return None,
-        };
-        i64::try_from(x).ok()
+        shape::number(self, key)
     }
 
     fn word(&self, key: Key) -> Option<&'static str> {
-        let r = self.r;
-        match key {
-            Key::Dir => self.dir(),
-            Key::Name if !r.has(F_ELL) && !r.has(F_GARBAGE) => {
-                Table::global().msg(r.id).map(|m| m.name)
-            }
-            _ => None,
-        }
+        shape::word(self, key)
     }
 
     fn visit(&self, key: Key, rest: &[String], f: &mut dyn FnMut(Val<'_>, Role)) -> bool {
         let r = self.r;
         let (ell, garbage) = (r.has(F_ELL), r.has(F_GARBAGE));
         let apt_frame = !ell && !garbage;
-        let v = match key {
-            Key::N => num(self.n),
-            Key::Proto => Val::Str(Cow::Borrowed(if ell { "ell" } else { "apt" })),
-            Key::Type => Val::Str(Cow::Borrowed(if garbage { "garbage" } else { "frame" })),
-            Key::Offset => num(r.offset),
-            Key::CapOffset => num(r.cap_offset),
-            Key::Len => num(r.len),
-            Key::Stream => num(r.stream),
-            Key::TsNs => match r.ts() {
-                Some(t) => num(t),
-                None => return false,
-            },
-            Key::Msgid if apt_frame => num(r.id),
-            Key::Channel if apt_frame => match r.chan() {
-                KeptChan::Chan(c) => num(c),
-                KeptChan::None => return false,
-                KeptChan::InFrame => return self.decoded(key, rest, f),
-            },
-            Key::Name if apt_frame => match Table::global().msg(r.id) {
-                Some(m) => Val::Str(Cow::Borrowed(m.name)),
-                None => return true,
-            },
-            Key::Dir => match self.dir() {
-                Some(d) => Val::Str(Cow::Borrowed(d)),
-                None => return false,
-            },
-            Key::Pair if !garbage => match reply_to(r) {
-                Some(p) => num(p),
-                None => return false,
-            },
-            Key::LatencyMs if !garbage => match reply_to(r).and_then(|_| latency(self.ix, r)) {
-                Some(l) => Val::Num(Num::F(l as f64 / 1e6)),
-                None => return false,
-            },
-            Key::Diag if !garbage => {
-                if r.flags & DIAG_FLAGS == 0 {
-                    return true;
+        // What the compact record has at hand, as `number` and `word` give it.
+        let v = if let Some(x) = shape::number(self, key) {
+            num(x)
+        } else if let Some(w) = shape::word(self, key) {
+            Val::Str(Cow::Borrowed(w))
+        } else {
+            match key {
+                Key::Proto => Val::Str(Cow::Borrowed(if ell { "ell" } else { "apt" })),
+                // Not at hand: there is none (or, for a time, one beyond `i64`).
+                Key::TsNs => match r.ts() {
+                    Some(t) => num(t),
+                    None => return false,
+                },
+                Key::Dir => return false,
+                Key::Channel if apt_frame => match r.chan() {
+                    KeptChan::InFrame => return self.decoded(key, rest, f),
+                    KeptChan::Chan(_) | KeptChan::None => return false,
+                },
+                // A message the table does not know: `name` is null.
+                Key::Name if apt_frame => return true,
+                Key::Pair if !garbage => return false,
+                Key::LatencyMs if !garbage => match reply_to(r).and_then(|_| latency(self.ix, r)) {
+                    Some(l) => Val::Num(Num::F(l as f64 / 1e6)),
+                    None => return false,
+                },
+                Key::Diag if !garbage => {
+                    if r.flags & DIAG_FLAGS == 0 {
+                        return true;
+                    }
+                    let there = self.decoded(key, rest, f);
+                    if r.has(F_NO_REPLY) {
+                        let e = NoReply {
+                            proto: if ell { Proto::Elliptec } else { Proto::Apt },
+                            stream: r.stream as u32,
+                            n: self.n,
+                            offset: r.offset,
+                            name: "",
+                        };
+                        Record::NoReply(e).visit(key, rest, f);
+                    }
+                    return there;
                 }
-                let there = self.decoded(key, rest, f);
-                if r.has(F_NO_REPLY) {
-                    let e = NoReply {
-                        proto: if ell { Proto::Elliptec } else { Proto::Apt },
-                        stream: r.stream as u32,
-                        n: self.n,
-                        offset: r.offset,
-                        name: "",
-                    };
-                    Record::NoReply(e).visit(key, rest, f);
-                }
-                return there;
+                _ => return self.decoded(key, rest, f),
             }
-            _ => return self.decoded(key, rest, f),
         };
         if rest.is_empty() {
             f(v, Role::Plain);

@@ -23,6 +23,7 @@ use crate::model::{Direction, Event, OwnedChunk, StreamInfo};
 use crate::open::{create, open, Format, OpenOptions};
 use aptscope_dissector::apt::{encode_named, EncodeError, Named};
 use aptscope_dissector::detect::Proto;
+use aptscope_dissector::msg;
 use aptscope_dissector::record::{Ctx, Decoder, Record};
 use aptscope_dissector::table::Dir;
 use aptscope_dissector::DiagKind;
@@ -66,13 +67,13 @@ pub const NAMES: &[&str] = &[
 ];
 
 /// Messages sent periodically (after HW_START_UPDATEMSGS): how many depends on timing.
-pub const STATUS_UPDATES: &[&str] = &[
-    "MOT_GET_DCSTATUSUPDATE",
-    "MOT_GET_STATUSUPDATE",
-    "PZ_GET_PZSTATUSUPDATE",
-    "LA_GET_STATUSUPDATE",
-    "TEC_GET_STATUSUPDATE",
-    "QUAD_GET_STATUSUPDATE",
+pub const STATUS_UPDATES: &[u16] = &[
+    msg::MOT_GET_DCSTATUSUPDATE,
+    msg::MOT_GET_STATUSUPDATE,
+    msg::PZ_GET_PZSTATUSUPDATE,
+    msg::LA_GET_STATUSUPDATE,
+    msg::TEC_GET_STATUSUPDATE,
+    msg::QUAD_GET_STATUSUPDATE,
 ];
 
 /// One step of a host script.
@@ -285,6 +286,12 @@ pub fn apt_frame(name: &str, args: &str, dst: u8) -> Result<Vec<u8>, SessionErro
     })
 }
 
+/// The name the table gives message `id` (empty for an id it does not hold, which the encoder
+/// then refuses by name).
+fn msg_name(id: u16) -> &'static str {
+    Table::global().msg(id).map_or("", |m| m.name)
+}
+
 /// A host script being written; the first error (a message the table cannot encode) is kept
 /// and returned by [`finish`](Script::finish).
 #[derive(Debug, Default)]
@@ -299,13 +306,25 @@ impl Script {
         Script::default()
     }
 
-    /// Send an APT message (see [`apt_frame`]) to `dst`.
-    pub fn apt(&mut self, name: &str, dst: u8, args: &str) -> &mut Script {
-        match apt_frame(name, args, dst) {
-            Ok(bytes) => self.steps.push(Step::Send {
-                bytes,
-                what: name.to_string(),
-            }),
+    /// Send APT message `id` (a [`msg`] constant; `args` as [`apt_frame`] reads them) to `dst`.
+    pub fn apt(&mut self, id: u16, dst: u8, args: &str) -> &mut Script {
+        self.send_apt(msg_name(id).to_string(), dst, args)
+    }
+
+    /// Send sub-message `sub` of the PARAMS message `id` (`msg::LA_SET_PARAMS`,
+    /// `msg::la::SETPOINT`) to `dst`.
+    pub fn apt_sub(&mut self, id: u16, sub: u16, dst: u8, args: &str) -> &mut Script {
+        let table = Table::global();
+        let sub_name = table
+            .msg(id)
+            .and_then(|m| table.sub(m.subs?, sub))
+            .map_or("", |s| s.name);
+        self.send_apt(format!("{}:{sub_name}", msg_name(id)), dst, args)
+    }
+
+    fn send_apt(&mut self, name: String, dst: u8, args: &str) -> &mut Script {
+        match apt_frame(&name, args, dst) {
+            Ok(bytes) => self.steps.push(Step::Send { bytes, what: name }),
             Err(e) => {
                 self.err.get_or_insert(e);
             }
@@ -314,8 +333,13 @@ impl Script {
     }
 
     /// Send an APT request and wait (a second at most) for its reply.
-    pub fn ask(&mut self, name: &str, dst: u8, args: &str, reply: &str) -> &mut Script {
-        self.apt(name, dst, args).wait_for(reply, REPLY_TIMEOUT_NS)
+    pub fn ask(&mut self, id: u16, dst: u8, args: &str, reply: u16) -> &mut Script {
+        self.apt(id, dst, args).wait_reply(reply, REPLY_TIMEOUT_NS)
+    }
+
+    /// Wait for APT message `id`.
+    pub fn wait_reply(&mut self, id: u16, timeout_ns: u64) -> &mut Script {
+        self.wait_for(msg_name(id), timeout_ns)
     }
 
     /// Send an Elliptec command as is (no terminator unless it has one).
@@ -382,58 +406,58 @@ fn part(device: Device, port: &str, s: &mut Script) -> Result<Part, SessionError
 /// relative move, the position, updates off.
 fn kdc101() -> Result<Vec<Part>, SessionError> {
     let mut s = Script::new();
-    s.ask("HW_REQ_INFO", USB, "", "HW_GET_INFO")
+    s.ask(msg::HW_REQ_INFO, USB, "", msg::HW_GET_INFO)
         .apt(
-            "MOD_SET_CHANENABLESTATE",
+            msg::MOD_SET_CHANENABLESTATE,
             USB,
             "chan_ident=CH1 enable_state=1",
         )
         .ask(
-            "MOD_REQ_CHANENABLESTATE",
+            msg::MOD_REQ_CHANENABLESTATE,
             USB,
             "chan_ident=CH1",
-            "MOD_GET_CHANENABLESTATE",
+            msg::MOD_GET_CHANENABLESTATE,
         )
         // 2.5 mm/s and 4 mm/s² on a Z8 stage (34 554.96 counts/mm).
         .apt(
-            "MOT_SET_VELPARAMS",
+            msg::MOT_SET_VELPARAMS,
             USB,
             "chan_ident=CH1 min_vel=0 acceleration=1055 max_vel=1932478",
         )
         .ask(
-            "MOT_REQ_VELPARAMS",
+            msg::MOT_REQ_VELPARAMS,
             USB,
             "chan_ident=CH1",
-            "MOT_GET_VELPARAMS",
+            msg::MOT_GET_VELPARAMS,
         )
-        .apt("HW_START_UPDATEMSGS", USB, "")
-        .apt("MOT_MOVE_HOME", USB, "chan_ident=CH1")
-        .wait_for("MOT_MOVE_HOMED", MOVE_TIMEOUT_NS)
+        .apt(msg::HW_START_UPDATEMSGS, USB, "")
+        .apt(msg::MOT_MOVE_HOME, USB, "chan_ident=CH1")
+        .wait_reply(msg::MOT_MOVE_HOMED, MOVE_TIMEOUT_NS)
         .apt(
-            "MOT_MOVE_ABSOLUTE",
+            msg::MOT_MOVE_ABSOLUTE,
             USB,
             "chan_ident=CH1 absolute_position=69110",
         )
-        .wait_for("MOT_MOVE_COMPLETED", MOVE_TIMEOUT_NS)
+        .wait_reply(msg::MOT_MOVE_COMPLETED, MOVE_TIMEOUT_NS)
         .apt(
-            "MOT_MOVE_RELATIVE",
+            msg::MOT_MOVE_RELATIVE,
             USB,
             "chan_ident=CH1 relative_distance=-34555",
         )
-        .wait_for("MOT_MOVE_COMPLETED", MOVE_TIMEOUT_NS)
+        .wait_reply(msg::MOT_MOVE_COMPLETED, MOVE_TIMEOUT_NS)
         .ask(
-            "MOT_REQ_POSCOUNTER",
+            msg::MOT_REQ_POSCOUNTER,
             USB,
             "chan_ident=CH1",
-            "MOT_GET_POSCOUNTER",
+            msg::MOT_GET_POSCOUNTER,
         )
-        .apt("HW_STOP_UPDATEMSGS", USB, "")
+        .apt(msg::HW_STOP_UPDATEMSGS, USB, "")
         // Everything sent before this reply has arrived when it does: the session is over.
         .ask(
-            "MOD_REQ_CHANENABLESTATE",
+            msg::MOD_REQ_CHANENABLESTATE,
             USB,
             "chan_ident=CH1",
-            "MOD_GET_CHANENABLESTATE",
+            msg::MOD_GET_CHANENABLESTATE,
         );
     Ok(vec![part(
         Device::Apt(AptModel::Kdc101),
@@ -446,44 +470,44 @@ fn kdc101() -> Result<Vec<Part>, SessionError> {
 /// their completions as they come, a status request per bay.
 fn bsc203() -> Result<Vec<Part>, SessionError> {
     let mut s = Script::new();
-    s.ask("HW_REQ_INFO", RACK, "", "HW_GET_INFO");
+    s.ask(msg::HW_REQ_INFO, RACK, "", msg::HW_GET_INFO);
     for bay in 0..4 {
         s.ask(
-            "RACK_REQ_BAYUSED",
+            msg::RACK_REQ_BAYUSED,
             RACK,
             &format!("bay_ident={bay}"),
-            "RACK_GET_BAYUSED",
+            msg::RACK_GET_BAYUSED,
         );
     }
     let bays = [0x21u8, 0x22, 0x23];
     for b in bays {
-        s.ask("HW_REQ_INFO", b, "", "HW_GET_INFO").apt(
-            "MOD_SET_CHANENABLESTATE",
+        s.ask(msg::HW_REQ_INFO, b, "", msg::HW_GET_INFO).apt(
+            msg::MOD_SET_CHANENABLESTATE,
             b,
             "chan_ident=CH1 enable_state=1",
         );
     }
-    s.apt("MOD_IDENTIFY", RACK, "chan_ident=CH2");
+    s.apt(msg::MOD_IDENTIFY, RACK, "chan_ident=CH2");
     // 0.5, 0.25 and 1 mm (409 600 µsteps/mm), all running at once.
     for (b, d) in bays.iter().zip([204_800, 102_400, 409_600]) {
         s.apt(
-            "MOT_MOVE_RELATIVE",
+            msg::MOT_MOVE_RELATIVE,
             *b,
             &format!("chan_ident=CH1 relative_distance={d}"),
         );
     }
     for _ in bays {
-        s.wait_for("MOT_MOVE_COMPLETED", MOVE_TIMEOUT_NS);
+        s.wait_reply(msg::MOT_MOVE_COMPLETED, MOVE_TIMEOUT_NS);
     }
     for b in bays {
         s.ask(
-            "MOT_REQ_STATUSUPDATE",
+            msg::MOT_REQ_STATUSUPDATE,
             b,
             "chan_ident=CH1",
-            "MOT_GET_STATUSUPDATE",
+            msg::MOT_GET_STATUSUPDATE,
         );
     }
-    s.ask("RACK_REQ_STATUSBITS", RACK, "", "RACK_GET_STATUSBITS");
+    s.ask(msg::RACK_REQ_STATUSBITS, RACK, "", msg::RACK_GET_STATUSBITS);
     Ok(vec![part(
         Device::Apt(AptModel::Bsc203),
         "/dev/ttyUSB0",
@@ -495,51 +519,51 @@ fn bsc203() -> Result<Vec<Part>, SessionError> {
 /// updates in between, the status (as pylablib polls it).
 fn kpz101() -> Result<Vec<Part>, SessionError> {
     let mut s = Script::new();
-    s.ask("HW_REQ_INFO", USB, "", "HW_GET_INFO")
+    s.ask(msg::HW_REQ_INFO, USB, "", msg::HW_GET_INFO)
         .apt(
-            "MOD_SET_CHANENABLESTATE",
+            msg::MOD_SET_CHANENABLESTATE,
             USB,
             "chan_ident=CH1 enable_state=1",
         )
-        .apt("PZ_SET_POSCONTROLMODE", USB, "chan_ident=CH1 mode=1")
+        .apt(msg::PZ_SET_POSCONTROLMODE, USB, "chan_ident=CH1 mode=1")
         .ask(
-            "PZ_REQ_POSCONTROLMODE",
+            msg::PZ_REQ_POSCONTROLMODE,
             USB,
             "chan_ident=CH1",
-            "PZ_GET_POSCONTROLMODE",
+            msg::PZ_GET_POSCONTROLMODE,
         )
         // Its voltage limit: a KPZ101 has PZ_REQ_TPZ_IOSETTINGS, not PZ_REQ_OUTPUTMAXVOLTS
         // (its lists in both revisions of the spec), and the simulator ignores the latter.
         .ask(
-            "PZ_REQ_TPZ_IOSETTINGS",
+            msg::PZ_REQ_TPZ_IOSETTINGS,
             USB,
             "chan_ident=CH1",
-            "PZ_GET_TPZ_IOSETTINGS",
+            msg::PZ_GET_TPZ_IOSETTINGS,
         )
-        .apt("PZ_SET_OUTPUTVOLTS", USB, "chan_ident=CH1 voltage=16384")
+        .apt(msg::PZ_SET_OUTPUTVOLTS, USB, "chan_ident=CH1 voltage=16384")
         .ask(
-            "PZ_REQ_OUTPUTVOLTS",
+            msg::PZ_REQ_OUTPUTVOLTS,
             USB,
             "chan_ident=CH1",
-            "PZ_GET_OUTPUTVOLTS",
+            msg::PZ_GET_OUTPUTVOLTS,
         )
-        .apt("HW_START_UPDATEMSGS", USB, "")
+        .apt(msg::HW_START_UPDATEMSGS, USB, "")
         .wait_ms(350)
-        .apt("PZ_SET_OUTPUTVOLTS", USB, "chan_ident=CH1 voltage=8192")
+        .apt(msg::PZ_SET_OUTPUTVOLTS, USB, "chan_ident=CH1 voltage=8192")
         .wait_ms(250)
-        .apt("HW_STOP_UPDATEMSGS", USB, "")
+        .apt(msg::HW_STOP_UPDATEMSGS, USB, "")
         .ask(
-            "PZ_REQ_OUTPUTVOLTS",
+            msg::PZ_REQ_OUTPUTVOLTS,
             USB,
             "chan_ident=CH1",
-            "PZ_GET_OUTPUTVOLTS",
+            msg::PZ_GET_OUTPUTVOLTS,
         )
         // Its status as pylablib asks for it (PZ_REQ_PZSTATUSBITS is not in its lists).
         .ask(
-            "PZ_REQ_PZSTATUSUPDATE",
+            msg::PZ_REQ_PZSTATUSUPDATE,
             USB,
             "chan_ident=CH1",
-            "PZ_GET_PZSTATUSUPDATE",
+            msg::PZ_GET_PZSTATUSUPDATE,
         );
     Ok(vec![part(
         Device::Apt(AptModel::Kpz101),
@@ -551,57 +575,85 @@ fn kpz101() -> Result<Vec<Part>, SessionError> {
 /// A TLS001 laser source, a TTC001 TEC controller and a KPA101 position aligner on three ports:
 /// LA_, TEC_ and QUAD_ PARAMS sub-messages set and requested, one status update each.
 fn laser_tec_quad() -> Result<Vec<Part>, SessionError> {
-    let la = "LA_GET_PARAMS";
+    let la = msg::LA_GET_PARAMS;
     let mut s = Script::new();
-    s.ask("HW_REQ_INFO", USB, "", "HW_GET_INFO")
-        .ask("LA_REQ_PARAMS", USB, "sub_id=9", la)
-        .ask("LA_REQ_PARAMS", USB, "sub_id=5", la)
-        .apt("LA_SET_PARAMS:SETPOINT", USB, "setpoint=16384")
-        .ask("LA_REQ_PARAMS", USB, "sub_id=1", la)
-        .apt(
-            "LA_SET_PARAMS:DISPLAY",
+    s.ask(msg::HW_REQ_INFO, USB, "", msg::HW_GET_INFO)
+        .ask(msg::LA_REQ_PARAMS, USB, "sub_id=9", la)
+        .ask(msg::LA_REQ_PARAMS, USB, "sub_id=5", la)
+        .apt_sub(msg::LA_SET_PARAMS, msg::la::SETPOINT, USB, "setpoint=16384")
+        .ask(msg::LA_REQ_PARAMS, USB, "sub_id=1", la)
+        .apt_sub(
+            msg::LA_SET_PARAMS,
+            msg::la::DISPLAY,
             USB,
             "disp_intensity=128 disp_units=MW",
         )
-        .apt("LA_ENABLEOUTPUT", USB, "")
-        .ask("LA_REQ_PARAMS", USB, "sub_id=3", la)
-        .ask("LA_REQ_PARAMS", USB, "sub_id=7", la)
-        .ask("LA_REQ_STATUSUPDATE", USB, "", "LA_GET_STATUSUPDATE")
-        .apt("LA_DISABLEOUTPUT", USB, "")
-        .ask("LA_REQ_PARAMS", USB, "sub_id=7", la);
+        .apt(msg::LA_ENABLEOUTPUT, USB, "")
+        .ask(msg::LA_REQ_PARAMS, USB, "sub_id=3", la)
+        .ask(msg::LA_REQ_PARAMS, USB, "sub_id=7", la)
+        .ask(msg::LA_REQ_STATUSUPDATE, USB, "", msg::LA_GET_STATUSUPDATE)
+        .apt(msg::LA_DISABLEOUTPUT, USB, "")
+        .ask(msg::LA_REQ_PARAMS, USB, "sub_id=7", la);
     let laser = part(Device::Apt(AptModel::Tls001), "/dev/ttyUSB0", &mut s)?;
 
-    let tec = "TEC_GET_PARAMS";
-    s.ask("HW_REQ_INFO", USB, "", "HW_GET_INFO")
-        .ask("TEC_REQ_PARAMS", USB, "sub_id=5", tec)
-        .apt("TEC_SET_PARAMS:TEMP_SETPOINT", USB, "t_set=2000")
-        .ask("TEC_REQ_PARAMS", USB, "sub_id=1", tec)
-        .apt(
-            "TEC_SET_PARAMS:LOOP_PARAMS",
+    let tec = msg::TEC_GET_PARAMS;
+    s.ask(msg::HW_REQ_INFO, USB, "", msg::HW_GET_INFO)
+        .ask(msg::TEC_REQ_PARAMS, USB, "sub_id=5", tec)
+        .apt_sub(
+            msg::TEC_SET_PARAMS,
+            msg::tec::TEMP_SETPOINT,
+            USB,
+            "t_set=2000",
+        )
+        .ask(msg::TEC_REQ_PARAMS, USB, "sub_id=1", tec)
+        .apt_sub(
+            msg::TEC_SET_PARAMS,
+            msg::tec::LOOP_PARAMS,
             USB,
             "p_gain=0x5332 i_gain=0x6665 d_gain=0x4CCC",
         )
-        .ask("TEC_REQ_PARAMS", USB, "sub_id=9", tec)
-        .ask("TEC_REQ_PARAMS", USB, "sub_id=3", tec)
-        .ask("TEC_REQ_PARAMS", USB, "sub_id=7", tec)
-        .ask("TEC_REQ_STATUSUPDATE", USB, "", "TEC_GET_STATUSUPDATE");
+        .ask(msg::TEC_REQ_PARAMS, USB, "sub_id=9", tec)
+        .ask(msg::TEC_REQ_PARAMS, USB, "sub_id=3", tec)
+        .ask(msg::TEC_REQ_PARAMS, USB, "sub_id=7", tec)
+        .ask(
+            msg::TEC_REQ_STATUSUPDATE,
+            USB,
+            "",
+            msg::TEC_GET_STATUSUPDATE,
+        );
     let tec = part(Device::Apt(AptModel::Ttc001), "/dev/ttyUSB1", &mut s)?;
 
-    let q = "QUAD_GET_PARAMS";
-    s.ask("HW_REQ_INFO", USB, "", "HW_GET_INFO")
-        .ask("QUAD_REQ_PARAMS", USB, "sub_id=7", q)
-        .ask("QUAD_REQ_PARAMS", USB, "sub_id=3", q)
-        .apt(
-            "QUAD_SET_PARAMS:POS_DEMAND_OUTPUTS",
+    let q = msg::QUAD_GET_PARAMS;
+    s.ask(msg::HW_REQ_INFO, USB, "", msg::HW_GET_INFO)
+        .ask(msg::QUAD_REQ_PARAMS, USB, "sub_id=7", q)
+        .ask(msg::QUAD_REQ_PARAMS, USB, "sub_id=3", q)
+        .apt_sub(
+            msg::QUAD_SET_PARAMS,
+            msg::quad::POS_DEMAND_OUTPUTS,
             USB,
             "x_pos=-2400 y_pos=1600",
         )
-        .apt("QUAD_SET_PARAMS:OPER_MODE", USB, "mode=OPEN_LOOP")
-        .ask("QUAD_REQ_PARAMS", USB, "sub_id=3", q)
-        .apt("QUAD_SET_PARAMS:OPER_MODE", USB, "mode=CLOSED_LOOP")
-        .ask("QUAD_REQ_PARAMS", USB, "sub_id=9", q)
-        .ask("QUAD_REQ_PARAMS", USB, "sub_id=14", q)
-        .ask("QUAD_REQ_STATUSUPDATE", USB, "", "QUAD_GET_STATUSUPDATE");
+        .apt_sub(
+            msg::QUAD_SET_PARAMS,
+            msg::quad::OPER_MODE,
+            USB,
+            "mode=OPEN_LOOP",
+        )
+        .ask(msg::QUAD_REQ_PARAMS, USB, "sub_id=3", q)
+        .apt_sub(
+            msg::QUAD_SET_PARAMS,
+            msg::quad::OPER_MODE,
+            USB,
+            "mode=CLOSED_LOOP",
+        )
+        .ask(msg::QUAD_REQ_PARAMS, USB, "sub_id=9", q)
+        .ask(msg::QUAD_REQ_PARAMS, USB, "sub_id=14", q)
+        .ask(
+            msg::QUAD_REQ_STATUSUPDATE,
+            USB,
+            "",
+            msg::QUAD_GET_STATUSUPDATE,
+        );
     let quad = part(Device::Apt(AptModel::Kpa101), "/dev/ttyUSB2", &mut s)?;
     Ok(vec![laser, tec, quad])
 }
@@ -863,7 +915,11 @@ pub fn damage(chunks: &[OwnedChunk]) -> Vec<OwnedChunk> {
     let mut d2h_seen = 0;
     let mut after_move = None;
     for (i, c) in chunks.iter().enumerate() {
-        let is = |n: &str| names.get(i).is_some_and(|v| v.iter().any(|x| x == n));
+        let is = |id: u16| {
+            names
+                .get(i)
+                .is_some_and(|v| v.iter().any(|x| x == msg_name(id)))
+        };
         if c.dir == Direction::DeviceToHost {
             // Noise just before the first reply and before the fifth thing the device sends.
             if d2h_seen == 0 || d2h_seen == 4 {
@@ -889,7 +945,7 @@ pub fn damage(chunks: &[OwnedChunk]) -> Vec<OwnedChunk> {
                     return out;
                 }
             }
-        } else if is("MOT_MOVE_ABSOLUTE") {
+        } else if is(msg::MOT_MOVE_ABSOLUTE) {
             after_move = Some(0);
         }
         out.push(c.clone());

@@ -21,6 +21,8 @@ pub struct DeviceProfile {
     pub model: String,
     /// Per message index: listed for this model.
     msgs: Box<[bool]>,
+    /// Per message index: the model sends none of the replies the table names for it.
+    silent: Box<[bool]>,
 }
 
 /// The parsed table with its lookup indexes.
@@ -106,7 +108,13 @@ impl Table {
             return None;
         }
         let mut msgs = vec![false; self.data.msgs.len()];
+        let mut silent = vec![false; self.data.msgs.len()];
         for g in groups {
+            for name in &g.silent {
+                if let Some(i) = self.data.msgs.iter().position(|m| m.name == *name) {
+                    silent[i] = true;
+                }
+            }
             for name in &g.msgs {
                 let Some(i) = self.data.msgs.iter().position(|m| m.name == *name) else {
                     continue;
@@ -123,7 +131,17 @@ impl Table {
         Some(DeviceProfile {
             model: model.trim().to_string(),
             msgs: msgs.into_boxed_slice(),
+            silent: silent.into_boxed_slice(),
         })
+    }
+
+    /// Whether `profile`'s model answers message `id` with the replies the table names for it:
+    /// not when a `silent` line says the model sends none (a flipper's MOT_MOVE_JOG).
+    pub fn answers(&self, profile: &DeviceProfile, id: u16) -> bool {
+        match self.by_id.get(id as usize) {
+            Some(&i) if i != u16::MAX => !profile.silent.get(i as usize).copied().unwrap_or(false),
+            _ => true,
+        }
     }
 
     /// Whether `profile`'s model implements message `id` (unknown ids: `true`, nothing to say).

@@ -650,6 +650,8 @@ pub struct DeviceGroup {
     pub source: DeviceSource,
     /// Message names.
     pub msgs: Vec<&'static str>,
+    /// Messages these models end without the reply the table names for them (`silent`).
+    pub silent: Vec<&'static str>,
     /// Table file.
     pub file: &'static str,
     /// Line.

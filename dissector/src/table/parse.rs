@@ -253,6 +253,7 @@ impl Parser {
                         models,
                         source,
                         msgs: vec![],
+                        silent: vec![],
                         file,
                         line: ln,
                     });
@@ -261,6 +262,10 @@ impl Parser {
                 "msgs" => match self.cur {
                     Cur::Devices(d) => self.data.devices[d].msgs.extend(tokens(rest)),
                     _ => self.err(file, ln, "`msgs` outside a devices block"),
+                },
+                "silent" => match self.cur {
+                    Cur::Devices(d) => self.data.devices[d].silent.extend(tokens(rest)),
+                    _ => self.err(file, ln, "`silent` outside a devices block"),
                 },
                 "sub" => self.sub(file, ln, rest),
                 "doc" => match self.cur {
@@ -812,7 +817,7 @@ impl Parser {
             }
         }
         for d in &self.data.devices {
-            for m in &d.msgs {
+            for m in d.msgs.iter().chain(&d.silent) {
                 if !names.contains(m) {
                     errs.push(TableError {
                         file: d.file.to_string(),

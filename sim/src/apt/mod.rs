@@ -10,12 +10,24 @@
 
 use crate::models::{self, Family, ModelSpec};
 use crate::{earliest, Line, Simulator, MS, SEC};
-use aptscope_dissector::apt::{encode, AptFrame, AptFramer, FieldValue, Item};
+use aptscope_dissector::apt::{encode, AptFrame, AptFramer, FieldValue, Item, Value};
 use aptscope_dissector::msg;
 use aptscope_dissector::table::{
     example_bytes, Access, DeviceProfile, FormKind, Loc, MsgDef, Table,
 };
 use aptscope_dissector::units;
+
+mod model;
+mod motion;
+mod outputs;
+mod status;
+
+pub use model::{model_list, AptModel};
+use model::{serial_of, Scaling};
+use motion::{Kind, Motion};
+
+/// Named field values, as the encoder takes them.
+type Params = Vec<(&'static str, FieldValue)>;
 
 /// Host address.
 const HOST: u8 = 0x01;
@@ -62,6 +74,9 @@ const LD_OUTPUT: u32 = 0x1;
 const LD_KEYSWITCH: u32 = 0x2;
 const LD_PSU_OK: u32 = 0x1000;
 const LD_STABLE: u32 = 0x8000_0000;
+// nt_status bits: tracking with a signal; both channels connected.
+const NT_TRACKING: u32 = 0x3;
+const NT_CHANS: u32 = 0x3_0000;
 // tec_status bits.
 const TEC_OUTPUT_ENABLED: u32 = 0x1;
 const TEC_DISP_TACT: u32 = 0x10;
@@ -75,282 +90,6 @@ const QUAD_BEAM: (i64, i64, i64) = (1200, -800, 45_000);
 const QUAD_RESIDUAL: (i64, i64) = (3, -2);
 /// Counts per mm or degree of a stage the units table does not know (MPC paddles, flippers).
 const DEFAULT_COUNTS: f64 = 1000.0;
-
-/// A controller model the simulator can be: an entry of [`models::MODELS`].
-#[derive(Debug, Clone, Copy)]
-pub struct AptModel(&'static ModelSpec);
-
-impl PartialEq for AptModel {
-    fn eq(&self, o: &AptModel) -> bool {
-        self.0.name == o.0.name
-    }
-}
-
-impl Eq for AptModel {}
-
-/// The models the first simulators had, by the names their callers use.
-#[allow(non_upper_case_globals)]
-impl AptModel {
-    /// K-Cube brushed DC servo controller.
-    pub const Kdc101: AptModel = AptModel(&models::KDC101);
-    /// T-Cube DC servo controller.
-    pub const Tdc001: AptModel = AptModel(&models::TDC001);
-    /// K-Cube piezo controller.
-    pub const Kpz101: AptModel = AptModel(&models::KPZ101);
-    /// Three-bay benchtop stepper controller.
-    pub const Bsc203: AptModel = AptModel(&models::BSC203);
-    /// T-Cube laser source.
-    pub const Tls001: AptModel = AptModel(&models::TLS001);
-    /// T-Cube TEC controller.
-    pub const Ttc001: AptModel = AptModel(&models::TTC001);
-    /// K-Cube position aligner.
-    pub const Kpa101: AptModel = AptModel(&models::KPA101);
-}
-
-impl AptModel {
-    /// Every model, in the spec's order.
-    pub fn all() -> impl Iterator<Item = AptModel> {
-        models::MODELS.iter().map(AptModel)
-    }
-
-    /// The model `s` names (any case: `kdc101`, `BSC203`).
-    pub fn parse(s: &str) -> Option<AptModel> {
-        models::find(s).map(AptModel)
-    }
-
-    /// The model name as HW_GET_INFO gives it.
-    pub fn name(self) -> &'static str {
-        self.0.name
-    }
-
-    /// Its data: family, bays, channels, serial prefix, firmware, stage.
-    pub fn spec(self) -> &'static ModelSpec {
-        self.0
-    }
-
-    /// The first digits of the serial number.
-    pub fn serial_prefix(self) -> u32 {
-        self.0.serial_prefix
-    }
-
-    /// What it implements: the table's device profile (every model here has one; a test says
-    /// so).
-    pub fn profile(self) -> Option<DeviceProfile> {
-        Table::global().device_profile(self.0.name)
-    }
-
-    /// Motion scaling from the units table's stage rows (spec section 8).
-    fn scaling(self) -> Scaling {
-        let (stage, travel) = self.0.stage;
-        let fam = units::model(self.0.name)
-            .and_then(|m| m.family)
-            .unwrap_or(match self.0.family {
-                Family::Brushless => units::Family::Brushless,
-                Family::Stepper => units::Family::Trinamic,
-                _ => units::Family::DcServo,
-            });
-        let counts = units::stage_for(stage, fam).map_or(DEFAULT_COUNTS, |s| s.counts_per_unit);
-        let (vel, acc) = match fam {
-            // Section 8's DC servo and Trinamic factors to the digits the first simulators
-            // used: the committed session recordings (samples/sessions/) hold positions
-            // computed with them.
-            units::Family::DcServo => (22.369_621, 0.007_635_4),
-            units::Family::Trinamic => (53.687_091, 0.010_995),
-            f => {
-                let q = |q| f.factor(q, 1.0).unwrap_or(1.0);
-                (
-                    q(aptscope_dissector::table::Quantity::Vel),
-                    q(aptscope_dissector::table::Quantity::Acc),
-                )
-            }
-        };
-        Scaling {
-            counts_per_mm: counts,
-            travel_mm: travel,
-            vel,
-            acc,
-        }
-    }
-}
-
-/// One line of `sim apt --list` per model: name, family, bays, channels, HW_GET_INFO serial.
-pub fn model_list() -> String {
-    let mut out = String::from("MODEL    FAMILY         BAYS  CHANNELS  SERIAL\n");
-    for m in models::MODELS {
-        let note = if m.prefix_in_spec { "" } else { " *" };
-        out.push_str(&format!(
-            "{:<8} {:<14} {:>4}  {:>8}  {}{}\n",
-            m.name,
-            m.family.name(),
-            if m.bays == 0 {
-                "-".to_string()
-            } else {
-                m.bays.to_string()
-            },
-            m.channels,
-            serial_of(m, 0),
-            note
-        ));
-    }
-    out.push_str(
-        "(bays: a rack answering at 0x11 with bays from 0x21; -: a single unit at 0x50 and \
-         0x21)\n(*: serial prefix not in the spec's table)\n",
-    );
-    out
-}
-
-/// The serial number of unit `i` of a model (8 digits from its prefix).
-fn serial_of(m: &ModelSpec, i: u32) -> u32 {
-    let p = m.serial_prefix;
-    let base = if p >= 100 { p * 100_000 } else { p * 1_000_000 };
-    base + 123 + i
-}
-
-#[derive(Debug, Clone, Copy)]
-struct Scaling {
-    counts_per_mm: f64,
-    travel_mm: f64,
-    vel: f64,
-    acc: f64,
-}
-
-impl Scaling {
-    fn max_pos(&self) -> i64 {
-        (self.counts_per_mm * self.travel_mm) as i64
-    }
-    fn vel_param(&self, mm_s: f64) -> i64 {
-        (mm_s * self.counts_per_mm * self.vel).round() as i64
-    }
-    fn acc_param(&self, mm_s2: f64) -> i64 {
-        (mm_s2 * self.counts_per_mm * self.acc).round() as i64
-    }
-    /// counts/s from a velocity parameter (at least 1 count/s).
-    fn counts_s(&self, param: i64) -> f64 {
-        (param as f64 / self.vel).max(1.0)
-    }
-    /// counts/s² from an acceleration parameter (at least 1 count/s²).
-    fn counts_s2(&self, param: i64) -> f64 {
-        (param as f64 / self.acc).max(1.0)
-    }
-}
-
-/// What a motion is, for status bits and the completion message.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Kind {
-    Move,
-    Jog,
-    Home,
-    /// A velocity move or continuous jog: runs to the end of travel unless stopped.
-    Velocity,
-    /// Decelerating after MOT_MOVE_STOP (profiled).
-    Stopping,
-}
-
-/// A 1-D motion: accelerate from `v0` to `vpeak`, cruise, decelerate to rest.
-#[derive(Debug, Clone, Copy)]
-struct Motion {
-    kind: Kind,
-    start_ns: u64,
-    from: i64,
-    /// Where it ends (exactly).
-    to: i64,
-    dir: i64,
-    v0: f64,
-    vpeak: f64,
-    a: f64,
-    t1: f64,
-    t2: f64,
-    t3: f64,
-    /// Channel the host named, for the completion message.
-    chan: i64,
-}
-
-impl Motion {
-    /// A trapezoidal move from rest to rest.
-    fn trapezoid(kind: Kind, now: u64, from: i64, to: i64, v: f64, a: f64, chan: i64) -> Motion {
-        let d = (to - from).unsigned_abs() as f64;
-        let (vpeak, t1, t2) = if d >= v * v / a {
-            (v, v / a, (d - v * v / a) / v)
-        } else {
-            let vp = (a * d).sqrt();
-            (vp, vp / a, 0.0)
-        };
-        Motion {
-            kind,
-            start_ns: now,
-            from,
-            to,
-            dir: if to >= from { 1 } else { -1 },
-            v0: 0.0,
-            vpeak,
-            a,
-            t1,
-            t2,
-            t3: t1,
-            chan,
-        }
-    }
-
-    /// Constant speed for `secs` (homing).
-    fn linear(kind: Kind, now: u64, from: i64, to: i64, secs: f64, chan: i64) -> Motion {
-        let d = (to - from).unsigned_abs() as f64;
-        Motion {
-            kind,
-            start_ns: now,
-            from,
-            to,
-            dir: if to >= from { 1 } else { -1 },
-            v0: d / secs,
-            vpeak: d / secs,
-            a: 0.0,
-            t1: 0.0,
-            t2: secs,
-            t3: 0.0,
-            chan,
-        }
-    }
-
-    fn total_s(&self) -> f64 {
-        self.t1 + self.t2 + self.t3
-    }
-
-    fn end_ns(&self) -> u64 {
-        self.start_ns
-            .saturating_add((self.total_s() * SEC as f64).min(1e18) as u64)
-    }
-
-    /// Distance covered and speed (counts, counts/s) at `now`.
-    fn at(&self, now: u64) -> (f64, f64) {
-        let t = now.saturating_sub(self.start_ns) as f64 / SEC as f64;
-        let x1 = self.v0 * self.t1 + 0.5 * self.a * self.t1 * self.t1;
-        let x2 = x1 + self.vpeak * self.t2;
-        if t < self.t1 {
-            (self.v0 * t + 0.5 * self.a * t * t, self.v0 + self.a * t)
-        } else if t < self.t1 + self.t2 {
-            (x1 + self.vpeak * (t - self.t1), self.vpeak)
-        } else if t < self.total_s() {
-            let tau = t - self.t1 - self.t2;
-            (
-                x2 + self.vpeak * tau - 0.5 * self.a * tau * tau,
-                (self.vpeak - self.a * tau).max(0.0),
-            )
-        } else {
-            ((self.to - self.from).unsigned_abs() as f64, 0.0)
-        }
-    }
-
-    /// Position and speed at `now`.
-    fn pos(&self, now: u64) -> (i64, f64) {
-        if now >= self.end_ns() {
-            return (self.to, 0.0);
-        }
-        let (d, v) = self.at(now);
-        (self.from + self.dir * d.round() as i64, v)
-    }
-}
-
-/// Named field values, as the encoder takes them.
-type Params = Vec<(&'static str, FieldValue)>;
 
 /// A parameter block a unit holds for one GET message (and sub-message): the frame's param
 /// bytes or data packet, as a SET sent it or the defaults made it.
@@ -382,6 +121,8 @@ struct Unit {
     next_update: Option<u64>,
     /// Status updates sent since the host's last ACK.
     unacked: u32,
+    /// Updates stopped for want of the host's ACK (they resume with it).
+    starved: bool,
     /// Where its status updates come from (0x50 or 0x21: where the host started them).
     update_src: u8,
     store: Vec<Stored>,
@@ -451,6 +192,7 @@ impl AptSim {
             motion: None,
             next_update: None,
             unacked: 0,
+            starved: false,
             update_src: addr,
             store: vec![],
         };
@@ -823,6 +565,7 @@ impl AptSim {
                 let addr = self.units[ui].addr;
                 for u in self.units.iter_mut().filter(|u| u.addr == addr) {
                     u.next_update = None;
+                    u.starved = false;
                 }
             }
             msg::MOT_ACK_DCSTATUSUPDATE
@@ -833,9 +576,14 @@ impl AptSim {
             | msg::TEC_ACK_STATUSUPDATE
             | msg::QUAD_ACK_STATUSUPDATE
             | msg::PZMOT_ACK_STATUSUPDATE => {
+                // The host is alive: the count starts again, and updates stopped for want of
+                // it resume (thorlabs-apt-device's first ACK can come after the 50th update).
                 let addr = self.units[ui].addr;
                 for u in self.units.iter_mut().filter(|u| u.addr == addr) {
                     u.unacked = 0;
+                    if std::mem::take(&mut u.starved) {
+                        u.next_update = Some(now + UPDATE_NS);
+                    }
                 }
             }
             msg::MOD_SET_CHANENABLESTATE => {
@@ -1056,7 +804,12 @@ impl AptSim {
                 } else {
                     to
                 };
-                self.units[ui].motion = Some(Motion::trapezoid(kind, now, from, to, v, a, chan));
+                let mut mo = Motion::trapezoid(kind, now, from, to, v, a, chan);
+                mo.silent = self
+                    .profile
+                    .as_ref()
+                    .is_some_and(|p| !Table::global().answers(p, m.id));
+                self.units[ui].motion = Some(mo);
             }
             _ => {
                 // MOT_MOVE_STOP.
@@ -1085,6 +838,7 @@ impl AptSim {
                         t2: 0.0,
                         t3: t,
                         chan,
+                        silent: false,
                     });
                 } else {
                     u.motion = None;
@@ -1093,33 +847,6 @@ impl AptSim {
                     self.send(now, b);
                 }
             }
-        }
-        true
-    }
-
-    /// Outputs that react beyond storing the value: the laser source's enable, the piezo's
-    /// output voltage (within 0..100 %, only while the channel is enabled), the strain gauge's
-    /// zero. False when `r` is not of this family.
-    fn output_msg(&mut self, r: &Req<'_, '_>) -> bool {
-        let Req { f, m, ui, .. } = *r;
-        match m.id {
-            msg::LA_ENABLEOUTPUT | msg::LA_DISABLEOUTPUT => {
-                self.units[ui].output = m.id == msg::LA_ENABLEOUTPUT;
-            }
-            msg::PZ_SET_OUTPUTVOLTS => {
-                if let Some(v) = f.field("voltage").and_then(|(_, v)| v.as_i64()) {
-                    if self.units[ui].enabled {
-                        let v = v.clamp(0, 32767);
-                        self.set_field(ui, msg::PZ_GET_OUTPUTVOLTS, "voltage", v);
-                    }
-                }
-            }
-            msg::PZ_SET_ZERO if self.model.0.family == Family::StrainGauge => {
-                // The gauge takes its present reading as zero.
-                self.set_field(ui, msg::PZ_GET_TSG_READING, "reading", 0);
-                self.set_field(ui, msg::PZ_GET_TSG_READING, "smoothed", 0);
-            }
-            _ => return false,
         }
         true
     }
@@ -1177,11 +904,8 @@ impl AptSim {
         let live = self.live(ui, gm.id, sub, now);
         if !live.is_empty() {
             if let Some(fr) = AptFrame::decode(t, 0, &b, false) {
-                let mut vals: Vec<(&str, FieldValue)> = fr
-                    .fields()
-                    .filter(|(fd, _)| fd.name != "sub_id")
-                    .filter_map(|(fd, v)| Some((fd.name, int(v.as_i64()?))))
-                    .collect();
+                let mut vals = values_of(&fr);
+                vals.retain(|(n, _)| *n != "sub_id");
                 for (name, v) in live {
                     if let Some(s) = vals.iter_mut().find(|(n, _)| *n == name) {
                         s.1 = v;
@@ -1192,102 +916,8 @@ impl AptSim {
                 }
             }
         }
-        set_chan(gm, &mut b, r.chan);
+        set_chan(&mut b, r.chan);
         self.line.send(now, b);
-    }
-
-    /// Readings of a sub-message block that come from the unit's state, not from SET_PARAMS.
-    fn live(&self, ui: usize, get: u16, id: u16, now: u64) -> Params {
-        match (get, id) {
-            (msg::LA_GET_PARAMS, msg::la::CURRENT_POWER) => {
-                let (c, p, _) = self.laser(ui);
-                vec![("laser_current", int(c)), ("laser_power", int(p))]
-            }
-            (msg::LA_GET_PARAMS, msg::la::STATUS_BITS) => {
-                vec![("status_bits", int(self.laser(ui).2 as i64))]
-            }
-            (msg::TEC_GET_PARAMS, msg::tec::READINGS) => {
-                let (i, ta, ts, _) = self.tec(ui);
-                vec![("i_tec", int(i)), ("t_act", int(ta)), ("t_set", int(ts))]
-            }
-            (msg::TEC_GET_PARAMS, msg::tec::STATUS_BITS) => {
-                vec![("status_bits", int(self.tec(ui).3 as i64))]
-            }
-            (msg::QUAD_GET_PARAMS, msg::quad::READINGS) => {
-                let q = self.quad(ui);
-                vec![
-                    ("x_diff", int(q.0)),
-                    ("y_diff", int(q.1)),
-                    ("sum", int(q.2)),
-                    ("x_pos", int(q.3)),
-                    ("y_pos", int(q.4)),
-                ]
-            }
-            (msg::PZMOT_GET_PARAMS, msg::pzmot::POS_COUNTS) => {
-                vec![("position", int(self.unit_pos(ui, now)))]
-            }
-            (msg::QUAD_GET_PARAMS, msg::quad::STATUS_BITS) => {
-                vec![("status_bits", int(self.quad(ui).5 as i64))]
-            }
-            _ => vec![],
-        }
-    }
-
-    /// Laser current and power (0..32767) and status bits: the power follows the setpoint while
-    /// the output is on.
-    fn laser(&self, ui: usize) -> (i64, i64, u32) {
-        let u = &self.units[ui];
-        let sp = self
-            .held_field(ui, msg::LA_GET_PARAMS, msg::la::SETPOINT, "setpoint")
-            .unwrap_or(0);
-        let mut bits = LA_KEYSWITCH_ENABLED | LA_CLOSED_LOOP | LA_UNITS_MW;
-        if u.output {
-            bits |= LA_OUTPUT_ENABLED;
-            let c = (sp as f64 * LA_CURRENT_PER_POWER).round() as i64;
-            (c, sp, bits)
-        } else {
-            (0, 0, bits)
-        }
-    }
-
-    /// TEC current (mA), actual and set temperature, status bits: the element holds its
-    /// setpoint.
-    fn tec(&self, ui: usize) -> (i64, i64, i64, u32) {
-        let g = msg::TEC_GET_PARAMS;
-        let ts = self
-            .held_field(ui, g, msg::tec::TEMP_SETPOINT, "t_set")
-            .unwrap_or(0);
-        let lim = self
-            .held_field(ui, g, msg::tec::IO_SETTINGS, "i_lim")
-            .unwrap_or(TEC_HOLD_MA);
-        let disp = match self.held_field(ui, g, msg::tec::DISP_SETTINGS, "disp_mode") {
-            Some(1) => 0x20,
-            Some(2) => 0x40,
-            Some(3) => 0x80,
-            _ => TEC_DISP_TACT,
-        };
-        (TEC_HOLD_MA.min(lim), ts, ts, TEC_OUTPUT_ENABLED | disp)
-    }
-
-    /// Quad detector XDIFF, YDIFF, SUM, position outputs XPOS, YPOS and status bits, by
-    /// operating mode: monitor (outputs 0), open loop (outputs as set), closed loop (the
-    /// outputs cancel the beam's offset).
-    fn quad(&self, ui: usize) -> (i64, i64, i64, i64, i64, u32) {
-        let g = msg::QUAD_GET_PARAMS;
-        let (bx, by, sum) = QUAD_BEAM;
-        match self.held_field(ui, g, msg::quad::OPER_MODE, "mode") {
-            Some(2) => {
-                let d = msg::quad::POS_DEMAND_OUTPUTS;
-                let x = self.held_field(ui, g, d, "x_pos").unwrap_or(0);
-                let y = self.held_field(ui, g, d, "y_pos").unwrap_or(0);
-                (bx, by, sum, x, y, 0x2)
-            }
-            Some(3) | Some(4) => {
-                let (rx, ry) = QUAD_RESIDUAL;
-                (rx, ry, sum, -2 * bx, -2 * by, 0x4)
-            }
-            _ => (bx, by, sum, 0, 0, 0x1),
-        }
     }
 
     fn send(&mut self, now: u64, b: Option<Vec<u8>>) {
@@ -1316,204 +946,6 @@ impl AptSim {
             ],
         )
         .unwrap_or_default()
-    }
-
-    fn status_bits(&self, ui: usize, now: u64) -> u32 {
-        let u = &self.units[ui];
-        let mut bits = MOTOR_CONNECTED;
-        if u.enabled {
-            bits |= ENABLED;
-        }
-        if u.homed {
-            bits |= HOMED;
-        }
-        let (p, moving) = match u.motion {
-            Some(m) if now < m.end_ns() => (m.pos(now).0, Some(m)),
-            Some(m) => (m.to, None),
-            None => (u.pos, None),
-        };
-        if let Some(m) = moving {
-            let cw = m.dir > 0;
-            bits |= match (m.kind, cw) {
-                (Kind::Jog, true) => JOGGING_CW,
-                (Kind::Jog, false) => JOGGING_CCW,
-                (_, true) => MOVING_CW,
-                (_, false) => MOVING_CCW,
-            };
-            if m.kind == Kind::Home {
-                bits |= HOMING;
-            }
-        }
-        let max = self.scaling.max_pos();
-        if self.model.0.family != Family::InertiaMotor {
-            if p >= max {
-                bits |= CW_HW_LIMIT;
-            }
-            // A flipper reports its first position on the CCW switch.
-            if p <= 0 && (u.homed || self.model.0.family == Family::Flipper) {
-                bits |= CCW_HW_LIMIT;
-            }
-        }
-        bits
-    }
-
-    /// MOT_GET_DCSTATUSUPDATE (or MOVE_COMPLETED/MOVE_STOPPED, same structure). Velocity is the
-    /// speed in counts/s divided by 10 (the spec leaves its scale to the controller).
-    fn dc_status(&self, ui: usize, now: u64, id: u16, chan: i64, src: u8) -> Option<Vec<u8>> {
-        let u = &self.units[ui];
-        let (p, v) = u.motion.map_or((u.pos, 0.0), |m| m.pos(now));
-        build(
-            id,
-            Some(14),
-            HOST,
-            src,
-            &[
-                ("chan_ident", int(chan)),
-                ("position", int(p)),
-                (
-                    "velocity",
-                    int(((v / 10.0).round() as i64).clamp(0, 0xFFFF)),
-                ),
-                ("status_bits", int(self.status_bits(ui, now) as i64)),
-            ],
-        )
-    }
-
-    /// The status message a family sends after HW_START_UPDATEMSGS: the first of its
-    /// candidates the model implements.
-    fn status_msg(&self) -> u16 {
-        let cands: &[u16] = match self.model.0.family {
-            Family::DcServo | Family::Brushless | Family::Polariser => {
-                &[msg::MOT_GET_DCSTATUSUPDATE, msg::MOT_GET_STATUSUPDATE]
-            }
-            Family::Stepper | Family::Solenoid | Family::Flipper => {
-                &[msg::MOT_GET_STATUSUPDATE, msg::MOT_GET_DCSTATUSUPDATE]
-            }
-            Family::Piezo | Family::StrainGauge => &[msg::PZ_GET_PZSTATUSUPDATE],
-            Family::NanoTrak => &[msg::PZ_GET_NTSTATUSUPDATE],
-            Family::Laser => &[msg::LA_GET_STATUSUPDATE],
-            Family::LaserDiode => &[msg::LD_GET_STATUSUPDATE, msg::LA_GET_STATUSUPDATE],
-            Family::Tec => &[msg::TEC_GET_STATUSUPDATE],
-            Family::Quad => &[msg::QUAD_GET_STATUSUPDATE],
-            Family::InertiaMotor => &[msg::PZMOT_GET_STATUSUPDATE, msg::MOT_GET_STATUSUPDATE],
-        };
-        let t = Table::global();
-        cands
-            .iter()
-            .copied()
-            .find(|id| self.profile.as_ref().is_none_or(|p| t.implements(p, *id)))
-            .unwrap_or(cands[0])
-    }
-
-    /// Status message `get` of unit `ui` from `src`: the family's live values in the message's
-    /// fields, the rest as the defaults have them.
-    fn status_update(&self, ui: usize, now: u64, get: u16, src: u8) -> Option<Vec<u8>> {
-        let u = &self.units[ui];
-        let chan = i64::from(u.chan);
-        let pos = u.motion.map_or(u.pos, |m| m.pos(now).0);
-        let bits = i64::from(self.status_bits(ui, now));
-        let vals: Vec<(&str, FieldValue)> = match get {
-            msg::MOT_GET_DCSTATUSUPDATE => {
-                return self.dc_status(ui, now, get, chan, src);
-            }
-            msg::PZ_GET_PZSTATUSUPDATE => {
-                let v = self
-                    .held_field(ui, msg::PZ_GET_OUTPUTVOLTS, 0, "voltage")
-                    .unwrap_or(0);
-                let mut bits = PZ_ACTUATOR_CONNECTED;
-                let mode = self.held_field(ui, msg::PZ_GET_POSCONTROLMODE, 0, "mode");
-                if mode.is_some_and(|m| m == 2 || m == 4) {
-                    bits |= 0x400;
-                }
-                vec![
-                    ("chan_ident", int(chan)),
-                    ("op_voltage", int(v)),
-                    ("position", int(0)),
-                    ("status_bits", int(bits as i64)),
-                ]
-            }
-            msg::MOT_GET_STATUSUPDATE => {
-                // Stepper status bits share the low 11 bits with mot_status.
-                vec![
-                    ("chan_ident", int(chan)),
-                    ("position", int(pos)),
-                    ("enc_count", int(0)),
-                    ("status_bits", int(bits & 0x7FF)),
-                    ("chan_ident2", int(chan)),
-                ]
-            }
-            msg::LA_GET_STATUSUPDATE => {
-                let (c, p, bits) = self.laser(ui);
-                vec![
-                    ("laser_current", int(c)),
-                    ("laser_power", int(p)),
-                    ("status_bits", int(bits as i64)),
-                ]
-            }
-            msg::LD_GET_STATUSUPDATE => {
-                // A laser diode driver: the current follows the power setpoint while the output
-                // is on; key switch, supply and stability bits set.
-                let (c, _, _) = self.laser(ui);
-                let on = self.units[ui].output;
-                let bits = LD_KEYSWITCH | LD_PSU_OK | LD_STABLE | (u32::from(on) * LD_OUTPUT);
-                vec![
-                    ("laser_current", int(c)),
-                    ("photo_current", int(c / 2)),
-                    ("laser_voltage", int(if on { 1800 } else { 0 })),
-                    ("status_bits", int(i64::from(bits))),
-                ]
-            }
-            msg::TEC_GET_STATUSUPDATE => {
-                let (i, ta, ts, bits) = self.tec(ui);
-                vec![
-                    ("i_tec", int(i)),
-                    ("t_act", int(ta)),
-                    ("t_set", int(ts)),
-                    ("status_bits", int(bits as i64)),
-                ]
-            }
-            msg::QUAD_GET_STATUSUPDATE => {
-                let q = self.quad(ui);
-                vec![
-                    ("x_diff", int(q.0)),
-                    ("y_diff", int(q.1)),
-                    ("sum", int(q.2)),
-                    ("x_pos", int(q.3)),
-                    ("y_pos", int(q.4)),
-                    ("status_bits", int(q.5 as i64)),
-                ]
-            }
-            msg::PZMOT_GET_STATUSUPDATE => {
-                // All four channels of the controller in one message.
-                const NAMES: [[&str; 3]; 4] = [
-                    ["chan_ident1", "position1", "status_bits1"],
-                    ["chan_ident2", "position2", "status_bits2"],
-                    ["chan_ident3", "position3", "status_bits3"],
-                    ["chan_ident4", "position4", "status_bits4"],
-                ];
-                let mut v = vec![];
-                let chans = self
-                    .units
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, x)| x.addr == u.addr);
-                for ((i, x), n) in chans.zip(NAMES) {
-                    let bits = i64::from(self.status_bits(i, now) & 0x7FF);
-                    v.push((n[0], int(1 << (x.chan - 1).min(3))));
-                    v.push((n[1], int(self.unit_pos(i, now))));
-                    v.push((n[2], int(bits)));
-                }
-                v
-            }
-            _ => {
-                // No live values: the defaults (NanoTrak, laser diode readings).
-                let m = Table::global().msg(get)?;
-                let mut b = self.held(ui, m, 0, src)?;
-                set_chan(m, &mut b, chan);
-                return Some(b);
-            }
-        };
-        build(get, None, HOST, src, &vals)
     }
 
     /// The next event (motion end or status update) at or before `now`, if any.
@@ -1559,9 +991,10 @@ impl AptSim {
                         src,
                         &[("chan_ident", int(m.chan))],
                     )
-                } else if self.model.0.family == Family::Flipper {
+                } else if m.silent {
                     // pylablib's MFF class (written against the hardware) polls the status
-                    // bits and takes a MOT_MOVE_COMPLETED for an error: a flipper sends none.
+                    // bits and takes a MOT_MOVE_COMPLETED for an error: a flipper sends none
+                    // (the table's `silent` line for MFF101/MFF102).
                     None
                 } else if self.model.0.family == Family::InertiaMotor {
                     let bits = i64::from(self.status_bits(ui, t) & 0x7FF);
@@ -1603,6 +1036,7 @@ impl AptSim {
                 if u.unacked > KEEPALIVE_UPDATES {
                     // The host has not said it is alive: the controller stops its updates.
                     u.next_update = None;
+                    u.starved = true;
                     let addr = u.addr;
                     self.note(format!(
                         "status updates of 0x{addr:02X} stopped: {KEEPALIVE_UPDATES} sent \
@@ -1661,6 +1095,16 @@ impl Simulator for AptSim {
     }
 }
 
+/// The numeric fields of a frame as the encoder takes them back.
+fn values_of(f: &AptFrame<'_, '_>) -> Params {
+    f.fields()
+        .filter_map(|(fd, v)| match v {
+            Value::F(x) => Some((fd.name, FieldValue::Float(x))),
+            v => Some((fd.name, int(v.as_i64()?))),
+        })
+        .collect()
+}
+
 /// A frame of message `id` with these param bytes, or this data packet.
 fn frame(id: u16, params: [u8; 2], data: Option<&[u8]>, dst: u8, src: u8) -> Vec<u8> {
     let mut b = Vec::with_capacity(6 + data.map_or(0, <[u8]>::len));
@@ -1683,7 +1127,7 @@ fn frame(id: u16, params: [u8; 2], data: Option<&[u8]>, dst: u8, src: u8) -> Vec
 }
 
 /// Write the host's channel ident into `b`'s `chan_ident` field, where its form has one.
-fn set_chan(m: &MsgDef, b: &mut [u8], chan: i64) {
+fn set_chan(b: &mut [u8], chan: i64) {
     let Some(f) = AptFrame::decode(Table::global(), 0, b, false) else {
         return;
     };
@@ -1691,7 +1135,6 @@ fn set_chan(m: &MsgDef, b: &mut [u8], chan: i64) {
         return;
     };
     let (at, w) = (fd.loc.frame_offset(), fd.ty.width());
-    let _ = m;
     if at + w <= b.len() && (1..=2).contains(&w) {
         b[at..at + w].copy_from_slice(&chan.to_le_bytes()[..w]);
     }
