@@ -52,9 +52,17 @@ fn main() -> std::io::Result<()> {
     app.select(app.len().saturating_sub(1));
     let _ = term.draw(|f| ui::draw(f, &mut app));
     let jump = t1.elapsed();
-    let records = shared.index.read().map(|i| i.recs.len()).unwrap_or(0);
+    let (records, index_mb, plot_mb) = shared.index.read().map_or((0, 0.0, 0.0), |i| {
+        let points: usize = i.series.values().map(Vec::capacity).sum();
+        let mb = |b: usize| b as f64 / 1e6;
+        (
+            i.recs.len(),
+            mb(i.recs.memory() + i.arena.capacity()),
+            mb(points * std::mem::size_of::<index::Point>()),
+        )
+    });
     println!(
-        "{{\"first_screen_ms\":{:.1},\"records_at_first_screen\":{frames_at_first},\"index_s\":{:.2},\"cpu_s_when_indexed\":{cpu:.2},\"records\":{records},\"jump_to_end_and_draw_ms\":{:.1}}}",
+        "{{\"first_screen_ms\":{:.1},\"records_at_first_screen\":{frames_at_first},\"index_s\":{:.2},\"cpu_s_when_indexed\":{cpu:.2},\"records\":{records},\"records_mb\":{index_mb:.0},\"plot_mb\":{plot_mb:.0},\"jump_to_end_and_draw_ms\":{:.1}}}",
         first.as_secs_f64() * 1e3,
         total.as_secs_f64(),
         jump.as_secs_f64() * 1e3

@@ -62,7 +62,7 @@ pub fn for_node(ix: &Index, n: u64, node: &Node) -> Option<String> {
     let v = View {
         ix,
         n,
-        r: ix.rec(n)?,
+        r: &ix.rec(n)?,
     };
     let proto = v.proto().unwrap_or("apt");
     let name = ["name".to_string()];

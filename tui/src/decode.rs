@@ -140,8 +140,9 @@ fn push_sep(out: &mut String, s: &str) {
 
 /// Decode the timeline row of record `n`.
 pub fn row(ix: &Index, n: u64) -> Option<Row> {
-    let r = ix.rec(n)?;
+    let r = &ix.rec(n)?;
     let bytes = ix.bytes(r);
+    let bytes = &*bytes;
     let mut row = Row {
         n,
         ts: r.ts(),
@@ -323,10 +324,11 @@ fn addr_text(a: aptscope_dissector::apt::Addr) -> String {
 /// The detail tree of record `n` (every node; collapsing is the view's business).
 pub fn tree(ix: &Index, n: u64) -> Vec<Node> {
     let mut t = Tree(vec![]);
-    let Some(r) = ix.rec(n) else {
+    let Some(r) = &ix.rec(n) else {
         return t.0;
     };
     let bytes = ix.bytes(r);
+    let bytes = &*bytes;
     let mut top = format!(
         "Record {n}: {} bytes at stream offset {:#x}",
         bytes.len(),

@@ -25,7 +25,7 @@ use std::borrow::Cow;
 /// Does record `n` pass `filter`? (The terminal UI's one call of the display filter.)
 pub fn matches(filter: &Filter, ix: &Index, n: u64) -> bool {
     match ix.rec(n) {
-        Some(r) => filter.matches(&View { ix, n, r }),
+        Some(r) => filter.matches(&View { ix, n, r: &r }),
         None => false,
     }
 }
@@ -96,8 +96,9 @@ fn reply_to(r: &Rec) -> Option<u64> {
 /// Re-decode record `n` from the arena into the [`Record`] the decode chain gave for it (its
 /// pairing from the index), and pass it to `f`. `None` when there is no such record.
 pub fn with_record<T>(ix: &Index, n: u64, f: impl FnOnce(&Record<'_>) -> T) -> Option<T> {
-    let r = ix.rec(n)?;
+    let r = &ix.rec(n)?;
     let bytes = ix.bytes(r);
+    let bytes = &*bytes;
     let meta = meta(ix, n, r);
     let ell = r.has(F_ELL);
     if r.has(F_GARBAGE) {
@@ -165,7 +166,7 @@ pub fn diag_kinds(ix: &Index, n: u64, r: &Rec, f: &mut dyn FnMut(&'static str)) 
         let d = if r.has(F_ELL) {
             DiagKind::Garbage { len: len as u32 }
         } else {
-            aptscope_dissector::shape::garbage_diag(r.offset, len, garbage_kind(r, ix.bytes(r)))
+            aptscope_dissector::shape::garbage_diag(r.offset, len, garbage_kind(r, &ix.bytes(r)))
                 .kind
         };
         return f(d.name());

@@ -1,11 +1,12 @@
-//! The capture index: every record (frame or garbage) of a capture, stored compactly (a small
-//! fixed-size record plus its bytes in one arena), built by a background thread while the UI
-//! already shows what has been read.
+//! The capture index: every record (frame or garbage) of a capture, stored compactly (24 bytes
+//! a record, [`Recs`]), built by a background thread while the UI already shows what has been
+//! read.
 //!
 //! The records come from the one decode chain ([`aptscope_dissector::record::Decoder`]): the
 //! indexer keeps of each [`Record`] what the timeline, filters and statistics read without
-//! decoding (a [`Rec`]) and its bytes. Nothing rendered is stored: the UI decodes the rows it
-//! shows from the arena.
+//! decoding (a [`Rec`]). Its bytes are read back from the capture file by position (a raw
+//! capture) or kept in an arena (other formats, live sources). Nothing rendered is stored: the
+//! UI decodes the rows it shows from those bytes.
 
 use aptscope_capture::model::{Event, Reader};
 use aptscope_capture::open::{open_with_progress, OpenOptions};
@@ -17,6 +18,7 @@ use aptscope_dissector::hash::NumMap;
 use aptscope_dissector::record::{AptRec, Ctx, Decoder, EllRec, GarbageRec, Record};
 use aptscope_dissector::table::{Class, Dir};
 use aptscope_dissector::units::{Scale, UnitsOpts};
+use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, RwLock};
@@ -50,8 +52,8 @@ pub const F_IS_REPLY: u16 = 2048;
 /// [`Index::not_for_model`]).
 pub const F_NOT_FOR_MODEL: u16 = 4096;
 
-/// One record of the capture (a frame or a garbage run), 56 bytes: what the timeline, filters
-/// and statistics read without decoding the frame.
+/// One record of the capture (a frame or a garbage run): what the timeline, filters and
+/// statistics read without decoding the frame. [`Recs`] stores it packed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Rec {
     /// Start of the bytes in the arena.
@@ -93,8 +95,307 @@ pub struct Rec {
 /// [`Rec::chan`] of a channel outside 0–253.
 pub const CHAN_OTHER: u8 = u8::MAX;
 
-// The compact record stays one 56-byte slot (memory per record of the index).
-const _: () = assert!(std::mem::size_of::<Rec>() == 56);
+/// A record as the index stores it, 24 bytes: [`Rec`] without its arena position and stream
+/// offset (kept beside it only once they differ from its capture offset: they never do in a
+/// raw capture, one stream whose every byte is a record's), its direction in the flags, its
+/// capture offset, time and module relative to those of its [`Block`], and narrower fields
+/// whose rare larger values ([`Wide`]) are kept beside it.
+#[derive(Debug, Clone, Copy, Default)]
+struct Packed {
+    /// Time since the block's; [`NO_TS`]: not recorded.
+    ts: u32,
+    pair: u32,
+    /// Capture offset after the block's (24 bits, little-endian).
+    cap: [u8; 3],
+    /// Stream.
+    stream: u8,
+    /// Length; [`NARROW`]: this record's values are in [`Recs::wide`].
+    len: u16,
+    /// Module or scale entry: 0 none, else after the block's (+ 1).
+    module: u16,
+    /// `F_*` flags, and the direction at [`DIR_SHIFT`].
+    flags: u16,
+    id: u16,
+    /// Diagnostic kinds entry.
+    diags: u8,
+    src: u8,
+    dst: u8,
+    chan: u8,
+}
+
+// Memory per record of the index (a raw capture's: nothing beside it but a few blocks).
+const _: () = assert!(std::mem::size_of::<Packed>() == 24);
+
+/// [`Packed::len`] of a record with a value too large for its slot (in [`Recs::wide`]).
+const NARROW: u16 = u16::MAX;
+
+/// Records in a chunk of [`Recs::packed`] (1.5 MB).
+const CHUNK: usize = 1 << 16;
+
+/// [`Packed::ts`] of a record without time.
+const NO_TS: u32 = u32::MAX;
+
+/// Capture offsets a block spans.
+const CAP_SPAN: u64 = 1 << 24;
+
+/// How much earlier than its first record's time a block's time is (records of several
+/// streams come a little out of time order).
+const TS_BACK: u64 = 1 << 30;
+
+/// Where [`Packed::flags`] keeps the direction (the `F_*` flags use the bits below).
+const DIR_SHIFT: u16 = 13;
+
+/// What the records from `first` on (to the next block) count their capture offset, time and
+/// module from. A record that does not fit its block's ranges starts a new one.
+#[derive(Debug, Clone, Copy)]
+struct Block {
+    first: u64,
+    cap: u64,
+    ts: u64,
+    module: u32,
+}
+
+impl Block {
+    /// The block a record would start.
+    fn of(r: &Rec, prev: Option<&Block>) -> Block {
+        Block {
+            first: 0,
+            // Room for records a little out of order (other streams, other directions).
+            cap: r.cap_offset.saturating_sub(CAP_SPAN / 4),
+            ts: r
+                .ts()
+                .map(|t| t.saturating_sub(TS_BACK))
+                .or(prev.map(|b| b.ts))
+                .unwrap_or(0),
+            // Room for older entries than the record's (other devices' conversions).
+            module: match r.module {
+                0 => prev.map_or(1, |b| b.module),
+                m => m.saturating_sub(u32::from(u16::MAX / 2)).max(1),
+            },
+        }
+    }
+    /// A record's capture offset, time and module relative to the block, when they fit.
+    fn fit(&self, r: &Rec) -> Option<([u8; 3], u32, u16)> {
+        let cap = r
+            .cap_offset
+            .checked_sub(self.cap)
+            .filter(|&c| c < CAP_SPAN)?;
+        let ts = match r.ts() {
+            None => NO_TS,
+            Some(t) => u32::try_from(t.checked_sub(self.ts)?)
+                .ok()
+                .filter(|&t| t != NO_TS)?,
+        };
+        let module = match r.module {
+            0 => 0,
+            m => u16::try_from(m.checked_sub(self.module)? + 1).ok()?,
+        };
+        let [a, b, c, _] = (cap as u32).to_le_bytes();
+        Some(([a, b, c], ts, module))
+    }
+}
+
+/// The values of a record that do not fit its [`Packed`] slot.
+#[derive(Debug, Clone, Copy)]
+struct Wide {
+    len: u32,
+    stream: u16,
+    diags: u16,
+}
+
+/// The records of the index in timeline order, stored packed ([`Recs::get`] gives a [`Rec`]).
+#[derive(Debug, Default, Clone)]
+pub struct Recs {
+    /// The records in chunks of [`CHUNK`]: growing never copies them (nor needs twice
+    /// their memory for a moment, as a doubling vector does).
+    packed: Vec<Vec<Packed>>,
+    len: usize,
+    /// The blocks, by first record.
+    blocks: Vec<Block>,
+    /// (arena start, stream offset) of every record, once one has them apart from its capture
+    /// offset; empty until then.
+    apart: Vec<[u64; 2]>,
+    /// Records (by index, in order) with a value too large for their slot.
+    wide: Vec<(u64, Wide)>,
+}
+
+impl Recs {
+    /// Number of records.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+    /// The block of record index `i`.
+    fn block_of(&self, i: usize) -> usize {
+        self.blocks
+            .partition_point(|b| b.first <= i as u64)
+            .saturating_sub(1)
+    }
+    /// Record at index `i` (record number `i + 1`).
+    pub fn get(&self, i: usize) -> Option<Rec> {
+        self.unpack(i, self.block_of(i))
+    }
+    /// Record at index `i` of block `b`.
+    fn unpack(&self, i: usize, b: usize) -> Option<Rec> {
+        let p = self.packed.get(i / CHUNK)?.get(i % CHUNK)?;
+        let b = self.blocks.get(b)?;
+        let [x, y, z] = p.cap;
+        let cap_offset = b.cap + u64::from(u32::from_le_bytes([x, y, z, 0]));
+        let mut r = Rec {
+            start: cap_offset,
+            offset: cap_offset,
+            cap_offset,
+            ts: match p.ts {
+                NO_TS => u64::MAX,
+                t => b.ts + u64::from(t),
+            },
+            pair: p.pair,
+            len: u32::from(p.len),
+            module: match p.module {
+                0 => 0,
+                m => b.module + u32::from(m) - 1,
+            },
+            stream: u16::from(p.stream),
+            flags: p.flags & ((1 << DIR_SHIFT) - 1),
+            dir: (p.flags >> DIR_SHIFT) as u8,
+            src: p.src,
+            dst: p.dst,
+            id: p.id,
+            diags: u16::from(p.diags),
+            chan: p.chan,
+        };
+        if p.len == NARROW {
+            let w = self.wide.binary_search_by_key(&(i as u64), |(j, _)| *j);
+            if let Some((_, w)) = w.ok().and_then(|k| self.wide.get(k)) {
+                r.len = w.len;
+                r.stream = w.stream;
+                r.diags = w.diags;
+            }
+        }
+        if let Some(&[start, offset]) = self.apart.get(i) {
+            (r.start, r.offset) = (start, offset);
+        }
+        Some(r)
+    }
+    /// The last record.
+    pub fn last(&self) -> Option<Rec> {
+        self.get(self.len().checked_sub(1)?)
+    }
+    /// Records from index `from` (record number `from + 1`) to the end.
+    pub fn iter_from(&self, from: usize) -> impl Iterator<Item = Rec> + '_ {
+        let mut b = self.block_of(from);
+        (from..self.len()).filter_map(move |i| {
+            while self.blocks.get(b + 1).is_some_and(|x| x.first <= i as u64) {
+                b += 1;
+            }
+            self.unpack(i, b)
+        })
+    }
+    /// All records.
+    pub fn iter(&self) -> impl Iterator<Item = Rec> + '_ {
+        self.iter_from(0)
+    }
+    /// Append a record.
+    pub fn push(&mut self, r: Rec) {
+        let i = self.len;
+        let apart = r.start != r.cap_offset || r.offset != r.cap_offset;
+        if apart && self.apart.len() < i {
+            // The first record kept apart: the ones before are given theirs.
+            self.apart = self.iter().map(|r| [r.cap_offset, r.cap_offset]).collect();
+        }
+        if apart || !self.apart.is_empty() {
+            self.apart.push([r.start, r.offset]);
+        }
+        let fit = self.blocks.last().and_then(|b| b.fit(&r));
+        let Some((cap, ts, module)) = fit.or_else(|| {
+            let b = Block {
+                first: i as u64,
+                ..Block::of(&r, self.blocks.last())
+            };
+            self.blocks.push(b);
+            b.fit(&r)
+        }) else {
+            // A new block always fits its first record.
+            return;
+        };
+        let narrow = |x: u32, max: u32| x < max;
+        let fits = narrow(r.len, u32::from(NARROW))
+            && narrow(r.stream.into(), 256)
+            && narrow(r.diags.into(), 256);
+        if !fits {
+            self.wide.push((
+                i as u64,
+                Wide {
+                    len: r.len,
+                    stream: r.stream,
+                    diags: r.diags,
+                },
+            ));
+        }
+        if self.packed.last().is_none_or(|c| c.len() == CHUNK) {
+            self.packed.push(Vec::with_capacity(CHUNK));
+        }
+        let Some(chunk) = self.packed.last_mut() else {
+            return;
+        };
+        self.len += 1;
+        chunk.push(Packed {
+            ts,
+            pair: r.pair,
+            cap,
+            stream: if fits { r.stream as u8 } else { 0 },
+            len: if fits { r.len as u16 } else { NARROW },
+            module,
+            flags: r.flags | u16::from(r.dir) << DIR_SHIFT,
+            id: r.id,
+            diags: if fits { r.diags as u8 } else { 0 },
+            src: r.src,
+            dst: r.dst,
+            chan: r.chan,
+        });
+    }
+    /// Set the pair link of record index `i` (when it has none) and add `flags`; gives the
+    /// flags it had.
+    fn patch(&mut self, i: usize, pair: u32, flags: u16) -> Option<u16> {
+        let p = self.packed.get_mut(i / CHUNK)?.get_mut(i % CHUNK)?;
+        if p.pair == 0 {
+            p.pair = pair;
+        }
+        let was = p.flags & ((1 << DIR_SHIFT) - 1);
+        p.flags |= flags;
+        Some(was)
+    }
+    /// Bytes the records take in memory (their capacity).
+    pub fn memory(&self) -> usize {
+        self.packed.iter().map(Vec::capacity).sum::<usize>() * std::mem::size_of::<Packed>()
+            + self.blocks.capacity() * std::mem::size_of::<Block>()
+            + self.apart.capacity() * std::mem::size_of::<[u64; 2]>()
+            + self.wide.capacity() * std::mem::size_of::<(u64, Wide)>()
+    }
+    /// Number of blocks (the records' bases).
+    pub fn blocks(&self) -> usize {
+        self.blocks.len()
+    }
+}
+
+impl Extend<Rec> for Recs {
+    fn extend<I: IntoIterator<Item = Rec>>(&mut self, it: I) {
+        for r in it {
+            self.push(r);
+        }
+    }
+}
+
+impl FromIterator<Rec> for Recs {
+    fn from_iter<I: IntoIterator<Item = Rec>>(it: I) -> Self {
+        let mut recs = Recs::default();
+        recs.extend(it);
+        recs
+    }
+}
 
 /// An APT record's channel as the index kept it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -167,9 +468,12 @@ pub type Point = (f64, f64);
 #[derive(Debug, Default)]
 pub struct Index {
     /// Records, in timeline order (record number = index + 1).
-    pub recs: Vec<Rec>,
-    /// Bytes of all records.
+    pub recs: Recs,
+    /// Bytes of all records, when they are not read from [`Index::file`].
     pub arena: Vec<u8>,
+    /// The capture file records' bytes are read from (by capture offset) instead of the
+    /// arena: a raw capture, whose capture offsets are file positions.
+    pub file: Option<ReadBack>,
     /// Elliptec modules as the bus knew them (indexed by `Rec::module - 1`).
     pub modules: Vec<Module>,
     /// APT: the stage conversions records use (indexed by `Rec::module - 1`).
@@ -212,18 +516,83 @@ pub struct Index {
 }
 
 impl Index {
-    /// The bytes of a record.
-    pub fn bytes(&self, r: &Rec) -> &[u8] {
+    /// The bytes of a record: from the arena, or read from the capture file (empty when the
+    /// file can no longer give them).
+    pub fn bytes(&self, r: &Rec) -> Cow<'_, [u8]> {
+        if let Some(f) = &self.file {
+            return f
+                .read(r.cap_offset, r.len as usize)
+                .map_or(Cow::Borrowed(&[]), Cow::Owned);
+        }
         let s = r.start as usize;
-        self.arena.get(s..s + r.len as usize).unwrap_or(&[])
+        Cow::Borrowed(self.arena.get(s..s + r.len as usize).unwrap_or(&[]))
     }
     /// A record by number (1-based).
-    pub fn rec(&self, n: u64) -> Option<&Rec> {
+    pub fn rec(&self, n: u64) -> Option<Rec> {
         self.recs.get((n as usize).checked_sub(1)?)
     }
     /// Whether records were seen on more than one stream.
     pub fn multi_stream(&self) -> bool {
         self.streams_seen.count_ones() > 1
+    }
+}
+
+/// A capture file records' bytes are read back from ([`Index::file`]).
+#[derive(Debug)]
+pub struct ReadBack {
+    file: std::fs::File,
+    /// Tells this file's [`WINDOW`] from another index's.
+    id: u64,
+}
+
+/// Bytes read back at once: records read in order (a filter's scan, a screen of rows) cost one
+/// read of the file per window, not one each.
+const WINDOW_LEN: usize = 64 << 10;
+
+thread_local! {
+    /// The part of a file this thread read back last: ([`ReadBack::id`], its file position,
+    /// its bytes).
+    static WINDOW: std::cell::RefCell<(u64, u64, Vec<u8>)> =
+        const { std::cell::RefCell::new((0, 0, Vec::new())) };
+}
+
+impl ReadBack {
+    /// Read records' bytes back from the file at `path`.
+    pub fn open(path: &str) -> std::io::Result<Self> {
+        static NEXT: AtomicU64 = AtomicU64::new(1);
+        Ok(ReadBack {
+            file: std::fs::File::open(path)?,
+            id: NEXT.fetch_add(1, Ordering::Relaxed),
+        })
+    }
+
+    /// The `len` bytes at `at`, when the file has them.
+    fn read(&self, at: u64, len: usize) -> Option<Vec<u8>> {
+        use std::os::unix::fs::FileExt;
+        if len > WINDOW_LEN {
+            let mut buf = vec![0; len];
+            return self.file.read_exact_at(&mut buf, at).ok().map(|()| buf);
+        }
+        WINDOW.with_borrow_mut(|(id, start, buf)| {
+            let end = at.checked_add(len as u64)?;
+            let inside = *id == self.id && at >= *start && end <= *start + buf.len() as u64;
+            if !inside {
+                buf.resize(WINDOW_LEN, 0);
+                let mut got = 0;
+                while got < WINDOW_LEN {
+                    match self.file.read_at(&mut buf[got..], at + got as u64) {
+                        Ok(0) => break,
+                        Ok(n) => got += n,
+                        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                        Err(_) => break,
+                    }
+                }
+                buf.truncate(got);
+                (*id, *start) = (self.id, at);
+            }
+            let from = usize::try_from(at - *start).ok()?;
+            buf.get(from..from + len).map(<[u8]>::to_vec)
+        })
     }
 }
 
@@ -270,6 +639,9 @@ pub struct IndexOpts {
     /// is certain; Elliptec host chunks are host writes (a command is framed without waiting
     /// for its terminator).
     pub follow: Option<String>,
+    /// The capture file the source reads, when it stays put: a raw capture's record bytes are
+    /// then read back from it ([`Index::file`]) instead of being kept in memory.
+    pub file: Option<String>,
 }
 
 /// Open a capture and index it in a background thread. The returned [`Shared`] fills as the
@@ -302,6 +674,7 @@ pub fn spawn_with(
         // standard input (a pipe a live capture writes: its reader blocks until more comes).
         live: opts.follow.is_some() || path == "-",
         follow: opts.follow.is_some().then(|| path.clone()),
+        file: (opts.follow.is_none() && path != "-").then(|| path.clone()),
         ..IndexOpts::default()
     };
     spawn_source(
@@ -330,8 +703,10 @@ where
             Ok((reader, progress)) => {
                 let input = progress.clone();
                 let shared = shared_for(reader.as_ref(), progress, &opts);
+                let from_file = read_back(&shared, reader.as_ref(), opts.file.as_deref());
                 let _ = tx.send(Ok(shared.clone()));
                 let mut ix = Indexer::new(shared, opts.proto, opts.units);
+                ix.sink.from_file = from_file;
                 ix.follow = opts.follow.and_then(|p| std::fs::File::open(p).ok());
                 ix.input = input;
                 ix.run(reader);
@@ -364,21 +739,63 @@ fn shared_for(
     shared
 }
 
-fn opened(path: &str, opts: OpenOptions) -> std::io::Result<(Arc<Shared>, Box<dyn Reader>)> {
-    let (reader, _, progress) = open_with_progress(path, opts)?;
-    let shared = shared_for(reader.as_ref(), Some(progress), &IndexOpts::default());
-    Ok((shared, reader))
+/// Whether the records' bytes can be read back from `file` (a raw capture, whose capture
+/// offsets are its file positions) rather than kept: if so, the index is given the file.
+fn read_back(shared: &Shared, reader: &dyn Reader, file: Option<&str>) -> bool {
+    if reader.format() != "raw bytes" {
+        return false;
+    }
+    let Some(f) = file.and_then(|p| ReadBack::open(p).ok()) else {
+        return false;
+    };
+    match shared.index.write() {
+        Ok(mut ix) => {
+            ix.file = Some(f);
+            true
+        }
+        Err(_) => false,
+    }
 }
 
-/// Open and index a capture completely, in the calling thread (tests, small files).
+fn opened(
+    path: &str,
+    opts: OpenOptions,
+    in_memory: bool,
+) -> std::io::Result<(Arc<Shared>, Box<dyn Reader>, bool)> {
+    let (reader, _, progress) = open_with_progress(path, opts)?;
+    let shared = shared_for(reader.as_ref(), Some(progress), &IndexOpts::default());
+    let file = (!in_memory && opts.follow.is_none() && path != "-").then_some(path);
+    let from_file = read_back(&shared, reader.as_ref(), file);
+    Ok((shared, reader, from_file))
+}
+
+/// Open and index a capture completely, in the calling thread (tests, small files). A raw
+/// capture's bytes are read back from the file, as the viewer does.
 pub fn load(path: &str, opts: OpenOptions) -> std::io::Result<Arc<Shared>> {
     load_with(path, opts, UnitsOpts::default())
 }
 
 /// [`load`] with a stage or scale for APT motion values.
 pub fn load_with(path: &str, opts: OpenOptions, units: UnitsOpts) -> std::io::Result<Arc<Shared>> {
-    let (shared, reader) = opened(path, opts)?;
-    Indexer::new(shared.clone(), None, units).run(reader);
+    load_inner(path, opts, units, false)
+}
+
+/// [`load`] keeping every record's bytes in memory (the index live sources build): tests
+/// compare it with the index that reads them back from the file.
+pub fn load_in_memory(path: &str, opts: OpenOptions) -> std::io::Result<Arc<Shared>> {
+    load_inner(path, opts, UnitsOpts::default(), true)
+}
+
+fn load_inner(
+    path: &str,
+    opts: OpenOptions,
+    units: UnitsOpts,
+    in_memory: bool,
+) -> std::io::Result<Arc<Shared>> {
+    let (shared, reader, from_file) = opened(path, opts, in_memory)?;
+    let mut ix = Indexer::new(shared.clone(), None, units);
+    ix.sink.from_file = from_file;
+    ix.run(reader);
     Ok(shared)
 }
 
@@ -467,7 +884,9 @@ impl Indexer {
                 }
                 // A live source's reader blocks until more comes: publish what it gave now.
                 let live = self.follow.is_none() && self.shared.live.load(Ordering::Relaxed);
-                if caught_up || live || self.last_flush.elapsed() > Duration::from_millis(50) {
+                // A full batch goes too: the batches in flight stay a few MB.
+                let full = self.sink.batch.len() >= MAX_BATCH;
+                if caught_up || live || full || self.last_flush.elapsed() > FLUSH_EVERY {
                     self.flush();
                 }
             }
@@ -556,6 +975,13 @@ impl Indexer {
     }
 }
 
+/// Records published at once at most (their [`Rec`]s take 3.7 MB): the indexer's batch, the
+/// ones in flight to the publishing thread and the spare stay small beside the index.
+const MAX_BATCH: usize = 1 << 16;
+
+/// How long read records may wait before they are published.
+const FLUSH_EVERY: Duration = Duration::from_millis(50);
+
 /// Conversions remembered for reuse (one per device).
 const MAX_SCALE_AT: usize = 4096;
 
@@ -574,6 +1000,8 @@ struct Sink {
     arena: Vec<u8>,
     /// Arena bytes already published.
     arena_base: u64,
+    /// Records' bytes are read back from the capture file ([`Index::file`]): none kept.
+    from_file: bool,
     /// Records already published.
     base: u64,
     proto: Option<(Proto, bool, f64)>,
@@ -669,7 +1097,12 @@ impl Sink {
     #[inline(always)]
     fn add(&mut self, n: u64, mut rec: Rec, bytes: &[u8]) {
         while self.base + (self.batch.len() as u64) + 1 < n {
-            let start = self.arena_base + self.arena.len() as u64;
+            // Read back from the file, a record starts at its capture offset (and is then
+            // stored without a position apart from it).
+            let start = match self.from_file {
+                true => rec.cap_offset,
+                false => self.arena_base + self.arena.len() as u64,
+            };
             self.batch.push(Rec {
                 start,
                 len: 0,
@@ -677,12 +1110,16 @@ impl Sink {
                 ..rec
             });
         }
-        rec.start = self.arena_base + self.arena.len() as u64;
         rec.len = bytes.len() as u32;
         if rec.stream < 64 {
             self.streams_seen |= 1 << rec.stream;
         }
-        self.arena.extend_from_slice(bytes);
+        if self.from_file {
+            rec.start = rec.cap_offset;
+        } else {
+            rec.start = self.arena_base + self.arena.len() as u64;
+            self.arena.extend_from_slice(bytes);
+        }
         self.batch.push(rec);
     }
 
@@ -1037,20 +1474,17 @@ impl Publication {
             ix.proto_certain = certain;
             ix.proto_share = Some(share);
         }
-        ix.recs.append(&mut self.recs);
+        ix.recs.extend(self.recs.drain(..));
         ix.arena.append(&mut self.arena);
         ix.modules.append(&mut self.modules);
         ix.scales.append(&mut self.scales);
         ix.units_notes.append(&mut self.units_notes);
         for (n, pair, flags) in self.patches {
-            if let Some(r) = (n as usize).checked_sub(1).and_then(|i| ix.recs.get_mut(i)) {
-                if r.pair == 0 {
-                    r.pair = pair;
-                }
-                if flags & !r.flags & F_NO_REPLY != 0 {
-                    ix.late_no_reply.push(n);
-                }
-                r.flags |= flags;
+            let was = (n as usize)
+                .checked_sub(1)
+                .and_then(|i| ix.recs.patch(i, pair, flags));
+            if was.is_some_and(|was| flags & !was & F_NO_REPLY != 0) {
+                ix.late_no_reply.push(n);
             }
         }
         ix.diag_sets.append(&mut self.diag_sets);
@@ -1076,5 +1510,142 @@ impl Publication {
             ix.done = true;
         }
         (self.recs, self.arena)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two files read back in turn on one thread give their own bytes (each read misses the
+    /// other's window), across windows and up to their ends.
+    #[test]
+    fn files_read_back_give_their_own_bytes() {
+        let dir = std::env::temp_dir().join(format!("aptscope-readback-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let data: Vec<Vec<u8>> = (0..2u8)
+            .map(|k| {
+                (0..WINDOW_LEN * 2 + 100)
+                    .map(|i| (i % 251) as u8 ^ k)
+                    .collect()
+            })
+            .collect();
+        let files: Vec<ReadBack> = data
+            .iter()
+            .enumerate()
+            .map(|(k, d)| {
+                let p = dir.join(format!("{k}.bin"));
+                std::fs::write(&p, d).expect("write");
+                ReadBack::open(&p.to_string_lossy()).expect("open")
+            })
+            .collect();
+        let _ = std::fs::remove_dir_all(&dir);
+        let end = data[0].len();
+        for (at, len) in [
+            (0, 10),
+            (WINDOW_LEN - 3, 6),
+            (5, WINDOW_LEN + 7),
+            (end - 4, 4),
+        ] {
+            for (f, d) in files.iter().zip(&data) {
+                assert_eq!(f.read(at as u64, len).as_deref(), d.get(at..at + len));
+            }
+        }
+        assert_eq!(files[0].read(end as u64 - 2, 4), None);
+    }
+
+    /// Records of every shape (offsets and times going back and far ahead, no time, old and
+    /// new module entries, values too wide for their slot, offsets apart from the capture's
+    /// from some record on) come back from the packed store as they went in, by index, by
+    /// iteration from any record, and after their pair link and flags are patched.
+    #[test]
+    fn packed_records_read_back_as_pushed() {
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let (mut cap, mut ts) = (0u64, 1_000u64);
+        let mut recs = vec![];
+        for i in 0..(CHUNK as u64 * 2 + 777) {
+            let r = next();
+            cap = match r % 50 {
+                0 => cap.saturating_sub(r >> 40),
+                1 => cap + (r >> 20),
+                _ => cap + r % 300,
+            };
+            ts = match (r >> 8) % 40 {
+                0 => ts.saturating_sub((r >> 30) % 5_000_000_000),
+                1 => ts + (r >> 16),
+                _ => ts + (r >> 12) % 100_000,
+            };
+            let apart = i > CHUNK as u64 + 5;
+            recs.push(Rec {
+                start: if apart { cap / 2 } else { cap },
+                offset: if apart && r % 3 == 0 { cap + 1 } else { cap },
+                cap_offset: cap,
+                ts: if (r >> 20) % 9 == 0 { u64::MAX } else { ts },
+                pair: (r >> 24) as u32,
+                len: if (r >> 4) % 500 == 0 {
+                    70_000 + (r % 9) as u32
+                } else {
+                    (r % 300) as u32
+                },
+                module: match (r >> 6) % 5 {
+                    0 => 0,
+                    1 => 1,
+                    2 => (r >> 40) as u32,
+                    _ => (i / 100) as u32,
+                },
+                stream: if (r >> 9) % 300 == 0 {
+                    300
+                } else {
+                    ((r >> 9) % 4) as u16
+                },
+                flags: (r >> 32) as u16 & ((1 << DIR_SHIFT) - 1),
+                dir: ((r >> 50) % 3) as u8,
+                src: (r >> 13) as u8,
+                dst: (r >> 21) as u8,
+                id: (r >> 29) as u16,
+                diags: if (r >> 3) % 700 == 0 {
+                    999
+                } else {
+                    ((r >> 3) % 5) as u16
+                },
+                chan: (r >> 45) as u8,
+            });
+        }
+        let mut packed: Recs = recs.iter().copied().collect();
+        assert_eq!(packed.len(), recs.len());
+        for (i, r) in recs.iter().enumerate() {
+            assert_eq!(packed.get(i).as_ref(), Some(r), "#{i}");
+        }
+        for from in [
+            0,
+            1,
+            CHUNK - 1,
+            CHUNK,
+            CHUNK + 6,
+            recs.len() - 1,
+            recs.len(),
+        ] {
+            assert!(
+                packed.iter_from(from).eq(recs[from..].iter().copied()),
+                "from {from}"
+            );
+        }
+        assert_eq!(packed.last(), recs.last().copied());
+        for i in [0, 5, CHUNK + 3, recs.len() - 1] {
+            let was = packed.patch(i, 42, F_NO_REPLY);
+            assert_eq!(was, Some(recs[i].flags));
+            recs[i].flags |= F_NO_REPLY;
+            if recs[i].pair == 0 {
+                recs[i].pair = 42;
+            }
+            assert_eq!(packed.get(i), Some(recs[i]), "patched #{i}");
+        }
+        assert_eq!(packed.get(recs.len()), None);
     }
 }

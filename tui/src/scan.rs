@@ -176,12 +176,9 @@ impl Scan {
         };
         let len = ix.recs.len() as u64;
         let (from, end) = (w.next, (w.next + BATCH).min(len + 1));
-        let recs = ix
-            .recs
-            .get((from - 1) as usize..(end - 1) as usize)
-            .unwrap_or(&[]);
-        for (i, r) in recs.iter().enumerate() {
-            let n = from + i as u64;
+        let recs = ix.recs.iter_from((from - 1) as usize);
+        for (i, r) in recs.take((end - from) as usize).enumerate() {
+            let (n, r) = (from + i as u64, &r);
             if let Some(f) = &w.filter {
                 let apt_frame = r.flags & (F_ELL | F_GARBAGE) == 0;
                 if apt_frame && w.ids.as_ref().is_some_and(|ids| !ids.contains(r.id)) {
@@ -204,7 +201,7 @@ impl Scan {
             let now = ix.rec(n).is_some_and(|r| {
                 w.filter
                     .as_ref()
-                    .is_none_or(|f| f.matches(&View { ix: &ix, n, r }))
+                    .is_none_or(|f| f.matches(&View { ix: &ix, n, r: &r }))
             });
             late.push((n, now));
         }
@@ -230,7 +227,7 @@ impl Scan {
                 (true, _) => w.counts.bump_diag(DiagKind::NoReply { cmd: n }.name()),
                 (false, true) => {
                     if let Some(r) = ix.rec(n) {
-                        w.counts.add(&ix, n, r);
+                        w.counts.add(&ix, n, &r);
                     }
                     newly.push(n);
                 }
@@ -424,11 +421,15 @@ impl Counts {
                 );
             }
         }
-        let view = |n: u64| ix.rec(n).map(|r| View { ix, n, r });
         // Named as `Stats` names them, from one record of each.
         for (msg, c) in self.messages.iter().enumerate() {
             let Some(c) = c else { continue };
-            let Some(v) = view(c.rep) else { continue };
+            let Some(r) = ix.rec(c.rep) else { continue };
+            let v = View {
+                ix,
+                n: c.rep,
+                r: &r,
+            };
             let mut key = String::new();
             stats::message_key(&v, &mut key);
             let m = s.messages.entry(key).or_default();
@@ -440,7 +441,12 @@ impl Counts {
         }
         // Per stream too.
         for (k, c) in &self.addresses {
-            let Some(v) = view(c.rep) else { continue };
+            let Some(r) = ix.rec(c.rep) else { continue };
+            let v = View {
+                ix,
+                n: c.rep,
+                r: &r,
+            };
             let mut addr = String::new();
             stats::address_key(&v, &mut addr);
             let st = k >> 24;

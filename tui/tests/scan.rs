@@ -10,7 +10,7 @@ use aptscope_dissector::pipeline::{Format, Pipeline};
 use aptscope_dissector::stats::Stats;
 use aptscope_dissector::{synth, Table};
 use aptscope_tui::fields::{with_record, View};
-use aptscope_tui::index::{load, Shared, F_NO_REPLY};
+use aptscope_tui::index::{load, load_in_memory, Rec, Shared, F_NO_REPLY};
 use aptscope_tui::scan::{Scan, BIN_NS};
 use serde_json::Value;
 use std::sync::Arc;
@@ -45,6 +45,14 @@ const FILTERS: &[&str] = &[
     "dir != d2h && apt.name != \"MOT_MOVE_ABSOLUTE\"",
     "dir == H2D || len < 8 || offset > 1.5",
 ];
+
+/// [`FILTERS`] parsed.
+fn filters() -> Vec<Filter> {
+    FILTERS
+        .iter()
+        .map(|t| Filter::parse(t).expect("filter"))
+        .collect()
+}
 
 fn sample(name: &str) -> String {
     format!("{}/../samples/{name}", env!("CARGO_MANIFEST_DIR"))
@@ -187,10 +195,7 @@ fn reference(recs: &[Value], filter: Option<&Filter>) -> (Vec<u64>, String) {
 
 #[test]
 fn scan_equals_the_pipeline_selection_and_its_statistics() {
-    let filters: Vec<Filter> = FILTERS
-        .iter()
-        .map(|t| Filter::parse(t).expect("filter"))
-        .collect();
+    let filters = filters();
     let mut total = vec![0; filters.len()];
     let (_dir, synth) = synthetic();
     for path in samples().into_iter().chain([synth]) {
@@ -249,7 +254,7 @@ fn the_compact_view_reads_like_the_decoded_record() {
         let ix = shared.index.read().expect("lock");
         for (i, r) in ix.recs.iter().enumerate().take(3000) {
             let n = i as u64 + 1;
-            let view = View { ix: &ix, n, r };
+            let view = View { ix: &ix, n, r: &r };
             assert_eq!(
                 view.proto().map(str::to_string),
                 with_record(&ix, n, |rec| rec.proto().map(str::to_string)).flatten(),
@@ -294,4 +299,44 @@ fn the_compact_view_reads_like_the_decoded_record() {
     assert!(compared > 10_000);
     assert!(numbers > 1_000, "{numbers}");
     assert!(words > 1_000, "{words}");
+}
+
+/// A raw capture's index reads its records' bytes back from the file instead of keeping them:
+/// records, bytes, pairing links, plots, statistics and every filter's selection are those of
+/// the index that keeps them in memory (as live sources do).
+#[test]
+fn reading_bytes_back_from_the_file_changes_no_answer() {
+    let filters = filters();
+    let (_dir, synth) = synthetic();
+    let paths = [sample("damaged.bin"), sample("sessions/damaged.bin"), synth];
+    for path in paths {
+        let (file, mem) = (
+            load(&path, OpenOptions::default()).expect("opens"),
+            load_in_memory(&path, OpenOptions::default()).expect("opens"),
+        );
+        {
+            let (a, b) = (
+                file.index.read().expect("lock"),
+                mem.index.read().expect("lock"),
+            );
+            assert!(a.file.is_some() && a.arena.is_empty(), "{path}");
+            assert!(b.file.is_none() && !b.arena.is_empty(), "{path}");
+            assert_eq!(a.recs.len(), b.recs.len(), "{path}");
+            let same = |r: Rec| Rec { start: 0, ..r };
+            for (i, (x, y)) in a.recs.iter().zip(b.recs.iter()).enumerate() {
+                assert_eq!(same(x), same(y), "{path} #{}", i + 1);
+                assert_eq!(a.bytes(&x), b.bytes(&y), "{path} #{}", i + 1);
+            }
+            assert_eq!(a.series, b.series, "{path}");
+            assert_eq!(a.late_no_reply, b.late_no_reply, "{path}");
+        }
+        assert_eq!(scan(&file, None), scan(&mem, None), "{path}");
+        for f in &filters {
+            assert_eq!(
+                scan(&file, Some(f.clone())),
+                scan(&mem, Some(f.clone())),
+                "{path}: {f}"
+            );
+        }
+    }
 }

@@ -223,7 +223,7 @@ fn rows_are_coloured_by_rule() {
     let rules: Vec<Option<usize>> = (1..=9)
         .map(|n| {
             let r = row(&ix, n).expect("row");
-            colour_rule(ix.rec(n).expect("rec"), r.way)
+            colour_rule(&ix.rec(n).expect("rec"), r.way)
         })
         .collect();
     drop(ix);
@@ -243,7 +243,7 @@ fn rows_are_coloured_by_rule() {
     let ix = a.shared().index.read().expect("lock");
     let rules: Vec<Option<usize>> = [1, 2, 8]
         .iter()
-        .map(|&n| colour_rule(ix.rec(n).expect("rec"), row(&ix, n).expect("row").way))
+        .map(|&n| colour_rule(&ix.rec(n).expect("rec"), row(&ix, n).expect("row").way))
         .collect();
     drop(ix);
     assert_eq!(rules, [req, rule("Replies"), dev]);

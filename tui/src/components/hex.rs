@@ -36,7 +36,7 @@ impl Hex {
             return;
         };
         let Some(r) = ix.rec(n) else { return };
-        let bytes = ix.bytes(r).to_vec();
+        let bytes = ix.bytes(&r).into_owned();
         let base = r.offset;
         drop(ix);
         let hl = if app.focus() == Pane::List {

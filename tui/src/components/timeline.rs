@@ -94,7 +94,7 @@ impl Timeline {
             .iter()
             .map(|n| {
                 let r = row(&ix, *n)?;
-                let rule = ix.rec(*n).and_then(|rec| colour_rule(rec, r.way));
+                let rule = ix.rec(*n).and_then(|rec| colour_rule(&rec, r.way));
                 let port = if cols.port > 0 {
                     port_label(&ix, r.stream)
                 } else {
@@ -345,7 +345,7 @@ const PORT_MAX: usize = 12;
 impl Columns {
     fn of(ix: &Index, mode: TimeMode, width: u16) -> Self {
         let n = ix.recs.len().max(1).to_string().len().max(3);
-        let span = match (ix.first_ts, ix.recs.last().and_then(Rec::ts)) {
+        let span = match (ix.first_ts, ix.recs.last().and_then(|r| r.ts())) {
             (Some(a), Some(b)) => Some(b.saturating_sub(a)),
             _ => None,
         };
