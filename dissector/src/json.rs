@@ -82,6 +82,19 @@ macro_rules! key {
     };
 }
 
+/// `rec_key!(out, "name")`: as [`key!`], for a key of a decoded record, which must be in the
+/// record's shape ([`crate::shape::KEYS`], what filters and statistics read): a key written here
+/// but not listed there does not build.
+macro_rules! rec_key {
+    ($out:expr, $name:literal) => {{
+        const _: () = assert!(
+            crate::shape::is_key($name),
+            concat!("record key `", $name, "` is not in shape::KEYS")
+        );
+        key!($out, $name)
+    }};
+}
+
 /// A comma before a member or element unless it is the first of its object or list (the
 /// last byte written tells: keys end in `:`, openings in `{`/`[`, a caller's prefix in `,`).
 #[inline(always)]
@@ -353,7 +366,7 @@ pub fn record<S: Sink + ?Sized>(out: &mut S, rec: &Record<'_>, file: Option<&str
         },
         Record::NoReply(e) => {
             late_diag_members(out, e.proto.code(), e.n, e.diag());
-            key!(out, "stream");
+            rec_key!(out, "stream");
             out.uint(u64::from(e.stream));
         }
     }
@@ -362,17 +375,17 @@ pub fn record<S: Sink + ?Sized>(out: &mut S, rec: &Record<'_>, file: Option<&str
 
 /// The capture context of a frame or garbage run, after its own members.
 fn meta<S: Sink + ?Sized>(out: &mut S, m: &Meta, dir: Option<&str>) {
-    key!(out, "cap_offset");
+    rec_key!(out, "cap_offset");
     out.uint(m.cap_offset);
     if let Some(d) = dir {
-        key!(out, "dir");
+        rec_key!(out, "dir");
         out.plain(d);
     }
     if let Some(t) = m.ts_ns {
-        key!(out, "ts_ns");
+        rec_key!(out, "ts_ns");
         out.uint(t);
     }
-    key!(out, "stream");
+    rec_key!(out, "stream");
     out.uint(u64::from(m.stream));
 }
 
@@ -518,9 +531,9 @@ fn apt_members<S: Sink + ?Sized>(
 ) {
     let h = f.header();
     record_head(out, "apt", "frame", n, f.offset, f.bytes);
-    key!(out, "msgid");
+    rec_key!(out, "msgid");
     out.uint(u64::from(h.msg_id()));
-    key!(out, "msgid_hex");
+    rec_key!(out, "msgid_hex");
     const H: &[u8; 16] = b"0123456789ABCDEF";
     let id = h.msg_id();
     let mut x = *b"0x0000";
@@ -528,36 +541,36 @@ fn apt_members<S: Sink + ?Sized>(
         x[2 + i] = H[(id >> sh) as usize & 15];
     }
     out.plain(std::str::from_utf8(&x).unwrap_or_default());
-    key!(out, "name");
+    rec_key!(out, "name");
     match f.msg {
         Some(m) => {
             out.str(m.name);
-            key!(out, "msg_dir");
+            rec_key!(out, "msg_dir");
             out.plain(m.dir.as_str());
         }
         None => out.null(),
     }
-    key!(out, "src");
+    rec_key!(out, "src");
     addr(out, h.src());
-    key!(out, "dst");
+    rec_key!(out, "dst");
     addr(out, h.dst());
-    key!(out, "data_flag");
+    rec_key!(out, "data_flag");
     out.bool(h.has_data());
-    key!(out, "data_len");
+    rec_key!(out, "data_len");
     out.uint(f.data_len() as u64);
     if let Some(form) = f.form.filter(|x| !x.note.is_empty()) {
-        key!(out, "form_note");
+        rec_key!(out, "form_note");
         out.str(form.note);
     }
     if let Some(c) = f.channel() {
-        key!(out, "channel");
+        rec_key!(out, "channel");
         out.int(c);
     }
     if let Some(s) = f.sub {
-        key!(out, "sub");
+        rec_key!(out, "sub");
         sub(out, s);
     }
-    key!(out, "fields");
+    rec_key!(out, "fields");
     apt_fields(out, f);
     // `phys` and `codes` in passes of their own (no buffer, no allocation per frame), taken
     // only when the form has fields they concern.
@@ -583,21 +596,21 @@ fn apt_members<S: Sink + ?Sized>(
     }
     pairing(out, p.pair, p.latency_ns);
     if p.other_address {
-        key!(out, "pair_other_address");
+        rec_key!(out, "pair_other_address");
         out.bool(true);
     }
-    key!(out, "diag");
+    rec_key!(out, "diag");
     diags(out, apt_diags(f, p));
 }
 
 /// `"pair"` and `"latency_ms"` of a reply, when paired.
 fn pairing<S: Sink + ?Sized>(out: &mut S, pair: Option<u64>, latency_ns: Option<u64>) {
     if let Some(x) = pair {
-        key!(out, "pair");
+        rec_key!(out, "pair");
         out.uint(x);
     }
     if let Some(l) = latency_ns {
-        key!(out, "latency_ms");
+        rec_key!(out, "latency_ms");
         out.float(l as f64 / 1e6);
     }
 }
@@ -610,7 +623,7 @@ fn phys_map<'u, S: Sink + ?Sized>(
     let mut first = true;
     for (name, (x, unit)) in items {
         if first {
-            key!(out, "phys");
+            rec_key!(out, "phys");
             out.begin_obj();
             first = false;
         }
@@ -632,7 +645,7 @@ fn codes<S: Sink + ?Sized>(out: &mut S, items: impl Iterator<Item = (&'static st
     let mut first = true;
     for (name, c) in items {
         if first {
-            key!(out, "codes");
+            rec_key!(out, "codes");
             out.begin_obj();
             first = false;
         }
@@ -716,17 +729,17 @@ fn record_head<S: Sink + ?Sized>(
     offset: u64,
     bytes: &[u8],
 ) {
-    key!(out, "n");
+    rec_key!(out, "n");
     out.uint(n);
-    key!(out, "proto");
+    rec_key!(out, "proto");
     out.plain(proto);
-    key!(out, "type");
+    rec_key!(out, "type");
     out.plain(kind);
-    key!(out, "offset");
+    rec_key!(out, "offset");
     out.uint(offset);
-    key!(out, "len");
+    rec_key!(out, "len");
     out.uint(bytes.len() as u64);
-    key!(out, "raw");
+    rec_key!(out, "raw");
     out.hex(bytes);
 }
 
@@ -738,7 +751,7 @@ fn apt_garbage_members<S: Sink + ?Sized>(
     kind: GarbageKind,
 ) {
     record_head(out, "apt", "garbage", n, offset, bytes);
-    key!(out, "diag");
+    rec_key!(out, "diag");
     diags(
         out,
         std::iter::once(garbage_diag(offset, bytes.len(), kind)),
@@ -802,20 +815,20 @@ pub fn ell_frame<S: Sink + ?Sized>(out: &mut S, n: u64, f: &EllFrame<'_>, o: &Ob
 
 fn ell_members<S: Sink + ?Sized>(out: &mut S, n: u64, f: &EllFrame<'_>, o: &Observation) {
     record_head(out, "ell", "frame", n, f.offset, f.bytes);
-    key!(out, "text");
+    rec_key!(out, "text");
     out.str(&String::from_utf8_lossy(f.bytes));
-    key!(out, "addr");
+    rec_key!(out, "addr");
     out.plain(f.addr_char().encode_utf8(&mut [0; 4]));
-    key!(out, "dir");
+    rec_key!(out, "dir");
     out.plain(f.dir().as_str());
-    key!(out, "cmd");
+    rec_key!(out, "cmd");
     out.str(f.code_str());
-    key!(out, "name");
+    rec_key!(out, "name");
     match f.cmd {
         Some(c) => out.str(c.name),
         None => out.null(),
     }
-    key!(out, "fields");
+    rec_key!(out, "fields");
     ell_fields(out, f);
     let scale = o.module.as_ref().and_then(|m| m.scale());
     phys_map(
@@ -829,7 +842,7 @@ fn ell_members<S: Sink + ?Sized>(out: &mut S, n: u64, f: &EllFrame<'_>, o: &Obse
             .filter_map(|(fd, v)| Some((fd.name, i128::from(crate::shape::ell_code(fd, &v)?)))),
     );
     if let Some(m) = &o.module {
-        key!(out, "module");
+        rec_key!(out, "module");
         out.begin_obj();
         key!(out, "first_addr");
         out.uint(u64::from(m.first_addr));
@@ -845,10 +858,10 @@ fn ell_members<S: Sink + ?Sized>(out: &mut S, n: u64, f: &EllFrame<'_>, o: &Obse
     }
     pairing(out, o.pair, o.latency_ns);
     if o.interim {
-        key!(out, "interim");
+        rec_key!(out, "interim");
         out.bool(true);
     }
-    key!(out, "diag");
+    rec_key!(out, "diag");
     diags(out, f.diags().iter().copied());
 }
 
@@ -861,9 +874,9 @@ pub fn ell_garbage<S: Sink + ?Sized>(out: &mut S, n: u64, offset: u64, bytes: &[
 
 fn ell_garbage_members<S: Sink + ?Sized>(out: &mut S, n: u64, offset: u64, bytes: &[u8]) {
     record_head(out, "ell", "garbage", n, offset, bytes);
-    key!(out, "text");
+    rec_key!(out, "text");
     out.str(&String::from_utf8_lossy(bytes));
-    key!(out, "diag");
+    rec_key!(out, "diag");
     let d = Diag {
         offset,
         kind: DiagKind::Garbage {
@@ -881,13 +894,13 @@ pub fn late_diag<S: Sink + ?Sized>(out: &mut S, proto: &str, refers_to: u64, d: 
 }
 
 fn late_diag_members<S: Sink + ?Sized>(out: &mut S, proto: &str, refers_to: u64, d: Diag) {
-    key!(out, "proto");
+    rec_key!(out, "proto");
     out.plain(proto);
-    key!(out, "type");
+    rec_key!(out, "type");
     out.plain("diag");
-    key!(out, "ref");
+    rec_key!(out, "ref");
     out.uint(refers_to);
-    key!(out, "diag");
+    rec_key!(out, "diag");
     diags(out, std::iter::once(d));
 }
 

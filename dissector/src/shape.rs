@@ -79,6 +79,34 @@ pub struct KeyDef {
     pub scope: u8,
 }
 
+/// Whether `name` is one of [`KEYS`]: the NDJSON writer checks every key of a decoded record
+/// it writes against this list at compile time.
+pub const fn is_key(name: &str) -> bool {
+    let mut i = 0;
+    while i < KEYS.len() {
+        if str_eq(KEYS[i].name, name) {
+            return true;
+        }
+        i += 1;
+    }
+    false
+}
+
+const fn str_eq(a: &str, b: &str) -> bool {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.len() != b.len() {
+        return false;
+    }
+    let mut i = 0;
+    while i < a.len() {
+        if a[i] != b[i] {
+            return false;
+        }
+        i += 1;
+    }
+    true
+}
+
 const fn k(name: &'static str, key: Key, scope: u8) -> KeyDef {
     KeyDef { name, key, scope }
 }
