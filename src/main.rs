@@ -34,6 +34,10 @@ enum Cmd {
     /// Statistics of a capture: counts and bytes per message, address and direction, request
     /// latency (min/median/p99/max), diagnostics by kind, rate over time.
     Stats(cmd::stats::StatsArgs),
+    /// Survey a connected controller against the spec: identify it, send every read-only
+    /// request the spec lists for its model (never a SET or a move), and report what it
+    /// answers, with which layout, how fast, and where it differs.
+    Probe(cmd::probe::ProbeArgs),
     /// Browse a capture in the terminal UI: timeline, detail tree, hex, filters, statistics, plots.
     View(cmd::view::ViewArgs),
     /// Simulate a controller on a pseudo-terminal (or a serial port, --port):
@@ -90,6 +94,7 @@ fn main() -> ExitCode {
         Cmd::Decode(a) => cmd::decode::run(a),
         Cmd::Stats(a) => cmd::stats::run(a),
         Cmd::View(a) => cmd::view::run(a),
+        Cmd::Probe(a) => cmd::probe::run(a),
         Cmd::Sim { what } => cmd::sim::run(what),
         Cmd::Tap(a) => cmd::live::tap(a),
         Cmd::Replay(a) => cmd::replay::run(a),
