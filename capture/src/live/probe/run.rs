@@ -80,6 +80,30 @@ struct Line<'a> {
     epoch_ns: u64,
 }
 
+/// What a request got.
+enum Asked {
+    /// Its answer, and the latency in µs.
+    Reply(Vec<u8>, u64),
+    /// None within its timeout.
+    NoReply,
+    /// A stop signal came first, by name.
+    Signal(String),
+}
+
+impl Asked {
+    /// The answer, or the error a stop signal during identification on `path` is.
+    fn ident(self, path: &str) -> Result<Option<Vec<u8>>, ProbeError> {
+        match self {
+            Asked::Reply(f, _) => Ok(Some(f)),
+            Asked::NoReply => Ok(None),
+            Asked::Signal(signal) => Err(ProbeError::Interrupted {
+                path: path.to_string(),
+                signal,
+            }),
+        }
+    }
+}
+
 /// What waiting for a frame ended with.
 enum Got {
     /// A whole frame and when it was complete (ns since start).
@@ -205,13 +229,13 @@ impl<'a> Line<'a> {
         step: &Step,
         timeout_ms: u32,
         strays: &mut Vec<Stray>,
-    ) -> Result<Result<Option<(Vec<u8>, u64)>, String>, ProbeError> {
+    ) -> Result<Asked, ProbeError> {
         let sent = self.send(&step.bytes)?;
         let deadline = Instant::now() + Duration::from_millis(u64::from(timeout_ms));
         loop {
             match self.recv(deadline)? {
                 Got::Frame(f, ts) if answers(step, &f) => {
-                    return Ok(Ok(Some((f, ts.saturating_sub(sent) / 1000))))
+                    return Ok(Asked::Reply(f, ts.saturating_sub(sent) / 1000))
                 }
                 Got::Frame(f, _) => {
                     let ours = Table::global()
@@ -219,8 +243,8 @@ impl<'a> Line<'a> {
                         .is_some_and(|m| Table::global().reply_ids(m).contains(&frame_id(&f)));
                     stray(&f, &step.label(), ours, strays)
                 }
-                Got::Timeout => return Ok(Ok(None)),
-                Got::Signal(s) => return Ok(Err(s)),
+                Got::Timeout => return Ok(Asked::NoReply),
+                Got::Signal(s) => return Ok(Asked::Signal(s)),
             }
         }
     }
@@ -312,14 +336,11 @@ fn identify(
         path: line.path.to_string(),
         ms: IDENTIFY_MS,
     };
+    let path = line.path;
     let info = ident_step("HW_REQ_INFO", USB, &[]);
-    let interrupted = |signal| ProbeError::Interrupted {
-        path: line.path.to_string(),
-        signal,
-    };
-    let (f, _) = line
+    let f = line
         .ask(&info, IDENTIFY_MS, strays)?
-        .map_err(interrupted)?
+        .ident(path)?
         .ok_or_else(not_apt)?;
     let (top, hw_type) = unit_of(USB, &f).ok_or_else(not_apt)?;
     if hw_type != 45 {
@@ -329,13 +350,7 @@ fn identify(
     for bay in 0..top.channels.min(10) {
         let b = bay.to_string();
         let q = ident_step("RACK_REQ_BAYUSED", RACK, &[("bay_ident", &b)]);
-        let Some((f, _)) =
-            line.ask(&q, IDENTIFY_MS, strays)?
-                .map_err(|s| ProbeError::Interrupted {
-                    path: line.path.to_string(),
-                    signal: s,
-                })?
-        else {
+        let Some(f) = line.ask(&q, IDENTIFY_MS, strays)?.ident(path)? else {
             continue;
         };
         // RACK_GET_BAYUSED: header byte 3 is the bay's state, 1 = occupied.
@@ -344,13 +359,7 @@ fn identify(
         }
         let addr = BAY0 + bay as u8;
         let q = ident_step("HW_REQ_INFO", addr, &[]);
-        if let Some((f, _)) =
-            line.ask(&q, IDENTIFY_MS, strays)?
-                .map_err(|s| ProbeError::Interrupted {
-                    path: line.path.to_string(),
-                    signal: s,
-                })?
-        {
+        if let Some(f) = line.ask(&q, IDENTIFY_MS, strays)?.ident(path)? {
             if let Some((u, _)) = unit_of(addr, &f) {
                 units.push(u);
             }
@@ -413,16 +422,15 @@ pub fn probe_apt(
         if let Some(m) = opts.max_timeout_ms {
             step.timeout_ms = step.timeout_ms.min(m);
         }
-        match line.ask(&step, step.timeout_ms, &mut strays)? {
-            Err(_) => {
+        let reply = match line.ask(&step, step.timeout_ms, &mut strays)? {
+            Asked::Signal(_) => {
                 report.interrupted = true;
                 break;
             }
-            Ok(got) => {
-                let reply = got.map(|(f, lat)| check_reply(&f, lat, profile.as_ref()));
-                report.outcomes.push(Outcome { step, reply });
-            }
-        }
+            Asked::Reply(f, lat) => Some(check_reply(&f, lat, profile.as_ref())),
+            Asked::NoReply => None,
+        };
+        report.outcomes.push(Outcome { step, reply });
     }
     // What is still in the buffer answered nothing either.
     while let Some(f) = line.take_frame() {
