@@ -63,7 +63,9 @@ impl CliError {
             CliError::Sim(_) => io::ErrorKind::InvalidInput,
             CliError::Probe(ProbeError::Port(e)) => e.kind(),
             CliError::Probe(ProbeError::Io { source, .. }) => source.kind(),
-            CliError::Probe(ProbeError::NotApt { .. }) => io::ErrorKind::TimedOut,
+            CliError::Probe(ProbeError::NotApt { .. } | ProbeError::NotElliptec { .. }) => {
+                io::ErrorKind::TimedOut
+            }
             CliError::Probe(ProbeError::Interrupted { .. }) => io::ErrorKind::Interrupted,
             CliError::Differences | CliError::CaptureIncomplete => io::ErrorKind::Other,
             CliError::Io(e) => e.kind(),

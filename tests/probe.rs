@@ -297,3 +297,60 @@ fn a_port_that_does_not_answer_apt_is_refused() {
     assert!(err.contains("does not answer APT"), "{err}");
     assert!(err.contains("ell.pty"), "the port is named: {err}");
 }
+
+#[test]
+fn an_elliptec_bus_is_scanned_and_each_module_asked_its_queries() {
+    let dir = Scratch::new("probe-ell");
+    let link = dir.join("bus.pty");
+    let sim = start_sim_with(
+        &["sim", "elliptec", "--modules", "0:ELL14,3:ELL9", "--once"],
+        &link,
+    );
+    let (out, err, ok) = aptscope(
+        &[
+            "probe",
+            "--proto",
+            "elliptec",
+            "--port",
+            link.to_str().expect("utf-8"),
+            "--json",
+        ],
+        None,
+    );
+    drop(sim);
+    assert!(ok, "{err}");
+    let v = parse(&out, "elliptec");
+    let units: Vec<&str> = v["units"]
+        .as_array()
+        .expect("units")
+        .iter()
+        .map(|u| u["model"].as_str().expect("model"))
+        .collect();
+    assert_eq!(units, ["ELL14", "ELL9"], "{v}");
+    assert_eq!(v["deviations"], 0, "{v}");
+    // 16 scanned addresses, then the queries of each module's model (an ELL9 has one motor
+    // and no velocity: fewer).
+    let asked = keys_where(&v, |o| o["reply"].is_object());
+    assert!(
+        asked.contains(&"0x00 GET_POSITION".to_string()),
+        "{asked:?}"
+    );
+    assert!(
+        asked.contains(&"0x00 REQ_MOTOR2_INFO".to_string()),
+        "{asked:?}"
+    );
+    assert!(
+        asked.contains(&"0x03 REQ_MOTOR1_INFO".to_string()),
+        "{asked:?}"
+    );
+    assert!(
+        !asked.contains(&"0x03 REQ_MOTOR2_INFO".to_string()),
+        "{asked:?}"
+    );
+    let sent = keys_where(&v, |_| true);
+    assert!(
+        sent.iter()
+            .all(|k| k.contains("REQ_") || k.contains("GET_")),
+        "only queries: {sent:?}"
+    );
+}

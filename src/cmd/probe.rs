@@ -2,7 +2,7 @@
 //! `aptscope_capture::live::probe`).
 
 use crate::error::{CliError, Result};
-use aptscope_capture::live::probe::run::{probe_apt, Options};
+use aptscope_capture::live::probe::run::{probe_apt, probe_elliptec, Options};
 use aptscope_capture::live::probe::{compare, Report};
 use aptscope_capture::open::{create, Format};
 use aptscope_dissector::table::{Class, MsgDef};
@@ -13,6 +13,9 @@ pub(crate) struct ProbeArgs {
     /// The controller's serial port (or a pseudo-terminal: a simulator's `--pty` link).
     #[arg(long, alias = "device", required_unless_present = "compare")]
     pub(crate) port: Option<String>,
+    /// The protocol: an APT controller, or an Elliptec bus (scanned at addresses 0-F).
+    #[arg(long, value_enum, default_value_t = ProbeProto::Apt)]
+    pub(crate) proto: ProbeProto,
     /// One JSON object (what --compare reads).
     #[arg(long)]
     pub(crate) json: bool,
@@ -43,6 +46,15 @@ pub(crate) struct ProbeArgs {
     /// Exit with status 1 when the report has deviations from the spec.
     #[arg(long)]
     pub(crate) check: bool,
+}
+
+/// What `probe --proto` takes.
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum ProbeProto {
+    /// Thorlabs APT (binary).
+    Apt,
+    /// Elliptec ELLx (ASCII), a bus of up to 16 modules.
+    Elliptec,
 }
 
 /// Replay's safety rule, applied to the plan on top of the probe's own: a message that starts
@@ -86,7 +98,10 @@ pub(crate) fn run(a: ProbeArgs) -> Result<()> {
             .map(|ns| u32::try_from(ns / 1_000_000).unwrap_or(u32::MAX).max(1)),
         refuse: Some(moves),
     };
-    let (report, steps) = probe_apt(port, &opts, a.dry_run)?;
+    let (report, steps) = match a.proto {
+        ProbeProto::Apt => probe_apt(port, &opts, a.dry_run)?,
+        ProbeProto::Elliptec => probe_elliptec(port, &opts, a.dry_run)?,
+    };
     if let Some(w) = out.as_mut() {
         report.write_to(w.as_mut())?;
     }
@@ -135,7 +150,11 @@ fn print_plan(report: &Report, steps: &[aptscope_capture::live::probe::Step]) {
         steps.len()
     );
     for s in steps {
-        let hex: Vec<String> = s.bytes.iter().map(|b| format!("{b:02x}")).collect();
+        let hex: Vec<String> = if report.elliptec {
+            vec![String::from_utf8_lossy(&s.bytes).into_owned()]
+        } else {
+            s.bytes.iter().map(|b| format!("{b:02x}")).collect()
+        };
         println!(
             "  0x{:02X} {:<34} {:<7} {}",
             s.dst,

@@ -13,6 +13,7 @@
 //! safety module uses to ask before a real port). No SET, MOVE, HOME, JOG, identify, enable or
 //! anything else that changes the device's state or moves a stage is ever part of a plan.
 
+pub mod ell;
 pub mod run;
 
 use crate::model::{OwnedChunk, StreamInfo, Writer};
@@ -410,6 +411,8 @@ pub struct Report {
     pub strays: Vec<Stray>,
     /// Whether Ctrl-C ended the probe before the plan did.
     pub interrupted: bool,
+    /// Whether the bus is Elliptec (families are then the modules' addresses).
+    pub elliptec: bool,
     /// The whole exchange (for `-w`), times in ns since the Unix epoch.
     pub exchange: Vec<OwnedChunk>,
 }
@@ -473,9 +476,16 @@ impl Report {
             "{:<8} {:>5} {:>8} {:>10} {:>10}",
             "family", "sent", "answered", "median µs", "max µs"
         );
-        let mut fams: Vec<&str> = vec![];
-        for o in &self.outcomes {
-            let f = family(o.step.name);
+        let fam = |o: &Outcome| {
+            if self.elliptec {
+                format!("addr {}", ell::addr_char(o.step.dst))
+            } else {
+                family(o.step.name).to_string()
+            }
+        };
+        let mut fams: Vec<String> = vec![];
+        for o in self.outcomes.iter().filter(|o| o.step.listed) {
+            let f = fam(o);
             if !fams.contains(&f) {
                 fams.push(f);
             }
@@ -484,7 +494,7 @@ impl Report {
             let of: Vec<&Outcome> = self
                 .outcomes
                 .iter()
-                .filter(|o| family(o.step.name) == f)
+                .filter(|o| o.step.listed && fam(o) == f)
                 .collect();
             let mut lat: Vec<u64> = of
                 .iter()
@@ -594,11 +604,14 @@ impl Report {
                     let _ = writeln!(s, "-");
                 }
                 Some(r) => {
-                    let revs = r.layout.revs.join(",");
+                    let revs = match r.layout.revs.join(",") {
+                        v if v.is_empty() => String::new(),
+                        v => format!(" rev {v}"),
+                    };
                     let _ = writeln!(
                         s,
-                        "{} len {} form {} rev {} {} µs",
-                        r.name, r.len, r.layout.form, revs, r.latency_us
+                        "{} len {} form {}{revs} {} µs",
+                        r.name, r.len, r.layout.form, r.latency_us
                     );
                 }
             }
@@ -641,6 +654,7 @@ impl Report {
             .collect();
         json!({
             "port": self.port, "model": self.model, "profiled": self.profiled,
+            "proto": if self.elliptec { "elliptec" } else { "apt" },
             "units": units, "interrupted": self.interrupted,
             "sent": self.outcomes.len(),
             "answered": self.outcomes.iter().filter(|o| o.reply.is_some()).count(),
@@ -756,7 +770,14 @@ impl Report {
         out.stream(&StreamInfo {
             id: 0,
             name: self.port.clone(),
-            settings: Some("115200 8N1 RTS/CTS".into()),
+            settings: Some(
+                if self.elliptec {
+                    "9600 8N1"
+                } else {
+                    "115200 8N1 RTS/CTS"
+                }
+                .into(),
+            ),
         })?;
         for c in &self.exchange {
             out.chunk(&c.as_chunk())?;

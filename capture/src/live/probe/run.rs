@@ -2,7 +2,7 @@
 //! and wait for each answer (or its timeout), recording the whole exchange.
 
 use super::{answers, check_reply, frame_id, plan, Outcome, Report, Step, Stray, Unit};
-use super::{BAY0, HOST, RACK, USB};
+use super::{ell, BAY0, HOST, RACK, USB};
 use crate::live::error::PortError;
 use crate::live::serial::{open_serial, LineSettings, SerialFd};
 use crate::live::signals::{Signals, TERMINATE};
@@ -50,6 +50,12 @@ pub enum ProbeError {
         /// What the system said.
         source: io::Error,
     },
+    /// No module answered `in` at any address.
+    #[error("{path} does not answer Elliptec: no module answered `in` at addresses 0-F (is the bus powered, and the right port and protocol chosen?)")]
+    NotElliptec {
+        /// The port's path.
+        path: String,
+    },
     /// Nothing answered HW_REQ_INFO: the probe sends nothing else.
     #[error("{path} does not answer APT: no HW_GET_INFO within {ms} ms of HW_REQ_INFO (is the controller on, and the right port and protocol chosen?)")]
     NotApt {
@@ -78,6 +84,8 @@ struct Line<'a> {
     exchange: Vec<OwnedChunk>,
     /// The start as ns since the Unix epoch (the capture's clock).
     epoch_ns: u64,
+    /// Elliptec: replies are lines.
+    ell: bool,
 }
 
 /// What a request got.
@@ -114,7 +122,32 @@ enum Got {
     Signal(String),
 }
 
+/// SIGINT and SIGTERM, received through a descriptor the waits poll.
+fn signals(path: &str) -> Result<Signals, ProbeError> {
+    Signals::install(TERMINATE).map_err(|source| ProbeError::Io {
+        path: path.to_string(),
+        source,
+    })
+}
+
 impl<'a> Line<'a> {
+    /// Open `path` with `proto`'s line settings.
+    fn open(path: &'a str, sigs: &'a Signals, proto: Proto) -> Result<Line<'a>, ProbeError> {
+        let port = open_serial(path, &LineSettings::for_proto(proto, None, None))?;
+        Ok(Line {
+            path,
+            port,
+            sigs,
+            start: Instant::now(),
+            rx: vec![],
+            exchange: vec![],
+            epoch_ns: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)),
+            ell: proto == Proto::Elliptec,
+        })
+    }
+
     fn err(&self, source: io::Error) -> ProbeError {
         ProbeError::Io {
             path: self.path.to_string(),
@@ -160,6 +193,9 @@ impl<'a> Line<'a> {
     /// A whole frame from the receive buffer, by the header's own length (not the table's: a
     /// frame of a length the table does not know is what the probe is there to report).
     fn take_frame(&mut self) -> Option<Vec<u8>> {
+        if self.ell {
+            return self.take_line();
+        }
         loop {
             if self.rx.len() < 6 {
                 return None;
@@ -177,6 +213,20 @@ impl<'a> Line<'a> {
                 return None;
             }
             return Some(self.rx.drain(..6 + len).collect());
+        }
+    }
+
+    /// An Elliptec reply line, without its CR LF (empty lines skipped).
+    fn take_line(&mut self) -> Option<Vec<u8>> {
+        loop {
+            let end = self.rx.iter().position(|b| *b == b'\n')?;
+            let mut l: Vec<u8> = self.rx.drain(..=end).collect();
+            while l.last().is_some_and(|b| *b == b'\n' || *b == b'\r') {
+                l.pop();
+            }
+            if !l.is_empty() {
+                return Some(l);
+            }
         }
     }
 
@@ -234,6 +284,15 @@ impl<'a> Line<'a> {
         let deadline = Instant::now() + Duration::from_millis(u64::from(timeout_ms));
         loop {
             match self.recv(deadline)? {
+                Got::Frame(f, ts) if self.ell && ell::answers(step, &f) => {
+                    return Ok(Asked::Reply(f, ts.saturating_sub(sent) / 1000))
+                }
+                Got::Frame(f, _) if self.ell => strays.push(Stray {
+                    name: String::from_utf8_lossy(f.get(1..3).unwrap_or(&[])).into_owned(),
+                    src: f.first().copied().unwrap_or(0),
+                    len: f.len().saturating_sub(3),
+                    during: step.label(),
+                }),
                 Got::Frame(f, ts) if answers(step, &f) => {
                     return Ok(Asked::Reply(f, ts.saturating_sub(sent) / 1000))
                 }
@@ -382,22 +441,8 @@ pub fn probe_apt(
     opts: &Options,
     dry_run: bool,
 ) -> Result<(Report, Vec<Step>), ProbeError> {
-    let sigs = Signals::install(TERMINATE).map_err(|source| ProbeError::Io {
-        path: path.to_string(),
-        source,
-    })?;
-    let port = open_serial(path, &LineSettings::for_proto(Proto::Apt, None, None))?;
-    let mut line = Line {
-        path,
-        port,
-        sigs: &sigs,
-        start: Instant::now(),
-        rx: vec![],
-        exchange: vec![],
-        epoch_ns: std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)),
-    };
+    let sigs = signals(path)?;
+    let mut line = Line::open(path, &sigs, Proto::Apt)?;
     let mut strays = vec![];
     let (model, units) = identify(&mut line, &mut strays)?;
     let profile = profile_of(&model);
@@ -435,6 +480,93 @@ pub fn probe_apt(
     // What is still in the buffer answered nothing either.
     while let Some(f) = line.take_frame() {
         stray(&f, "the end", false, &mut strays);
+    }
+    report.strays = strays;
+    report.exchange = line.exchange;
+    Ok((report, steps))
+}
+
+/// Probe the Elliptec bus on `path`: `in` at every address 0–F (each waiting
+/// [`ell::SCAN_MS`]), then every query each module's model supports, one at a time. Ctrl-C as
+/// for [`probe_apt`]; `dry_run`: scan, then return the plan.
+pub fn probe_elliptec(
+    path: &str,
+    opts: &Options,
+    dry_run: bool,
+) -> Result<(Report, Vec<Step>), ProbeError> {
+    let sigs = signals(path)?;
+    let mut line = Line::open(path, &sigs, Proto::Elliptec)?;
+    let mut strays = vec![];
+    let mut report = Report {
+        port: path.to_string(),
+        model: "Elliptec bus".into(),
+        profiled: true,
+        elliptec: true,
+        ..Report::default()
+    };
+    let mut steps = vec![];
+    for addr in 0..16u8 {
+        let mut s = ell::scan_step(addr);
+        if let Some(m) = opts.max_timeout_ms {
+            s.timeout_ms = s.timeout_ms.min(m);
+        }
+        let got = line.ask(&s, s.timeout_ms, &mut strays)?;
+        let f = match got {
+            Asked::Reply(f, lat) => {
+                let reply = ell::check(&s, &f, lat);
+                report.outcomes.push(Outcome {
+                    step: s,
+                    reply: Some(reply),
+                });
+                f
+            }
+            Asked::NoReply => {
+                report.outcomes.push(ell::empty_address(s));
+                continue;
+            }
+            Asked::Signal(signal) => {
+                return Err(ProbeError::Interrupted {
+                    path: path.to_string(),
+                    signal,
+                })
+            }
+        };
+        let Some(n) = ell::model_of(&f) else {
+            continue;
+        };
+        let text = |r: std::ops::Range<usize>| {
+            String::from_utf8_lossy(f.get(r).unwrap_or(&[])).into_owned()
+        };
+        report.units.push(Unit {
+            addr,
+            model: format!("ELL{n}"),
+            serial: text(5..13).trim().parse().unwrap_or(0),
+            firmware: text(17..19),
+            channels: 1,
+        });
+        steps.extend(ell::plan(addr, n));
+    }
+    if report.units.is_empty() {
+        return Err(ProbeError::NotElliptec {
+            path: path.to_string(),
+        });
+    }
+    if !dry_run {
+        for step in &steps {
+            let mut step = step.clone();
+            if let Some(m) = opts.max_timeout_ms {
+                step.timeout_ms = step.timeout_ms.min(m);
+            }
+            let reply = match line.ask(&step, step.timeout_ms, &mut strays)? {
+                Asked::Signal(_) => {
+                    report.interrupted = true;
+                    break;
+                }
+                Asked::Reply(f, lat) => Some(ell::check(&step, &f, lat)),
+                Asked::NoReply => None,
+            };
+            report.outcomes.push(Outcome { step, reply });
+        }
     }
     report.strays = strays;
     report.exchange = line.exchange;
