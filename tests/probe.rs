@@ -354,3 +354,66 @@ fn an_elliptec_bus_is_scanned_and_each_module_asked_its_queries() {
         "only queries: {sent:?}"
     );
 }
+
+/// A KDC101 that answers its identification, then nothing; counting the bytes it was sent.
+struct Mute(AptSim, std::sync::Arc<std::sync::atomic::AtomicUsize>);
+
+impl Simulator for Mute {
+    fn input(&mut self, bytes: &[u8], now_ns: u64) {
+        use std::sync::atomic::Ordering;
+        self.1.fetch_add(bytes.len(), Ordering::SeqCst);
+        self.0.input(bytes, now_ns);
+    }
+
+    fn poll(&mut self, now_ns: u64) -> Option<Vec<u8>> {
+        use std::sync::atomic::Ordering;
+        let out = self.0.poll(now_ns)?;
+        // HW_REQ_INFO is 6 bytes: what answers anything after it is kept back.
+        Some(if self.1.load(Ordering::SeqCst) > 6 {
+            vec![]
+        } else {
+            out
+        })
+    }
+
+    fn next_deadline(&self) -> Option<u64> {
+        self.0.next_deadline()
+    }
+}
+
+#[test]
+fn ctrl_c_stops_the_probe_at_once() {
+    use common::proc::{wait_for, Proc};
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Arc;
+    let pty = Pty::open().expect("pty");
+    let path = pty.path().to_str().expect("utf-8").to_string();
+    let (stop, signal) = stop_pair().expect("stop");
+    let seen = Arc::new(AtomicUsize::new(0));
+    let counter = seen.clone();
+    let server = thread::spawn(move || {
+        let mut sim = Mute(
+            AptSim::new(AptModel::parse("kdc101").expect("kdc101")),
+            counter,
+        );
+        serve_pty(&mut sim, pty, Some(&signal), &[])
+    });
+    let mut p = Proc::aptscope(&["probe", "--port", path.as_str()]);
+    // HW_REQ_INFO, then the plan's first request, which waits 2 s for its reply.
+    wait_for(
+        "the first request of the plan",
+        || p.both(),
+        || seen.load(Ordering::SeqCst) >= 12,
+    );
+    p.interrupt();
+    stop.stop();
+    server.join().expect("server").expect("serve");
+    let out = p.stdout();
+    assert!(
+        out.contains("requests  0 sent, 0 answered, 0 deviation(s) (interrupted)"),
+        "{out}"
+    );
+    assert!(p.stderr().contains("interrupted"), "{}", p.both());
+    // Nothing was sent after the signal (no second request of the plan).
+    assert_eq!(seen.load(Ordering::SeqCst), 12, "{}", p.both());
+}
