@@ -417,6 +417,34 @@ pub struct Report {
     pub exchange: Vec<OwnedChunk>,
 }
 
+/// A titled list of answered requests, `  0xDST REQUEST  REPLY (N bytes)` and what `tail` adds
+/// (a line only where it gives `Some`); nothing when there are none.
+fn section<'a>(
+    s: &mut String,
+    title: &str,
+    outcomes: impl Iterator<Item = &'a Outcome>,
+    tail: impl Fn(&Outcome) -> Option<String>,
+) {
+    let mut head = false;
+    for o in outcomes {
+        let (Some(r), Some(t)) = (&o.reply, tail(o)) else {
+            continue;
+        };
+        if !head {
+            let _ = writeln!(s, "\n{title}");
+            head = true;
+        }
+        let _ = writeln!(
+            s,
+            "  0x{:02X} {:<34} {} ({} bytes){t}",
+            o.step.dst,
+            o.step.label(),
+            r.name,
+            r.len
+        );
+    }
+}
+
 /// The family of a message: its name's prefix (`MOT`, `PZ`, `HW`).
 pub fn family(name: &str) -> &str {
     name.split('_').next().unwrap_or(name)
@@ -528,26 +556,13 @@ impl Report {
                 }
             }
         }
-        let one: Vec<&Outcome> = self
-            .outcomes
-            .iter()
-            .filter(|o| o.one_revision().is_some())
-            .collect();
-        if !one.is_empty() {
-            let _ = writeln!(s, "\nlayouts of one revision (where the revisions differ)");
-            for o in one {
-                if let (Some(r), Some(rev)) = (&o.reply, o.one_revision()) {
-                    let _ = writeln!(
-                        s,
-                        "  0x{:02X} {:<34} {} ({} bytes): {rev} layout",
-                        o.step.dst,
-                        o.step.label(),
-                        r.name,
-                        r.len
-                    );
-                }
-            }
-        }
+        let one = self.outcomes.iter().filter(|o| o.one_revision().is_some());
+        section(
+            &mut s,
+            "layouts of one revision (where the revisions differ)",
+            one,
+            |o| o.one_revision().map(|rev| format!(": {rev} layout")),
+        );
         let subs: Vec<String> = self
             .outcomes
             .iter()
@@ -561,26 +576,13 @@ impl Report {
                 subs.join(", ")
             );
         }
-        let extra: Vec<&Outcome> = self
+        let extra = self
             .outcomes
             .iter()
-            .filter(|o| !o.step.listed && o.reply.is_some())
-            .collect();
-        if !extra.is_empty() {
-            let _ = writeln!(s, "\nanswered beyond the model's list");
-            for o in extra {
-                if let Some(r) = &o.reply {
-                    let _ = writeln!(
-                        s,
-                        "  0x{:02X} {:<34} {} ({} bytes)",
-                        o.step.dst,
-                        o.step.label(),
-                        r.name,
-                        r.len
-                    );
-                }
-            }
-        }
+            .filter(|o| !o.step.listed && o.reply.is_some());
+        section(&mut s, "answered beyond the model's list", extra, |_| {
+            Some(String::new())
+        });
         if !self.strays.is_empty() {
             let _ = writeln!(s, "\nanswering nothing");
             for x in &self.strays {

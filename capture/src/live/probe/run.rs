@@ -427,6 +427,34 @@ fn identify(
     Ok((top.model, units))
 }
 
+/// Send `steps` one at a time (their timeouts capped by `opts`), each answer judged by
+/// `judge`, into `report`; a stop signal ends it, the report marked interrupted.
+fn run_plan(
+    line: &mut Line<'_>,
+    steps: &[Step],
+    opts: &Options,
+    strays: &mut Vec<Stray>,
+    report: &mut Report,
+    judge: impl Fn(&Step, &[u8], u64) -> super::Reply,
+) -> Result<(), ProbeError> {
+    for step in steps {
+        let mut step = step.clone();
+        if let Some(m) = opts.max_timeout_ms {
+            step.timeout_ms = step.timeout_ms.min(m);
+        }
+        let reply = match line.ask(&step, step.timeout_ms, strays)? {
+            Asked::Signal(_) => {
+                report.interrupted = true;
+                break;
+            }
+            Asked::Reply(f, lat) => Some(judge(&step, &f, lat)),
+            Asked::NoReply => None,
+        };
+        report.outcomes.push(Outcome { step, reply });
+    }
+    Ok(())
+}
+
 /// The device profile of `model` (`None` when the table has no list for it).
 pub fn profile_of(model: &str) -> Option<DeviceProfile> {
     Table::global().device_profile(model)
@@ -462,21 +490,14 @@ pub fn probe_apt(
         report.exchange = line.exchange;
         return Ok((report, steps));
     }
-    for step in &steps {
-        let mut step = step.clone();
-        if let Some(m) = opts.max_timeout_ms {
-            step.timeout_ms = step.timeout_ms.min(m);
-        }
-        let reply = match line.ask(&step, step.timeout_ms, &mut strays)? {
-            Asked::Signal(_) => {
-                report.interrupted = true;
-                break;
-            }
-            Asked::Reply(f, lat) => Some(check_reply(&f, lat, profile.as_ref())),
-            Asked::NoReply => None,
-        };
-        report.outcomes.push(Outcome { step, reply });
-    }
+    run_plan(
+        &mut line,
+        &steps,
+        opts,
+        &mut strays,
+        &mut report,
+        |_, f, lat| check_reply(f, lat, profile.as_ref()),
+    )?;
     // What is still in the buffer answered nothing either.
     while let Some(f) = line.take_frame() {
         stray(&f, "the end", false, &mut strays);
@@ -552,21 +573,14 @@ pub fn probe_elliptec(
         });
     }
     if !dry_run {
-        for step in &steps {
-            let mut step = step.clone();
-            if let Some(m) = opts.max_timeout_ms {
-                step.timeout_ms = step.timeout_ms.min(m);
-            }
-            let reply = match line.ask(&step, step.timeout_ms, &mut strays)? {
-                Asked::Signal(_) => {
-                    report.interrupted = true;
-                    break;
-                }
-                Asked::Reply(f, lat) => Some(ell::check(&step, &f, lat)),
-                Asked::NoReply => None,
-            };
-            report.outcomes.push(Outcome { step, reply });
-        }
+        run_plan(
+            &mut line,
+            &steps,
+            opts,
+            &mut strays,
+            &mut report,
+            ell::check,
+        )?;
     }
     report.strays = strays;
     report.exchange = line.exchange;
