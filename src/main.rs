@@ -34,10 +34,6 @@ enum Cmd {
     /// Statistics of a capture: counts and bytes per message, address and direction, request
     /// latency (min/median/p99/max), diagnostics by kind, rate over time.
     Stats(cmd::stats::StatsArgs),
-    /// Survey a connected controller against the spec: identify it, send every read-only
-    /// request the spec lists for its model (never a SET or a move), and report what it
-    /// answers, with which layout, how fast, and where it differs.
-    Probe(cmd::probe::ProbeArgs),
     /// Browse a capture in the terminal UI: timeline, detail tree, hex, filters, statistics, plots.
     View(cmd::view::ViewArgs),
     /// Simulate a controller on a pseudo-terminal (or a serial port, --port):
@@ -52,6 +48,10 @@ enum Cmd {
     /// Replay a capture to a port with its timing, as the host (to a device or simulator) or
     /// as the device (to a host program), and compare the replies with the captured ones.
     Replay(cmd::replay::ReplayCmd),
+    /// Survey a connected controller against the spec: identify it, send every read-only
+    /// request the spec lists for its model (never a SET or a move), and report what it
+    /// answers, with which layout, how fast, and where it differs.
+    Probe(cmd::probe::ProbeArgs),
     /// Passive sniff of a Y-cable with two receive-only adapters, merged by time.
     Sniff(cmd::live::SniffArgs),
     /// What a capture holds: format, streams, counts per direction, times (like capinfos).

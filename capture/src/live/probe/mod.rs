@@ -787,3 +787,102 @@ impl Report {
         out.finish()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kdc(addr: u8, channels: u16) -> Unit {
+        Unit {
+            addr,
+            model: "KDC101".into(),
+            serial: 27000123,
+            firmware: "3.0.11".into(),
+            channels,
+        }
+    }
+
+    fn reply(name: &str, data: &[u8]) -> Vec<u8> {
+        let m = Table::global().msg_by_name(name).expect(name);
+        let mut f = m.id.to_le_bytes().to_vec();
+        f.extend((data.len() as u16).to_le_bytes());
+        f.extend([0x81, USB]);
+        f.extend_from_slice(data);
+        f
+    }
+
+    #[test]
+    fn a_plan_holds_the_models_read_only_requests_on_every_unit_and_channel() {
+        let p = Table::global().device_profile("KDC101");
+        let steps = plan(p.as_ref(), &[kdc(0x21, 2), kdc(0x22, 1)], false);
+        let t = Table::global();
+        assert!(steps
+            .iter()
+            .all(|s| t.msg_by_name(s.name).is_some_and(read_only) && s.listed));
+        let vel: Vec<(u8, Option<u16>)> = steps
+            .iter()
+            .filter(|s| s.name == "MOT_REQ_VELPARAMS")
+            .map(|s| (s.dst, s.chan))
+            .collect();
+        assert_eq!(vel, [(0x21, Some(1)), (0x21, Some(2)), (0x22, Some(1))]);
+        let s = steps
+            .iter()
+            .find(|s| s.name == "MOT_REQ_VELPARAMS")
+            .unwrap();
+        assert_eq!(s.bytes, [0x14, 0x04, 0x01, 0x00, 0x21, 0x01]);
+        assert_eq!(s.timeout_ms, DEFAULT_TIMEOUT_MS);
+        // --unlisted adds what the model's list leaves out, marked so.
+        let all = plan(p.as_ref(), &[kdc(0x50, 1)], true);
+        assert!(all.iter().any(|s| !s.listed && s.name.starts_with("PZ_")));
+    }
+
+    #[test]
+    fn replies_are_judged_against_the_tables_forms() {
+        let p = Table::global().device_profile("KDC101");
+        let ok = check_reply(
+            &reply(
+                "MOT_GET_VELPARAMS",
+                &[1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+            ),
+            5,
+            p.as_ref(),
+        );
+        assert!(ok.notes.is_empty(), "{:?}", ok.notes);
+        assert_eq!(ok.layout.form, "14");
+        let short = check_reply(&reply("MOT_GET_VELPARAMS", &[1, 0, 0, 0]), 5, p.as_ref());
+        assert_eq!(
+            short.notes,
+            ["wrong length: 4 data bytes fit no form of MOT_GET_VELPARAMS (14)"]
+        );
+        let old = check_reply(&reply("MOT_GET_KCUBEMMIPARAMS", &[0; 28]), 5, p.as_ref());
+        assert_eq!(old.layout.revs, ["23"]);
+        let new = check_reply(&reply("MOT_GET_KCUBEMMIPARAMS", &[0; 36]), 5, p.as_ref());
+        assert_eq!(new.layout.revs, ["2025"]);
+        let alien = check_reply(&reply("PZ_GET_OUTPUTVOLTS", &[1, 0, 0, 0]), 5, p.as_ref());
+        assert!(
+            alien
+                .notes
+                .iter()
+                .any(|n| n.contains("not in the KDC101 list")),
+            "{:?}",
+            alien.notes
+        );
+    }
+
+    #[test]
+    fn an_answer_is_for_the_channel_asked() {
+        let p = Table::global().device_profile("KDC101");
+        let steps = plan(p.as_ref(), &[kdc(0x50, 2)], false);
+        let ch2 = steps
+            .iter()
+            .find(|s| s.name == "MOT_REQ_VELPARAMS" && s.chan == Some(2))
+            .unwrap();
+        let mut data = [0u8; 14];
+        data[0] = 1;
+        assert!(!answers(ch2, &reply("MOT_GET_VELPARAMS", &data)));
+        data[0] = 2;
+        assert!(answers(ch2, &reply("MOT_GET_VELPARAMS", &data)));
+        assert!(!answers(ch2, &reply("MOT_GET_JOGPARAMS", &[2, 0])));
+        assert_eq!(ch2.label(), "MOT_REQ_VELPARAMS ch2");
+    }
+}
