@@ -302,7 +302,7 @@ pub struct Reply {
     pub len: usize,
     /// The layout its length matches.
     pub layout: Layout,
-    /// Time from the request's last byte to the reply's arrival, in µs.
+    /// Time from the request's last write to the reply's last byte read, in µs.
     pub latency_us: u64,
     /// What differs from the spec (wrong length, decoding diagnostics, a reply the model's list
     /// does not name). A layout of one revision only is no deviation: see [`Layout::revs`].

@@ -168,10 +168,14 @@ impl<'a> Line<'a> {
         u64::try_from(self.start.elapsed().as_nanos()).unwrap_or(u64::MAX)
     }
 
-    /// Send `bytes` whole; the time its last byte went.
+    /// Send `bytes` whole; the time just before the write that handed over its last bytes
+    /// (taken after it, a probe descheduled on a loaded machine would measure a reply that was
+    /// already waiting as answered in microseconds).
     fn send(&mut self, bytes: &[u8]) -> Result<u64, ProbeError> {
         let mut rest = bytes;
+        let mut ts = self.now_ns();
         while !rest.is_empty() {
+            ts = self.now_ns();
             match self.port.file.write(rest) {
                 Ok(n) => rest = &rest[n..],
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
@@ -185,7 +189,6 @@ impl<'a> Line<'a> {
                 Err(e) => return Err(self.err(e)),
             }
         }
-        let ts = self.now_ns();
         self.record(Direction::HostToDevice, bytes, ts);
         Ok(ts)
     }
