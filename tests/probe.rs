@@ -175,12 +175,23 @@ impl Simulator for Deviating {
 
 /// Probe a [`Deviating`] KDC101 served in this process with `args`.
 fn probe_deviating(args: &[&str]) -> (String, String, bool) {
+    probe_served(
+        |sim| Box::new(Deviating(sim)) as Box<dyn Simulator + Send>,
+        args,
+    )
+}
+
+/// Probe a KDC101 simulator wrapped by `wrap`, served in this process, with `args`.
+fn probe_served(
+    wrap: impl FnOnce(AptSim) -> Box<dyn Simulator + Send> + Send + 'static,
+    args: &[&str],
+) -> (String, String, bool) {
     let pty = Pty::open().expect("pty");
     let path = pty.path().to_str().expect("utf-8").to_string();
     let (stop, signal) = stop_pair().expect("stop");
     let server = thread::spawn(move || {
-        let mut sim = Deviating(AptSim::new(AptModel::parse("kdc101").expect("kdc101")));
-        serve_pty(&mut sim, pty, Some(&signal), &[])
+        let mut sim = wrap(AptSim::new(AptModel::parse("kdc101").expect("kdc101")));
+        serve_pty(sim.as_mut(), pty, Some(&signal), &[])
     });
     let mut a = vec!["probe", "--port", path.as_str()];
     a.extend_from_slice(args);
@@ -416,4 +427,59 @@ fn ctrl_c_stops_the_probe_at_once() {
     assert!(p.stderr().contains("interrupted"), "{}", p.both());
     // Nothing was sent after the signal (no second request of the plan).
     assert_eq!(seen.load(Ordering::SeqCst), 12, "{}", p.both());
+}
+
+/// A KDC101 that also answers PZ_REQ_OUTPUTVOLTS, which the spec does not list for it.
+struct Generous(AptSim, Vec<Vec<u8>>);
+
+impl Simulator for Generous {
+    fn input(&mut self, bytes: &[u8], now_ns: u64) {
+        // The probe sends one request at a time: a chunk starts with its header.
+        if bytes.len() >= 6 && u16::from_le_bytes([bytes[0], bytes[1]]) == msg::PZ_REQ_OUTPUTVOLTS {
+            let named = aptscope_dissector::apt::Named {
+                name: "PZ_GET_OUTPUTVOLTS",
+                sub: None,
+                values: &[("chan_ident", "1")],
+                form: None,
+                dst: 0x01,
+                src: 0x50,
+            };
+            let t = aptscope_dissector::Table::global();
+            self.1
+                .push(aptscope_dissector::apt::encode_named(t, &named).expect("encode"));
+        }
+        self.0.input(bytes, now_ns);
+    }
+
+    fn poll(&mut self, now_ns: u64) -> Option<Vec<u8>> {
+        self.1.pop().or_else(|| self.0.poll(now_ns))
+    }
+
+    fn next_deadline(&self) -> Option<u64> {
+        if self.1.is_empty() {
+            self.0.next_deadline()
+        } else {
+            Some(0)
+        }
+    }
+}
+
+#[test]
+fn unlisted_finds_what_a_device_does_beyond_its_list() {
+    let (out, err, ok) = probe_served(
+        |sim| Box::new(Generous(sim, vec![])) as Box<dyn Simulator + Send>,
+        &["--unlisted", "--timeout", "30ms"],
+    );
+    assert!(ok, "{err}");
+    assert!(out.contains("answered beyond the model's list"), "{out}");
+    assert!(
+        out.contains("PZ_REQ_OUTPUTVOLTS ch1") && out.contains("PZ_GET_OUTPUTVOLTS (4 bytes)"),
+        "{out}"
+    );
+    assert!(
+        out.contains("PZ_GET_OUTPUTVOLTS is not in the KDC101 list"),
+        "{out}"
+    );
+    // What it does not answer beyond its list is no deviation.
+    assert!(out.contains("1 deviation(s)"), "{out}");
 }
