@@ -2,9 +2,10 @@
 //! `aptscope_capture::live::probe`).
 
 use crate::error::{CliError, Result};
-use aptscope_capture::live::probe::run::{probe_apt, probe_elliptec, Options};
+use aptscope_capture::live::probe::run::{probe, Options};
 use aptscope_capture::live::probe::{compare, Report};
 use aptscope_capture::open::{create, Format};
+use aptscope_dissector::detect::Proto;
 use aptscope_dissector::table::{Class, MsgDef};
 
 /// The options of `probe`.
@@ -98,10 +99,11 @@ pub(crate) fn run(a: ProbeArgs) -> Result<()> {
             .map(|ns| u32::try_from(ns / 1_000_000).unwrap_or(u32::MAX).max(1)),
         refuse: Some(moves),
     };
-    let (report, steps) = match a.proto {
-        ProbeProto::Apt => probe_apt(port, &opts, a.dry_run)?,
-        ProbeProto::Elliptec => probe_elliptec(port, &opts, a.dry_run)?,
+    let proto = match a.proto {
+        ProbeProto::Apt => Proto::Apt,
+        ProbeProto::Elliptec => Proto::Elliptec,
     };
+    let (report, steps) = probe(port, proto, &opts, a.dry_run)?;
     if let Some(w) = out.as_mut() {
         report.write_to(w.as_mut())?;
     }

@@ -463,19 +463,34 @@ pub fn profile_of(model: &str) -> Option<DeviceProfile> {
     Table::global().device_profile(model)
 }
 
-/// Probe the APT controller on `path` (a serial port, or a pseudo-terminal such as a
-/// simulator's `--pty` link): identify it, then send every read-only request of its plan one at
-/// a time. SIGINT or SIGTERM ends it at once (after the request in flight, which is read-only),
-/// the report saying so. `dry_run`: identify, then return the plan without sending it.
-pub fn probe_apt(
+/// Probe the controller (APT) or bus (Elliptec) on `path`: a serial port, or a pseudo-terminal
+/// such as a simulator's `--pty` link. SIGINT or SIGTERM ends it at once (after the request in
+/// flight, which is read-only), the report saying so. `dry_run`: identify, then return the plan
+/// without sending it.
+pub fn probe(
     path: &str,
+    proto: Proto,
     opts: &Options,
     dry_run: bool,
 ) -> Result<(Report, Vec<Step>), ProbeError> {
     let sigs = signals(path)?;
-    let mut line = Line::open(path, &sigs, Proto::Apt)?;
+    let mut line = Line::open(path, &sigs, proto)?;
+    match proto {
+        Proto::Apt => probe_apt(&mut line, opts, dry_run),
+        Proto::Elliptec => probe_elliptec(&mut line, opts, dry_run),
+    }
+}
+
+/// The APT probe: identify the controller, then send every read-only request of its plan one
+/// at a time.
+fn probe_apt(
+    line: &mut Line<'_>,
+    opts: &Options,
+    dry_run: bool,
+) -> Result<(Report, Vec<Step>), ProbeError> {
+    let path = line.path;
     let mut strays = vec![];
-    let (model, units) = identify(&mut line, &mut strays)?;
+    let (model, units) = identify(line, &mut strays)?;
     let profile = profile_of(&model);
     let mut steps = plan(profile.as_ref(), &units, opts.unlisted);
     if let Some(refuse) = opts.refuse {
@@ -490,36 +505,29 @@ pub fn probe_apt(
         ..Report::default()
     };
     if dry_run {
-        report.exchange = line.exchange;
+        report.exchange = std::mem::take(&mut line.exchange);
         return Ok((report, steps));
     }
-    run_plan(
-        &mut line,
-        &steps,
-        opts,
-        &mut strays,
-        &mut report,
-        |_, f, lat| check_reply(f, lat, profile.as_ref()),
-    )?;
+    run_plan(line, &steps, opts, &mut strays, &mut report, |_, f, lat| {
+        check_reply(f, lat, profile.as_ref())
+    })?;
     // What is still in the buffer answered nothing either.
     while let Some(f) = line.take_frame() {
         stray(&f, "the end", false, &mut strays);
     }
     report.strays = strays;
-    report.exchange = line.exchange;
+    report.exchange = std::mem::take(&mut line.exchange);
     Ok((report, steps))
 }
 
-/// Probe the Elliptec bus on `path`: `in` at every address 0–F (each waiting
-/// [`ell::SCAN_MS`]), then every query each module's model supports, one at a time. Ctrl-C as
-/// for [`probe_apt`]; `dry_run`: scan, then return the plan.
-pub fn probe_elliptec(
-    path: &str,
+/// The Elliptec probe: `in` at every address 0–F (each waiting [`ell::SCAN_MS`]), then every
+/// query each module's model supports, one at a time.
+fn probe_elliptec(
+    line: &mut Line<'_>,
     opts: &Options,
     dry_run: bool,
 ) -> Result<(Report, Vec<Step>), ProbeError> {
-    let sigs = signals(path)?;
-    let mut line = Line::open(path, &sigs, Proto::Elliptec)?;
+    let path = line.path;
     let mut strays = vec![];
     let mut report = Report {
         port: path.to_string(),
@@ -576,17 +584,10 @@ pub fn probe_elliptec(
         });
     }
     if !dry_run {
-        run_plan(
-            &mut line,
-            &steps,
-            opts,
-            &mut strays,
-            &mut report,
-            ell::check,
-        )?;
+        run_plan(line, &steps, opts, &mut strays, &mut report, ell::check)?;
     }
     report.strays = strays;
-    report.exchange = line.exchange;
+    report.exchange = std::mem::take(&mut line.exchange);
     Ok((report, steps))
 }
 
