@@ -4,6 +4,7 @@
 //! picks the exit status.
 
 use aptscope_capture::live::error::LiveError;
+use aptscope_capture::live::probe::run::ProbeError;
 use aptscope_capture::live::sim::SimError;
 use aptscope_capture::open::{CreateError, OpenError};
 use std::io;
@@ -29,6 +30,9 @@ pub(crate) enum CliError {
     /// A simulator's arguments name no model or bus it can be.
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// A probe could not run (the port, or a device not answering APT).
+    #[error(transparent)]
+    Probe(#[from] ProbeError),
     /// `replay --check` found the replies differ from the captured ones.
     #[error("differences found (--check)")]
     Differences,
@@ -57,6 +61,12 @@ impl CliError {
             },
             CliError::Live(e) => e.kind(),
             CliError::Sim(_) => io::ErrorKind::InvalidInput,
+            CliError::Probe(ProbeError::Port(e)) => e.kind(),
+            CliError::Probe(ProbeError::Io { source, .. }) => source.kind(),
+            CliError::Probe(ProbeError::NotApt { .. } | ProbeError::NotElliptec { .. }) => {
+                io::ErrorKind::TimedOut
+            }
+            CliError::Probe(ProbeError::Interrupted { .. }) => io::ErrorKind::Interrupted,
             CliError::Differences | CliError::CaptureIncomplete => io::ErrorKind::Other,
             CliError::Io(e) => e.kind(),
         }

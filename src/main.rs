@@ -48,6 +48,10 @@ enum Cmd {
     /// Replay a capture to a port with its timing, as the host (to a device or simulator) or
     /// as the device (to a host program), and compare the replies with the captured ones.
     Replay(cmd::replay::ReplayCmd),
+    /// Survey a connected controller against the spec: identify it, send every read-only
+    /// request the spec lists for its model (never a SET or a move), and report what it
+    /// answers, with which layout, how fast, and where it differs.
+    Probe(cmd::probe::ProbeArgs),
     /// Passive sniff of a Y-cable with two receive-only adapters, merged by time.
     Sniff(cmd::live::SniffArgs),
     /// What a capture holds: format, streams, counts per direction, times (like capinfos).
@@ -90,6 +94,7 @@ fn main() -> ExitCode {
         Cmd::Decode(a) => cmd::decode::run(a),
         Cmd::Stats(a) => cmd::stats::run(a),
         Cmd::View(a) => cmd::view::run(a),
+        Cmd::Probe(a) => cmd::probe::run(a),
         Cmd::Sim { what } => cmd::sim::run(what),
         Cmd::Tap(a) => cmd::live::tap(a),
         Cmd::Replay(a) => cmd::replay::run(a),

@@ -7,6 +7,7 @@ pub(crate) mod export;
 pub(crate) mod info;
 pub(crate) mod live;
 pub(crate) mod messages;
+pub(crate) mod probe;
 pub(crate) mod replay;
 pub(crate) mod sim;
 pub(crate) mod stats;

@@ -2,6 +2,7 @@
 //! written).
 
 pub mod error;
+pub mod probe;
 pub mod pty;
 pub mod serial;
 pub mod session;
