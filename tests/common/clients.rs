@@ -19,8 +19,14 @@ const IMPORTS: &str = "import thorlabs_apt_device, pylablib, elliptec, thorlabs_
 /// The interpreter of a virtual environment holding every [`CLIENTS`] library, or `None` when
 /// it cannot be made and the tools rule says skip (in CI it fails).
 pub fn client_python() -> Option<PathBuf> {
-    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/client-venv");
+    let target = Path::new(env!("CARGO_MANIFEST_DIR")).join("target");
+    let venv = target.join("client-venv");
     let py = venv.join("bin/python");
+    // One maker at a time: the tests of a binary run at once, and on a fresh checkout they
+    // would all make the same environment together (the lock is released when `_lock` drops).
+    let _lock = std::fs::create_dir_all(&target)
+        .and_then(|()| std::fs::File::create(target.join("client-venv.lock")))
+        .and_then(|f| f.lock().map(|()| f));
     let has = |py: &Path| {
         Command::new(py)
             .args(["-c", IMPORTS])
