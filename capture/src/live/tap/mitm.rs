@@ -2,7 +2,9 @@
 //! device, forwarding both ways and recording what crossed.
 
 use super::port::{open_device, DevicePair, FdPort, HostPty, Port};
-use super::record::{forward, run_recorded, supervise, FwdEnd, Recording, Run, Shared};
+use super::record::{
+    forward, run_recorded, stop_signals, supervise, FwdEnd, Recording, Run, Shared,
+};
 use super::sink::FileSink;
 use super::{clock_time, StopHandle, TapOptions, TapStats, READ_BUF, RETRY_EVERY};
 use crate::live::error::LiveError;
@@ -20,7 +22,10 @@ use std::time::{Duration, Instant};
 /// both ways until stopped (signal, [`StopHandle`], duration) or the device disappears (unless
 /// `reconnect`), write the capture, show the timeline; print and return the statistics.
 pub fn tap_main(opts: TapOptions) -> Result<TapStats, LiveError> {
-    Tap::new(opts)?.run(None)
+    // Handled before the host link appears: a SIGTERM sent as soon as it does (Wireshark
+    // stopping an extcap capture) ends the tap cleanly instead of killing it.
+    let signals = stop_signals(opts.signals)?;
+    Tap::new(opts)?.run_installed(None, signals)
 }
 
 /// A tap set up (device open, pseudo-terminal and file created) and ready to run.

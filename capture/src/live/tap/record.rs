@@ -344,29 +344,35 @@ pub(super) trait Run: Sized + Send {
         say: Say,
     ) -> Result<TapStats, LiveError>;
 
-    /// [`Run::run_with`] with the stop signals handled (when asked for), then the statistics
-    /// said.
+    /// [`Run::run_installed`] with the signals installed now, after the set-up (the tests
+    /// run a tap set up by hand this way).
+    #[cfg(test)]
     fn run(self, display: Option<Box<dyn Write + Send>>) -> Result<TapStats, LiveError> {
-        let (signals, _, say) = self.control();
-        run_signalled((signals, say), Self::WHAT, |sig| {
-            self.run_with(display, sig, say)
-        })
+        let signals = stop_signals(self.control().0)?;
+        self.run_installed(display, signals)
+    }
+
+    /// [`Run::run_with`] with the stop signals already installed by the caller (before the
+    /// set-up made what a stop is sent for: the host link), then the statistics said.
+    fn run_installed(
+        self,
+        display: Option<Box<dyn Write + Send>>,
+        signals: Option<Signals>,
+    ) -> Result<TapStats, LiveError> {
+        let say = self.control().2;
+        let stats = self.run_with(display, signals.as_ref(), say)?;
+        drop(signals);
+        say.line(format_args!("{}", stats.summary(Self::WHAT)));
+        Ok(stats)
     }
 }
 
-/// Run `f` with the stop signals handled (when `handle`), then say the statistics as `what`.
-fn run_signalled(
-    (handle, say): (bool, Say),
-    what: &str,
-    f: impl FnOnce(Option<&Signals>) -> Result<TapStats, LiveError>,
-) -> Result<TapStats, LiveError> {
-    let signals = if handle {
+/// The stop signals received through a signalfd from now on (when `handle`), in this thread
+/// and the threads it starts afterwards.
+pub(super) fn stop_signals(handle: bool) -> Result<Option<Signals>, LiveError> {
+    Ok(if handle {
         Some(Signals::install(STOP)?)
     } else {
         None
-    };
-    let stats = f(signals.as_ref())?;
-    drop(signals);
-    say.line(format_args!("{}", stats.summary(what)));
-    Ok(stats)
+    })
 }

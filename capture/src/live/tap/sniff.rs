@@ -2,7 +2,9 @@
 //! into one capture.
 
 use super::port::{open_serial, SerialPort};
-use super::record::{forward, run_recorded, supervise, FwdEnd, Recording, Run, Shared};
+use super::record::{
+    forward, run_recorded, stop_signals, supervise, FwdEnd, Recording, Run, Shared,
+};
 use super::sink::FileSink;
 use super::{clock_time, SniffOptions, StopHandle, TapStats, RETRY_EVERY};
 use crate::live::error::LiveError;
@@ -20,7 +22,9 @@ use std::time::Instant;
 /// directions by time into the capture, show the timeline, until stopped or an adapter
 /// disappears (unless `reconnect`); print and return the statistics.
 pub fn sniff_main(opts: SniffOptions) -> Result<TapStats, LiveError> {
-    Sniff::new(opts)?.run(None)
+    // Handled before the set-up, as the tap does.
+    let signals = stop_signals(opts.signals)?;
+    Sniff::new(opts)?.run_installed(None, signals)
 }
 
 /// A sniff set up (ports open, file created) and ready to run.
