@@ -2,7 +2,7 @@
 //! view (the terminal UI) follows the file in the calling one.
 
 use super::mitm::Tap;
-use super::record::Run;
+use super::record::{stop_signals, Run};
 use super::sniff::Sniff;
 use super::{SniffOptions, StopHandle, TapOptions, TapStats, TICK};
 use crate::follow::FollowStop;
@@ -66,9 +66,12 @@ pub fn tap_with_view(
     let path = viewed_path(&opts.write)?;
     opts.followed = true;
     opts.quiet = true;
+    // Handled before the set-up, as `tap_main` does, and before any thread starts: the view's
+    // threads inherit the mask too.
+    let signals = stop_signals(opts.signals)?;
     let tap = Tap::new(opts)?;
     let host = format!("host {}", tap.host.path().display());
-    view_run(tap, (&path, Some(&host)), view, abandon)
+    view_run(tap, signals, (&path, Some(&host)), view, abandon)
 }
 
 /// [`tap_with_view`] for a sniff.
@@ -80,30 +83,36 @@ pub fn sniff_with_view(
     let path = viewed_path(&opts.write)?;
     opts.followed = true;
     opts.quiet = true;
+    let signals = stop_signals(opts.signals)?;
     let sniff = Sniff::new(opts)?;
-    view_run(sniff, (&path, None), view, abandon)
+    view_run(sniff, signals, (&path, None), view, abandon)
 }
 
-/// Run `run` (a tap or sniff set up to write `path`; host programs connect at `host`) in a
-/// thread and `view` in this one; see [`tap_with_view`].
+/// Run `run` (a tap or sniff set up to write `path`; host programs connect at `host`; the stop
+/// `signals` installed before its set-up) in a thread and `view` in this one; see
+/// [`tap_with_view`].
 fn view_run<R: Run>(
     run: R,
+    signals: Option<Signals>,
     (path, host): (&str, Option<&str>),
     view: impl FnOnce(LiveView<'_>) -> io::Result<()>,
     abandon: fn(ViewAbandoned) -> !,
 ) -> Result<TapStats, LiveError> {
-    let (signals, stop, say) = run.control();
+    let (_, stop, say) = run.control();
     let viewed = Viewed {
         path,
         host,
-        signals,
         stop,
         say,
         what: R::WHAT,
         abandon,
     };
     // The view has the terminal: the run says nothing while it does.
-    viewed.run(move |sig| run.run_with(None, sig, Say::Nothing), view)
+    viewed.run(
+        signals,
+        move |sig| run.run_with(None, sig, Say::Nothing),
+        view,
+    )
 }
 
 /// A simulator's own traffic in a live view: `sim` served on a private pseudo-terminal with a
@@ -153,8 +162,6 @@ struct Viewed<'a> {
     path: &'a str,
     /// Where host programs connect (a tap's).
     host: Option<&'a str>,
-    /// Whether the stop signals are handled.
-    signals: bool,
     /// The run's stop handle.
     stop: StopHandle,
     /// Where the statistics are said after the view.
@@ -166,19 +173,14 @@ struct Viewed<'a> {
 }
 
 impl Viewed<'_> {
-    /// Run `run` (a tap or sniff, given the signals) in a thread and `view` in this one; see
-    /// [`tap_with_view`].
+    /// Run `run` (a tap or sniff, given the `signals` its caller installed) in a thread and
+    /// `view` in this one; see [`tap_with_view`].
     fn run(
         self,
+        signals: Option<Signals>,
         run: impl FnOnce(Option<&Signals>) -> Result<TapStats, LiveError> + Send,
         view: impl FnOnce(LiveView<'_>) -> io::Result<()>,
     ) -> Result<TapStats, LiveError> {
-        // Installed here, before any thread starts: the view's threads inherit the mask too.
-        let signals = if self.signals {
-            Some(Signals::install(STOP)?)
-        } else {
-            None
-        };
         let written = FollowStop::new();
         let quit = AtomicBool::new(false);
         let view_done = AtomicBool::new(false);
