@@ -1305,17 +1305,17 @@ fn sub_params(family: Family) -> Vec<(u16, u16, Params)> {
         Family::Laser | Family::LaserDiode => {
             let g = msg::LA_GET_PARAMS;
             vec![
-                (g, 0x01, vec![("setpoint", int(0))]),
+                (g, msg::la::SETPOINT, vec![("setpoint", int(0))]),
                 (
                     g,
-                    0x03,
+                    msg::la::CURRENT_POWER,
                     vec![("laser_current", int(0)), ("laser_power", int(0))],
                 ),
-                (g, 0x05, vec![("laser_source", int(0))]),
-                (g, 0x07, vec![("status_bits", int(0))]),
+                (g, msg::la::POWER_SOURCE, vec![("laser_source", int(0))]),
+                (g, msg::la::STATUS_BITS, vec![("status_bits", int(0))]),
                 (
                     g,
-                    0x09,
+                    msg::la::MAX_LIMITS,
                     // 50 mA, 2.5 mW, 635 nm.
                     vec![
                         ("max_current", int(5000)),
@@ -1325,7 +1325,7 @@ fn sub_params(family: Family) -> Vec<(u16, u16, Params)> {
                 ),
                 (
                     g,
-                    0x0B,
+                    msg::la::DISPLAY,
                     vec![("disp_intensity", int(255)), ("disp_units", int(2))],
                 ),
             ]
@@ -1333,17 +1333,21 @@ fn sub_params(family: Family) -> Vec<(u16, u16, Params)> {
         Family::Tec => {
             let g = msg::TEC_GET_PARAMS;
             vec![
-                (g, 0x01, vec![("t_set", int(2500))]),
+                (g, msg::tec::TEMP_SETPOINT, vec![("t_set", int(2500))]),
                 (
                     g,
-                    0x03,
+                    msg::tec::READINGS,
                     vec![("i_tec", int(0)), ("t_act", int(0)), ("t_set", int(0))],
                 ),
-                (g, 0x05, vec![("sensor", int(1)), ("i_lim", int(1000))]),
-                (g, 0x07, vec![("status_bits", int(0))]),
                 (
                     g,
-                    0x09,
+                    msg::tec::IO_SETTINGS,
+                    vec![("sensor", int(1)), ("i_lim", int(1000))],
+                ),
+                (g, msg::tec::STATUS_BITS, vec![("status_bits", int(0))]),
+                (
+                    g,
+                    msg::tec::LOOP_PARAMS,
                     vec![
                         ("p_gain", int(0x5332)),
                         ("i_gain", int(0x6665)),
@@ -1352,7 +1356,7 @@ fn sub_params(family: Family) -> Vec<(u16, u16, Params)> {
                 ),
                 (
                     g,
-                    0x0B,
+                    msg::tec::DISP_SETTINGS,
                     vec![("disp_intensity", int(255)), ("disp_mode", int(0))],
                 ),
             ]
@@ -1362,7 +1366,7 @@ fn sub_params(family: Family) -> Vec<(u16, u16, Params)> {
             vec![
                 (
                     g,
-                    0x01,
+                    msg::quad::LOOP_PARAMS,
                     vec![
                         ("p_gain", int(21_298)),
                         ("i_gain", int(26_213)),
@@ -1371,7 +1375,7 @@ fn sub_params(family: Family) -> Vec<(u16, u16, Params)> {
                 ),
                 (
                     g,
-                    0x03,
+                    msg::quad::READINGS,
                     vec![
                         ("x_diff", int(0)),
                         ("y_diff", int(0)),
@@ -1382,7 +1386,7 @@ fn sub_params(family: Family) -> Vec<(u16, u16, Params)> {
                 ),
                 (
                     g,
-                    0x05,
+                    msg::quad::POS_DEMAND_PARAMS,
                     vec![
                         ("x_pos_demand_min", int(-32_767)),
                         ("y_pos_demand_min", int(-32_767)),
@@ -1394,21 +1398,25 @@ fn sub_params(family: Family) -> Vec<(u16, u16, Params)> {
                         ("y_pos_demand_fb_sense", int(32_767)),
                     ],
                 ),
-                (g, 0x07, vec![("mode", int(1))]),
-                (g, 0x09, vec![("status_bits", int(0))]),
+                (g, msg::quad::OPER_MODE, vec![("mode", int(1))]),
+                (g, msg::quad::STATUS_BITS, vec![("status_bits", int(0))]),
                 (
                     g,
-                    0x0B,
+                    msg::quad::DISP_SETTINGS,
                     vec![
                         ("disp_intensity", int(255)),
                         ("disp_mode", int(1)),
                         ("disp_dim_timeout", int(0)),
                     ],
                 ),
-                (g, 0x0D, vec![("x_pos", int(0)), ("y_pos", int(0))]),
                 (
                     g,
-                    0x0E,
+                    msg::quad::POS_DEMAND_OUTPUTS,
+                    vec![("x_pos", int(0)), ("y_pos", int(0))],
+                ),
+                (
+                    g,
+                    msg::quad::LOOP_PARAMS2,
                     vec![
                         ("pid_consts_p", f(65.7)),
                         ("pid_consts_i", f(80.3)),
@@ -1422,7 +1430,7 @@ fn sub_params(family: Family) -> Vec<(u16, u16, Params)> {
                 ),
                 (
                     g,
-                    0x0F,
+                    msg::quad::KPA_TRIG_IO_CONFIG,
                     vec![
                         ("trig1_mode", int(0x0B)),
                         ("trig1_polarity", int(1)),
@@ -1436,7 +1444,7 @@ fn sub_params(family: Family) -> Vec<(u16, u16, Params)> {
                         ("trig2_diff_threshold", int(50)),
                     ],
                 ),
-                (g, 0x10, vec![("dig_ops", int(0))]),
+                (g, msg::quad::KPA_DIG_OPS, vec![("dig_ops", int(0))]),
             ]
         }
         _ => vec![],
