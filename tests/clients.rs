@@ -10,8 +10,8 @@
 mod common;
 
 use common::clients::client_python;
-use common::host::start_sim_with;
-use common::proc::{wait_for, Proc};
+use common::host::{start_sim_with, start_tap};
+use common::proc::wait_for;
 use common::{aptscope, scratch};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -54,7 +54,7 @@ fn run_client_cap(
     let py = client_python()?;
     let dir = scratch(&format!("client-{name}"));
     let _sim = start_sim_with(&["sim", "apt", "--model", model], &dir.join("dev"));
-    let mut tap = start_tap(&dir);
+    let mut tap = start_tap(&dir, &[]);
     let file = dir.join("client.py");
     std::fs::write(&file, format!("{prelude}{script}")).expect("write the script");
     let out = Command::new(&py)
@@ -85,25 +85,6 @@ fn run_client_cap(
     let (all, _, _) = aptscope(&["decode", cap.to_str().expect("utf-8 path")], None);
     assert!(all.lines().count() > 10, "{name}: {all}");
     Some((stdout, cap))
-}
-
-/// `aptscope tap --device DIR/dev --link DIR/host -w DIR/cap.pcapng --quiet`, once its link is
-/// there.
-fn start_tap(dir: &Path) -> Proc {
-    let p = |f: &str| dir.join(f).to_str().expect("utf-8 path").to_string();
-    let args = [
-        "tap".to_string(),
-        "--device".into(),
-        p("dev"),
-        "--link".into(),
-        p("host"),
-        "-w".into(),
-        p("cap.pcapng"),
-        "--quiet".into(),
-    ];
-    let t = Proc::aptscope(&args);
-    t.wait_stderr("aptscope tap: host side");
-    t
 }
 
 /// The records of `decode` of the capture that carry a diagnostic.

@@ -9,7 +9,7 @@
 mod common;
 
 use common::clients::client_python;
-use common::host::start_sim_with;
+use common::host::{start_sim_with, start_tap};
 use common::proc::Proc;
 use common::{aptscope, Scratch};
 use serde_json::Value;
@@ -28,20 +28,7 @@ impl Rig {
     fn start(name: &str, modules: &str) -> Rig {
         let dir = Scratch::new(name);
         let sim = start_sim_with(&["sim", "elliptec", "--modules", modules], &dir.join("dev"));
-        let p = |f: &str| dir.join(f).to_str().expect("utf-8 path").to_string();
-        let tap = Proc::aptscope(&[
-            "tap",
-            "--proto",
-            "elliptec",
-            "--device",
-            &p("dev"),
-            "--link",
-            &p("host"),
-            "-w",
-            &p("cap.pcapng"),
-            "--quiet",
-        ]);
-        tap.wait_stderr("aptscope tap: host side");
+        let tap = start_tap(dir.path(), &["--proto", "elliptec"]);
         Rig { dir, sim, tap }
     }
 

@@ -8,7 +8,9 @@ mod common;
 use aptscope_capture::open::{open, Format, OpenOptions};
 use aptscope_capture::{Direction, Event};
 use common::clients::client_python;
-use common::host::{ask_info, open_host, ready, start_sim, start_sim_with, HW_GET_INFO_LEN};
+use common::host::{
+    ask_info, open_host, ready, start_sim, start_sim_with, start_tap, tap_args, HW_GET_INFO_LEN,
+};
 use common::proc::{lock, wait_for, Proc, DEADLINE, POLL};
 use common::term::Term;
 use common::{apt_frames as frames, scratch};
@@ -26,24 +28,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
-
-/// `tap --device DIR/dev --link DIR/host -w DIR/cap.pcapng EXTRA…`: the tap between the
-/// simulator and the host in the tests' scratch directory.
-fn tap_args(dir: &Path, extra: &[&str]) -> Vec<String> {
-    let p = |f: &str| dir.join(f).to_str().expect("utf-8 path").to_string();
-    let mut a: Vec<String> = vec!["tap".into(), "--device".into(), p("dev"), "--link".into()];
-    a.extend([p("host"), "-w".into(), p("cap.pcapng")]);
-    a.extend(extra.iter().map(|s| s.to_string()));
-    a
-}
-
-/// `aptscope tap … --quiet EXTRA…` (see [`tap_args`]), once its link is there.
-fn start_tap(dir: &Path, extra: &[&str]) -> Proc {
-    let p = Proc::aptscope(&tap_args(dir, &[&["--quiet"], extra].concat()));
-    p.wait_stderr("aptscope tap: host side");
-    assert!(std::fs::read_link(dir.join("host")).is_ok(), "{}", p.both());
-    p
-}
 
 // ---------------------------------------------------------------------------------------------
 // The host program

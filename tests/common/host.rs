@@ -89,3 +89,21 @@ pub fn ask_info(link: &Path, ctx: impl Fn() -> String) -> Vec<u8> {
     assert_eq!(got.len(), HW_GET_INFO_LEN, "exactly one reply: {got:02x?}");
     got
 }
+
+/// `tap --device DIR/dev --link DIR/host -w DIR/cap.pcapng EXTRA…`: the tap between the
+/// simulator and the host in the tests' scratch directory.
+pub fn tap_args(dir: &Path, extra: &[&str]) -> Vec<String> {
+    let p = |f: &str| dir.join(f).to_str().expect("utf-8 path").to_string();
+    let mut a: Vec<String> = vec!["tap".into(), "--device".into(), p("dev"), "--link".into()];
+    a.extend([p("host"), "-w".into(), p("cap.pcapng")]);
+    a.extend(extra.iter().map(|s| s.to_string()));
+    a
+}
+
+/// `aptscope tap … --quiet EXTRA…` (see [`tap_args`]), once its link is there.
+pub fn start_tap(dir: &Path, extra: &[&str]) -> Proc {
+    let p = Proc::aptscope(&tap_args(dir, &[&["--quiet"], extra].concat()));
+    p.wait_stderr("aptscope tap: host side");
+    assert!(std::fs::read_link(dir.join("host")).is_ok(), "{}", p.both());
+    p
+}
