@@ -333,16 +333,16 @@ fn capture(iface: &str, a: &ExtcapArgs) -> io::Result<()> {
         .filter(|l| !l.is_empty())
         .unwrap_or_else(|| default_link(iface));
     let mut o = TapOptions::new(device, Some(link));
-    o.proto = proto;
-    o.baud = baud;
-    o.flow = flow;
-    o.write = Some(fifo.clone());
+    o.live.proto = proto;
+    o.live.baud = baud;
+    o.live.flow = flow;
+    o.live.write = Some(fifo.clone());
     o.stream = true;
-    o.quiet = true;
-    o.reconnect = a.reconnect;
-    o.signals = true;
+    o.live.quiet = true;
+    o.live.reconnect = a.reconnect;
+    o.live.signals = true;
     // Wireshark shows anything on standard error as an error: only a failure is said there.
-    o.say = aptscope_capture::Say::Nothing;
+    o.live.say = aptscope_capture::Say::Nothing;
     let stats = tap_main(o);
     let stats = match stats {
         Ok(s) => s,

@@ -6,8 +6,8 @@ use crate::error::{CliError, Result};
 use aptscope_capture::live::error::LiveError;
 use aptscope_capture::live::serial::Flow;
 use aptscope_capture::live::tap::{
-    sniff_main, sniff_with_view, tap_main, tap_with_view, LiveView, SniffOptions, TapOptions,
-    TapStats, ViewAbandoned,
+    sniff_main, sniff_with_view, tap_main, tap_with_view, LiveOptions, LiveView, SniffOptions,
+    TapOptions, TapStats, ViewAbandoned,
 };
 use aptscope_capture::open::{Format, OpenOptions};
 use aptscope_dissector::detect::Proto;
@@ -82,36 +82,13 @@ pub(crate) struct SniffArgs {
     pub(crate) live: LiveArgs,
 }
 
-/// Copies the options `tap` and `sniff` share into their options struct (two types with the
-/// same fields).
-macro_rules! live_fields {
-    ($o:ident, $live:ident, $proto:ident, $flow:ident) => {
-        $o.proto = $proto;
-        $o.baud = $live.baud;
-        // Without --flow each keeps its own default: the tap the protocol's, the sniff none
-        // (its adapters only receive).
-        if $flow.is_some() {
-            $o.flow = $flow;
-        }
-        $o.write = $live.write.clone();
-        $o.write_format = write_format($live.write_format.as_deref())?;
-        $o.force = $live.force;
-        $o.reconnect = $live.reconnect;
-        $o.quiet = $live.quiet;
-        $o.duration = $live.duration.map(std::time::Duration::from_nanos);
-        $o.signals = true;
-        $o.units = $live.units.opts()?;
-    };
-}
-
 /// Run a tap.
 pub(crate) fn tap(a: TapArgs) -> Result<()> {
     let TapArgs { device, link, live } = a;
-    let (proto, flow) = live_opts(&live)?;
     let mut o = TapOptions::new(device, link);
-    live_fields!(o, live, proto, flow);
+    let proto = live_opts(&live, &mut o.live)?;
     if live.view {
-        let (path, units) = (viewed_file(&mut o.write, "tap"), o.units.clone());
+        let (path, units) = (viewed_file(&mut o.live.write, "tap"), o.live.units.clone());
         let r = tap_with_view(o, |v| live_view(v, proto, units), end_abandoned);
         return_view(r, &path, "aptscope tap")
     } else {
@@ -126,11 +103,13 @@ pub(crate) fn sniff(a: SniffArgs) -> Result<()> {
         device_tx,
         live,
     } = a;
-    let (proto, flow) = live_opts(&live)?;
     let mut o = SniffOptions::new(host_tx, device_tx);
-    live_fields!(o, live, proto, flow);
+    let proto = live_opts(&live, &mut o.live)?;
     if live.view {
-        let (path, units) = (viewed_file(&mut o.write, "sniff"), o.units.clone());
+        let (path, units) = (
+            viewed_file(&mut o.live.write, "sniff"),
+            o.live.units.clone(),
+        );
         let r = sniff_with_view(o, |v| live_view(v, proto, units), end_abandoned);
         return_view(r, &path, "aptscope sniff")
     } else {
@@ -150,16 +129,29 @@ fn write_format(f: Option<&str>) -> Result<Option<Format>> {
     }
 }
 
-fn live_opts(l: &LiveArgs) -> Result<(Proto, Option<Flow>)> {
+/// The options `tap` and `sniff` share, from their arguments into `o` (whose defaults are the
+/// tap's or the sniff's); the protocol.
+fn live_opts(l: &LiveArgs, o: &mut LiveOptions) -> Result<Proto> {
     let proto = proto_of(l.proto).unwrap_or(Proto::Apt);
-    let flow = match &l.flow {
-        None => None,
-        Some(f) => Some(
+    o.proto = proto;
+    o.baud = l.baud;
+    // Without --flow each keeps its own default: the tap the protocol's, the sniff none (its
+    // adapters only receive).
+    if let Some(f) = &l.flow {
+        o.flow = Some(
             Flow::parse(f)
                 .ok_or_else(|| bad(format!("unknown flow control {f} (none, rtscts, xonxoff)")))?,
-        ),
-    };
-    Ok((proto, flow))
+        );
+    }
+    o.write = l.write.clone();
+    o.write_format = write_format(l.write_format.as_deref())?;
+    o.force = l.force;
+    o.reconnect = l.reconnect;
+    o.quiet = l.quiet;
+    o.duration = l.duration.map(std::time::Duration::from_nanos);
+    o.signals = true;
+    o.units = l.units.opts()?;
+    Ok(proto)
 }
 
 /// The file a live view follows: `write` (-w), else a new temporary pcapng (set into `write`).

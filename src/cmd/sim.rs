@@ -142,10 +142,10 @@ fn sim_view(
 ) -> Result<()> {
     let link = pty.map(|p| p.to_string_lossy().into_owned());
     let mut o = TapOptions::new(String::new(), link);
-    o.proto = proto;
-    o.write = view.write;
-    o.force = view.force;
-    let path = viewed_file(&mut o.write, "sim");
+    o.live.proto = proto;
+    o.live.write = view.write;
+    o.live.force = view.force;
+    let path = viewed_file(&mut o.live.write, "sim");
     let r = sim_with_view(
         sim,
         o,

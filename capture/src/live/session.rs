@@ -1132,12 +1132,12 @@ pub fn run_real(device: &Device, steps: &[Step], dir: &Path) -> Result<RealRun, 
     let link = dir.join("tty");
     let capture = dir.join("tap.pcapng");
     let mut opts = TapOptions::new(dev_path, Some(link.to_string_lossy().into_owned()));
-    opts.proto = proto;
-    opts.write = Some(capture.to_string_lossy().into_owned());
-    opts.force = true;
-    opts.quiet = true;
-    opts.signals = false;
-    let tap_stop = opts.stop.clone();
+    opts.live.proto = proto;
+    opts.live.write = Some(capture.to_string_lossy().into_owned());
+    opts.live.force = true;
+    opts.live.quiet = true;
+    opts.live.signals = false;
+    let tap_stop = opts.live.stop.clone();
     let tap_thread = std::thread::spawn(move || tap_main(opts));
 
     let result = (|| -> Result<(Vec<u8>, Vec<u8>), SessionError> {

@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 pub fn tap_main(opts: TapOptions) -> Result<TapStats, LiveError> {
     // Handled before the host link appears: a SIGTERM sent as soon as it does (Wireshark
     // stopping an extcap capture) ends the tap cleanly instead of killing it.
-    let signals = stop_signals(opts.signals)?;
+    let signals = stop_signals(opts.live.signals)?;
     Tap::new(opts)?.run_installed(None, signals)
 }
 
@@ -39,19 +39,20 @@ pub(super) struct Tap {
 
 impl Tap {
     pub(super) fn new(opts: TapOptions) -> Result<Tap, LiveError> {
-        let settings = LineSettings::for_proto(opts.proto, opts.baud, opts.flow);
-        let format = match (&opts.write, opts.stream) {
+        let settings = LineSettings::for_proto(opts.live.proto, opts.live.baud, opts.live.flow);
+        let format = match (&opts.live.write, opts.stream) {
             // A pipe's name says nothing about what goes through it.
-            (Some(_), true) => Some(opts.write_format.unwrap_or(Format::PcapNg)),
+            (Some(_), true) => Some(opts.live.write_format.unwrap_or(Format::PcapNg)),
             (p, _) => p
                 .as_deref()
-                .map(|p| FileSink::format(p, opts.write_format))
+                .map(|p| FileSink::format(p, opts.live.write_format))
                 .transpose()?,
         };
         let device = match open_device(&opts.device, &settings) {
             Ok(d) => Some(d),
-            Err(e) if opts.reconnect => {
-                opts.say
+            Err(e) if opts.live.reconnect => {
+                opts.live
+                    .say
                     .line(format_args!("aptscope tap: {e}; waiting for it"));
                 None
             }
@@ -64,16 +65,16 @@ impl Tap {
             settings: Some(settings.to_string()),
         };
         let format = format.unwrap_or(Format::PcapNg);
-        let sink = match &opts.write {
+        let sink = match &opts.live.write {
             Some(p) => Some(FileSink::for_opts(
                 p,
                 format,
-                (opts.stream, opts.force, opts.followed),
+                (opts.stream, opts.live.force, opts.live.followed),
                 &info,
             )?),
             None => None,
         };
-        opts.say.line(format_args!(
+        opts.live.say.line(format_args!(
             "aptscope tap: host side {}{} ⇄ device {} ({settings}){}",
             host.slave_path.display(),
             host.link
@@ -81,12 +82,13 @@ impl Tap {
                 .map(|l| format!(" (link {})", l.path().display()))
                 .unwrap_or_default(),
             opts.device,
-            opts.write
+            opts.live
+                .write
                 .as_ref()
                 .map(|w| format!(", writing {w}"))
                 .unwrap_or_default()
         ));
-        let rec = Recording::new(opts.stop.clone(), opts.quiet, sink);
+        let rec = Recording::new(opts.live.stop.clone(), opts.live.quiet, sink);
         Ok(Tap {
             opts,
             settings,
@@ -101,7 +103,11 @@ impl Run for Tap {
     const WHAT: &'static str = "aptscope tap";
 
     fn control(&self) -> (bool, StopHandle, Say) {
-        (self.opts.signals, self.opts.stop.clone(), self.opts.say)
+        (
+            self.opts.live.signals,
+            self.opts.live.stop.clone(),
+            self.opts.live.say,
+        )
     }
 
     fn run_with(
@@ -119,7 +125,7 @@ impl Run for Tap {
         } = self;
         let (sh, sink, disp) = rec.start(say, display);
         let sh = &sh;
-        let deadline = opts.duration.map(|d| Instant::now() + d);
+        let deadline = opts.live.duration.map(|d| Instant::now() + d);
         let mut host_r = host.master.try_clone()?;
         let mut host_w = host.master.try_clone()?;
         let stats = thread::scope(|scope| {
@@ -128,7 +134,7 @@ impl Run for Tap {
                 sh,
                 sink,
                 disp,
-                (opts.proto, opts.units.clone()),
+                (opts.live.proto, opts.live.units.clone()),
                 || loop {
                     let (mut dev_r, mut dev_w) = match device.take() {
                         Some(d) => d,
@@ -184,7 +190,7 @@ impl Run for Tap {
                     }
                     if let Some((t, e)) = dev_gone {
                         sh.disconnect(t, &opts.device, &e);
-                        if opts.reconnect && !sh.stop.is_stopped() {
+                        if opts.live.reconnect && !sh.stop.is_stopped() {
                             sh.say.line(format_args!(
                                 "aptscope tap: waiting for {} to come back",
                                 opts.device

@@ -87,14 +87,9 @@ const RETRY_EVERY: Duration = Duration::from_millis(500);
 /// Bytes read at once.
 const READ_BUF: usize = 4096;
 
-/// Options of [`tap_main`].
+/// What a tap and a sniff share: the line, the capture file, when to stop and what to say.
 #[derive(Debug, Clone)]
-pub struct TapOptions {
-    /// The real serial port (`/dev/ttyUSB0`).
-    pub device: String,
-    /// Where to symlink the pseudo-terminal the host program opens instead (`/tmp/ttyAPT`);
-    /// an existing symlink there is replaced, anything else is refused.
-    pub link: Option<String>,
+pub struct LiveOptions {
     /// The protocol: the default line settings and the live decoder.
     pub proto: Proto,
     /// Baud rate override.
@@ -108,12 +103,7 @@ pub struct TapOptions {
     pub write_format: Option<Format>,
     /// Overwrite an existing capture.
     pub force: bool,
-    /// `write` is a pipe that already exists (the FIFO Wireshark gives an extcap): it is opened
-    /// as it is (never created or truncated), pcapng unless `write_format` says, flushed as soon
-    /// as packets are written (a live reader shows them at once), and the tap stops when the
-    /// reader closes it ([`TapStats::reader_closed`]).
-    pub stream: bool,
-    /// When the device disappears, wait for it to come back instead of ending.
+    /// When the device (an adapter) disappears, wait for it to come back instead of ending.
     pub reconnect: bool,
     /// No live timeline on standard output.
     pub quiet: bool,
@@ -121,7 +111,7 @@ pub struct TapOptions {
     pub duration: Option<Duration>,
     /// Stop on SIGINT/SIGTERM/SIGHUP (Linux; blocks them in the calling thread while running).
     pub signals: bool,
-    /// Stops the tap from another thread.
+    /// Stops the run from another thread.
     pub stop: StopHandle,
     /// Where progress lines (the device gone, the statistics …) are said.
     pub say: Say,
@@ -132,19 +122,16 @@ pub struct TapOptions {
     pub followed: bool,
 }
 
-impl TapOptions {
-    /// APT defaults for `device`, symlinked at `link`, no file, signals handled.
-    pub fn new(device: impl Into<String>, link: Option<String>) -> Self {
-        TapOptions {
-            device: device.into(),
-            link,
+impl Default for LiveOptions {
+    /// APT with the protocol's line settings, no file, signals handled, progress on stderr.
+    fn default() -> Self {
+        LiveOptions {
             proto: Proto::Apt,
             baud: None,
             flow: None,
             write: None,
             write_format: None,
             force: false,
-            stream: false,
             reconnect: false,
             quiet: false,
             duration: None,
@@ -157,6 +144,35 @@ impl TapOptions {
     }
 }
 
+/// Options of [`tap_main`].
+#[derive(Debug, Clone)]
+pub struct TapOptions {
+    /// The real serial port (`/dev/ttyUSB0`).
+    pub device: String,
+    /// Where to symlink the pseudo-terminal the host program opens instead (`/tmp/ttyAPT`);
+    /// an existing symlink there is replaced, anything else is refused.
+    pub link: Option<String>,
+    /// `write` is a pipe that already exists (the FIFO Wireshark gives an extcap): it is opened
+    /// as it is (never created or truncated), pcapng unless `write_format` says, flushed as soon
+    /// as packets are written (a live reader shows them at once), and the tap stops when the
+    /// reader closes it ([`TapStats::reader_closed`]).
+    pub stream: bool,
+    /// What a tap shares with a sniff.
+    pub live: LiveOptions,
+}
+
+impl TapOptions {
+    /// APT defaults for `device`, symlinked at `link`, no file, signals handled.
+    pub fn new(device: impl Into<String>, link: Option<String>) -> Self {
+        TapOptions {
+            device: device.into(),
+            link,
+            stream: false,
+            live: LiveOptions::default(),
+        }
+    }
+}
+
 /// Options of [`sniff_main`].
 #[derive(Debug, Clone)]
 pub struct SniffOptions {
@@ -164,57 +180,21 @@ pub struct SniffOptions {
     pub host_tx: String,
     /// The receive-only adapter on the device's TX line (device → host bytes).
     pub device_tx: String,
-    /// The protocol: default line settings and live decoder.
-    pub proto: Proto,
-    /// Baud rate override.
-    pub baud: Option<u32>,
-    /// Flow control override (normally none: receive-only adapters see no handshake).
-    pub flow: Option<Flow>,
-    /// Write the capture here: pcapng, or pcap by the `.pcap` extension (a name without
-    /// extension gets pcapng; another extension is refused unless `write_format` says).
-    pub write: Option<String>,
-    /// The file's format whatever its name says (pcapng or pcap).
-    pub write_format: Option<Format>,
-    /// Overwrite an existing capture.
-    pub force: bool,
-    /// When an adapter disappears, wait for it to come back instead of ending.
-    pub reconnect: bool,
-    /// No live timeline on standard output.
-    pub quiet: bool,
-    /// Stop after this long.
-    pub duration: Option<Duration>,
-    /// Stop on SIGINT/SIGTERM/SIGHUP.
-    pub signals: bool,
-    /// Stops the sniff from another thread.
-    pub stop: StopHandle,
-    /// Where progress lines are said.
-    pub say: Say,
-    /// Stage or scale for the live timeline's APT motion values (physical units beside raw).
-    pub units: UnitsOpts,
-    /// A live view follows the `write` file (see [`TapOptions::followed`]).
-    pub followed: bool,
+    /// What a sniff shares with a tap.
+    pub live: LiveOptions,
 }
 
 impl SniffOptions {
-    /// APT defaults (baud 115200, no flow control) for the two adapters.
+    /// APT defaults (baud 115200, no flow control: receive-only adapters see no handshake) for
+    /// the two adapters.
     pub fn new(host_tx: impl Into<String>, device_tx: impl Into<String>) -> Self {
         SniffOptions {
             host_tx: host_tx.into(),
             device_tx: device_tx.into(),
-            proto: Proto::Apt,
-            baud: None,
-            flow: Some(Flow::None),
-            write: None,
-            write_format: None,
-            force: false,
-            reconnect: false,
-            quiet: false,
-            duration: None,
-            signals: true,
-            stop: StopHandle::new(),
-            say: Say::Stderr,
-            units: UnitsOpts::default(),
-            followed: false,
+            live: LiveOptions {
+                flow: Some(Flow::None),
+                ..LiveOptions::default()
+            },
         }
     }
 }

@@ -23,7 +23,7 @@ use std::time::Instant;
 /// disappears (unless `reconnect`); print and return the statistics.
 pub fn sniff_main(opts: SniffOptions) -> Result<TapStats, LiveError> {
     // Handled before the set-up, as the tap does.
-    let signals = stop_signals(opts.signals)?;
+    let signals = stop_signals(opts.live.signals)?;
     Sniff::new(opts)?.run_installed(None, signals)
 }
 
@@ -37,29 +37,31 @@ pub(super) struct Sniff {
 
 impl Sniff {
     pub(super) fn new(opts: SniffOptions) -> Result<Sniff, LiveError> {
-        let settings = LineSettings::for_proto(opts.proto, opts.baud, opts.flow);
+        let settings = LineSettings::for_proto(opts.live.proto, opts.live.baud, opts.live.flow);
         let format = opts
+            .live
             .write
             .as_deref()
-            .map(|p| FileSink::format(p, opts.write_format))
+            .map(|p| FileSink::format(p, opts.live.write_format))
             .transpose()?;
         let mut ports = vec![];
         for p in [&opts.host_tx, &opts.device_tx] {
             ports.push(match open_serial(p, &settings) {
                 Ok(port) => Some(port),
-                Err(e) if opts.reconnect => {
-                    opts.say
+                Err(e) if opts.live.reconnect => {
+                    opts.live
+                        .say
                         .line(format_args!("aptscope sniff: {e}; waiting for it"));
                     None
                 }
                 Err(e) => return Err(e),
             });
         }
-        let sink = match &opts.write {
+        let sink = match &opts.live.write {
             Some(p) => Some(FileSink::for_opts(
                 p,
                 format.unwrap_or(Format::PcapNg),
-                (false, opts.force, opts.followed),
+                (false, opts.live.force, opts.live.followed),
                 &StreamInfo {
                     id: 0,
                     name: format!("{} + {}", opts.host_tx, opts.device_tx),
@@ -68,16 +70,17 @@ impl Sniff {
             )?),
             None => None,
         };
-        opts.say.line(format_args!(
+        opts.live.say.line(format_args!(
             "aptscope sniff: host TX on {}, device TX on {} ({settings}){}",
             opts.host_tx,
             opts.device_tx,
-            opts.write
+            opts.live
+                .write
                 .as_ref()
                 .map(|w| format!(", writing {w}"))
                 .unwrap_or_default()
         ));
-        let rec = Recording::new(opts.stop.clone(), opts.quiet, sink);
+        let rec = Recording::new(opts.live.stop.clone(), opts.live.quiet, sink);
         Ok(Sniff {
             opts,
             settings,
@@ -91,7 +94,11 @@ impl Run for Sniff {
     const WHAT: &'static str = "aptscope sniff";
 
     fn control(&self) -> (bool, StopHandle, Say) {
-        (self.opts.signals, self.opts.stop.clone(), self.opts.say)
+        (
+            self.opts.live.signals,
+            self.opts.live.stop.clone(),
+            self.opts.live.say,
+        )
     }
 
     fn run_with(
@@ -108,7 +115,7 @@ impl Run for Sniff {
         } = self;
         let (sh, sink, disp) = rec.start(say, display);
         let sh = &sh;
-        let deadline = opts.duration.map(|d| Instant::now() + d);
+        let deadline = opts.live.duration.map(|d| Instant::now() + d);
         let never = AtomicBool::new(false);
         let stats = thread::scope(|scope| {
             run_recorded(
@@ -116,14 +123,14 @@ impl Run for Sniff {
                 sh,
                 sink,
                 disp,
-                (opts.proto, opts.units.clone()),
+                (opts.live.proto, opts.live.units.clone()),
                 || {
                     thread::scope(|s| {
                         let dirs = [Direction::HostToDevice, Direction::DeviceToHost];
                         let paths = [&opts.host_tx, &opts.device_tx];
                         for ((port, dir), path) in ports.into_iter().zip(dirs).zip(paths) {
                             let (sh, never, settings) = (&sh, &never, &settings);
-                            let reconnect = opts.reconnect;
+                            let reconnect = opts.live.reconnect;
                             s.spawn(move || {
                                 receive(path, port, dir, settings, reconnect, sh, never)
                             });

@@ -124,9 +124,9 @@ fn read_back(path: &Path) -> (Vec<u8>, Vec<u8>, Vec<StreamInfo>, Vec<String>) {
 
 fn tap_opts(device: &str, dir: &Path) -> TapOptions {
     let mut o = TapOptions::new(device, Some(dir.join("ttyAPT").to_string_lossy().into()));
-    o.write = Some(dir.join("cap.pcapng").to_string_lossy().into());
-    o.quiet = true;
-    o.signals = false;
+    o.live.write = Some(dir.join("cap.pcapng").to_string_lossy().into());
+    o.live.quiet = true;
+    o.live.signals = false;
     o
 }
 
@@ -156,8 +156,8 @@ fn forwards_both_ways_losslessly_and_records_exactly_what_crossed() {
     let dir = scratch("both");
     let (mut dev, dev_path) = fake_device();
     let mut opts = tap_opts(&dev_path, &dir);
-    opts.quiet = false;
-    let stop = opts.stop.clone();
+    opts.live.quiet = false;
+    let stop = opts.live.stop.clone();
     let tap = Tap::new(opts).unwrap();
     let shown = Shown::default();
     let out = shown.clone();
@@ -262,8 +262,8 @@ fn reconnect_waits_for_the_device_and_carries_on_in_the_same_file() {
     let (mut dev, p1) = fake_device();
     std::os::unix::fs::symlink(&p1, &dev_link).unwrap();
     let mut opts = tap_opts(dev_link.to_str().unwrap(), &dir);
-    opts.reconnect = true;
-    let stop = opts.stop.clone();
+    opts.live.reconnect = true;
+    let stop = opts.live.stop.clone();
     let tap = Tap::new(opts).unwrap();
     let done = within(move || tap.run(None));
     let mut host = open_host(&dir.join("ttyAPT"));
@@ -301,10 +301,10 @@ fn sniff_merges_two_receive_only_ports() {
     let (mut htx, hp) = fake_device();
     let (mut dtx, dp) = fake_device();
     let mut opts = SniffOptions::new(&hp, &dp);
-    opts.write = Some(dir.join("sniff.pcapng").to_string_lossy().into());
-    opts.quiet = true;
-    opts.signals = false;
-    let stop = opts.stop.clone();
+    opts.live.write = Some(dir.join("sniff.pcapng").to_string_lossy().into());
+    opts.live.quiet = true;
+    opts.live.signals = false;
+    let stop = opts.live.stop.clone();
     let sniff = Sniff::new(opts).unwrap();
     let fwd = sniff.rec.forwarded();
     let done = within(move || sniff.run(None));
@@ -348,7 +348,7 @@ fn the_file_is_readable_while_the_tap_runs() {
     let dir = scratch("live-file");
     let (mut dev, dev_path) = fake_device();
     let opts = tap_opts(&dev_path, &dir);
-    let stop = opts.stop.clone();
+    let stop = opts.live.stop.clone();
     let tap = Tap::new(opts).unwrap();
     let done = within(move || tap.run(None));
     let mut host = open_host(&dir.join("ttyAPT"));
@@ -375,16 +375,16 @@ fn an_existing_file_is_kept_without_force() {
     let dir = scratch("exists");
     let (_dev, dev_path) = fake_device();
     let opts = tap_opts(&dev_path, &dir);
-    std::fs::write(opts.write.as_ref().unwrap(), b"precious").unwrap();
+    std::fs::write(opts.live.write.as_ref().unwrap(), b"precious").unwrap();
     let e = Tap::new(opts.clone()).err().unwrap();
     assert_eq!(e.kind(), io::ErrorKind::AlreadyExists);
     assert_eq!(
-        std::fs::read(opts.write.as_ref().unwrap()).unwrap(),
+        std::fs::read(opts.live.write.as_ref().unwrap()).unwrap(),
         b"precious"
     );
     // A missing device is an error at once without `reconnect`.
     let mut o = tap_opts(dir.join("nope").to_str().unwrap(), &dir);
-    o.force = true;
+    o.live.force = true;
     assert!(Tap::new(o).is_err());
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -397,7 +397,7 @@ fn a_stream_goes_into_an_existing_pipe_and_ends_with_its_reader() {
     // Never created, nor written over when it is a file.
     let mut o = tap_opts(&dev_path, &dir);
     o.stream = true;
-    o.write = Some(fifo.to_string_lossy().into());
+    o.live.write = Some(fifo.to_string_lossy().into());
     assert_eq!(
         Tap::new(o.clone()).err().unwrap().kind(),
         io::ErrorKind::NotFound
@@ -452,8 +452,8 @@ fn writes_pcap_by_extension_and_refuses_non_streaming_formats() {
     let dir = scratch("pcap");
     let (mut dev, dev_path) = fake_device();
     let mut opts = tap_opts(&dev_path, &dir);
-    opts.write = Some(dir.join("cap.pcap").to_string_lossy().into());
-    let stop = opts.stop.clone();
+    opts.live.write = Some(dir.join("cap.pcap").to_string_lossy().into());
+    let stop = opts.live.stop.clone();
     let tap = Tap::new(opts).unwrap();
     let done = within(move || tap.run(None));
     let mut host = open_host(&dir.join("ttyAPT"));
@@ -470,7 +470,7 @@ fn writes_pcap_by_extension_and_refuses_non_streaming_formats() {
     assert_eq!((h2d, d2h), (a, b));
 
     let mut o = tap_opts(&dev_path, &dir);
-    o.write = Some(dir.join("cap.mcap").to_string_lossy().into());
+    o.live.write = Some(dir.join("cap.mcap").to_string_lossy().into());
     let e = Tap::new(o).err().unwrap();
     assert!(e.to_string().contains("pcapng or pcap"), "{e}");
     assert!(!dir.join("cap.mcap").exists(), "nothing created");

@@ -51,24 +51,24 @@ impl ViewAbandoned {
     }
 }
 
-/// Run a tap writing `opts.write` with `view` in the calling thread (the terminal UI, which
+/// Run a tap writing `opts.live.write` with `view` in the calling thread (the terminal UI, which
 /// follows the file): the recording never waits for the view. When the view returns (the user
 /// quit) the tap is stopped; when the tap stops first (signal, duration) the view is asked to
 /// close; when the device goes away the view stays on the complete file. Progress lines are
 /// held back while the view has the terminal; the statistics are said after it (to
-/// `opts.say`). A view that does not close when asked is given up: `abandon` is called (from
+/// `opts.live.say`). A view that does not close when asked is given up: `abandon` is called (from
 /// another thread) and must end the process.
 pub fn tap_with_view(
     mut opts: TapOptions,
     view: impl FnOnce(LiveView<'_>) -> io::Result<()>,
     abandon: fn(ViewAbandoned) -> !,
 ) -> Result<TapStats, LiveError> {
-    let path = viewed_path(&opts.write)?;
-    opts.followed = true;
-    opts.quiet = true;
+    let path = viewed_path(&opts.live.write)?;
+    opts.live.followed = true;
+    opts.live.quiet = true;
     // Handled before the set-up, as `tap_main` does, and before any thread starts: the view's
     // threads inherit the mask too.
-    let signals = stop_signals(opts.signals)?;
+    let signals = stop_signals(opts.live.signals)?;
     let tap = Tap::new(opts)?;
     let host = format!("host {}", tap.host.path().display());
     view_run(tap, signals, (&path, Some(&host)), view, abandon)
@@ -80,10 +80,10 @@ pub fn sniff_with_view(
     view: impl FnOnce(LiveView<'_>) -> io::Result<()>,
     abandon: fn(ViewAbandoned) -> !,
 ) -> Result<TapStats, LiveError> {
-    let path = viewed_path(&opts.write)?;
-    opts.followed = true;
-    opts.quiet = true;
-    let signals = stop_signals(opts.signals)?;
+    let path = viewed_path(&opts.live.write)?;
+    opts.live.followed = true;
+    opts.live.quiet = true;
+    let signals = stop_signals(opts.live.signals)?;
     let sniff = Sniff::new(opts)?;
     view_run(sniff, signals, (&path, None), view, abandon)
 }
@@ -117,7 +117,7 @@ fn view_run<R: Run>(
 
 /// A simulator's own traffic in a live view: `sim` served on a private pseudo-terminal with a
 /// tap in front of it (`opts.device` is set to it) whose host side is what programs open
-/// (`opts.link`), recorded to `opts.write` and shown by `view` as [`tap_with_view`] does.
+/// (`opts.link`), recorded to `opts.live.write` and shown by `view` as [`tap_with_view`] does.
 pub fn sim_with_view(
     sim: Box<dyn crate::live::sim::Simulator + Send>,
     mut opts: TapOptions,
