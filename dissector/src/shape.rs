@@ -1,5 +1,6 @@
 //! The record's shape, described once: the keys of each record kind as NDJSON names them
-//! ([`KEYS`], with the filter's aliases and where each is valid), the record-level values a
+//! ([`KEYS`], with the filter's aliases and where each is valid) and what each holds
+//! ([`Key::ty`]: the filter checks its literals against it), the record-level values a
 //! holder of a record has at hand ([`Head`], answered by [`number`] and [`word`]), the keys
 //! NDJSON derives beside an Elliptec field ([`ell_derived`]: their names and values), and the
 //! rules that make a value of a record (`codes`, `phys` of Elliptec positions, the diagnostics
@@ -159,7 +160,88 @@ pub const KEYS: &[KeyDef] = &[
     k("paired", Key::Paired, TOP | APT | ELL),
 ];
 
+/// What a key's value is, in NDJSON and to filters: what comparisons mean on it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ty {
+    /// A non-negative integer.
+    UInt,
+    /// An integer.
+    Int,
+    /// A number with a fraction.
+    Float,
+    /// `true` or `false`.
+    Bool,
+    /// One of a few words (`h2d`, `frame`, a message name).
+    Word,
+    /// Free text (a file name, an Elliptec frame's text, its address character).
+    Text,
+    /// Bytes, written as hex text.
+    Hex,
+    /// An APT address: `{"addr", "name", "bay"}`; filters compare its number, or its name.
+    Address,
+    /// An object of named values (`fields`, `phys`, `codes`, `sub`, `module`).
+    Object,
+    /// A list (`diag`).
+    List,
+}
+
+impl Ty {
+    /// Whether the value is a number (no text ever equals it).
+    pub fn is_number(self) -> bool {
+        matches!(self, Ty::UInt | Ty::Int | Ty::Float)
+    }
+
+    /// Whether `<`, `>` … mean something on the value (text and words in byte order, as
+    /// Wireshark orders strings).
+    pub fn is_ordered(self) -> bool {
+        !matches!(self, Ty::Bool | Ty::Object | Ty::List)
+    }
+
+    /// How a user is told what the value is.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Ty::UInt | Ty::Int | Ty::Float => "a number",
+            Ty::Bool => "true or false",
+            Ty::Word => "a word",
+            Ty::Text => "text",
+            Ty::Hex => "bytes (hex)",
+            Ty::Address => "an address",
+            Ty::Object => "a set of named values",
+            Ty::List => "a list",
+        }
+    }
+}
+
 impl Key {
+    /// What the key's value is (at the record's top level; below it, what the path names).
+    pub const fn ty(self) -> Ty {
+        match self {
+            Key::N
+            | Key::Offset
+            | Key::CapOffset
+            | Key::Len
+            | Key::Msgid
+            | Key::DataLen
+            | Key::Pair
+            | Key::TsNs
+            | Key::Stream
+            | Key::Ref => Ty::UInt,
+            Key::Channel => Ty::Int,
+            Key::LatencyMs => Ty::Float,
+            Key::DataFlag | Key::PairOtherAddress | Key::Interim | Key::Unpaired | Key::Paired => {
+                Ty::Bool
+            }
+            Key::Proto | Key::Type | Key::Name | Key::MsgDir | Key::Dir | Key::Cmd => Ty::Word,
+            Key::File | Key::MsgidHex | Key::FormNote | Key::StreamName | Key::Text | Key::Addr => {
+                Ty::Text
+            }
+            Key::Raw => Ty::Hex,
+            Key::Src | Key::Dst => Ty::Address,
+            Key::Fields | Key::Phys | Key::Codes | Key::Sub | Key::Module => Ty::Object,
+            Key::Diag => Ty::List,
+        }
+    }
+
     /// The key's NDJSON name.
     pub fn json_name(self) -> &'static str {
         match self {

@@ -188,6 +188,37 @@ fn at_hand_is_what_visit_gives(rec: &Record<'_>) -> Result<(), String> {
     Ok(())
 }
 
+/// Every key of a decoded record holds a value of the type the shape gives it
+/// ([`Key::ty`](aptscope_dissector::shape::Key::ty)), which filters check literals against.
+fn types_are_the_shapes(v: &serde_json::Value) -> Result<(), String> {
+    use aptscope_dissector::shape::{Key, Ty};
+    use serde_json::Value as J;
+    let Some(obj) = v.as_object() else {
+        return Err("not an object".into());
+    };
+    for (name, val) in obj {
+        // Keys of the other record types (detect, input …) are not the shape's.
+        let Some(def) = KEYS.iter().find(|d| d.name == name) else {
+            continue;
+        };
+        let ok = match (def.key.ty(), val) {
+            (_, J::Null) => def.key == Key::Name,
+            (Ty::UInt, J::Number(n)) => n.is_u64(),
+            (Ty::Int, J::Number(n)) => n.is_i64() || n.is_u64(),
+            (Ty::Float, J::Number(_)) | (Ty::Bool, J::Bool(_)) => true,
+            (Ty::Word | Ty::Text, J::String(_)) => true,
+            (Ty::Hex, J::String(s)) => s.len() % 2 == 0 && s.bytes().all(|c| c.is_ascii_hexdigit()),
+            (Ty::Address, J::Object(o)) => o.get("addr").is_some_and(J::is_u64),
+            (Ty::Object, J::Object(_)) | (Ty::List, J::Array(_)) => true,
+            _ => false,
+        };
+        if !ok {
+            return Err(format!("`{name}` is not {:?}: {val}", def.key.ty()));
+        }
+    }
+    Ok(())
+}
+
 /// Decode `bytes` as one timed stream, and as two streams (the bytes on each, interleaved;
 /// the second one captured device→host), checking every filter on every record both ways.
 /// Returns the records seen and how many each filter matched.
@@ -204,6 +235,7 @@ fn check(bytes: &[u8], proto: Option<Proto>, filters: &[Filter]) -> (usize, Vec<
                 serde_json::from_str(&line).map_err(|e| format!("{e}: {line}"))?;
             seen += 1;
             at_hand_is_what_visit_gives(rec).map_err(|e| format!("{e}: {line}"))?;
+            types_are_the_shapes(&v).map_err(|e| format!("{e}: {line}"))?;
             for ((f, m), h) in filters.iter().zip(&matchers).zip(hits.iter_mut()) {
                 let typed = f.matches(rec);
                 if typed != f.matches(&v) {

@@ -7,6 +7,7 @@ use super::lexer::{
     word_lit, PErr, Res,
 };
 use crate::fields::Key;
+use crate::shape::Ty;
 use nom::branch::alt;
 use nom::bytes::complete::{tag, take_while, take_while1};
 use nom::character::complete::{char as nchar, multispace0};
@@ -185,9 +186,14 @@ fn test(i: &str) -> Res<'_, Expr> {
             )
         }
     };
+    let name = segs.join(".");
     match op {
         Op::In => {
+            let at = skip_ws(k);
             let (k, set) = set(k)?;
+            if let Err(msg) = set.iter().try_for_each(|l| fits(&f, &name, op_text, l)) {
+                return failure(at, msg);
+            }
             let set = set.into_iter().map(|l| normalize(&f, l)).collect();
             Ok((k, Expr::Test(Test::In(f, set))))
         }
@@ -209,10 +215,50 @@ fn test(i: &str) -> Res<'_, Expr> {
             Ok((k, Expr::Test(Test::Contains(f, lit))))
         }
         Op::Cmp(c) => {
+            let at = skip_ws(k);
+            if matches!(c, CmpOp::Lt | CmpOp::Le | CmpOp::Gt | CmpOp::Ge) {
+                if let Some(ty) = top_ty(&f).filter(|t| !t.is_ordered()) {
+                    return failure(
+                        start,
+                        format!(
+                            "`{name}` is {}: `{op_text}` does not apply (use == or !=)",
+                            ty.describe()
+                        ),
+                    );
+                }
+            }
             let (k, lit) = value(k, op_text)?;
+            if let Err(msg) = fits(&f, &name, op_text, &lit) {
+                return failure(at, msg);
+            }
             let lit = normalize(&f, lit);
             Ok((k, Expr::Test(Test::Cmp(f, c, lit))))
         }
+    }
+}
+
+/// The type of what `f` reads, when it is a record-level key as such (not a path below one, nor
+/// a name that may be a field's too).
+fn top_ty(f: &FieldRef) -> Option<Ty> {
+    (f.rest.is_empty() && f.fallback.is_none()).then(|| f.key.ty())
+}
+
+/// A literal of the wrong kind is a mistake, said at once rather than matching nothing or
+/// anything: text compared with a number key (`n == abc` never holds), a number with the hex
+/// text of bytes (`raw > 5` would read the hex digits as a decimal number).
+fn fits(f: &FieldRef, name: &str, op: &str, lit: &Lit) -> Result<(), String> {
+    let text = matches!(lit.kind, LitKind::Str | LitKind::Word | LitKind::Bool(_));
+    match top_ty(f) {
+        Some(ty) if ty.is_number() && text => Err(format!(
+            "`{name}` is {}: `{name} {op} {}` can never hold",
+            ty.describe(),
+            lit.text
+        )),
+        Some(Ty::Hex) if lit.numeric() => Err(format!(
+            "`{name}` is {}: compare it with hex text in quotes (`{name} contains \"0500\"`)",
+            Ty::Hex.describe()
+        )),
+        _ => Ok(()),
     }
 }
 

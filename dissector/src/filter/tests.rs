@@ -661,6 +661,16 @@ fn errors_point_at_their_column() {
                 "unknown field `ell.fields.postion`; did you mean `ell.fields.position`?",
             ),
             ("apt == 5", 1, "`apt` is a protocol; compare one of its fields, e.g. `apt.name`"),
+            // The shape's value types (shape::Key::ty).
+            ("n == abc", 6, "`n` is a number: `n == abc` can never hold"),
+            ("len in {6 \"x\"}", 8, "`len` is a number: `len in x` can never hold"),
+            ("interim > 0", 1, "`interim` is true or false: `>` does not apply (use == or !=)"),
+            ("apt.diag < 2", 1, "`apt.diag` is a list: `<` does not apply (use == or !=)"),
+            (
+                "raw > 5",
+                7,
+                "`raw` is bytes (hex): compare it with hex text in quotes (`raw contains \"0500\"`)",
+            ),
             ("apt.fields.", 12, "expected a field name after `.`"),
             ("n == 1 &&", 10, "expected a test after `&&`"),
             ("n == 1 ||   ", 13, "expected a test after `||`"),
