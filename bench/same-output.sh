@@ -15,7 +15,8 @@ git worktree add -q --detach "$tmp/base" "$base"
 # The base builds in a target directory of its own, kept between runs (a rebuild is quick).
 base_target="target/same-output-$base"
 (cd "$tmp/base" && cargo build -q --release --bin aptscope --target-dir "$OLDPWD/$base_target")
-cargo build -q --release --bin aptscope -p aptscope-dissector --example gen_stream --example gen_d2h
+cargo build -q --release --bin aptscope
+cargo build -q --release -p aptscope-dissector --example gen_stream --example gen_d2h
 old="$base_target/release/aptscope"
 new=target/release/aptscope
 
