@@ -515,7 +515,10 @@ impl Recs {
         if p.len != NARROW {
             return Some(u64::from(p.len));
         }
-        let k = self.wide.binary_search_by_key(&(i as u64), |(j, _)| *j).ok()?;
+        let k = self
+            .wide
+            .binary_search_by_key(&(i as u64), |(j, _)| *j)
+            .ok()?;
         self.wide.get(k).map(|(_, w)| u64::from(w.len))
     }
     /// The arena start of record index `i` (its mark's, and the lengths between).
@@ -659,7 +662,11 @@ impl Recs {
             p.flags |= flags;
             use std::os::unix::fs::FileExt;
             let at = (i * std::mem::size_of::<Packed>()) as u64;
-            self.spill.as_ref()?.file.write_all_at(&p.to_bytes(), at).ok()?;
+            self.spill
+                .as_ref()?
+                .file
+                .write_all_at(&p.to_bytes(), at)
+                .ok()?;
             self.spill_gen += 1;
             return Some(was);
         }
@@ -1139,13 +1146,19 @@ pub fn load(path: &str, opts: OpenOptions) -> std::io::Result<Arc<Shared>> {
 
 /// [`load`] with a stage or scale for APT motion values.
 pub fn load_with(path: &str, opts: OpenOptions, units: UnitsOpts) -> std::io::Result<Arc<Shared>> {
-    load_inner(path, opts, units, false)
+    load_inner(path, opts, units, false, None)
 }
 
-/// [`load`] keeping every record's bytes in memory (the index live sources build): tests
-/// compare it with the index that reads them back from the file.
+/// [`load`] keeping every record's bytes in memory (no scratch file): tests compare it with
+/// the index that reads them back.
 pub fn load_in_memory(path: &str, opts: OpenOptions) -> std::io::Result<Arc<Shared>> {
-    load_inner(path, opts, UnitsOpts::default(), true)
+    load_inner(path, opts, UnitsOpts::default(), true, None)
+}
+
+/// [`load`] keeping at most `budget` bytes of records in memory (the others in a scratch
+/// file), whatever [`index_memory`] says: tests compare it with the index kept in memory.
+pub fn load_spilling(path: &str, opts: OpenOptions, budget: usize) -> std::io::Result<Arc<Shared>> {
+    load_inner(path, opts, UnitsOpts::default(), false, Some(budget))
 }
 
 fn load_inner(
@@ -1153,8 +1166,12 @@ fn load_inner(
     opts: OpenOptions,
     units: UnitsOpts,
     in_memory: bool,
+    budget: Option<usize>,
 ) -> std::io::Result<Arc<Shared>> {
     let (shared, reader, from_file) = opened(path, opts, in_memory)?;
+    if let (Some(b), Ok(mut ix)) = (budget, shared.index.write()) {
+        ix.recs.set_budget(b);
+    }
     let mut ix = Indexer::new(shared.clone(), None, units);
     ix.sink.from_file = from_file;
     ix.sink.arena_tried = in_memory;
