@@ -425,3 +425,41 @@ fn an_index_over_its_budget_changes_no_answer() {
         same_answers(&path, &spilled, &mem, &filters);
     }
 }
+
+/// The scan split between threads (as field filters over huge captures run) gives the
+/// sequential scan's selection and statistics, on every sample and for every filter, batches
+/// split from two records on; a scan kept from before gives the same again without scanning.
+#[test]
+fn the_parallel_scan_and_a_kept_one_equal_the_sequential_scan() {
+    let filters = filters();
+    let (_dir, synth) = synthetic();
+    let mut paths = every_sample();
+    paths.push(synth);
+    let run = |s: &Arc<Scan>, shared: &Arc<Shared>, f: Option<Filter>| {
+        s.start(shared.clone(), f, false);
+        let st = s.state.lock().expect("lock");
+        assert!(st.done);
+        (st.matches.clone(), stats_text(&st.stats))
+    };
+    for path in paths {
+        let shared = load(&path, OpenOptions::default()).expect("opens");
+        let len = shared.index.read().expect("lock").recs.len() as u64;
+        let (one, three) = (
+            Arc::new(Scan::with_threads(1, 2)),
+            Arc::new(Scan::with_threads(3, 2)),
+        );
+        for f in std::iter::once(None).chain(filters.iter().cloned().map(Some)) {
+            assert!(!three.is_kept(f.as_ref(), len));
+            let want = run(&one, &shared, f.clone());
+            assert_eq!(run(&three, &shared, f.clone()), want, "{path}: {f:?}");
+            assert!(three.is_kept(f.as_ref(), len), "{path}: {f:?}");
+        }
+        // Going back to a filter: the result kept (the newest eight), the same answers.
+        for f in filters.iter().rev().take(8).cloned() {
+            let want = run(&one, &shared, Some(f.clone()));
+            assert!(three.is_kept(Some(&f), len), "{path}: {f}");
+            assert_eq!(run(&three, &shared, Some(f.clone())), want, "{path}: {f}");
+        }
+        assert!(!three.is_kept(filters.first(), len));
+    }
+}
