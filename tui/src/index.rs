@@ -263,9 +263,12 @@ const SPILLED_KEPT: usize = 4;
 thread_local! {
     /// The spilled chunks this thread read back last: (spill id, [`Recs::spill_gen`], chunk
     /// number, its records), the newest last.
-    static SPILLED: std::cell::RefCell<Vec<(u64, u64, usize, Vec<Packed>)>> =
+    static SPILLED: std::cell::RefCell<Vec<KeptChunk>> =
         const { std::cell::RefCell::new(Vec::new()) };
 }
+
+/// A spilled chunk read back: (spill id, generation, chunk number, its records).
+type KeptChunk = (u64, u64, usize, Vec<Packed>);
 
 impl Packed {
     /// The record as it is written to a [`Spill`].
@@ -573,7 +576,7 @@ impl Recs {
         let kept = match &mut self.starts {
             Starts::Cap => r.start == r.cap_offset,
             Starts::Marks { marks, next } if *next == r.start => {
-                if i % MARK == 0 {
+                if i.is_multiple_of(MARK) {
                     marks.push(r.start);
                 }
                 *next = end;

@@ -455,9 +455,9 @@ fn the_parallel_scan_and_a_kept_one_equal_the_sequential_scan() {
             assert!(three.is_kept(f.as_ref(), len), "{path}: {f:?}");
         }
         // Going back to a filter: the result kept (the newest eight), the same answers.
-        for f in filters.iter().rev().take(8).cloned() {
+        for f in filters.iter().rev().take(8) {
             let want = run(&one, &shared, Some(f.clone()));
-            assert!(three.is_kept(Some(&f), len), "{path}: {f}");
+            assert!(three.is_kept(Some(f), len), "{path}: {f}");
             assert_eq!(run(&three, &shared, Some(f.clone())), want, "{path}: {f}");
         }
         assert!(!three.is_kept(filters.first(), len));
