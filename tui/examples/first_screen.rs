@@ -62,6 +62,10 @@ fn main() -> std::io::Result<()> {
     app.select(app.len().saturating_sub(1));
     let _ = term.draw(|f| ui::draw(f, &mut app));
     let jump = t1.elapsed();
+    let (nfm, late, blocks) = shared.index.read().map_or((0, 0, 0), |i| {
+        (i.not_for_model.len(), i.late_no_reply.len(), i.recs.blocks())
+    });
+    eprintln!("not_for_model {nfm} late_no_reply {late} blocks {blocks}");
     let (records, index_mb, plot_mb, spilled) = shared.index.read().map_or((0, 0.0, 0.0, 0), |i| {
         let points: usize = i.series.values().map(Vec::capacity).sum();
         let mb = |b: usize| b as f64 / 1e6;

@@ -656,20 +656,20 @@ impl Recs {
     /// flags it had.
     fn patch(&mut self, i: usize, pair: u32, flags: u16) -> Option<u16> {
         if i / CHUNK < self.spilled {
-            // Rare (a request's timeout passing long after it): patched in the file.
-            let mut p = self.packed_at(i)?;
+            // Rare (a request's timeout passing long after it): patched in the file, read
+            // alone (not through its chunk: the next patch would read that again).
+            use std::os::unix::fs::FileExt;
+            let at = (i * std::mem::size_of::<Packed>()) as u64;
+            let file = &self.spill.as_ref()?.file;
+            let mut b = [0u8; 24];
+            file.read_exact_at(&mut b, at).ok()?;
+            let mut p = Packed::from_bytes(&b);
             if p.pair == 0 {
                 p.pair = pair;
             }
             let was = p.flags & ((1 << DIR_SHIFT) - 1);
             p.flags |= flags;
-            use std::os::unix::fs::FileExt;
-            let at = (i * std::mem::size_of::<Packed>()) as u64;
-            self.spill
-                .as_ref()?
-                .file
-                .write_all_at(&p.to_bytes(), at)
-                .ok()?;
+            file.write_all_at(&p.to_bytes(), at).ok()?;
             self.spill_gen += 1;
             return Some(was);
         }
