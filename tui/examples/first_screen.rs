@@ -63,7 +63,11 @@ fn main() -> std::io::Result<()> {
     let _ = term.draw(|f| ui::draw(f, &mut app));
     let jump = t1.elapsed();
     let (nfm, late, blocks) = shared.index.read().map_or((0, 0, 0), |i| {
-        (i.not_for_model.len(), i.late_no_reply.len(), i.recs.blocks())
+        (
+            i.not_for_model.len(),
+            i.late_no_reply.len(),
+            i.recs.blocks(),
+        )
     });
     eprintln!("not_for_model {nfm} late_no_reply {late} blocks {blocks}");
     let (records, index_mb, plot_mb, spilled) = shared.index.read().map_or((0, 0.0, 0.0, 0), |i| {

@@ -1396,8 +1396,8 @@ struct Sink {
     modules_base: usize,
     /// Per stream, the module entry last given to each bus address.
     slots: Vec<(u32, [Option<u32>; 16])>,
-    /// Every conversion given out so far (`Rec::module - 1` indexes them), and how many of
-    /// them are published.
+    /// The conversions given out since the last publication (entries from `scales_published`
+    /// on; `Rec::module - 1` indexes them all), and how many were published before.
     scales: Vec<Scale>,
     scales_published: usize,
     /// The entry given for each revision of a conversion ([`Scale::revision`]).
@@ -1569,7 +1569,7 @@ impl Sink {
             return id;
         }
         self.scales.push(sc.clone());
-        let id = self.scales.len() as u32;
+        let id = (self.scales_published + self.scales.len()) as u32;
         if self.scale_at.len() >= MAX_SCALE_AT {
             self.scale_at.clear();
         }
@@ -1821,8 +1821,10 @@ impl Sink {
             .filter(|(_, pts)| !pts.is_empty())
             .map(|(k, pts)| (k.clone(), std::mem::take(pts)))
             .collect();
-        let scales = self.scales[self.scales_published..].to_vec();
-        self.scales_published = self.scales.len();
+        // Published ones are the index's: not kept here too (a capture whose stages change
+        // often has as many as a tenth of its records).
+        let scales = std::mem::take(&mut self.scales);
+        self.scales_published += scales.len();
         let diag_sets = self.diag_sets[self.diag_sets_published..].to_vec();
         self.diag_sets_published = self.diag_sets.len();
         self.modules_base += self.modules.len();
