@@ -25,10 +25,23 @@ pub(crate) struct ViewArgs {
     pub(crate) follow: bool,
     #[command(flatten)]
     pub(crate) units: UnitsArgs,
+    /// Memory the index of the records may take (`512M`, `2G`; default: a quarter of the
+    /// machine's memory); beyond it, older records are kept in a scratch file in
+    /// `$XDG_CACHE_HOME/aptscope` (or the temporary directory) and read back when shown.
+    #[arg(long, value_name = "SIZE", value_parser = parse_size)]
+    pub(crate) index_memory: Option<u64>,
+}
+
+fn parse_size(s: &str) -> std::result::Result<u64, String> {
+    aptscope_tui::index::parse_size(s)
+        .ok_or_else(|| format!("`{s}` is not a size (bytes, or with K, M, G or T: `512M`, `2G`)"))
 }
 
 /// Browse the capture `a` names in the terminal UI.
 pub(crate) fn run(a: ViewArgs) -> Result<()> {
+    if let Some(bytes) = a.index_memory {
+        aptscope_tui::index::set_index_memory(bytes);
+    }
     let mut o = open_opts(a.format.as_deref(), false, a.usb_device.as_deref())?;
     // Standard input is followed as it comes, with or without --follow (a pipe ends when its
     // writer does: `dumpcap -w - | aptscope view --follow -`).

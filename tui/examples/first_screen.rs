@@ -3,7 +3,8 @@
 //! screen of rows is shown, then waits for the index to finish. Prints both times as JSON, and
 //! the CPU time of the process when the index was complete (indexing, the statistics scan and
 //! the drawing: on a busy machine wall times say little).
-//! `bench/tui-first-screen.sh` runs it on a generated 10 M-frame capture.
+//! `--index-memory SIZE` as `aptscope view` takes it. `bench/tui-first-screen.sh` runs it on a
+//! generated 10 M-frame capture.
 
 use aptscope_tui::{app::App, index, ui};
 use ratatui::{backend::TestBackend, Terminal};
@@ -25,10 +26,19 @@ fn process_cpu() -> f64 {
 }
 
 fn main() -> std::io::Result<()> {
-    let Some(path) = std::env::args().nth(1) else {
-        eprintln!("usage: first_screen FILE");
-        std::process::exit(2);
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let (path, budget) = match args.as_slice() {
+        [p] => (p.clone(), None),
+        [p, flag, size] if flag == "--index-memory" => (p.clone(), index::parse_size(size)),
+        _ => (String::new(), None),
     };
+    if path.is_empty() || (args.len() > 1 && budget.is_none()) {
+        eprintln!("usage: first_screen FILE [--index-memory SIZE]");
+        std::process::exit(2);
+    }
+    if let Some(b) = budget {
+        index::set_index_memory(b);
+    }
     let t0 = Instant::now();
     let shared = index::spawn(&path, Default::default())?;
     let mut app = App::new(shared.clone(), "bench", true);
@@ -52,17 +62,26 @@ fn main() -> std::io::Result<()> {
     app.select(app.len().saturating_sub(1));
     let _ = term.draw(|f| ui::draw(f, &mut app));
     let jump = t1.elapsed();
-    let (records, index_mb, plot_mb) = shared.index.read().map_or((0, 0.0, 0.0), |i| {
+    let (nfm, late, blocks) = shared.index.read().map_or((0, 0, 0), |i| {
+        (
+            i.not_for_model.len(),
+            i.late_no_reply.len(),
+            i.recs.blocks(),
+        )
+    });
+    eprintln!("not_for_model {nfm} late_no_reply {late} blocks {blocks}");
+    let (records, index_mb, plot_mb, spilled) = shared.index.read().map_or((0, 0.0, 0.0, 0), |i| {
         let points: usize = i.series.values().map(Vec::capacity).sum();
         let mb = |b: usize| b as f64 / 1e6;
         (
             i.recs.len(),
             mb(i.recs.memory() + i.arena.capacity()),
             mb(points * std::mem::size_of::<index::Point>()),
+            i.recs.spilled_chunks(),
         )
     });
     println!(
-        "{{\"first_screen_ms\":{:.1},\"records_at_first_screen\":{frames_at_first},\"index_s\":{:.2},\"cpu_s_when_indexed\":{cpu:.2},\"records\":{records},\"records_mb\":{index_mb:.0},\"plot_mb\":{plot_mb:.0},\"jump_to_end_and_draw_ms\":{:.1}}}",
+        "{{\"first_screen_ms\":{:.1},\"records_at_first_screen\":{frames_at_first},\"index_s\":{:.2},\"cpu_s_when_indexed\":{cpu:.2},\"records\":{records},\"records_mb\":{index_mb:.0},\"plot_mb\":{plot_mb:.0},\"spilled_chunks\":{spilled},\"jump_to_end_and_draw_ms\":{:.1}}}",
         first.as_secs_f64() * 1e3,
         total.as_secs_f64(),
         jump.as_secs_f64() * 1e3

@@ -5,8 +5,8 @@
 //! The records come from the one decode chain ([`aptscope_dissector::record::Decoder`]): the
 //! indexer keeps of each [`Record`] what the timeline, filters and statistics read without
 //! decoding (a [`Rec`]). Its bytes are read back from the capture file by position (a raw
-//! capture) or kept in an arena (other formats, live sources). Nothing rendered is stored: the
-//! UI decodes the rows it shows from those bytes.
+//! capture) or from an arena the indexer writes to an unlinked scratch file (other formats, live
+//! sources). Nothing rendered is stored: the UI decodes the rows it shows from those bytes.
 
 use aptscope_capture::model::{Event, Reader};
 use aptscope_capture::open::{open_with_progress, OpenOptions};
@@ -204,7 +204,7 @@ struct Wide {
 }
 
 /// The records of the index in timeline order, stored packed ([`Recs::get`] gives a [`Rec`]).
-#[derive(Debug, Default, Clone)]
+#[derive(Debug, Default)]
 pub struct Recs {
     /// The records in chunks of [`CHUNK`]: growing never copies them (nor needs twice
     /// their memory for a moment, as a doubling vector does).
@@ -212,11 +212,151 @@ pub struct Recs {
     len: usize,
     /// The blocks, by first record.
     blocks: Vec<Block>,
-    /// (arena start, stream offset) of every record, once one has them apart from its capture
-    /// offset; empty until then.
-    apart: Vec<[u64; 2]>,
+    /// Where the records' arena starts are.
+    starts: Starts,
+    /// The stream offset of every record, once one has it apart from its capture offset; empty
+    /// until then.
+    apart: Vec<u64>,
     /// Records (by index, in order) with a value too large for their slot.
     wide: Vec<(u64, Wide)>,
+    /// Where chunks go once the records in memory would exceed [`Recs::budget`]: the first
+    /// `spilled` chunks are in this file (their entries in `packed` emptied).
+    spill: Option<Arc<Spill>>,
+    spilled: usize,
+    /// Bytes of records kept in memory at most; `None`: [`index_memory`].
+    budget: Option<usize>,
+    /// Bumped when a spilled record is patched: chunks read back before are stale.
+    spill_gen: u64,
+}
+
+/// Where the records' arena starts ([`Rec::start`]) are.
+#[derive(Debug, Default)]
+enum Starts {
+    /// At their capture offsets (a raw capture read back from the file).
+    #[default]
+    Cap,
+    /// One after the other from the first (the indexer writes the arena in record order): the
+    /// start of every [`MARK`]th record kept, the others' found by adding the lengths before
+    /// them; `next` is where the next record starts.
+    Marks { marks: Vec<u64>, next: u64 },
+    /// Each its own (records that are neither).
+    All(Vec<u64>),
+}
+
+/// Records per kept start in [`Starts::Marks`] (half a byte a record).
+const MARK: usize = 16;
+
+/// The file the records over the memory budget are written to, chunk after chunk.
+#[derive(Debug)]
+struct Spill {
+    file: std::fs::File,
+    /// Tells this file's chunks from another index's in [`SPILLED`].
+    id: u64,
+}
+
+/// Bytes of a chunk of records in a [`Spill`].
+const CHUNK_BYTES: usize = CHUNK * std::mem::size_of::<Packed>();
+
+/// Spilled chunks a thread keeps read back (6 MB).
+const SPILLED_KEPT: usize = 4;
+
+thread_local! {
+    /// The spilled chunks this thread read back last: (spill id, [`Recs::spill_gen`], chunk
+    /// number, its records), the newest last.
+    static SPILLED: std::cell::RefCell<Vec<KeptChunk>> =
+        const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// A spilled chunk read back: (spill id, generation, chunk number, its records).
+type KeptChunk = (u64, u64, usize, Vec<Packed>);
+
+impl Packed {
+    /// The record as it is written to a [`Spill`].
+    fn to_bytes(self) -> [u8; 24] {
+        let mut b = [0u8; 24];
+        b[0..4].copy_from_slice(&self.ts.to_le_bytes());
+        b[4..8].copy_from_slice(&self.pair.to_le_bytes());
+        b[8..11].copy_from_slice(&self.cap);
+        b[11] = self.stream;
+        b[12..14].copy_from_slice(&self.len.to_le_bytes());
+        b[14..16].copy_from_slice(&self.module.to_le_bytes());
+        b[16..18].copy_from_slice(&self.flags.to_le_bytes());
+        b[18..20].copy_from_slice(&self.id.to_le_bytes());
+        [b[20], b[21], b[22], b[23]] = [self.diags, self.src, self.dst, self.chan];
+        b
+    }
+    /// A record read back from a [`Spill`].
+    fn from_bytes(b: &[u8; 24]) -> Packed {
+        let u16_at = |i: usize| u16::from_le_bytes([b[i], b[i + 1]]);
+        let u32_at = |i: usize| u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+        Packed {
+            ts: u32_at(0),
+            pair: u32_at(4),
+            cap: [b[8], b[9], b[10]],
+            stream: b[11],
+            len: u16_at(12),
+            module: u16_at(14),
+            flags: u16_at(16),
+            id: u16_at(18),
+            diags: b[20],
+            src: b[21],
+            dst: b[22],
+            chan: b[23],
+        }
+    }
+}
+
+/// The memory the index's records may take before older ones are written to a scratch file
+/// ([`set_index_memory`], else a quarter of the machine's memory).
+pub fn index_memory() -> usize {
+    match INDEX_MEMORY.load(Ordering::Relaxed) {
+        0 => {
+            static QUARTER: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+            *QUARTER.get_or_init(|| mem_total().map_or(usize::MAX, |t| t / 4))
+        }
+        b => usize::try_from(b).unwrap_or(usize::MAX),
+    }
+}
+
+/// Set the memory budget of the indexes made from now on ([`index_memory`]; `aptscope view
+/// --index-memory`).
+pub fn set_index_memory(bytes: u64) {
+    INDEX_MEMORY.store(bytes.max(1), Ordering::Relaxed);
+}
+
+static INDEX_MEMORY: AtomicU64 = AtomicU64::new(0);
+
+/// The machine's memory (`MemTotal` of `/proc/meminfo`).
+fn mem_total() -> Option<usize> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemTotal:"))?;
+    let kib: usize = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib.checked_mul(1024)
+}
+
+/// A size as `--index-memory` takes it: bytes, or with a suffix `K`, `M`, `G`, `T` (powers
+/// of 1024; `512M`, `1.5G`, `2GiB`).
+pub fn parse_size(s: &str) -> Option<u64> {
+    let s = s.trim();
+    let t = s
+        .strip_suffix("iB")
+        .or_else(|| s.strip_suffix('B'))
+        .unwrap_or(s);
+    let (num, unit) = match t.char_indices().last()? {
+        (i, c) if c.is_ascii_alphabetic() => (&t[..i], c.to_ascii_uppercase()),
+        _ => (t, ' '),
+    };
+    let mult = match unit {
+        ' ' => 1u64,
+        'K' => 1 << 10,
+        'M' => 1 << 20,
+        'G' => 1 << 30,
+        'T' => 1 << 40,
+        _ => return None,
+    };
+    let x: f64 = num.trim().parse().ok()?;
+    let b = x * mult as f64;
+    (x.is_finite() && x > 0.0 && b < u64::MAX as f64).then_some(b as u64)
 }
 
 impl Recs {
@@ -236,11 +376,95 @@ impl Recs {
     }
     /// Record at index `i` (record number `i + 1`).
     pub fn get(&self, i: usize) -> Option<Rec> {
-        self.unpack(i, self.block_of(i))
+        self.unpack(i, self.block_of(i), None)
     }
-    /// Record at index `i` of block `b`.
-    fn unpack(&self, i: usize, b: usize) -> Option<Rec> {
-        let p = self.packed.get(i / CHUNK)?.get(i % CHUNK)?;
+    /// The packed record at index `i`, from memory or its spilled chunk.
+    #[inline]
+    fn packed_at(&self, i: usize) -> Option<Packed> {
+        let c = i / CHUNK;
+        if c >= self.spilled {
+            return self.packed.get(c)?.get(i % CHUNK).copied();
+        }
+        let spill = self.spill.as_ref()?;
+        let key = (spill.id, self.spill_gen, c);
+        SPILLED.with_borrow_mut(|kept| {
+            if let Some(k) = kept.iter().position(|e| (e.0, e.1, e.2) == key) {
+                return kept[k].3.get(i % CHUNK).copied();
+            }
+            use std::os::unix::fs::FileExt;
+            let mut buf = vec![0u8; CHUNK_BYTES];
+            spill
+                .file
+                .read_exact_at(&mut buf, (c * CHUNK_BYTES) as u64)
+                .ok()?;
+            let recs: Vec<Packed> = buf
+                .chunks_exact(24)
+                .filter_map(|b| b.try_into().ok().map(Packed::from_bytes))
+                .collect();
+            let p = recs.get(i % CHUNK).copied();
+            if kept.len() >= SPILLED_KEPT {
+                kept.remove(0);
+            }
+            kept.push((key.0, key.1, key.2, recs));
+            p
+        })
+    }
+    /// Keep the records in memory within the budget: write the oldest full chunks to the
+    /// spill file (made at the first), and free them. The chunk being filled stays (the
+    /// pairing's patches go mostly to recent records).
+    fn spill_over(&mut self) {
+        let budget = self.budget.unwrap_or_else(index_memory);
+        while (self.packed.len() - self.spilled) * CHUNK_BYTES > budget
+            && self.spilled + 1 < self.packed.len()
+        {
+            if self.spill.is_none() {
+                static NEXT: AtomicU64 = AtomicU64::new(1);
+                match scratch_file("index") {
+                    Some(file) => {
+                        let id = NEXT.fetch_add(1, Ordering::Relaxed);
+                        self.spill = Some(Arc::new(Spill { file, id }));
+                    }
+                    None => {
+                        // Nowhere to write: the records stay in memory.
+                        self.budget = Some(usize::MAX);
+                        return;
+                    }
+                }
+            }
+            let Some(spill) = &self.spill else {
+                return;
+            };
+            let c = self.spilled;
+            let mut buf = Vec::with_capacity(CHUNK_BYTES);
+            for p in &self.packed[c] {
+                buf.extend_from_slice(&p.to_bytes());
+            }
+            use std::os::unix::fs::FileExt;
+            if spill
+                .file
+                .write_all_at(&buf, (c * CHUNK_BYTES) as u64)
+                .is_err()
+            {
+                self.budget = Some(usize::MAX);
+                return;
+            }
+            self.packed[c] = Vec::new();
+            self.spilled += 1;
+        }
+    }
+    /// Keep at most `bytes` of records in memory (older ones go to a scratch file); the
+    /// default is [`index_memory`].
+    pub fn set_budget(&mut self, bytes: usize) {
+        self.budget = Some(bytes);
+    }
+    /// Chunks of records written to the scratch file (none while within the budget).
+    pub fn spilled_chunks(&self) -> usize {
+        self.spilled
+    }
+    /// Record at index `i` of block `b` (`start_hint`: its arena start, when the caller knows
+    /// it).
+    fn unpack(&self, i: usize, b: usize, start_hint: Option<u64>) -> Option<Rec> {
+        let p = &self.packed_at(i)?;
         let b = self.blocks.get(b)?;
         let [x, y, z] = p.cap;
         let cap_offset = b.cap + u64::from(u32::from_le_bytes([x, y, z, 0]));
@@ -275,10 +499,45 @@ impl Recs {
                 r.diags = w.diags;
             }
         }
-        if let Some(&[start, offset]) = self.apart.get(i) {
-            (r.start, r.offset) = (start, offset);
+        r.start = match &self.starts {
+            Starts::Cap => r.cap_offset,
+            Starts::Marks { .. } => match start_hint {
+                Some(s) => s,
+                None => self.start_of(i)?,
+            },
+            Starts::All(v) => *v.get(i)?,
+        };
+        if let Some(&offset) = self.apart.get(i) {
+            r.offset = offset;
         }
         Some(r)
+    }
+    /// The length of record index `i`.
+    fn len_at(&self, i: usize) -> Option<u64> {
+        let p = self.packed_at(i)?;
+        if p.len != NARROW {
+            return Some(u64::from(p.len));
+        }
+        let k = self
+            .wide
+            .binary_search_by_key(&(i as u64), |(j, _)| *j)
+            .ok()?;
+        self.wide.get(k).map(|(_, w)| u64::from(w.len))
+    }
+    /// The arena start of record index `i` (its mark's, and the lengths between).
+    fn start_of(&self, i: usize) -> Option<u64> {
+        match &self.starts {
+            Starts::Cap => self.get(i).map(|r| r.cap_offset),
+            Starts::Marks { marks, .. } => {
+                let m = i / MARK;
+                let mut s = *marks.get(m)?;
+                for j in m * MARK..i {
+                    s += self.len_at(j)?;
+                }
+                Some(s)
+            }
+            Starts::All(v) => v.get(i).copied(),
+        }
     }
     /// The last record.
     pub fn last(&self) -> Option<Rec> {
@@ -287,11 +546,15 @@ impl Recs {
     /// Records from index `from` (record number `from + 1`) to the end.
     pub fn iter_from(&self, from: usize) -> impl Iterator<Item = Rec> + '_ {
         let mut b = self.block_of(from);
+        // The next record's arena start, after the one before (records are contiguous there).
+        let mut next = None;
         (from..self.len()).filter_map(move |i| {
             while self.blocks.get(b + 1).is_some_and(|x| x.first <= i as u64) {
                 b += 1;
             }
-            self.unpack(i, b)
+            let r = self.unpack(i, b, next)?;
+            next = Some(r.start + u64::from(r.len));
+            Some(r)
         })
     }
     /// All records.
@@ -301,13 +564,42 @@ impl Recs {
     /// Append a record.
     pub fn push(&mut self, r: Rec) {
         let i = self.len;
-        let apart = r.start != r.cap_offset || r.offset != r.cap_offset;
+        let apart = r.offset != r.cap_offset;
         if apart && self.apart.len() < i {
             // The first record kept apart: the ones before are given theirs.
-            self.apart = self.iter().map(|r| [r.cap_offset, r.cap_offset]).collect();
+            self.apart = self.iter().map(|r| r.cap_offset).collect();
         }
         if apart || !self.apart.is_empty() {
-            self.apart.push([r.start, r.offset]);
+            self.apart.push(r.offset);
+        }
+        let end = r.start + u64::from(r.len);
+        let kept = match &mut self.starts {
+            Starts::Cap => r.start == r.cap_offset,
+            Starts::Marks { marks, next } if *next == r.start => {
+                if i.is_multiple_of(MARK) {
+                    marks.push(r.start);
+                }
+                *next = end;
+                true
+            }
+            _ => false,
+        };
+        if !kept {
+            if i == 0 {
+                self.starts = Starts::Marks {
+                    marks: vec![r.start],
+                    next: end,
+                };
+            } else {
+                if !matches!(self.starts, Starts::All(_)) {
+                    // The first record out of line: every start kept from now on.
+                    let all = (0..i).map(|j| self.start_of(j).unwrap_or(0)).collect();
+                    self.starts = Starts::All(all);
+                }
+                if let Starts::All(v) = &mut self.starts {
+                    v.push(r.start);
+                }
+            }
         }
         let fit = self.blocks.last().and_then(|b| b.fit(&r));
         let Some((cap, ts, module)) = fit.or_else(|| {
@@ -336,6 +628,9 @@ impl Recs {
             ));
         }
         if self.packed.last().is_none_or(|c| c.len() == CHUNK) {
+            if !self.packed.is_empty() {
+                self.spill_over();
+            }
             self.packed.push(Vec::with_capacity(CHUNK));
         }
         let Some(chunk) = self.packed.last_mut() else {
@@ -360,6 +655,24 @@ impl Recs {
     /// Set the pair link of record index `i` (when it has none) and add `flags`; gives the
     /// flags it had.
     fn patch(&mut self, i: usize, pair: u32, flags: u16) -> Option<u16> {
+        if i / CHUNK < self.spilled {
+            // Rare (a request's timeout passing long after it): patched in the file, read
+            // alone (not through its chunk: the next patch would read that again).
+            use std::os::unix::fs::FileExt;
+            let at = (i * std::mem::size_of::<Packed>()) as u64;
+            let file = &self.spill.as_ref()?.file;
+            let mut b = [0u8; 24];
+            file.read_exact_at(&mut b, at).ok()?;
+            let mut p = Packed::from_bytes(&b);
+            if p.pair == 0 {
+                p.pair = pair;
+            }
+            let was = p.flags & ((1 << DIR_SHIFT) - 1);
+            p.flags |= flags;
+            file.write_all_at(&p.to_bytes(), at).ok()?;
+            self.spill_gen += 1;
+            return Some(was);
+        }
         let p = self.packed.get_mut(i / CHUNK)?.get_mut(i % CHUNK)?;
         if p.pair == 0 {
             p.pair = pair;
@@ -368,11 +681,15 @@ impl Recs {
         p.flags |= flags;
         Some(was)
     }
-    /// Bytes the records take in memory (their capacity).
+    /// Bytes the records take in memory (their capacity; spilled chunks not counted).
     pub fn memory(&self) -> usize {
         self.packed.iter().map(Vec::capacity).sum::<usize>() * std::mem::size_of::<Packed>()
             + self.blocks.capacity() * std::mem::size_of::<Block>()
-            + self.apart.capacity() * std::mem::size_of::<[u64; 2]>()
+            + self.apart.capacity() * std::mem::size_of::<u64>()
+            + match &self.starts {
+                Starts::Cap => 0,
+                Starts::Marks { marks: v, .. } | Starts::All(v) => v.capacity() * 8,
+            }
             + self.wide.capacity() * std::mem::size_of::<(u64, Wide)>()
     }
     /// Number of blocks (the records' bases).
@@ -469,11 +786,17 @@ pub type Point = (f64, f64);
 pub struct Index {
     /// Records, in timeline order (record number = index + 1).
     pub recs: Recs,
-    /// Bytes of all records, when they are not read from [`Index::file`].
+    /// Bytes of all records, when they are not read back from [`Index::file`] or
+    /// [`Index::arena_file`] (an index loaded with [`load_in_memory`], or one whose scratch file
+    /// could not be made).
     pub arena: Vec<u8>,
     /// The capture file records' bytes are read from (by capture offset) instead of the
     /// arena: a raw capture, whose capture offsets are file positions.
     pub file: Option<ReadBack>,
+    /// The arena written to a file (by `Rec::start`) instead of kept in memory: every other
+    /// format and live sources, whose containers cannot be read back by position (packets cut
+    /// in pieces, text logs, pipes).
+    pub arena_file: Option<ReadBack>,
     /// Elliptec modules as the bus knew them (indexed by `Rec::module - 1`).
     pub modules: Vec<Module>,
     /// APT: the stage conversions records use (indexed by `Rec::module - 1`).
@@ -519,9 +842,14 @@ impl Index {
     /// The bytes of a record: from the arena, or read from the capture file (empty when the
     /// file can no longer give them).
     pub fn bytes(&self, r: &Rec) -> Cow<'_, [u8]> {
-        if let Some(f) = &self.file {
+        let back = match (&self.file, &self.arena_file) {
+            (Some(f), _) => Some((f, r.cap_offset)),
+            (None, Some(f)) => Some((f, r.start)),
+            (None, None) => None,
+        };
+        if let Some((f, at)) = back {
             return f
-                .read(r.cap_offset, r.len as usize)
+                .read(at, r.len as usize)
                 .map_or(Cow::Borrowed(&[]), Cow::Owned);
         }
         let s = r.start as usize;
@@ -535,6 +863,45 @@ impl Index {
     pub fn multi_stream(&self) -> bool {
         self.streams_seen.count_ones() > 1
     }
+}
+
+/// Where the viewer keeps its files: `$XDG_CACHE_HOME/aptscope`, else `~/.cache/aptscope`,
+/// else the temporary directory (whichever can be made).
+pub fn cache_dir() -> std::path::PathBuf {
+    let home = std::env::var_os("HOME").map(|h| std::path::PathBuf::from(h).join(".cache"));
+    let xdg = std::env::var_os("XDG_CACHE_HOME")
+        .map(std::path::PathBuf::from)
+        .filter(|p| p.is_absolute());
+    xdg.or(home)
+        .map(|d| d.join("aptscope"))
+        .filter(|d| std::fs::create_dir_all(d).is_ok())
+        .unwrap_or_else(std::env::temp_dir)
+}
+
+/// A new file of the viewer's own, already unlinked (it goes when the process does, however it
+/// ends), opened for reading and writing: in [`cache_dir`], else the temporary directory.
+pub(crate) fn scratch_file(what: &str) -> Option<std::fs::File> {
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    let n = NEXT.fetch_add(1, Ordering::Relaxed);
+    let name = format!("{what}-{}-{n}.tmp", std::process::id());
+    [cache_dir(), std::env::temp_dir()].iter().find_map(|d| {
+        let p = d.join(&name);
+        let f = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(&p)
+            .ok()?;
+        let _ = std::fs::remove_file(&p);
+        Some(f)
+    })
+}
+
+/// A file for the arena: the indexer's handle to write it, and the index's to read it back.
+fn arena_file_pair() -> Option<(std::fs::File, ReadBack)> {
+    let f = scratch_file("arena")?;
+    let back = f.try_clone().ok()?;
+    Some((f, ReadBack::of(back)))
 }
 
 /// A capture file records' bytes are read back from ([`Index::file`]).
@@ -559,11 +926,16 @@ thread_local! {
 impl ReadBack {
     /// Read records' bytes back from the file at `path`.
     pub fn open(path: &str) -> std::io::Result<Self> {
+        Ok(Self::of(std::fs::File::open(path)?))
+    }
+
+    /// Read back from an open file.
+    fn of(file: std::fs::File) -> Self {
         static NEXT: AtomicU64 = AtomicU64::new(1);
-        Ok(ReadBack {
-            file: std::fs::File::open(path)?,
+        ReadBack {
+            file,
             id: NEXT.fetch_add(1, Ordering::Relaxed),
-        })
+        }
     }
 
     /// The `len` bytes at `at`, when the file has them.
@@ -777,13 +1149,19 @@ pub fn load(path: &str, opts: OpenOptions) -> std::io::Result<Arc<Shared>> {
 
 /// [`load`] with a stage or scale for APT motion values.
 pub fn load_with(path: &str, opts: OpenOptions, units: UnitsOpts) -> std::io::Result<Arc<Shared>> {
-    load_inner(path, opts, units, false)
+    load_inner(path, opts, units, false, None)
 }
 
-/// [`load`] keeping every record's bytes in memory (the index live sources build): tests
-/// compare it with the index that reads them back from the file.
+/// [`load`] keeping every record's bytes in memory (no scratch file): tests compare it with
+/// the index that reads them back.
 pub fn load_in_memory(path: &str, opts: OpenOptions) -> std::io::Result<Arc<Shared>> {
-    load_inner(path, opts, UnitsOpts::default(), true)
+    load_inner(path, opts, UnitsOpts::default(), true, None)
+}
+
+/// [`load`] keeping at most `budget` bytes of records in memory (the others in a scratch
+/// file), whatever [`index_memory`] says: tests compare it with the index kept in memory.
+pub fn load_spilling(path: &str, opts: OpenOptions, budget: usize) -> std::io::Result<Arc<Shared>> {
+    load_inner(path, opts, UnitsOpts::default(), false, Some(budget))
 }
 
 fn load_inner(
@@ -791,10 +1169,15 @@ fn load_inner(
     opts: OpenOptions,
     units: UnitsOpts,
     in_memory: bool,
+    budget: Option<usize>,
 ) -> std::io::Result<Arc<Shared>> {
     let (shared, reader, from_file) = opened(path, opts, in_memory)?;
+    if let (Some(b), Ok(mut ix)) = (budget, shared.index.write()) {
+        ix.recs.set_budget(b);
+    }
     let mut ix = Indexer::new(shared.clone(), None, units);
     ix.sink.from_file = from_file;
+    ix.sink.arena_tried = in_memory;
     ix.run(reader);
     Ok(shared)
 }
@@ -1002,6 +1385,10 @@ struct Sink {
     arena_base: u64,
     /// Records' bytes are read back from the capture file ([`Index::file`]): none kept.
     from_file: bool,
+    /// Where published arena bytes are written ([`Index::arena_file`]), once made.
+    arena_out: Option<std::fs::File>,
+    /// Whether making it was tried (or is not wanted: the bytes stay in memory).
+    arena_tried: bool,
     /// Records already published.
     base: u64,
     proto: Option<(Proto, bool, f64)>,
@@ -1009,8 +1396,8 @@ struct Sink {
     modules_base: usize,
     /// Per stream, the module entry last given to each bus address.
     slots: Vec<(u32, [Option<u32>; 16])>,
-    /// Every conversion given out so far (`Rec::module - 1` indexes them), and how many of
-    /// them are published.
+    /// The conversions given out since the last publication (entries from `scales_published`
+    /// on; `Rec::module - 1` indexes them all), and how many were published before.
     scales: Vec<Scale>,
     scales_published: usize,
     /// The entry given for each revision of a conversion ([`Scale::revision`]).
@@ -1182,7 +1569,7 @@ impl Sink {
             return id;
         }
         self.scales.push(sc.clone());
-        let id = self.scales.len() as u32;
+        let id = (self.scales_published + self.scales.len()) as u32;
         if self.scale_at.len() >= MAX_SCALE_AT {
             self.scale_at.clear();
         }
@@ -1408,17 +1795,36 @@ impl Sink {
             )
         });
         let recs = std::mem::replace(&mut self.batch, batch);
-        let arena = std::mem::replace(&mut self.arena, arena);
-        self.base += recs.len() as u64;
+        let mut arena = std::mem::replace(&mut self.arena, arena);
+        let mut arena_file = None;
+        if !self.from_file && !self.arena_tried {
+            self.arena_tried = true;
+            if let Some((out, back)) = arena_file_pair() {
+                self.arena_out = Some(out);
+                arena_file = Some(back);
+            }
+        }
+        let at = self.arena_base;
         self.arena_base += arena.len() as u64;
+        if let Some(out) = &self.arena_out {
+            use std::os::unix::fs::FileExt;
+            // Written before the records are published: they are read back at once. A failed
+            // write (a full disk) leaves those records without bytes (shown empty), as a
+            // capture file that can no longer be read does.
+            let _ = out.write_all_at(&arena, at);
+            arena.clear();
+        }
+        self.base += recs.len() as u64;
         let series = self
             .series
             .iter_mut()
             .filter(|(_, pts)| !pts.is_empty())
             .map(|(k, pts)| (k.clone(), std::mem::take(pts)))
             .collect();
-        let scales = self.scales[self.scales_published..].to_vec();
-        self.scales_published = self.scales.len();
+        // Published ones are the index's: not kept here too (a capture whose stages change
+        // often has as many as a tenth of its records).
+        let scales = std::mem::take(&mut self.scales);
+        self.scales_published += scales.len();
         let diag_sets = self.diag_sets[self.diag_sets_published..].to_vec();
         self.diag_sets_published = self.diag_sets.len();
         self.modules_base += self.modules.len();
@@ -1426,6 +1832,7 @@ impl Sink {
             proto: self.proto.take(),
             recs,
             arena,
+            arena_file,
             modules: std::mem::take(&mut self.modules),
             scales,
             units_notes: std::mem::take(&mut self.units_notes),
@@ -1450,6 +1857,8 @@ struct Publication {
     proto: Option<(Proto, bool, f64)>,
     recs: Vec<Rec>,
     arena: Vec<u8>,
+    /// The file the arena is written to, from the first publication on.
+    arena_file: Option<ReadBack>,
     modules: Vec<Module>,
     scales: Vec<Scale>,
     units_notes: Vec<String>,
@@ -1473,6 +1882,9 @@ impl Publication {
             ix.proto = Some(p);
             ix.proto_certain = certain;
             ix.proto_share = Some(share);
+        }
+        if let Some(f) = self.arena_file.take() {
+            ix.arena_file = Some(f);
         }
         ix.recs.extend(self.recs.drain(..));
         ix.arena.append(&mut self.arena);
@@ -1617,7 +2029,47 @@ mod tests {
                 chan: (r >> 45) as u8,
             });
         }
-        let mut packed: Recs = recs.iter().copied().collect();
+        // Arena starts at the capture offsets, then apart; one after the other (an arena
+        // written in order); one after the other, then out of line.
+        let in_line = |recs: &[Rec], upto: usize| {
+            let mut at = 1000;
+            let mut out = recs.to_vec();
+            for r in out.iter_mut().take(upto) {
+                r.start = at;
+                at += u64::from(r.len);
+            }
+            out
+        };
+        let variants = [
+            recs.clone(),
+            in_line(&recs, recs.len()),
+            in_line(&recs, CHUNK + 100),
+        ];
+        // In memory, and over a budget of about one chunk (the older ones in a scratch file).
+        let cases = variants
+            .iter()
+            .flat_map(|v| [(v, None), (v, Some(CHUNK_BYTES))]);
+        let mut whole = 0;
+        for (pristine, budget) in cases {
+            let mut recs = pristine.clone();
+            let mut packed = Recs::default();
+            if let Some(b) = budget {
+                packed.set_budget(b);
+            }
+            packed.extend(recs.iter().copied());
+            check_packed(&mut packed, &mut recs);
+            let spilled = packed.spilled_chunks();
+            assert_eq!(spilled > 0, budget.is_some(), "{spilled}");
+            // Of the three chunks, the first is spilled: the budget holds the second, and the
+            // third is being filled.
+            match budget {
+                None => whole = packed.memory(),
+                Some(_) => assert_eq!(packed.memory() + CHUNK_BYTES, whole),
+            }
+        }
+    }
+
+    fn check_packed(packed: &mut Recs, recs: &mut [Rec]) {
         assert_eq!(packed.len(), recs.len());
         for (i, r) in recs.iter().enumerate() {
             assert_eq!(packed.get(i).as_ref(), Some(r), "#{i}");
@@ -1637,7 +2089,7 @@ mod tests {
             );
         }
         assert_eq!(packed.last(), recs.last().copied());
-        for i in [0, 5, CHUNK + 3, recs.len() - 1] {
+        for i in [0, 5, CHUNK + 3, recs.len() - 1, 7] {
             let was = packed.patch(i, 42, F_NO_REPLY);
             assert_eq!(was, Some(recs[i].flags));
             recs[i].flags |= F_NO_REPLY;
@@ -1647,5 +2099,7 @@ mod tests {
             assert_eq!(packed.get(i), Some(recs[i]), "patched #{i}");
         }
         assert_eq!(packed.get(recs.len()), None);
+        // Patches to spilled records are seen by reads after them, not the chunks kept before.
+        assert!(packed.iter().eq(recs.iter().copied()));
     }
 }

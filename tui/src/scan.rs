@@ -58,15 +58,109 @@ pub struct Scan {
     gen: AtomicU64,
     /// Where the scan is and what it counted (held by whoever scans).
     work: Mutex<Work>,
+    /// Threads a filter is evaluated on (the records of a batch split between them).
+    threads: usize,
+    /// Records a batch needs to be split between threads.
+    split_from: usize,
+    /// The results of the last complete scans, newest last: going back to a filter shows
+    /// them at once instead of scanning again.
+    done: Mutex<Vec<Done>>,
 }
+
+/// A complete scan's result, kept for its filter.
+#[derive(Debug)]
+struct Done {
+    /// The filter's text (empty: none).
+    key: String,
+    /// Records of the (complete) index it covered.
+    len: u64,
+    /// Bit `n - 1` set: record `n` matched.
+    bits: Vec<u64>,
+    stats: Stats,
+}
+
+/// Complete scans kept ([`Scan::done`]): a bit a record each.
+const DONE_KEPT: usize = 8;
+
+/// Records a batch needs before its filter is evaluated on several threads (fewer are not
+/// worth starting them).
+const SPLIT_FROM: usize = 4096;
 
 impl Default for Scan {
     fn default() -> Self {
+        let cores = std::thread::available_parallelism().map_or(1, usize::from);
+        Scan::with_threads(cores.min(4), SPLIT_FROM)
+    }
+}
+
+impl Scan {
+    /// A scan that evaluates filters on `threads` threads for batches of `split_from` records
+    /// or more (one thread: the sequential scan tests compare the others with).
+    pub fn with_threads(threads: usize, split_from: usize) -> Self {
         Scan {
             state: Mutex::new(ScanState::new(0, None)),
             gen: AtomicU64::new(0),
             work: Mutex::new(Work::new(0, None)),
+            threads: threads.max(1),
+            split_from: split_from.max(2),
+            done: Mutex::new(vec![]),
         }
+    }
+
+    /// Whether the result of `filter` over the complete index of `len` records is kept.
+    pub fn is_kept(&self, filter: Option<&Filter>, len: u64) -> bool {
+        let key = filter.map_or(String::new(), Filter::to_string);
+        self.done
+            .lock()
+            .is_ok_and(|d| d.iter().any(|x| x.key == key && x.len == len))
+    }
+
+    /// Keep a complete scan's result.
+    fn keep(&self, s: &ScanState) {
+        let len = s.scanned;
+        let mut bits = vec![];
+        if s.filter.is_some() {
+            bits = vec![0u64; (len as usize).div_ceil(64)];
+            for &n in &s.matches {
+                if let Some(w) = bits.get_mut(((n - 1) / 64) as usize) {
+                    *w |= 1 << ((n - 1) % 64);
+                }
+            }
+        }
+        let key = s.filter.as_ref().map_or(String::new(), Filter::to_string);
+        if let Ok(mut d) = self.done.lock() {
+            d.retain(|x| x.key != key);
+            if d.len() >= DONE_KEPT {
+                d.remove(0);
+            }
+            d.push(Done {
+                key,
+                len,
+                bits,
+                stats: s.stats.clone(),
+            });
+        }
+    }
+
+    /// The kept result of `filter` over the complete index of `len` records, as a finished
+    /// scan's state.
+    fn kept(&self, gen: u64, filter: &Option<Filter>, len: u64) -> Option<ScanState> {
+        let key = filter.as_ref().map_or(String::new(), Filter::to_string);
+        let d = self.done.lock().ok()?;
+        let x = d.iter().find(|x| x.key == key && x.len == len)?;
+        let mut st = ScanState::new(gen, filter.clone());
+        for (i, &w) in x.bits.iter().enumerate() {
+            let mut w = w;
+            while w != 0 {
+                st.matches
+                    .push(i as u64 * 64 + u64::from(w.trailing_zeros()) + 1);
+                w &= w - 1;
+            }
+        }
+        st.stats = x.stats.clone();
+        st.scanned = len;
+        st.done = true;
+        Some(st)
     }
 }
 
@@ -85,6 +179,8 @@ struct Work {
     /// When the statistics shown were last rebuilt.
     shown: Instant,
     found: Vec<u64>,
+    /// The state was a kept result ([`Scan::kept`]): nothing to scan.
+    kept: bool,
 }
 
 impl Work {
@@ -98,6 +194,7 @@ impl Work {
             counts: Counts::default(),
             shown: Instant::now(),
             found: vec![],
+            kept: false,
         }
     }
 }
@@ -127,11 +224,23 @@ impl Scan {
     /// scans what the index gains later.
     pub fn start(self: &Arc<Self>, index: Arc<Shared>, filter: Option<Filter>, background: bool) {
         let gen = self.gen.fetch_add(1, Ordering::SeqCst) + 1;
+        // A filter scanned before over the same complete index: its result at once.
+        let complete = index
+            .index
+            .read()
+            .ok()
+            .filter(|ix| ix.done)
+            .map(|ix| ix.recs.len() as u64);
+        let kept = complete.and_then(|len| self.kept(gen, &filter, len));
         if let Ok(mut w) = self.work.lock() {
             *w = Work::new(gen, filter.clone());
+            w.kept = kept.is_some();
         }
         if let Ok(mut s) = self.state.lock() {
-            *s = ScanState::new(gen, filter);
+            *s = kept.unwrap_or_else(|| ScanState::new(gen, filter));
+            if s.done {
+                return;
+            }
         }
         if !background {
             self.catch_up(&index);
@@ -170,6 +279,9 @@ impl Scan {
         if w.gen != gen {
             return Step::Stale;
         }
+        if w.kept {
+            return Step::Finished;
+        }
         w.found.clear();
         let Ok(ix) = index.index.read() else {
             return Step::Stale;
@@ -177,19 +289,56 @@ impl Scan {
         let len = ix.recs.len() as u64;
         let (from, end) = (w.next, (w.next + BATCH).min(len + 1));
         let recs = ix.recs.iter_from((from - 1) as usize);
-        for (i, r) in recs.take((end - from) as usize).enumerate() {
-            let (n, r) = (from + i as u64, &r);
-            if let Some(f) = &w.filter {
-                let apt_frame = r.flags & (F_ELL | F_GARBAGE) == 0;
-                if apt_frame && w.ids.as_ref().is_some_and(|ids| !ids.contains(r.id)) {
-                    continue;
+        let take = (end - from) as usize;
+        match &w.filter {
+            Some(f) if self.threads > 1 && take >= self.split_from => {
+                // The filter on several threads (field terms decode frames: the costly part),
+                // each over a slice of the batch; then counted in order.
+                let recs: Vec<Rec> = recs.take(take).collect();
+                let part = recs.len().div_ceil(self.threads);
+                let (ix, ids) = (&*ix, w.ids.as_ref());
+                let keep: Vec<Vec<bool>> = std::thread::scope(|s| {
+                    let handles: Vec<_> = recs
+                        .chunks(part)
+                        .enumerate()
+                        .map(|(k, slice)| {
+                            let first = from + (k * part) as u64;
+                            s.spawn(move || {
+                                slice
+                                    .iter()
+                                    .enumerate()
+                                    .map(|(i, r)| passes(f, ids, ix, first + i as u64, r))
+                                    .collect::<Vec<bool>>()
+                            })
+                        })
+                        .collect();
+                    // A thread that panicked (it cannot: no data reaches a panic) passes none.
+                    handles
+                        .into_iter()
+                        .map(|h| h.join().unwrap_or_default())
+                        .collect()
+                });
+                let keep = keep.iter().flatten();
+                for (i, (r, &yes)) in recs.iter().zip(keep).enumerate() {
+                    if yes {
+                        let n = from + i as u64;
+                        w.found.push(n);
+                        w.counts.add(ix, n, r);
+                    }
                 }
-                if !f.matches(&View { ix: &ix, n, r }) {
-                    continue;
-                }
-                w.found.push(n);
             }
-            w.counts.add(&ix, n, r);
+            _ => {
+                for (i, r) in recs.take(take).enumerate() {
+                    let (n, r) = (from + i as u64, &r);
+                    if let Some(f) = &w.filter {
+                        if !passes(f, w.ids.as_ref(), &ix, n, r) {
+                            continue;
+                        }
+                        w.found.push(n);
+                    }
+                    w.counts.add(&ix, n, r);
+                }
+            }
         }
         // Records scanned before they got their `no_reply` (the timeline shows it on the row
         // now): counted now, with whether the filter takes them now.
@@ -255,6 +404,9 @@ impl Scan {
             }
             s.scanned = end - 1;
             s.done = finished;
+            if finished {
+                self.keep(&s);
+            }
         }
         if finished {
             Step::Finished
@@ -264,6 +416,16 @@ impl Scan {
             Step::More
         }
     }
+}
+
+/// Whether record `n` passes the filter (its message id first, when the filter names them).
+#[inline]
+fn passes(f: &Matcher, ids: Option<&IdSet>, ix: &Index, n: u64, r: &Rec) -> bool {
+    let apt_frame = r.flags & (F_ELL | F_GARBAGE) == 0;
+    if apt_frame && ids.is_some_and(|ids| !ids.contains(r.id)) {
+        return false;
+    }
+    f.matches(&View { ix, n, r })
 }
 
 type IdMap<K, V> = aptscope_dissector::hash::NumMap<K, V>;

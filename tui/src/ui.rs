@@ -146,12 +146,19 @@ fn draw_title(f: &mut Frame<'_>, app: &App, area: Rect) {
     if !app.filter_text().is_empty() {
         // Filtering until the scan has caught up with the records there are (a live scan is
         // never "done": more may come).
-        let (m, behind) = app.scan().state.lock().map_or((0, false), |st| {
-            (st.matches.len(), !st.done && (st.scanned as usize) < count)
+        let (m, behind, scanned) = app.scan().state.lock().map_or((0, false, 0), |st| {
+            let behind = !st.done && (st.scanned as usize) < count;
+            (st.matches.len(), behind, st.scanned)
         });
+        // How far the scan is: a field filter over a huge capture takes a while.
+        let pct = (scanned as f64 * 100.0 / count.max(1) as f64).min(100.0);
         s.push_str(&format!(
             " · {m} shown{}",
-            if behind { " (filtering…)" } else { "" }
+            if behind {
+                format!(" (filtering… {pct:.0}%)")
+            } else {
+                String::new()
+            }
         ));
     }
     if app.following() && !app.live() {

@@ -10,7 +10,7 @@ use aptscope_dissector::pipeline::{Format, Pipeline};
 use aptscope_dissector::stats::Stats;
 use aptscope_dissector::{synth, Table};
 use aptscope_tui::fields::{with_record, View};
-use aptscope_tui::index::{load, load_in_memory, Rec, Shared, F_NO_REPLY};
+use aptscope_tui::index::{load, load_in_memory, load_spilling, Rec, Shared, F_NO_REPLY};
 use aptscope_tui::scan::{Scan, BIN_NS};
 use serde_json::Value;
 use std::sync::Arc;
@@ -301,42 +301,165 @@ fn the_compact_view_reads_like_the_decoded_record() {
     assert!(words > 1_000, "{words}");
 }
 
-/// A raw capture's index reads its records' bytes back from the file instead of keeping them:
-/// records, bytes, pairing links, plots, statistics and every filter's selection are those of
-/// the index that keeps them in memory (as live sources do).
+/// Every file of samples/ (and samples/sessions/) that is a capture.
+fn every_sample() -> Vec<String> {
+    let mut v = vec![];
+    for dir in ["", "sessions/"] {
+        let path = sample(dir);
+        for e in std::fs::read_dir(&path).expect("samples") {
+            let e = e.expect("entry");
+            let name = e.file_name().to_string_lossy().to_string();
+            let script = [".sh", ".py", ".md"].iter().any(|x| name.ends_with(x));
+            if !script && e.file_type().is_ok_and(|t| t.is_file()) {
+                v.push(format!("{path}{name}"));
+            }
+        }
+    }
+    v.sort();
+    v
+}
+
+/// Two indexes of one capture give the same answers: the same records (pairing links, so the
+/// pair jumps, included), the same bytes and plot series, and for every filter
+/// the same selection and statistics.
+fn same_answers(path: &str, a: &Arc<Shared>, b: &Arc<Shared>, filters: &[Filter]) {
+    {
+        let (a, b) = (a.index.read().expect("lock"), b.index.read().expect("lock"));
+        assert_eq!(a.recs.len(), b.recs.len(), "{path}");
+        let same = |r: Rec| Rec { start: 0, ..r };
+        for (i, (x, y)) in a.recs.iter().zip(b.recs.iter()).enumerate() {
+            assert_eq!(same(x), same(y), "{path} #{}", i + 1);
+            assert_eq!(a.bytes(&x), b.bytes(&y), "{path} #{}", i + 1);
+        }
+        // Records read one by one (no read-back window or chunk in common with the iteration).
+        for n in [a.recs.len() as u64, 1, (a.recs.len() as u64).div_ceil(2)] {
+            let (x, y) = (a.rec(n), b.rec(n));
+            assert_eq!(x.map(same), y.map(same), "{path} #{n}");
+            if let (Some(x), Some(y)) = (x, y) {
+                assert_eq!(a.bytes(&x), b.bytes(&y), "{path} #{n}");
+            }
+        }
+        // Not `late_no_reply`: which no-replies come after their record's publication depends
+        // on when batches were published (every 50 ms too), not on where bytes are kept.
+        assert_eq!(a.series, b.series, "{path}");
+    }
+    assert_eq!(scan(a, None), scan(b, None), "{path}");
+    for f in filters {
+        assert_eq!(
+            scan(a, Some(f.clone())),
+            scan(b, Some(f.clone())),
+            "{path}: {f}"
+        );
+    }
+}
+
+/// The viewer's index reads records' bytes back (from a raw capture itself, else from the
+/// arena it wrote to a scratch file) instead of keeping them: on every sample (every format)
+/// records, bytes, pairing, plots, statistics and every filter's selection are those of the
+/// index that keeps them in memory.
 #[test]
-fn reading_bytes_back_from_the_file_changes_no_answer() {
+fn reading_bytes_back_changes_no_answer() {
     let filters = filters();
     let (_dir, synth) = synthetic();
-    let paths = [sample("damaged.bin"), sample("sessions/damaged.bin"), synth];
+    let mut paths = every_sample();
+    assert!(paths.len() > 30, "{paths:?}");
+    paths.push(synth);
     for path in paths {
-        let (file, mem) = (
+        let (back, mem) = (
             load(&path, OpenOptions::default()).expect("opens"),
             load_in_memory(&path, OpenOptions::default()).expect("opens"),
         );
         {
             let (a, b) = (
-                file.index.read().expect("lock"),
+                back.index.read().expect("lock"),
                 mem.index.read().expect("lock"),
             );
-            assert!(a.file.is_some() && a.arena.is_empty(), "{path}");
-            assert!(b.file.is_none() && !b.arena.is_empty(), "{path}");
-            assert_eq!(a.recs.len(), b.recs.len(), "{path}");
-            let same = |r: Rec| Rec { start: 0, ..r };
-            for (i, (x, y)) in a.recs.iter().zip(b.recs.iter()).enumerate() {
-                assert_eq!(same(x), same(y), "{path} #{}", i + 1);
-                assert_eq!(a.bytes(&x), b.bytes(&y), "{path} #{}", i + 1);
+            let raw = a.format == "raw bytes";
+            assert_eq!(a.file.is_some(), raw, "{path}");
+            assert_eq!(a.arena_file.is_some(), !raw, "{path}");
+            assert!(a.arena.is_empty(), "{path}");
+            assert!(b.file.is_none() && b.arena_file.is_none(), "{path}");
+            assert!(!b.arena.is_empty(), "{path}");
+        }
+        same_answers(&path, &back, &mem, &filters);
+    }
+}
+
+/// An index over its memory budget writes the older records to a scratch file and reads them
+/// back: the same answers as the index kept in memory, on a raw capture of 150,000 messages
+/// (three chunks of records: the first spilled) and on its pcapng copy.
+#[test]
+fn an_index_over_its_budget_changes_no_answer() {
+    let dir = tempdir::Dir::new("spill");
+    let raw = dir.0.join("big.bin");
+    std::fs::write(&raw, synth::stream(Table::global(), 11, 150_000, true)).expect("write");
+    let raw = raw.to_string_lossy().to_string();
+    let pcapng = dir.0.join("big.pcapng").to_string_lossy().to_string();
+    {
+        let (mut r, _) = aptscope_capture::open::open(&raw, OpenOptions::default()).expect("open");
+        let mut w = aptscope_capture::open::create(
+            &pcapng,
+            aptscope_capture::open::Format::parse("pcapng").expect("pcapng"),
+            true,
+        )
+        .expect("create");
+        w.stream(&Default::default()).expect("stream");
+        while let Some(ev) = r.next_event() {
+            if let Event::Chunk(c) = ev {
+                w.chunk(&c).expect("chunk");
             }
-            assert_eq!(a.series, b.series, "{path}");
-            assert_eq!(a.late_no_reply, b.late_no_reply, "{path}");
         }
-        assert_eq!(scan(&file, None), scan(&mem, None), "{path}");
-        for f in &filters {
-            assert_eq!(
-                scan(&file, Some(f.clone())),
-                scan(&mem, Some(f.clone())),
-                "{path}: {f}"
-            );
+        w.finish().expect("finish");
+    }
+    let filters: Vec<Filter> = ["apt.position > 1000", "unpaired", "diag", "n > 70000"]
+        .iter()
+        .map(|t| Filter::parse(t).expect("filter"))
+        .collect();
+    for path in [raw, pcapng] {
+        let (spilled, mem) = (
+            load_spilling(&path, OpenOptions::default(), 1).expect("opens"),
+            load_in_memory(&path, OpenOptions::default()).expect("opens"),
+        );
+        let chunks = spilled.index.read().expect("lock").recs.spilled_chunks();
+        assert!(chunks >= 1, "{path}: {chunks}");
+        same_answers(&path, &spilled, &mem, &filters);
+    }
+}
+
+/// The scan split between threads (as field filters over huge captures run) gives the
+/// sequential scan's selection and statistics, on every sample and for every filter, batches
+/// split from two records on; a scan kept from before gives the same again without scanning.
+#[test]
+fn the_parallel_scan_and_a_kept_one_equal_the_sequential_scan() {
+    let filters = filters();
+    let (_dir, synth) = synthetic();
+    let mut paths = every_sample();
+    paths.push(synth);
+    let run = |s: &Arc<Scan>, shared: &Arc<Shared>, f: Option<Filter>| {
+        s.start(shared.clone(), f, false);
+        let st = s.state.lock().expect("lock");
+        assert!(st.done);
+        (st.matches.clone(), stats_text(&st.stats))
+    };
+    for path in paths {
+        let shared = load(&path, OpenOptions::default()).expect("opens");
+        let len = shared.index.read().expect("lock").recs.len() as u64;
+        let (one, three) = (
+            Arc::new(Scan::with_threads(1, 2)),
+            Arc::new(Scan::with_threads(3, 2)),
+        );
+        for f in std::iter::once(None).chain(filters.iter().cloned().map(Some)) {
+            assert!(!three.is_kept(f.as_ref(), len));
+            let want = run(&one, &shared, f.clone());
+            assert_eq!(run(&three, &shared, f.clone()), want, "{path}: {f:?}");
+            assert!(three.is_kept(f.as_ref(), len), "{path}: {f:?}");
         }
+        // Going back to a filter: the result kept (the newest eight), the same answers.
+        for f in filters.iter().rev().take(8) {
+            let want = run(&one, &shared, Some(f.clone()));
+            assert!(three.is_kept(Some(f), len), "{path}: {f}");
+            assert_eq!(run(&three, &shared, Some(f.clone())), want, "{path}: {f}");
+        }
+        assert!(!three.is_kept(filters.first(), len));
     }
 }
