@@ -25,8 +25,8 @@ pub(crate) struct ViewArgs {
     pub(crate) follow: bool,
     #[command(flatten)]
     pub(crate) units: UnitsArgs,
-    /// Memory the index of the records may take (`512M`, `2G`; default: a quarter of the
-    /// machine's memory); beyond it, older records are kept in a scratch file in
+    /// Memory the index of the records may take (`512M`, `2G`; default 512M, or a quarter of
+    /// the machine's memory when that is less); beyond it, older records are kept in a scratch file in
     /// `$XDG_CACHE_HOME/aptscope` (or the temporary directory) and read back when shown.
     #[arg(long, value_name = "SIZE", value_parser = parse_size)]
     pub(crate) index_memory: Option<u64>,

@@ -220,13 +220,23 @@ impl Packed {
     }
 }
 
+/// The default of [`index_memory`] on a machine with a quarter of its memory or more to spare:
+/// 22 M records (a 340 MB raw capture) before any is written out. A quarter of the memory
+/// (6 GiB here) would let a 4 GB capture's 6.7 GB of records grow to that before spilling,
+/// where 512 MiB keeps its view near 1 GiB resident (docs/tui.md); spilled chunks come back
+/// from the page cache when touched, and indexing with records on disk costs ≈ 1.2× the CPU.
+pub const DEFAULT_INDEX_MEMORY: usize = 512 << 20;
+
 /// The memory the index's records may take before older ones are written to a scratch file
-/// ([`set_index_memory`], else a quarter of the machine's memory).
+/// ([`set_index_memory`], else [`DEFAULT_INDEX_MEMORY`] or a quarter of the machine's memory,
+/// whichever is less).
 pub fn index_memory() -> usize {
     match INDEX_MEMORY.load(Ordering::Relaxed) {
         0 => {
-            static QUARTER: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
-            *QUARTER.get_or_init(|| mem_total().map_or(usize::MAX, |t| t / 4))
+            static DEFAULT: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+            *DEFAULT.get_or_init(|| {
+                mem_total().map_or(DEFAULT_INDEX_MEMORY, |t| (t / 4).min(DEFAULT_INDEX_MEMORY))
+            })
         }
         b => usize::try_from(b).unwrap_or(usize::MAX),
     }
