@@ -1,8 +1,8 @@
 //! Decoding a framed APT message against the table: message, form, sub-message, typed fields.
 
-use super::header::{Addr, Header, HEADER_LEN};
+use super::header::{Addr, Header, HEADER_LEN, KNOWN_ADDR};
 use crate::diag::{Diag, DiagKind, Which};
-use crate::table::{Field, Form, FormKind, MsgDef, Prim, SubDef, Table, Ty};
+use crate::table::{Field, FieldRead, Form, FormKind, MsgDef, Prim, ReadKind, SubDef, Table, Ty};
 
 const D_TRUNCATED: u16 = 1;
 const D_DST: u16 = 2;
@@ -151,6 +151,36 @@ fn field_value<'a>(bytes: &'a [u8], f: &Field) -> Option<Value<'a>> {
     })
 }
 
+/// `N` bytes of `b` from `at`, as an array.
+#[inline(always)]
+fn le_bytes<const N: usize>(b: &[u8], at: usize) -> Option<[u8; N]> {
+    b.get(at..at + N)?.try_into().ok()
+}
+
+/// The value a [`FieldRead`] reads from the frame `bytes` (what [`field_value`] gives for its
+/// field, in one match); `None` when the frame is too short to hold it.
+#[inline(always)]
+fn read_value<'a>(r: &FieldRead, bytes: &'a [u8]) -> Option<Value<'a>> {
+    let start = r.start as usize;
+    let w = r.width as usize;
+    Some(match r.kind {
+        ReadKind::U8 => Value::U(u64::from(*bytes.get(start)?)),
+        ReadKind::I8 => Value::I(i64::from(*bytes.get(start)? as i8)),
+        ReadKind::U16 => Value::U(u64::from(u16::from_le_bytes(le_bytes(bytes, start)?))),
+        ReadKind::I16 => Value::I(i64::from(i16::from_le_bytes(le_bytes(bytes, start)?))),
+        ReadKind::U32 => Value::U(u64::from(u32::from_le_bytes(le_bytes(bytes, start)?))),
+        ReadKind::I32 => Value::I(i64::from(i32::from_le_bytes(le_bytes(bytes, start)?))),
+        ReadKind::F32 => Value::F(f64::from(f32::from_le_bytes(le_bytes(bytes, start)?))),
+        ReadKind::Array(p) => Value::Array(p, bytes.get(start..start + w)?),
+        ReadKind::Open(p) => {
+            let left = bytes.len().saturating_sub(start);
+            Value::Array(p, bytes.get(start..start + (left - left % w))?)
+        }
+        ReadKind::Str => Value::Str(bytes.get(start..start + w)?),
+        ReadKind::Bytes => Value::Bytes(bytes.get(start..start + w)?),
+    })
+}
+
 /// The text of a `str[N]` field: bytes up to the first NUL, lossy UTF-8.
 pub fn text_of(b: &[u8]) -> std::borrow::Cow<'_, str> {
     let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
@@ -169,13 +199,15 @@ impl<'a, 't> AptFrame<'a, 't> {
         if truncated {
             diag_bits |= D_TRUNCATED;
         }
-        if h.dst_byte() == 0 && h.src_byte() == 0 {
+        let (dst, src) = (h.dst_byte(), h.src_byte());
+        if dst == 0 && src == 0 {
             diag_bits |= D_ZERO_ADDRS;
         } else {
-            if !h.dst().is_known() {
+            // The framer's lookup table, not `Addr::from_byte`'s match: the same known set.
+            if !KNOWN_ADDR[usize::from(dst)] {
                 diag_bits |= D_DST;
             }
-            if !h.src().is_known() {
+            if !KNOWN_ADDR[usize::from(src)] {
                 diag_bits |= D_SRC;
             }
         }
@@ -199,7 +231,12 @@ impl<'a, 't> AptFrame<'a, 't> {
             diag_bits |= D_NO_DATA_FLAG;
         }
         let has_data = h.has_data() || no_flag;
-        let len = data_len(bytes);
+        // `data_len(bytes)` without reading the header again.
+        let len = if has_data {
+            usize::from(u16::from_le_bytes([h.param1(), h.param2()]))
+        } else {
+            0
+        };
         let (mut msg_form, mut sub, mut form) = (None, None, None);
         // Without a data packet: the first header-only form (found when the table was built).
         let header = m.hdr_form.and_then(|i| m.forms.get(usize::from(i)));
@@ -379,12 +416,15 @@ impl<'a, 't> AptFrame<'a, 't> {
 
     /// The fields of the matched form with their values (reserved `pad` fields left out).
     pub fn fields(&self) -> impl Iterator<Item = (&'t Field, Value<'a>)> + '_ {
-        let fields: &'t [Field] = self.form.map_or(&[], |f| f.fields.as_slice());
+        // The form's reads (pads left out when the table was built), not its `Field`s: a
+        // field's 100-odd bytes are only pointed at.
+        let (fields, reads): (&'t [Field], &'t [FieldRead]) =
+            self.form.map_or((&[], &[]), |f| (&f.fields, &f.reads));
         let bytes = self.bytes;
-        fields
-            .iter()
-            .filter(|f| !matches!(f.ty, Ty::Pad(_)))
-            .filter_map(move |f| Some((f, field_value(bytes, f)?)))
+        reads.iter().filter_map(move |r| {
+            let f = fields.get(usize::from(r.field))?;
+            Some((f, read_value(r, bytes)?))
+        })
     }
 
     /// A field by name (as [`AptFrame::fields`] gives it; only its value is read).

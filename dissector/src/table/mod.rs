@@ -39,6 +39,18 @@ pub struct Table {
     requesters: Vec<u8>,
     /// Per message index: the names of the fields of its forms and sub-messages' forms.
     field_names: Vec<Vec<&'static str>>,
+    /// Per message index: the lengths it exists in, for [`Table::accepts_len`] (the framer asks
+    /// it of most header-only frames).
+    lens: Vec<LenSet>,
+}
+
+/// The lengths one message exists in: [`Table::accepts_len`] worked out once.
+#[derive(Debug, Clone, Copy, Default)]
+struct LenSet {
+    /// It has a header-only form.
+    hdr: bool,
+    /// Bit `n`: it has a data packet of `n` bytes, for `n` up to 255.
+    data: [u64; 4],
 }
 
 impl Table {
@@ -206,7 +218,9 @@ impl Table {
             reply_ids: vec![],
             requesters: vec![],
             field_names: vec![],
+            lens: vec![],
         };
+        t.lens = (0..t.data.msgs.len()).map(|i| t.len_set(i)).collect();
         t.field_names = (0..t.data.msgs.len())
             .map(|i| {
                 let m = &t.data.msgs[i];
@@ -327,7 +341,58 @@ impl Table {
     /// Whether `m` exists in this length (header-only when `!has_data`).
     /// The rule of each form is [`Form::accepts_len`]; a `sub` form takes the lengths of its
     /// group's sub-messages' forms.
+    #[inline]
     pub fn accepts_len(&self, m: &MsgDef, has_data: bool, len: usize) -> bool {
+        if let Some(set) = self.lens_of(m) {
+            if !has_data {
+                return set.hdr;
+            }
+            if let Some(word) = set.data.get(len / 64) {
+                return word >> (len % 64) & 1 != 0;
+            }
+        }
+        self.accepts_len_by_forms(m, has_data, len)
+    }
+
+    /// The precomputed lengths of `m`, when it is this table's message.
+    #[inline]
+    fn lens_of(&self, m: &MsgDef) -> Option<&LenSet> {
+        let i = usize::from(*self.by_id.get(usize::from(m.id))?);
+        let ours = self.data.msgs.get(i).is_some_and(|x| std::ptr::eq(x, m));
+        self.lens.get(i).filter(|_| ours)
+    }
+
+    /// The lengths message `i` exists in up to 255 bytes: what
+    /// [`accepts_len_by_forms`](Self::accepts_len_by_forms) says, its group's sub-messages found
+    /// through `msg_subs` (the same group rule).
+    fn len_set(&self, i: usize) -> LenSet {
+        let m = &self.data.msgs[i];
+        let mut set = LenSet {
+            hdr: m.forms.iter().any(|f| f.kind == FormKind::Header),
+            data: [0; 4],
+        };
+        let subs = self.msg_subs[i].iter().map(|&(_, s)| &self.data.subs[s]);
+        let sub_forms = subs.flat_map(|s| s.forms.iter());
+        let has_sub = m.forms.iter().any(|f| f.kind == FormKind::Sub);
+        let forms = m.forms.iter().chain(sub_forms.filter(|_| has_sub));
+        for f in forms {
+            // One length each (the common case), else tried length by length.
+            let lens = match f.kind {
+                FormKind::Header | FormKind::Sub => 0..0,
+                FormKind::Data(n) => usize::from(n)..usize::from(n) + 1,
+                FormKind::Open(_) => 0..256,
+            };
+            for len in lens.filter(|&n| n < 256) {
+                if f.accepts_len(true, len) {
+                    set.data[len / 64] |= 1 << (len % 64);
+                }
+            }
+        }
+        set
+    }
+
+    /// [`accepts_len`](Self::accepts_len) from the forms themselves.
+    fn accepts_len_by_forms(&self, m: &MsgDef, has_data: bool, len: usize) -> bool {
         m.forms.iter().any(|f| match f.kind {
             FormKind::Sub => {
                 has_data

@@ -548,6 +548,7 @@ impl Parser {
             note,
             fields: vec![],
             idx: Default::default(),
+            reads: Vec::new(),
         });
     }
 
