@@ -189,6 +189,10 @@ pub fn text_of(b: &[u8]) -> std::borrow::Cow<'_, str> {
 
 impl<'a, 't> AptFrame<'a, 't> {
     /// Decode a frame (as produced by the framer: at least 6 bytes).
+    // Inlined into the caller's loop: returned from a call, the frame (12 words) was stored
+    // and copied out again, its last stores read back by wider loads (a store-forwarding
+    // stall on every frame).
+    #[inline]
     pub fn decode(table: &'t Table, offset: u64, bytes: &'a [u8], truncated: bool) -> Option<Self> {
         // Worked out in locals and the frame built once at the end: building it field by field
         // stored its 16-bit diagnostic bits just before copying them out as part of a wider
@@ -415,16 +419,17 @@ impl<'a, 't> AptFrame<'a, 't> {
     }
 
     /// The fields of the matched form with their values (reserved `pad` fields left out).
+    #[inline]
     pub fn fields(&self) -> impl Iterator<Item = (&'t Field, Value<'a>)> + '_ {
         // The form's reads (pads left out when the table was built), not its `Field`s: a
         // field's 100-odd bytes are only pointed at.
         let (fields, reads): (&'t [Field], &'t [FieldRead]) =
             self.form.map_or((&[], &[]), |f| (&f.fields, &f.reads));
-        let bytes = self.bytes;
-        reads.iter().filter_map(move |r| {
-            let f = fields.get(usize::from(r.field))?;
-            Some((f, read_value(r, bytes)?))
-        })
+        Fields {
+            fields,
+            reads: reads.iter(),
+            bytes: self.bytes,
+        }
     }
 
     /// A field by name (as [`AptFrame::fields`] gives it; only its value is read).
@@ -446,6 +451,32 @@ impl<'a, 't> AptFrame<'a, 't> {
     /// Whether a field is the form's sub-id or channel (shown in their own columns).
     pub fn is_key_field(f: &Field) -> bool {
         f.name == "sub_id" || f.name == "chan_ident"
+    }
+}
+
+/// The iterator of [`AptFrame::fields`]: a named type with an inline `next`, so that the
+/// caller's loop reads the values in registers (a closure's body stays behind a call in this
+/// crate, its value returned through memory and read back by wider loads).
+struct Fields<'a, 't> {
+    fields: &'t [Field],
+    reads: std::slice::Iter<'t, FieldRead>,
+    bytes: &'a [u8],
+}
+
+impl<'a, 't> Iterator for Fields<'a, 't> {
+    type Item = (&'t Field, Value<'a>);
+
+    #[inline]
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            let r = self.reads.next()?;
+            let Some(f) = self.fields.get(usize::from(r.field)) else {
+                continue;
+            };
+            if let Some(v) = read_value(r, self.bytes) {
+                return Some((f, v));
+            }
+        }
     }
 }
 
