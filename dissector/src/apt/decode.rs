@@ -2,7 +2,9 @@
 
 use super::header::{Addr, Header, HEADER_LEN, KNOWN_ADDR};
 use crate::diag::{Diag, DiagKind, Which};
-use crate::table::{Field, FieldRead, Form, FormKind, MsgDef, Prim, ReadKind, SubDef, Table, Ty};
+use crate::table::{
+    DataForm, Field, FieldRead, Form, FormKind, MsgDef, Prim, ReadKind, SubDef, Table, Ty,
+};
 
 const D_TRUNCATED: u16 = 1;
 const D_DST: u16 = 2;
@@ -256,7 +258,18 @@ impl<'a, 't> AptFrame<'a, 't> {
                 }
             }
         }
-        for fm in m.forms.iter().filter(|_| has_data) {
+        // Most data packets: the form found when the table was built, without the walk.
+        let data_form = if has_data {
+            m.data_form.get(len).copied().unwrap_or(DataForm::WALK)
+        } else {
+            DataForm::NONE
+        };
+        if let Some(fm) = data_form.form().and_then(|i| m.forms.get(i)) {
+            msg_form = Some(fm);
+            form = Some(fm);
+        }
+        let walk = data_form == DataForm::WALK;
+        for fm in m.forms.iter().filter(|_| walk) {
             match fm.kind {
                 FormKind::Data(_) | FormKind::Open(_) if fm.accepts_len(true, len) => {
                     msg_form = Some(fm);
@@ -291,8 +304,11 @@ impl<'a, 't> AptFrame<'a, 't> {
             };
         }
         let chan = form
-            .and_then(|fm| fm.chan_field())
-            .and_then(|fd| int_value(bytes, fd))
+            .and_then(|fm| match fm.chan_u16_at() {
+                // The table's every chan_ident: read without looking at the field.
+                Some(at) => le_bytes(bytes, at).map(|b| i64::from(u16::from_le_bytes(b))),
+                None => int_value(bytes, fm.chan_field()?),
+            })
             .map(|c| match c {
                 4 => 3,
                 8 => 4,
@@ -654,5 +670,70 @@ pub fn summary_in(
         out.push('=');
         fmt_value_in(frame.table(), f, &v, scale, out);
         n += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::apt::{AptFramer, Item};
+
+    /// What `fields` gave before the per-form reads: every field but `pad`, read by its `Field`.
+    fn fields_by_field<'a, 't>(fr: &AptFrame<'a, 't>) -> Vec<(&'t Field, Value<'a>)> {
+        let fields: &'t [Field] = fr.form.map_or(&[], |f| f.fields.as_slice());
+        fields
+            .iter()
+            .filter(|f| !matches!(f.ty, Ty::Pad(_)))
+            .filter_map(|f| Some((f, field_value(fr.bytes, f)?)))
+            .collect()
+    }
+
+    /// The channel as read before the `u16` shortcut.
+    fn channel_by_field(fr: &AptFrame<'_, '_>) -> Option<i64> {
+        let c = int_value(fr.bytes, fr.form?.chan_field()?)?;
+        Some(match c {
+            4 => 3,
+            8 => 4,
+            c => c,
+        })
+    }
+
+    /// Every form of the table with random values, each frame whole and cut at every length:
+    /// the values, fields and channel are those read field by field.
+    #[test]
+    fn reads_give_what_the_fields_give() {
+        let t = Table::global();
+        let stream = crate::synth::stream(t, 7, 3000, false);
+        let mut f = AptFramer::new(t);
+        f.push(&stream);
+        f.finish();
+        let mut frames = 0;
+        while let Some(it) = f.next_item() {
+            let Item::Frame { offset, bytes, .. } = it else {
+                continue;
+            };
+            for end in HEADER_LEN..=bytes.len() {
+                let cut = &bytes[..end];
+                let truncated = end < bytes.len();
+                let Some(fr) = AptFrame::decode(t, offset, cut, truncated) else {
+                    panic!("{cut:02x?}: no frame");
+                };
+                let got: Vec<_> = fr.fields().collect();
+                let want = fields_by_field(&fr);
+                assert_eq!(got.len(), want.len(), "{cut:02x?}");
+                for ((gf, gv), (wf, wv)) in got.iter().zip(&want) {
+                    assert!(std::ptr::eq(*gf, *wf), "{cut:02x?}: {}", wf.name);
+                    // Bit for bit: a random f32 may be a NaN.
+                    let same = match (gv, wv) {
+                        (Value::F(a), Value::F(b)) => a.to_bits() == b.to_bits(),
+                        _ => gv == wv,
+                    };
+                    assert!(same, "{cut:02x?}: {}: {gv:?} vs {wv:?}", wf.name);
+                }
+                assert_eq!(fr.channel(), channel_by_field(&fr), "{cut:02x?}");
+            }
+            frames += 1;
+        }
+        assert!(frames >= 3000, "{frames} frames");
     }
 }

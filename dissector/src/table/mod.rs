@@ -44,8 +44,38 @@ pub struct Table {
     lens: Vec<LenSet>,
 }
 
+/// [`MsgDef::data_form`] of a message's forms: for each data packet length up to 255, the
+/// first form the decoder's walk would stop at (a data or open form taking that length, or a
+/// `sub` form when the packet holds a sub-message id): that form when it is a data or open
+/// one, else [`DataForm::WALK`]; [`DataForm::NONE`] when there is none.
+fn data_forms(forms: &[Form]) -> [DataForm; 256] {
+    let mut out = [DataForm::NONE; 256];
+    if forms.len() >= 0x80 {
+        return [DataForm::WALK; 256];
+    }
+    // Last form first, so that the first that stops the walk is the one left.
+    for (i, f) in forms.iter().enumerate().rev() {
+        let lens = match f.kind {
+            FormKind::Header => 0..0,
+            FormKind::Data(k) => usize::from(k)..usize::from(k) + 1,
+            FormKind::Open(_) | FormKind::Sub => 0..256,
+        };
+        for len in lens.filter(|&len| len < 256) {
+            match f.kind {
+                FormKind::Sub if len >= 2 => out[len] = DataForm::WALK,
+                FormKind::Data(_) | FormKind::Open(_) if f.accepts_len(true, len) => {
+                    // `i` < 0x80.
+                    out[len] = DataForm(i as u8);
+                }
+                _ => {}
+            }
+        }
+    }
+    out
+}
+
 /// The lengths one message exists in: [`Table::accepts_len`] worked out once.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy)]
 struct LenSet {
     /// It has a header-only form.
     hdr: bool,
@@ -196,6 +226,7 @@ impl Table {
         for m in data.msgs.iter_mut() {
             let first = m.forms.iter().position(|f| f.kind == FormKind::Header);
             m.hdr_form = first.and_then(|i| u8::try_from(i).ok());
+            m.data_form = data_forms(&m.forms);
         }
         let mut by_id = vec![u16::MAX; 65536].into_boxed_slice();
         for (i, m) in data.msgs.iter().enumerate() {
@@ -486,6 +517,48 @@ mod tests {
             format!("msg 0x0413 MOT_SET_VELPARAMS h2d\n  form 4\n    {field}\n").into_boxed_str(),
         );
         Table::from_sources(&[("t.apt", text)])
+    }
+
+    /// The per-message length sets say what the forms say, for every message, both kinds of
+    /// frame and every length up to beyond the largest; the
+    /// data form that stops the decoder's walk of the forms is found at once; a message of
+    /// another table is judged by its forms.
+    #[test]
+    fn length_sets_agree_with_the_forms() {
+        let t = Table::global();
+        for m in t.msgs() {
+            let max = t.max_data_len(m) + 8;
+            for has_data in [false, true] {
+                for len in 0..=max {
+                    assert_eq!(
+                        t.accepts_len(m, has_data, len),
+                        t.accepts_len_by_forms(m, has_data, len),
+                        "{} has_data={has_data} len={len}",
+                        m.name
+                    );
+                }
+            }
+            for len in 0..256 {
+                // The form the walk of the forms stops at.
+                let stop = m.forms.iter().position(|f| match f.kind {
+                    FormKind::Sub => len >= 2,
+                    FormKind::Header => false,
+                    _ => f.accepts_len(true, len),
+                });
+                let want = match stop.map(|i| (i, m.forms[i].kind)) {
+                    None => DataForm::NONE,
+                    Some((_, FormKind::Sub)) => DataForm::WALK,
+                    Some((i, _)) => DataForm(i as u8),
+                };
+                assert_eq!(m.data_form[len], want, "{} len={len}", m.name);
+            }
+        }
+        // MOT_SET_VELPARAMS of a one-form table: 4 data bytes here, 14 in the global table.
+        let other = one_field("i32 max_vel").expect("a table");
+        let m = &other.msgs()[0];
+        assert!(t.accepts_len(m, true, 4) && !t.accepts_len(m, true, 14));
+        let m = t.msg(0x0413).expect("MOT_SET_VELPARAMS");
+        assert!(!t.accepts_len(m, true, 4) && t.accepts_len(m, true, 14));
     }
 
     /// The pairer keeps a request's reply ids inline: no message may have more, and the

@@ -193,6 +193,22 @@ pub struct Field {
     pub max_of: Option<Maximum>,
 }
 
+/// [`MsgDef::data_form`] of one length: the form, none, or the walk of the forms.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct DataForm(pub(crate) u8);
+
+impl DataForm {
+    /// No form takes this length (and no `sub` form might).
+    pub(crate) const NONE: DataForm = DataForm(0xFF);
+    /// Walk the forms: a `sub` form comes first (or there are too many forms to say).
+    pub(crate) const WALK: DataForm = DataForm(0xFE);
+    /// The position of the data or open form that takes this length, when it is one.
+    #[inline]
+    pub(crate) fn form(self) -> Option<usize> {
+        (self.0 < 0x80).then_some(usize::from(self.0))
+    }
+}
+
 /// A device maximum that percentages refer to (piezo controllers: the output voltage limit of
 /// PZ_GET_OUTPUTMAXVOLTS, the travel of PZ_GET_MAXTRAVEL).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -380,6 +396,9 @@ impl FieldRead {
 pub(crate) struct FormIdx {
     /// Position of `chan_ident` in `fields`.
     chan: Option<u16>,
+    /// The frame offset of `chan_ident` when it is a `u16` (every form of the table): the
+    /// decoder reads it so without the field's type and place.
+    chan_u16_at: Option<u16>,
     /// Position of `sub_id` in `fields`.
     sub: Option<u16>,
     /// A field converts to physical units (`q=`, `pct_of=`, `max_of=`).
@@ -401,8 +420,13 @@ impl Form {
                 .position(|f| f.name == name)
                 .and_then(|i| u16::try_from(i).ok())
         };
+        let chan = at("chan_ident");
+        let chan_field = chan.and_then(|i| self.fields.get(usize::from(i)));
         self.idx = FormIdx {
-            chan: at("chan_ident"),
+            chan,
+            chan_u16_at: chan_field
+                .filter(|f| f.ty == Ty::Prim(Prim::U16))
+                .and_then(|f| u16::try_from(f.loc.frame_offset()).ok()),
             sub: at("sub_id"),
             units: self
                 .fields
@@ -419,6 +443,11 @@ impl Form {
     #[inline]
     pub fn chan_field(&self) -> Option<&Field> {
         self.fields.get(usize::from(self.idx.chan?))
+    }
+    /// The frame offset of the `chan_ident` field when the form has one and it is a `u16`.
+    #[inline]
+    pub(crate) fn chan_u16_at(&self) -> Option<usize> {
+        self.idx.chan_u16_at.map(usize::from)
     }
     /// The `sub_id` field, if the form has one.
     #[inline]
@@ -541,6 +570,10 @@ pub struct MsgDef {
     /// Position in `forms` of the first header-only form (what a frame without data packet
     /// decodes as), set when the table is built.
     pub(crate) hdr_form: Option<u8>,
+    /// Per data packet length up to 255, set when the table is built: which form a frame with
+    /// a data packet of that length decodes as, so that most frames take it without walking the
+    /// forms. See [`DataForm`].
+    pub(crate) data_form: [DataForm; 256],
     /// Spec examples.
     pub examples: Vec<Example>,
     /// Table file it is defined in.

@@ -403,6 +403,7 @@ impl Parser {
             doc: "",
             forms: vec![],
             hdr_form: None,
+            data_form: [DataForm::WALK; 256],
             examples: vec![],
             file,
             line: ln,
