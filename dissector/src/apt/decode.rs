@@ -186,7 +186,13 @@ fn read_value<'a>(r: &FieldRead, bytes: &'a [u8]) -> Option<Value<'a>> {
 /// The text of a `str[N]` field: bytes up to the first NUL, lossy UTF-8.
 pub fn text_of(b: &[u8]) -> std::borrow::Cow<'_, str> {
     let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
-    String::from_utf8_lossy(&b[..end])
+    let b = &b[..end];
+    // Valid UTF-8 (the usual ASCII) borrowed after the fast check; `from_utf8_lossy` walks
+    // its chunks even then.
+    match std::str::from_utf8(b) {
+        Ok(s) => std::borrow::Cow::Borrowed(s),
+        Err(_) => String::from_utf8_lossy(b),
+    }
 }
 
 impl<'a, 't> AptFrame<'a, 't> {
@@ -696,6 +702,17 @@ mod tests {
             8 => 4,
             c => c,
         })
+    }
+
+    /// Text ends at the first NUL; valid UTF-8 is borrowed, invalid bytes become U+FFFD.
+    #[test]
+    fn text_reads_up_to_the_nul() {
+        use std::borrow::Cow;
+        assert!(matches!(text_of(b"KDC101\0\0x"), Cow::Borrowed("KDC101")));
+        assert!(matches!(text_of("µm".as_bytes()), Cow::Borrowed("µm")));
+        assert_eq!(text_of(b"a\xffb\0c"), "a\u{FFFD}b");
+        assert_eq!(text_of(b"\xe2\x82"), "\u{FFFD}");
+        assert_eq!(text_of(b""), "");
     }
 
     /// Every form of the table with random values, each frame whole and cut at every length:
