@@ -140,6 +140,22 @@ fn int_value(bytes: &[u8], f: &Field) -> Option<i64> {
     read_prim(p, bytes.get(start..start + p.width())?).as_i64()
 }
 
+/// The channel of a frame of form `fm` (see [`AptFrame::channel`]). Inline code, not a closure
+/// of `decode`'s: that stayed a call, its answer returned through memory.
+#[inline(always)]
+fn form_channel(fm: &Form, bytes: &[u8]) -> Option<i64> {
+    let c = match fm.chan_u16_at() {
+        // The table's every chan_ident: read without looking at the field.
+        Some(at) => i64::from(u16::from_le_bytes(le_bytes(bytes, at)?)),
+        None => int_value(bytes, fm.chan_field()?)?,
+    };
+    Some(match c {
+        4 => 3,
+        8 => 4,
+        c => c,
+    })
+}
+
 /// The value of field `f` in the frame `bytes`.
 #[inline]
 fn field_value<'a>(bytes: &'a [u8], f: &Field) -> Option<Value<'a>> {
@@ -310,17 +326,10 @@ impl<'a, 't> AptFrame<'a, 't> {
                 D_LENGTH
             };
         }
-        let chan = form
-            .and_then(|fm| match fm.chan_u16_at() {
-                // The table's every chan_ident: read without looking at the field.
-                Some(at) => le_bytes(bytes, at).map(|b| i64::from(u16::from_le_bytes(b))),
-                None => int_value(bytes, fm.chan_field()?),
-            })
-            .map(|c| match c {
-                4 => 3,
-                8 => 4,
-                c => c,
-            });
+        let chan = match form {
+            Some(fm) => form_channel(fm, bytes),
+            None => None,
+        };
         Some(frame(msg_form, sub, form, diag_bits, chan))
     }
 
