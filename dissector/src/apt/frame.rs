@@ -322,7 +322,52 @@ impl<'t> AptFramer<'t> {
 
     /// The next frame or garbage record, or `None` when more input is needed (or, after
     /// [`finish`](Self::finish), when everything has been returned).
+    #[inline]
     pub fn next_item(&mut self) -> Option<Item<'_>> {
+        if let Some(len) = self.plain_frame() {
+            let start = self.pos;
+            self.pos += len;
+            return Some(Item::Frame {
+                offset: self.base + start as u64,
+                bytes: &self.buf[start..start + len],
+                truncated: false,
+            });
+        }
+        self.next_item_slow()
+    }
+
+    /// The length of the frame at the scan position when it is the common case, decided
+    /// without the general loop: no garbage run open, both addresses known, the whole frame
+    /// buffered, and either a flagged data packet within the spec's 255 bytes (no table lookup
+    /// needed: every message may have that many) or a header-only frame whose params give no
+    /// unflagged data length. What [`step`] decides for these; `None` leaves it to the loop.
+    #[inline]
+    fn plain_frame(&self) -> Option<usize> {
+        if self.garbage.is_some() {
+            return None;
+        }
+        let b = self.buf.get(self.pos..)?;
+        let h = Header::new(b)?;
+        if !(KNOWN_ADDR[usize::from(h.dst_byte())] && KNOWN_ADDR[usize::from(h.src_byte())]) {
+            return None;
+        }
+        let len = if h.has_data() {
+            let len = HEADER_LEN + h.data_len();
+            if len == HEADER_LEN || h.data_len() > MAX_DATA_LEN {
+                return None;
+            }
+            len
+        } else {
+            if LenRule::of(self.table, h).unflagged.is_some() {
+                return None;
+            }
+            HEADER_LEN
+        };
+        (b.len() >= len).then_some(len)
+    }
+
+    /// [`next_item`](Self::next_item) for every case: garbage, look-ahead, the end of the stream.
+    fn next_item_slow(&mut self) -> Option<Item<'_>> {
         loop {
             if let Some(g) = self.garbage {
                 if self.pos - g >= MAX_GARBAGE_RUN {

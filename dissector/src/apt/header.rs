@@ -145,10 +145,12 @@ impl<'a> Header<'a> {
         self.0[4] & DATA_FLAG != 0
     }
     /// param1 (byte 2): meaningful for header-only messages.
+    #[inline]
     pub fn param1(&self) -> u8 {
         self.0[2]
     }
     /// param2 (byte 3): meaningful for header-only messages.
+    #[inline]
     pub fn param2(&self) -> u8 {
         self.0[3]
     }
@@ -172,10 +174,12 @@ impl<'a> Header<'a> {
         self.0[5]
     }
     /// The destination address.
+    #[inline]
     pub fn dst(&self) -> Addr {
         Addr::from_byte(self.dst_byte())
     }
     /// The source address.
+    #[inline]
     pub fn src(&self) -> Addr {
         Addr::from_byte(self.src_byte())
     }

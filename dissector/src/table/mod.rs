@@ -39,6 +39,48 @@ pub struct Table {
     requesters: Vec<u8>,
     /// Per message index: the names of the fields of its forms and sub-messages' forms.
     field_names: Vec<Vec<&'static str>>,
+    /// Per message index: the lengths it exists in, for [`Table::accepts_len`] (the framer asks
+    /// it of most header-only frames).
+    lens: Vec<LenSet>,
+}
+
+/// [`MsgDef::data_form`] of a message's forms: for each data packet length up to 255, the
+/// first form the decoder's walk would stop at (a data or open form taking that length, or a
+/// `sub` form when the packet holds a sub-message id): that form when it is a data or open
+/// one, else [`DataForm::WALK`]; [`DataForm::NONE`] when there is none.
+fn data_forms(forms: &[Form]) -> [DataForm; 256] {
+    let mut out = [DataForm::NONE; 256];
+    if forms.len() >= 0x80 {
+        return [DataForm::WALK; 256];
+    }
+    // Last form first, so that the first that stops the walk is the one left.
+    for (i, f) in forms.iter().enumerate().rev() {
+        let lens = match f.kind {
+            FormKind::Header => 0..0,
+            FormKind::Data(k) => usize::from(k)..usize::from(k) + 1,
+            FormKind::Open(_) | FormKind::Sub => 0..256,
+        };
+        for len in lens.filter(|&len| len < 256) {
+            match f.kind {
+                FormKind::Sub if len >= 2 => out[len] = DataForm::WALK,
+                FormKind::Data(_) | FormKind::Open(_) if f.accepts_len(true, len) => {
+                    // `i` < 0x80.
+                    out[len] = DataForm(i as u8);
+                }
+                _ => {}
+            }
+        }
+    }
+    out
+}
+
+/// The lengths one message exists in: [`Table::accepts_len`] worked out once.
+#[derive(Debug, Clone, Copy)]
+struct LenSet {
+    /// It has a header-only form.
+    hdr: bool,
+    /// Bit `n`: it has a data packet of `n` bytes, for `n` up to 255.
+    data: [u64; 4],
 }
 
 impl Table {
@@ -184,6 +226,7 @@ impl Table {
         for m in data.msgs.iter_mut() {
             let first = m.forms.iter().position(|f| f.kind == FormKind::Header);
             m.hdr_form = first.and_then(|i| u8::try_from(i).ok());
+            m.data_form = data_forms(&m.forms);
         }
         let mut by_id = vec![u16::MAX; 65536].into_boxed_slice();
         for (i, m) in data.msgs.iter().enumerate() {
@@ -206,7 +249,9 @@ impl Table {
             reply_ids: vec![],
             requesters: vec![],
             field_names: vec![],
+            lens: vec![],
         };
+        t.lens = (0..t.data.msgs.len()).map(|i| t.len_set(i)).collect();
         t.field_names = (0..t.data.msgs.len())
             .map(|i| {
                 let m = &t.data.msgs[i];
@@ -327,7 +372,58 @@ impl Table {
     /// Whether `m` exists in this length (header-only when `!has_data`).
     /// The rule of each form is [`Form::accepts_len`]; a `sub` form takes the lengths of its
     /// group's sub-messages' forms.
+    #[inline]
     pub fn accepts_len(&self, m: &MsgDef, has_data: bool, len: usize) -> bool {
+        if let Some(set) = self.lens_of(m) {
+            if !has_data {
+                return set.hdr;
+            }
+            if let Some(word) = set.data.get(len / 64) {
+                return word >> (len % 64) & 1 != 0;
+            }
+        }
+        self.accepts_len_by_forms(m, has_data, len)
+    }
+
+    /// The precomputed lengths of `m`, when it is this table's message.
+    #[inline]
+    fn lens_of(&self, m: &MsgDef) -> Option<&LenSet> {
+        let i = usize::from(*self.by_id.get(usize::from(m.id))?);
+        let ours = self.data.msgs.get(i).is_some_and(|x| std::ptr::eq(x, m));
+        self.lens.get(i).filter(|_| ours)
+    }
+
+    /// The lengths message `i` exists in up to 255 bytes: what
+    /// [`accepts_len_by_forms`](Self::accepts_len_by_forms) says, its group's sub-messages found
+    /// through `msg_subs` (the same group rule).
+    fn len_set(&self, i: usize) -> LenSet {
+        let m = &self.data.msgs[i];
+        let mut set = LenSet {
+            hdr: m.forms.iter().any(|f| f.kind == FormKind::Header),
+            data: [0; 4],
+        };
+        let subs = self.msg_subs[i].iter().map(|&(_, s)| &self.data.subs[s]);
+        let sub_forms = subs.flat_map(|s| s.forms.iter());
+        let has_sub = m.forms.iter().any(|f| f.kind == FormKind::Sub);
+        let forms = m.forms.iter().chain(sub_forms.filter(|_| has_sub));
+        for f in forms {
+            // One length each (the common case), else tried length by length.
+            let lens = match f.kind {
+                FormKind::Header | FormKind::Sub => 0..0,
+                FormKind::Data(n) => usize::from(n)..usize::from(n) + 1,
+                FormKind::Open(_) => 0..256,
+            };
+            for len in lens.filter(|&n| n < 256) {
+                if f.accepts_len(true, len) {
+                    set.data[len / 64] |= 1 << (len % 64);
+                }
+            }
+        }
+        set
+    }
+
+    /// [`accepts_len`](Self::accepts_len) from the forms themselves.
+    fn accepts_len_by_forms(&self, m: &MsgDef, has_data: bool, len: usize) -> bool {
         m.forms.iter().any(|f| match f.kind {
             FormKind::Sub => {
                 has_data
@@ -421,6 +517,48 @@ mod tests {
             format!("msg 0x0413 MOT_SET_VELPARAMS h2d\n  form 4\n    {field}\n").into_boxed_str(),
         );
         Table::from_sources(&[("t.apt", text)])
+    }
+
+    /// The per-message length sets say what the forms say, for every message, both kinds of
+    /// frame and every length up to beyond the largest; the
+    /// data form that stops the decoder's walk of the forms is found at once; a message of
+    /// another table is judged by its forms.
+    #[test]
+    fn length_sets_agree_with_the_forms() {
+        let t = Table::global();
+        for m in t.msgs() {
+            let max = t.max_data_len(m) + 8;
+            for has_data in [false, true] {
+                for len in 0..=max {
+                    assert_eq!(
+                        t.accepts_len(m, has_data, len),
+                        t.accepts_len_by_forms(m, has_data, len),
+                        "{} has_data={has_data} len={len}",
+                        m.name
+                    );
+                }
+            }
+            for len in 0..256 {
+                // The form the walk of the forms stops at.
+                let stop = m.forms.iter().position(|f| match f.kind {
+                    FormKind::Sub => len >= 2,
+                    FormKind::Header => false,
+                    _ => f.accepts_len(true, len),
+                });
+                let want = match stop.map(|i| (i, m.forms[i].kind)) {
+                    None => DataForm::NONE,
+                    Some((_, FormKind::Sub)) => DataForm::WALK,
+                    Some((i, _)) => DataForm(i as u8),
+                };
+                assert_eq!(m.data_form[len], want, "{} len={len}", m.name);
+            }
+        }
+        // MOT_SET_VELPARAMS of a one-form table: 4 data bytes here, 14 in the global table.
+        let other = one_field("i32 max_vel").expect("a table");
+        let m = &other.msgs()[0];
+        assert!(t.accepts_len(m, true, 4) && !t.accepts_len(m, true, 14));
+        let m = t.msg(0x0413).expect("MOT_SET_VELPARAMS");
+        assert!(!t.accepts_len(m, true, 4) && t.accepts_len(m, true, 14));
     }
 
     /// The pairer keeps a request's reply ids inline: no message may have more, and the

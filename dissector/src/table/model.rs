@@ -193,6 +193,22 @@ pub struct Field {
     pub max_of: Option<Maximum>,
 }
 
+/// [`MsgDef::data_form`] of one length: the form, none, or the walk of the forms.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct DataForm(pub(crate) u8);
+
+impl DataForm {
+    /// No form takes this length (and no `sub` form might).
+    pub(crate) const NONE: DataForm = DataForm(0xFF);
+    /// Walk the forms: a `sub` form comes first (or there are too many forms to say).
+    pub(crate) const WALK: DataForm = DataForm(0xFE);
+    /// The position of the data or open form that takes this length, when it is one.
+    #[inline]
+    pub(crate) fn form(self) -> Option<usize> {
+        (self.0 < 0x80).then_some(usize::from(self.0))
+    }
+}
+
 /// A device maximum that percentages refer to (piezo controllers: the output voltage limit of
 /// PZ_GET_OUTPUTMAXVOLTS, the travel of PZ_GET_MAXTRAVEL).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -308,6 +324,70 @@ pub struct Form {
     pub fields: Vec<Field>,
     /// What per-frame code asks of every form, worked out once when the table is built.
     pub(crate) idx: FormIdx,
+    /// How to read each field that is not `pad`, in order (set by [`Form::index`]): the
+    /// decoder's field loop reads these 12 bytes per field instead of the whole [`Field`].
+    pub(crate) reads: Vec<FieldRead>,
+}
+
+/// How one field's value is read from a frame, worked out when the table is built.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct FieldRead {
+    /// Position of the field in its form's `fields`.
+    pub(crate) field: u16,
+    /// Offset of the field's first byte from the start of the frame.
+    pub(crate) start: u32,
+    /// Width in bytes (for the open array, that of one element).
+    pub(crate) width: u32,
+    /// What the bytes are.
+    pub(crate) kind: ReadKind,
+}
+
+/// The kind of a [`FieldRead`]: one flat match per field instead of `Ty` then `Prim`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum ReadKind {
+    U8,
+    I8,
+    U16,
+    I16,
+    U32,
+    I32,
+    F32,
+    /// An array of a fixed number of elements.
+    Array(Prim),
+    /// The open array ending an open form (`TYPE[*]`): the whole elements left in the frame.
+    Open(Prim),
+    Str,
+    Bytes,
+}
+
+impl FieldRead {
+    /// The read of field `i`, `f`; `None` for `pad` (never given out as a value).
+    fn of(i: usize, f: &Field) -> Option<FieldRead> {
+        let kind = match f.ty {
+            Ty::Prim(Prim::U8) => ReadKind::U8,
+            Ty::Prim(Prim::I8) => ReadKind::I8,
+            Ty::Prim(Prim::U16) => ReadKind::U16,
+            Ty::Prim(Prim::I16) => ReadKind::I16,
+            Ty::Prim(Prim::U32) => ReadKind::U32,
+            Ty::Prim(Prim::I32) => ReadKind::I32,
+            Ty::Prim(Prim::F32) => ReadKind::F32,
+            Ty::Array(p, 0) => ReadKind::Open(p),
+            Ty::Array(p, _) => ReadKind::Array(p),
+            Ty::Str(_) => ReadKind::Str,
+            Ty::Bytes(_) => ReadKind::Bytes,
+            Ty::Pad(_) => return None,
+        };
+        let width = match kind {
+            ReadKind::Open(p) => p.width(),
+            _ => f.ty.width(),
+        };
+        Some(FieldRead {
+            field: u16::try_from(i).ok()?,
+            start: u32::try_from(f.loc.frame_offset()).ok()?,
+            width: u32::try_from(width).ok()?,
+            kind,
+        })
+    }
 }
 
 /// Per-form facts read for every frame (set by [`Form::index`]): looking them up by field name
@@ -316,6 +396,9 @@ pub struct Form {
 pub(crate) struct FormIdx {
     /// Position of `chan_ident` in `fields`.
     chan: Option<u16>,
+    /// The frame offset of `chan_ident` when it is a `u16` (every form of the table): the
+    /// decoder reads it so without the field's type and place.
+    chan_u16_at: Option<u16>,
     /// Position of `sub_id` in `fields`.
     sub: Option<u16>,
     /// A field converts to physical units (`q=`, `pct_of=`, `max_of=`).
@@ -337,8 +420,13 @@ impl Form {
                 .position(|f| f.name == name)
                 .and_then(|i| u16::try_from(i).ok())
         };
+        let chan = at("chan_ident");
+        let chan_field = chan.and_then(|i| self.fields.get(usize::from(i)));
         self.idx = FormIdx {
-            chan: at("chan_ident"),
+            chan,
+            chan_u16_at: chan_field
+                .filter(|f| f.ty == Ty::Prim(Prim::U16))
+                .and_then(|f| u16::try_from(f.loc.frame_offset()).ok()),
             sub: at("sub_id"),
             units: self
                 .fields
@@ -348,11 +436,18 @@ impl Form {
             // Set by the table (`Table::from_sources`), which knows the messages' `maxlen=`.
             max_data: 0,
         };
+        let fields = self.fields.iter().enumerate();
+        self.reads = fields.filter_map(|(i, f)| FieldRead::of(i, f)).collect();
     }
     /// The `chan_ident` field, if the form has one.
     #[inline]
     pub fn chan_field(&self) -> Option<&Field> {
         self.fields.get(usize::from(self.idx.chan?))
+    }
+    /// The frame offset of the `chan_ident` field when the form has one and it is a `u16`.
+    #[inline]
+    pub(crate) fn chan_u16_at(&self) -> Option<usize> {
+        self.idx.chan_u16_at.map(usize::from)
     }
     /// The `sub_id` field, if the form has one.
     #[inline]
@@ -475,6 +570,10 @@ pub struct MsgDef {
     /// Position in `forms` of the first header-only form (what a frame without data packet
     /// decodes as), set when the table is built.
     pub(crate) hdr_form: Option<u8>,
+    /// Per data packet length up to 255, set when the table is built: which form a frame with
+    /// a data packet of that length decodes as, so that most frames take it without walking the
+    /// forms. See [`DataForm`].
+    pub(crate) data_form: [DataForm; 256],
     /// Spec examples.
     pub examples: Vec<Example>,
     /// Table file it is defined in.

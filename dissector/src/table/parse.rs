@@ -403,6 +403,7 @@ impl Parser {
             doc: "",
             forms: vec![],
             hdr_form: None,
+            data_form: [DataForm::WALK; 256],
             examples: vec![],
             file,
             line: ln,
@@ -548,6 +549,7 @@ impl Parser {
             note,
             fields: vec![],
             idx: Default::default(),
+            reads: Vec::new(),
         });
     }
 
