@@ -35,7 +35,10 @@ fn run(args: &[&str], batch: Option<usize>) -> Run {
 const MODES: [&[&str]; 4] = [
     &[],
     &["--json"],
-    &["-Y", "apt.name ~ \"GET\" || ell.code == \"PO\" || garbage"],
+    &[
+        "-Y",
+        "apt.name ~ \"GET\" || ell.cmd == \"PO\" || unpaired || diag",
+    ],
     &["--json", "-Y", "dir == device || n > 100"],
 ];
 
@@ -49,6 +52,7 @@ fn same_as_one(file: &str, batch: Option<usize>) -> Vec<u8> {
         a.extend(["-j", "1", file]);
         let at = a.len() - 2;
         let one = run(&a, batch);
+        assert!(!one.1.contains("bad filter"), "{}", one.1);
         for j in ["2", "3"] {
             a[at] = j;
             let many = run(&a, batch);
@@ -94,9 +98,9 @@ fn every_sample_decodes_the_same_on_several_cores() {
     let files = samples();
     assert!(files.len() > 15, "{files:?}");
     for f in &files {
-        // Batches of 1, 7 and the default: every record boundary a batch boundary, batches
-        // cut inside every exchange, one batch.
-        for batch in [Some(1), Some(7), None] {
+        // Batches of 1 and 7: every record boundary a batch boundary, batches cut inside
+        // every exchange (the default, one batch for a sample, is in the next test).
+        for batch in [Some(1), Some(7)] {
             same_as_one(f, batch);
         }
     }
@@ -169,10 +173,10 @@ fn random_streams_decode_the_same_on_several_cores() {
     let mut files = vec![];
     for seed in 1..=2u64 {
         let f = dir.join(&format!("apt{seed}.bin"));
-        std::fs::write(&f, apt_stream(seed, 30_000)).expect("write");
+        std::fs::write(&f, apt_stream(seed, 15_000)).expect("write");
         files.push(f);
         let f = dir.join(&format!("ell{seed}.txt"));
-        std::fs::write(&f, elliptec_stream(seed, 20_000)).expect("write");
+        std::fs::write(&f, elliptec_stream(seed, 8_000)).expect("write");
         files.push(f);
     }
     // The APT streams in containers too: pcapng and MCAP (records with times and
@@ -187,10 +191,10 @@ fn random_streams_decode_the_same_on_several_cores() {
     }
     for f in &files {
         let f = f.to_str().expect("utf-8");
-        // Default batches (thousands of records: many of them), and batches of 13.
+        // Default batches (thousands of records: several of them), and batches of 13.
         for batch in [None, Some(13)] {
             let out = same_as_one(f, batch);
-            assert!(out.len() > 500_000, "{f}: {} bytes", out.len());
+            assert!(out.len() > 200_000, "{f}: {} bytes", out.len());
         }
     }
 }
