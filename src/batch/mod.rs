@@ -563,7 +563,7 @@ fn one(
                 if let Some(f) = filter {
                     p.set_filter(f);
                 }
-                let mut engine = Engine::Here(p);
+                let mut engine = Engine::Here(Box::new(p));
                 return lines(job, file, &mut engine, reader, format, &progress, out, bar);
             }
             let mut dec = Decoder::new(proto_of(job.proto));

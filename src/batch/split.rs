@@ -101,7 +101,7 @@ pub(super) fn render_thread(look: &Look<'_>, work: &Mutex<Receiver<Work>>, done:
 /// render threads.
 pub(super) enum Engine<'a> {
     /// Decode and render on this thread.
-    Here(Pipeline),
+    Here(Box<Pipeline>),
     /// Decode here, render there.
     Split(Box<Split<'a>>),
 }
@@ -242,7 +242,7 @@ impl Engine<'_> {
     /// Feed one event of the capture.
     pub(super) fn feed(&mut self, ev: &Event<'_>, out: &Out<'_, '_>) -> io::Result<()> {
         match self {
-            Engine::Here(p) => ev.feed(p, &mut |l: &str| line_out(out, l)),
+            Engine::Here(p) => ev.feed(&mut **p, &mut |l: &str| line_out(out, l)),
             Engine::Split(s) => {
                 let Split { dec, q } = &mut **s;
                 ev.feed(dec, &mut |rec: &Record<'_>| q.add(rec, out))
