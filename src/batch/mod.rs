@@ -60,7 +60,7 @@ pub struct Job<'a> {
     pub timeout: Option<u64>,
     pub units: UnitsOpts,
     pub out: Output,
-    /// Files decoded at once.
+    /// Threads: files decoded at once, and the spare ones render inside files.
     pub jobs: usize,
 }
 
