@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # `aptscope decode` over many files on 1 and 2 threads: throughput, CPU time and peak RSS, for
-# text, NDJSON and Parquet output, each -j 2 figure beside its -j 1 and Parquet beside NDJSON.
-# Usage: bench/batch.sh   (env: FILES=50 files of MB=4.2 MB each, ≥ 200 MB)
+# text, NDJSON and Parquet output, each -j 2 figure beside its -j 1 and Parquet beside NDJSON;
+# then ONE large capture (raw, and the same as pcapng) on 1 and 2 threads, text and NDJSON (one
+# file: the decode chain on one thread, rendering on the others).
+# Usage: bench/batch.sh   (env: FILES=50 files of MB=4.2 MB each, ≥ 200 MB; BIG=100 MB)
 #
 # The files are device→host streams of 27 common message forms with random field values
 # (dissector/examples/gen_d2h.rs, one seed per file): what a controller's status logs look
@@ -10,8 +12,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 FILES=${FILES:-50}
 MB=${MB:-4.2}
+BIG=${BIG:-100}
 cargo build -q --release --bin aptscope
-cargo build -q --release -p aptscope-dissector --example gen_d2h
+cargo build -q --release -p aptscope-dissector --example gen_d2h --example gen_stream
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 mkdir "$tmp/in"
@@ -22,7 +25,7 @@ total=$(du -cb "$tmp"/in/*.bin | tail -n1 | cut -f1)
 printf 'input: %d files, %.1f MB; %s, %d cores\n' "$FILES" "$(echo "$total / 1000000" | bc -l)" \
   "$(lscpu | sed -n 's/^Model name: *//p' | head -n1)" "$(nproc)"
 declare -A rate
-run() { # label, jobs, command...
+run() { # label, jobs, command...   (MB/s of $total bytes)
   local label=$1 jobs=$2
   shift 2
   local out wall cpu rss
@@ -49,3 +52,19 @@ for j in 1 2; do
 done
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
 printf 'dataset: %s in %d files\n' "$(du -sh "$tmp/out" | cut -f1)" "$(find "$tmp/out" -name '*.parquet' | wc -l)"
+
+# One large capture: random frames of every form (dissector/examples/gen_stream.rs), raw and
+# converted to pcapng (timestamps and directions per packet).
+target/release/examples/gen_stream "$BIG" > "$tmp/big.bin"
+target/release/aptscope convert "$tmp/big.bin" "$tmp/big.pcapng"
+rm -rf "$tmp/in" "$tmp/out"
+for kind in bin pcapng; do
+  total=$(stat -c %s "$tmp/big.$kind")
+  printf 'one %s capture: %.1f MB\n' "$kind" "$(echo "$total / 1000000" | bc -l)"
+  echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
+  for j in 1 2; do
+    run "text" "$j" target/release/aptscope decode -j "$j" "$tmp/big.$kind"
+    run "ndjson" "$j" target/release/aptscope decode --json -j "$j" "$tmp/big.$kind"
+  done
+done
+echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"

@@ -18,6 +18,7 @@ pub mod hex;
 pub mod json;
 pub mod listing;
 pub mod msg;
+pub mod owned;
 pub mod pair;
 pub mod pipeline;
 pub mod record;

@@ -209,6 +209,40 @@ impl Renderer {
         }
     }
 
+    /// Name the input in every NDJSON record, and to the filter (see [`Pipeline::set_file`]).
+    pub fn set_file(&mut self, name: &str) {
+        self.file = Some(name.to_string());
+    }
+
+    /// Render only what `filter` accepts (see [`Pipeline::set_filter`]).
+    pub fn set_filter(&mut self, filter: Filter) {
+        self.ids = filter.apt_ids(crate::Table::global());
+        self.filter = Some(filter);
+    }
+
+    /// The streams seen so far (what decides whether text lines name their stream).
+    pub fn streams(&self) -> &[u32] {
+        &self.streams
+    }
+
+    /// Start from these streams seen: a renderer taking over the records of a capture from
+    /// the middle renders them as the one that saw the start would.
+    pub fn set_streams(&mut self, streams: &[u32]) {
+        self.streams.clear();
+        self.streams.extend_from_slice(streams);
+    }
+
+    /// Note the stream a record names, as rendering it would (without rendering it): a
+    /// thread that hands records to other renderers keeps the streams seen with this.
+    pub fn note_streams(&mut self, rec: &Record<'_>) {
+        if let Some(m) = rec.meta() {
+            self.saw_stream(m.stream);
+        }
+        if let Record::Stream { id, .. } = rec {
+            self.saw_stream(*id);
+        }
+    }
+
     /// Whether a record passes the filter (every record when there is none).
     fn keep(&self, rec: &Record<'_>) -> bool {
         if let (Some(ids), Record::Apt(a)) = (&self.ids, rec) {
@@ -239,7 +273,7 @@ impl Renderer {
     }
 
     /// Render one record and emit it (frames and diagnostics through the filter).
-    fn render<E>(
+    pub fn render<E>(
         &mut self,
         rec: &Record<'_>,
         emit: &mut impl FnMut(&str) -> Result<(), E>,

@@ -32,7 +32,8 @@ pub(crate) struct DecodeArgs {
     /// Replace an existing dataset directory.
     #[arg(long)]
     pub(crate) force: bool,
-    /// Files decoded at once (default: the number of cores).
+    /// Threads (default: the number of cores): files decoded at once; fewer files than N
+    /// render their lines on the spare ones (same output).
     #[arg(short = 'j', long, value_name = "N")]
     pub(crate) jobs: Option<usize>,
     /// Protocol of the stream (default: detected from the first 4 KiB).

@@ -10,26 +10,35 @@
 //! most [`SPILL_MAX`] per file, beyond which the worker waits). Parquet: each worker writes its
 //! file's row groups as part files of their own (named by the file's index), so nothing is
 //! ordered or merged.
+//!
+//! Cores the files leave spare (one file with `-j 2`, two with `-j 4`) render inside each file:
+//! its decode chain runs on its worker, which hands the records to render threads and writes
+//! what they rendered in order ([`split`], which says why this rather than cutting the capture
+//! into parts). Either way the output is byte for byte that of `-j 1`.
 
 use crate::common::{compile_filter, fatal, proto_of, ProtoArg};
 use aptscope_capture::judge::{not_a_capture, not_a_capture_error, refuse};
 use aptscope_capture::open::{open_with_progress, OpenOptions, Progress};
-use aptscope_capture::Event;
 use aptscope_capture::{Chunk, Direction};
+use aptscope_capture::{Event, Reader};
 use aptscope_dissector::detect::{detect, Proto, SAMPLE};
 use aptscope_dissector::json;
 use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
+use aptscope_dissector::record::Decoder;
 use aptscope_dissector::units::UnitsOpts;
 use aptscope_parquet::{decode_file, CaptureWriter, DirSink};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use split::{Engine, Look, Split};
 use std::cell::{Cell, RefCell};
 use std::fs::File;
 use std::io::{self, IsTerminal, Read, Seek, SeekFrom, Write};
 use std::os::unix::fs::FileExt;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
+use std::sync::mpsc::{channel, sync_channel, Receiver, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
+
+mod split;
 
 /// What `decode` writes.
 pub enum Output {
@@ -51,7 +60,7 @@ pub struct Job<'a> {
     pub timeout: Option<u64>,
     pub units: UnitsOpts,
     pub out: Output,
-    /// Files decoded at once.
+    /// Threads: files decoded at once, and the spare ones render inside files.
     pub jobs: usize,
 }
 
@@ -293,6 +302,33 @@ impl ChanWriter<'_> {
     }
 }
 
+impl ChanWriter<'_> {
+    /// Write rendered lines (each ending in a newline) as `-j 1` writes them, one line's text
+    /// and then its newline: blocks are sent where they would have been (so what reaches the
+    /// output before an error ends a file is the same too).
+    fn write_lines(&mut self, mut b: &[u8]) -> io::Result<()> {
+        while !b.is_empty() {
+            let need = BLOCK.saturating_sub(self.buf.len()).max(1);
+            if b.len() < need {
+                self.buf.extend_from_slice(b);
+                return Ok(());
+            }
+            // `-j 1` checks the block's size after each line's text and after its newline:
+            // the first such point at or past `need` bytes.
+            let cut = b[need - 1..]
+                .iter()
+                .position(|&c| c == b'\n')
+                .map_or(b.len(), |q| (need - 1 + q).max(need));
+            self.buf.extend_from_slice(&b[..cut]);
+            b = &b[cut..];
+            if self.buf.len() >= BLOCK {
+                self.send(false)?;
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Drop for ChanWriter<'_> {
     /// What was spilled is announced however the worker ends: it was written as a sent block
     /// would have been.
@@ -355,6 +391,9 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
         rxs.push(rx);
     }
     let jobs = job.jobs.clamp(1, n.max(1));
+    // Cores the files leave spare render inside them (see `split`): one file with `-j 2` is
+    // decoded on one thread and rendered on two.
+    let helpers = if job.jobs > jobs { job.jobs / jobs } else { 0 };
     let job = &job;
     let (bar, stop, next, txs, head) = (&bar, &stop, &next, &txs, &head);
     let result = std::thread::scope(|sc| {
@@ -367,7 +406,7 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
                 let Some(tx) = txs[i].lock().ok().and_then(|mut t| t.take()) else {
                     break;
                 };
-                let r = one(job, i, &tx, bar, head);
+                let r = one(job, i, &tx, bar, head, helpers);
                 bar.file_done();
                 // The receiver is gone only when the writer stopped: nothing left to do.
                 if tx.send(Msg::Done(r)).is_err() {
@@ -460,6 +499,7 @@ fn one(
     tx: &SyncSender<Msg>,
     bar: &Bar,
     head: &AtomicUsize,
+    helpers: usize,
 ) -> io::Result<Stats> {
     let file = job.files[i].as_str();
     let mut seen = 0u64;
@@ -483,7 +523,7 @@ fn one(
             })
         }
         Output::Lines { json: as_json } => {
-            let (mut reader, format, progress) = open_with_progress(file, job.open)?;
+            let (reader, format, progress) = open_with_progress(file, job.open)?;
             // Held until the detector has judged the first 4 KiB, so that what is not a capture
             // prints nothing (a given protocol: nothing to judge).
             let held = Cell::new(job.proto == ProtoArg::Auto);
@@ -503,86 +543,139 @@ fn one(
             } else {
                 PFormat::Text
             };
-            let mut p = Pipeline::new(proto_of(job.proto), fmt);
-            if let Some((_, name)) = tag {
-                p.set_file(name);
+            let filter = job.filter.map(compile_filter).transpose()?;
+            let name = tag.map(|(_, name)| name);
+            // Rendering on other threads pays where there are cores to spare and a whole file
+            // to read (a live input shows each record as it comes: rendered here).
+            let split = helpers > 0
+                && job.open.follow.is_none()
+                && file != "-"
+                && std::fs::metadata(file).is_ok_and(|m| m.is_file());
+            if !split {
+                let mut p = Pipeline::new(proto_of(job.proto), fmt);
+                if let Some(name) = name {
+                    p.set_file(name);
+                }
+                p.set_units(job.units.clone());
+                if let Some(t) = job.timeout {
+                    p.set_reply_timeout(t);
+                }
+                if let Some(f) = filter {
+                    p.set_filter(f);
+                }
+                let mut engine = Engine::Here(Box::new(p));
+                return lines(job, file, &mut engine, reader, format, &progress, out, bar);
             }
-            p.set_units(job.units.clone());
+            let mut dec = Decoder::new(proto_of(job.proto));
+            dec.set_units(job.units.clone());
             if let Some(t) = job.timeout {
-                p.set_reply_timeout(t);
+                dec.set_reply_timeout(t);
             }
-            if let Some(f) = job.filter {
-                let f = compile_filter(f)?;
-                p.set_filter(f);
-            }
-            let mut k = 0u32;
-            // Shared by `emit` and the flushes of a live input.
-            let out = RefCell::new(out);
-            let mut emit = |line: &str| -> io::Result<()> {
-                let mut o = out.borrow_mut();
-                o.write_all(line.as_bytes())?;
-                o.write_all(b"\n")
+            let look = Look {
+                fmt,
+                file: name,
+                filter: filter.as_ref(),
             };
-            let mut file_problems = 0u64;
-            // A forced protocol is checked against what detection would say of the input.
-            let mut probing = job.proto != ProtoArg::Auto;
-            let mut probe = Probe::default();
-            while let Some(ev) = reader.next_event() {
-                match &ev {
-                    Event::Diag(d) => {
-                        fatal(d)?;
-                        file_problems += 1;
-                    }
-                    Event::Chunk(c) if probing => probing = probe.add(c),
-                    _ => {}
+            let (work_tx, work_rx) = channel();
+            let work_rx = Mutex::new(work_rx);
+            let (done_tx, done_rx) = channel();
+            let (look, work_rx) = (&look, &work_rx);
+            std::thread::scope(|sc| {
+                for _ in 0..helpers {
+                    let done = done_tx.clone();
+                    sc.spawn(move || split::render_thread(look, work_rx, done));
                 }
-                ev.feed(&mut p, &mut emit)?;
-                // The input had nothing more just now (a pipe a live capture writes, a followed
-                // file): what it gave is shown now, each record as its bytes arrive.
-                let idle = progress.idle();
-                if idle {
-                    p.detect_if_certain(&mut emit)?;
+                drop(done_tx);
+                // Dropped when `lines` returns, however it ends: the render threads then stop.
+                let mut engine =
+                    Engine::Split(Box::new(Split::new(dec, helpers, work_tx, &done_rx)));
+                lines(job, file, &mut engine, reader, format, &progress, out, bar)
+            })
+        }
+    }
+}
+
+/// Decode one file into `out` (text or NDJSON) with `engine`.
+#[allow(clippy::too_many_arguments)]
+fn lines(
+    job: &Job<'_>,
+    file: &str,
+    engine: &mut Engine<'_>,
+    mut reader: Box<dyn Reader>,
+    format: aptscope_capture::open::Format,
+    progress: &Progress,
+    out: ChanWriter<'_>,
+    bar: &Bar,
+) -> io::Result<Stats> {
+    let held = out.held;
+    let mut seen = 0u64;
+    let mut k = 0u32;
+    let out = RefCell::new(out);
+    let mut file_problems = 0u64;
+    // A forced protocol is checked against what detection would say of the input.
+    let mut probing = job.proto != ProtoArg::Auto;
+    let mut probe = Probe::default();
+    while let Some(ev) = reader.next_event() {
+        match &ev {
+            Event::Diag(d) => {
+                if let Err(e) = fatal(d) {
+                    // What `-j 1` had written out before it is written out.
+                    engine.sync(&out)?;
+                    return Err(e.into());
                 }
-                if held.get() {
-                    if let Some(d) = p.detection() {
-                        if not_a_capture(format, d) {
-                            return Err(not_a_capture_error(d));
-                        }
-                        held.set(false);
-                    }
-                }
-                if idle && !held.get() {
-                    out.borrow_mut().flush()?;
-                }
-                k = k.wrapping_add(1);
-                if k.is_multiple_of(256) {
-                    bar.tick(&progress, &mut seen);
-                }
+                file_problems += 1;
             }
-            p.finish(&mut emit)?;
-            if let Some(d) = p.detection().filter(|_| held.get()) {
+            Event::Chunk(c) if probing => probing = probe.add(c),
+            _ => {}
+        }
+        engine.feed(&ev, &out)?;
+        // The input had nothing more just now (a pipe a live capture writes, a followed
+        // file): what it gave is shown now, each record as its bytes arrive.
+        let idle = progress.idle();
+        if idle {
+            engine.detect_if_certain(&out)?;
+        }
+        if held.get() {
+            if let Some(d) = engine.decoder().detection() {
                 if not_a_capture(format, d) {
                     return Err(not_a_capture_error(d));
                 }
+                // What was rendered while held is held as `-j 1` held it.
+                engine.sync(&out)?;
+                held.set(false);
             }
-            held.set(false);
-            if let Some(forced) = proto_of(job.proto) {
-                if let Some(note) = forced_note(forced, &probe.sample) {
-                    bar.note(&format!("aptscope: {file}: {note}"));
-                }
-            }
-            // A forced protocol decodes whatever the input holds (the note above says what
-            // detection thinks of it).
-            let refused = refuse(p.decoder(), format, file_problems);
-            if let Some(e) = refused.filter(|_| job.proto == ProtoArg::Auto) {
-                out.borrow_mut().flush()?;
-                return Err(e);
-            }
-            bar.tick(&progress, &mut seen);
+        }
+        if idle && !held.get() {
+            engine.sync(&out)?;
             out.borrow_mut().flush()?;
-            Ok(Stats::default())
+        }
+        k = k.wrapping_add(1);
+        if k.is_multiple_of(256) {
+            bar.tick(progress, &mut seen);
         }
     }
+    engine.finish(&out)?;
+    if let Some(d) = engine.decoder().detection().filter(|_| held.get()) {
+        if not_a_capture(format, d) {
+            return Err(not_a_capture_error(d));
+        }
+    }
+    held.set(false);
+    if let Some(forced) = proto_of(job.proto) {
+        if let Some(note) = forced_note(forced, &probe.sample) {
+            bar.note(&format!("aptscope: {file}: {note}"));
+        }
+    }
+    // A forced protocol decodes whatever the input holds (the note above says what
+    // detection thinks of it).
+    let refused = refuse(engine.decoder(), format, file_problems);
+    if let Some(e) = refused.filter(|_| job.proto == ProtoArg::Auto) {
+        out.borrow_mut().flush()?;
+        return Err(e);
+    }
+    bar.tick(progress, &mut seen);
+    out.borrow_mut().flush()?;
+    Ok(Stats::default())
 }
 
 /// The first [`SAMPLE`] bytes of the first chunk's stream and direction (detection judges one

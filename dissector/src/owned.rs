@@ -1,0 +1,273 @@
+//! Records that outlive the [`Decoder`](crate::record::Decoder)'s callback: a [`Batch`] keeps a
+//! run of records in an owned, compact form and hands them back as [`Record`]s, equal to those it
+//! was given, on another thread or later.
+//!
+//! Frames keep their bytes (copied into one buffer per batch) and what the stateful part of the
+//! chain learnt about them (number, time, pairing, units, the Elliptec module); the typed frame
+//! itself is decoded again from its bytes when the record is read back, which is pure and costs
+//! less than copying it out of the decoder (a decoded frame borrows the framer's buffer). So the
+//! sequential part of a decode (framing, pairing, units, numbering) can run on one thread while
+//! others render what it found.
+
+use crate::apt::{AptFrame, GarbageKind};
+use crate::detect::{Detection, Proto};
+use crate::diag::{Diag, DiagKind};
+use crate::ell::{EllFrame, Observation};
+use crate::pair::PairInfo;
+use crate::record::{AptRec, EllRec, GarbageRec, Meta, NoReply, Record};
+use crate::units::{Notice, Scale};
+use crate::Table;
+
+/// A run of records, owned.
+#[derive(Default)]
+pub struct Batch {
+    /// The bytes of every frame and garbage run, one after the other.
+    bytes: Vec<u8>,
+    recs: Vec<Owned>,
+    /// The distinct conversions the frames refer to (by index).
+    scales: Vec<Scale>,
+}
+
+/// Where a frame's or garbage run's bytes are in [`Batch::bytes`].
+#[derive(Clone, Copy)]
+struct Span {
+    at: usize,
+    len: usize,
+}
+
+enum Owned {
+    Detect {
+        proto: Proto,
+        detection: Detection,
+        sample: usize,
+    },
+    Stream {
+        id: u32,
+        name: String,
+        settings: Option<String>,
+    },
+    Input(Diag),
+    FileDiag {
+        offset: u64,
+        kind: String,
+        msg: String,
+    },
+    Units(Box<Notice>),
+    Apt {
+        meta: Meta,
+        offset: u64,
+        span: Span,
+        truncated: bool,
+        pair: PairInfo,
+        scale: Option<usize>,
+    },
+    Ell {
+        meta: Meta,
+        offset: u64,
+        span: Span,
+        truncated: bool,
+        obs: Observation,
+    },
+    Garbage {
+        meta: Meta,
+        proto: Proto,
+        offset: u64,
+        span: Span,
+        kind: Option<GarbageKind>,
+    },
+    NoReply(NoReply),
+}
+
+impl Batch {
+    /// An empty batch.
+    pub fn new() -> Batch {
+        Batch::default()
+    }
+
+    /// Records held.
+    pub fn len(&self) -> usize {
+        self.recs.len()
+    }
+
+    /// Whether it holds no record.
+    pub fn is_empty(&self) -> bool {
+        self.recs.is_empty()
+    }
+
+    /// Bytes of frames and garbage held (with [`len`](Self::len), what says a batch is full).
+    pub fn byte_len(&self) -> usize {
+        self.bytes.len()
+    }
+
+    fn keep_bytes(&mut self, b: &[u8]) -> Span {
+        let at = self.bytes.len();
+        self.bytes.extend_from_slice(b);
+        Span { at, len: b.len() }
+    }
+
+    /// Keep a copy of `rec`.
+    pub fn push(&mut self, rec: &Record<'_>) {
+        let o = match rec {
+            Record::Detect {
+                proto,
+                detection,
+                sample,
+            } => Owned::Detect {
+                proto: *proto,
+                detection: *detection,
+                sample: *sample,
+            },
+            Record::Stream { id, name, settings } => Owned::Stream {
+                id: *id,
+                name: name.to_string(),
+                settings: settings.map(str::to_string),
+            },
+            Record::Input(d) => Owned::Input(*d),
+            Record::FileDiag { offset, kind, msg } => Owned::FileDiag {
+                offset: *offset,
+                kind: kind.to_string(),
+                msg: msg.to_string(),
+            },
+            Record::Units(n) => Owned::Units(Box::new((*n).clone())),
+            Record::Apt(a) => {
+                // The conversion of a device changes rarely: frames in a row share one copy
+                // (equal revisions are equal scales).
+                let scale = a.scale.map(|s| match self.scales.last() {
+                    Some(l) if l.revision() == s.revision() => self.scales.len() - 1,
+                    _ => {
+                        self.scales.push(s.clone());
+                        self.scales.len() - 1
+                    }
+                });
+                let truncated = a.frame.has_diags()
+                    && a.frame
+                        .diags()
+                        .any(|d| matches!(d.kind, DiagKind::Truncated { .. }));
+                Owned::Apt {
+                    meta: a.meta,
+                    offset: a.frame.offset,
+                    span: self.keep_bytes(a.frame.bytes),
+                    truncated,
+                    pair: a.pair.clone(),
+                    scale,
+                }
+            }
+            Record::Ell(e) => Owned::Ell {
+                meta: e.meta,
+                offset: e.frame.offset,
+                span: self.keep_bytes(e.frame.bytes),
+                truncated: e
+                    .frame
+                    .diags()
+                    .iter()
+                    .any(|d| matches!(d.kind, DiagKind::Truncated { .. })),
+                obs: e.obs.clone(),
+            },
+            Record::Garbage(g) => Owned::Garbage {
+                meta: g.meta,
+                proto: g.proto,
+                offset: g.offset,
+                span: self.keep_bytes(g.bytes),
+                kind: g.kind,
+            },
+            Record::NoReply(n) => Owned::NoReply(*n),
+        };
+        self.recs.push(o);
+    }
+
+    /// Pass each record, in order and as it was pushed, to `f`; stops at its first error.
+    pub fn for_each<E>(&self, f: &mut impl FnMut(&Record<'_>) -> Result<(), E>) -> Result<(), E> {
+        let bytes = |s: &Span| self.bytes.get(s.at..s.at + s.len).unwrap_or_default();
+        for o in &self.recs {
+            match o {
+                Owned::Detect {
+                    proto,
+                    detection,
+                    sample,
+                } => f(&Record::Detect {
+                    proto: *proto,
+                    detection: *detection,
+                    sample: *sample,
+                })?,
+                Owned::Stream { id, name, settings } => f(&Record::Stream {
+                    id: *id,
+                    name,
+                    settings: settings.as_deref(),
+                })?,
+                Owned::Input(d) => f(&Record::Input(*d))?,
+                Owned::FileDiag { offset, kind, msg } => f(&Record::FileDiag {
+                    offset: *offset,
+                    kind,
+                    msg,
+                })?,
+                Owned::Units(n) => f(&Record::Units(n))?,
+                Owned::Apt {
+                    meta,
+                    offset,
+                    span,
+                    truncated,
+                    pair,
+                    scale,
+                } => {
+                    // It decoded when it was pushed, and decoding is pure.
+                    let Some(frame) =
+                        AptFrame::decode(Table::global(), *offset, bytes(span), *truncated)
+                    else {
+                        continue;
+                    };
+                    f(&Record::Apt(AptRec {
+                        meta: *meta,
+                        frame: &frame,
+                        pair,
+                        scale: scale.and_then(|i| self.scales.get(i)),
+                    }))?
+                }
+                Owned::Ell {
+                    meta,
+                    offset,
+                    span,
+                    truncated,
+                    obs,
+                } => {
+                    let Some(mut frame) = EllFrame::decode(*offset, bytes(span), *truncated) else {
+                        continue;
+                    };
+                    // As the decoder adds it (see record.rs, EllSide::frame).
+                    if obs.unsolicited {
+                        frame.push_diag(Diag {
+                            offset: *offset,
+                            kind: DiagKind::Unsolicited,
+                        });
+                    }
+                    f(&Record::Ell(EllRec {
+                        meta: *meta,
+                        frame: &frame,
+                        obs,
+                    }))?
+                }
+                Owned::Garbage {
+                    meta,
+                    proto,
+                    offset,
+                    span,
+                    kind,
+                } => f(&Record::Garbage(GarbageRec {
+                    meta: *meta,
+                    proto: *proto,
+                    offset: *offset,
+                    bytes: bytes(span),
+                    kind: *kind,
+                }))?,
+                Owned::NoReply(n) => f(&Record::NoReply(*n))?,
+            }
+        }
+        Ok(())
+    }
+
+    /// Empty it, keeping its buffers.
+    pub fn clear(&mut self) {
+        self.bytes.clear();
+        self.recs.clear();
+        self.scales.clear();
+    }
+}
