@@ -27,11 +27,13 @@ use std::io::{self, Write};
 use std::sync::mpsc::{Receiver, Sender};
 use std::sync::Mutex;
 
-/// Records per batch: enough that handing a batch over costs little beside rendering it, few
-/// enough that its records and lines (≈ 80 KiB of NDJSON) stay in the caches between the
-/// threads. Measured on 30 MB of random frames, `--json -j 2`, CPU time against `-j 1`:
-/// +40 % with batches of 4096 records, +25 % with 1024, +20 % with 64 to 256.
-const BATCH_RECORDS: usize = 256;
+/// Records per batch: enough that handing a batch over costs little beside rendering it.
+/// Measured on 30 MB of random frames, `--json -j 2`, CPU time against `-j 1`, on a machine
+/// at load 15: +40 % with batches of 4096 records, +25 % with 1024, +20 % with 64 to 256; but
+/// on a quiet one (load 2, 100 MB, 5 alternating runs) 2048 records took 0.94× the wall time
+/// of 256 and 0.98× the CPU (at 28 MiB peak instead of 15): when the cores are free, fewer
+/// hand-overs matter more than the caches.
+const BATCH_RECORDS: usize = 2048;
 
 /// Bytes of frames and garbage per batch at most (long garbage runs).
 const BATCH_BYTES: usize = 1 << 18;
