@@ -1,4 +1,6 @@
-//! Column buffers: rows of [`V`] values in, Arrow arrays out.
+//! Column buffers: typed values put straight into Arrow builders, one row at a time, and
+//! Arrow arrays out. No cell per value in between (building, matching and dropping a row of
+//! cells was a third of the writer's instructions).
 
 use arrow_array::builder::{
     BinaryBuilder, Float32Builder, Float64Builder, Int16Builder, Int32Builder, Int64Builder,
@@ -7,34 +9,8 @@ use arrow_array::builder::{
 };
 use arrow_array::{ArrayRef, RecordBatch};
 use arrow_schema::{ArrowError, DataType, Field, SchemaRef};
-use std::borrow::Cow;
+use std::fmt::{self, Write as _};
 use std::sync::Arc;
-
-/// One cell.
-#[derive(Debug, Clone, Default)]
-pub enum V<'a> {
-    /// Null.
-    #[default]
-    Null,
-    /// Signed integer.
-    I(i64),
-    /// Unsigned integer.
-    U(u64),
-    /// Float.
-    F(f64),
-    /// Text.
-    S(Cow<'a, str>),
-    /// Bytes.
-    B(&'a [u8]),
-    /// A list of names.
-    ListS(Vec<&'a str>),
-    /// A list of integers.
-    ListI(Vec<i64>),
-    /// A list of floats.
-    ListF(Vec<f64>),
-    /// Diagnostics: kind, offset, message.
-    Diags(Vec<(Cow<'a, str>, u64, String)>),
-}
 
 /// A column being built, in its own Arrow type (values stored at their width, no conversion
 /// when the batch is taken).
@@ -62,34 +38,7 @@ fn item(dt: DataType) -> Arc<Field> {
     Arc::new(Field::new("item", dt, true))
 }
 
-/// A value for a signed column (an unsigned one beyond i64 is null).
-fn signed(v: &V<'_>) -> Option<i64> {
-    match *v {
-        V::I(i) => Some(i),
-        V::U(u) => i64::try_from(u).ok(),
-        _ => None,
-    }
-}
-
-/// A value for an unsigned column (a negative one is null).
-fn unsigned(v: &V<'_>) -> Option<u64> {
-    match *v {
-        V::U(u) => Some(u),
-        V::I(i) => u64::try_from(i).ok(),
-        _ => None,
-    }
-}
-
-fn float(v: &V<'_>) -> Option<f64> {
-    match *v {
-        V::F(f) => Some(f),
-        V::I(i) => Some(i as f64),
-        V::U(u) => Some(u as f64),
-        _ => None,
-    }
-}
-
-/// Append `x` (or null) to builder `b`, cast to the column's width as before (`as`).
+/// Append `x` (or null) to builder `b`, cast to the column's width (`as`).
 macro_rules! put {
     ($b:expr, $x:expr, $t:ty) => {
         match $x {
@@ -137,80 +86,111 @@ impl Buf {
         }
     }
 
-    fn push(&mut self, v: &V<'_>) {
+    /// No value in this row: null (an empty list for the diagnostics, which are never null).
+    fn null(&mut self) {
         match self {
-            Buf::I8(b) => put!(b, signed(v), i8),
-            Buf::I16(b) => put!(b, signed(v), i16),
-            Buf::I32(b) => put!(b, signed(v), i32),
-            Buf::I64(b) => put!(b, signed(v), i64),
-            Buf::U8(b) => put!(b, unsigned(v), u8),
-            Buf::U16(b) => put!(b, unsigned(v), u16),
-            Buf::U32(b) => put!(b, unsigned(v), u32),
-            Buf::U64(b) => put!(b, unsigned(v), u64),
-            Buf::F32(b) => put!(b, float(v), f32),
-            Buf::F64(b) => put!(b, float(v), f64),
-            Buf::Ts(b) => put!(
-                b,
-                match *v {
-                    V::U(u) => i64::try_from(u).ok(),
-                    V::I(i) => Some(i),
-                    _ => None,
-                },
-                i64
-            ),
-            Buf::Str(b) => match v {
-                V::S(s) => b.append_value(s),
-                V::I(i) => b.append_value(i.to_string()),
-                V::U(u) => b.append_value(u.to_string()),
-                V::F(f) => b.append_value(f.to_string()),
-                _ => b.append_null(),
-            },
-            Buf::Bin(b) => match v {
-                V::B(s) => b.append_value(s),
-                _ => b.append_null(),
-            },
-            Buf::ListS(b) => match v {
-                V::ListS(l) => {
-                    for s in l {
-                        b.values().append_value(s);
-                    }
-                    b.append(true);
-                }
-                _ => b.append(false),
-            },
-            Buf::ListI(b) => match v {
-                V::ListI(l) => {
-                    b.values().append_slice(l);
-                    b.append(true);
-                }
-                _ => b.append(false),
-            },
-            Buf::ListF(b) => match v {
-                V::ListF(l) => {
-                    b.values().append_slice(l);
-                    b.append(true);
-                }
-                _ => b.append(false),
-            },
-            Buf::Diags(b) => {
-                // Never null: no diagnostics is an empty list.
-                if let V::Diags(ds) = v {
-                    let s = b.values();
-                    for (kind, offset, msg) in ds {
-                        if let Some(k) = s.field_builder::<StringBuilder>(0) {
-                            k.append_value(kind);
-                        }
-                        if let Some(o) = s.field_builder::<UInt64Builder>(1) {
-                            o.append_value(*offset);
-                        }
-                        if let Some(m) = s.field_builder::<StringBuilder>(2) {
-                            m.append_value(msg);
-                        }
-                        s.append(true);
-                    }
-                }
-                b.append(true);
+            Buf::I8(b) => b.append_null(),
+            Buf::I16(b) => b.append_null(),
+            Buf::I32(b) => b.append_null(),
+            Buf::I64(b) => b.append_null(),
+            Buf::U8(b) => b.append_null(),
+            Buf::U16(b) => b.append_null(),
+            Buf::U32(b) => b.append_null(),
+            Buf::U64(b) => b.append_null(),
+            Buf::F32(b) => b.append_null(),
+            Buf::F64(b) => b.append_null(),
+            Buf::Ts(b) => b.append_null(),
+            Buf::Str(b) => b.append_null(),
+            Buf::Bin(b) => b.append_null(),
+            Buf::ListS(b) => b.append(false),
+            Buf::ListI(b) => b.append(false),
+            Buf::ListF(b) => b.append(false),
+            // The elements were put as they came ([`TableBuf::diag`]): this closes the list.
+            Buf::Diags(b) => b.append(true),
+        }
+    }
+
+    /// A signed value (an unsigned column takes a negative one as null).
+    fn int(&mut self, v: i64) {
+        match self {
+            Buf::I8(b) => b.append_value(v as i8),
+            Buf::I16(b) => b.append_value(v as i16),
+            Buf::I32(b) => b.append_value(v as i32),
+            Buf::I64(b) => b.append_value(v),
+            Buf::U8(b) => put!(b, u64::try_from(v).ok(), u8),
+            Buf::U16(b) => put!(b, u64::try_from(v).ok(), u16),
+            Buf::U32(b) => put!(b, u64::try_from(v).ok(), u32),
+            Buf::U64(b) => put!(b, u64::try_from(v).ok(), u64),
+            // Through f64, as the cells were: `as f32` of a large integer rounds otherwise.
+            Buf::F32(b) => b.append_value(v as f64 as f32),
+            Buf::F64(b) => b.append_value(v as f64),
+            Buf::Ts(b) => b.append_value(v),
+            Buf::Str(b) => {
+                let _ = write!(b, "{v}");
+                b.append_value("");
             }
+            _ => self.null(),
+        }
+    }
+
+    /// An unsigned value (a signed column takes one beyond i64 as null).
+    fn uint(&mut self, v: u64) {
+        match self {
+            Buf::I8(b) => put!(b, i64::try_from(v).ok(), i8),
+            Buf::I16(b) => put!(b, i64::try_from(v).ok(), i16),
+            Buf::I32(b) => put!(b, i64::try_from(v).ok(), i32),
+            Buf::I64(b) => put!(b, i64::try_from(v).ok(), i64),
+            Buf::U8(b) => b.append_value(v as u8),
+            Buf::U16(b) => b.append_value(v as u16),
+            Buf::U32(b) => b.append_value(v as u32),
+            Buf::U64(b) => b.append_value(v),
+            Buf::F32(b) => b.append_value(v as f64 as f32),
+            Buf::F64(b) => b.append_value(v as f64),
+            Buf::Ts(b) => put!(b, i64::try_from(v).ok(), i64),
+            Buf::Str(b) => {
+                let _ = write!(b, "{v}");
+                b.append_value("");
+            }
+            _ => self.null(),
+        }
+    }
+
+    /// A float (null in an integer column).
+    fn float(&mut self, v: f64) {
+        match self {
+            Buf::F32(b) => b.append_value(v as f32),
+            Buf::F64(b) => b.append_value(v),
+            Buf::Str(b) => {
+                let _ = write!(b, "{v}");
+                b.append_value("");
+            }
+            _ => self.null(),
+        }
+    }
+
+    /// Text (null in a column of another type).
+    fn text(&mut self, v: &str) {
+        match self {
+            Buf::Str(b) => b.append_value(v),
+            _ => self.null(),
+        }
+    }
+
+    /// Text written by `Display`, straight into the column.
+    fn text_fmt(&mut self, v: fmt::Arguments<'_>) {
+        match self {
+            Buf::Str(b) => {
+                let _ = b.write_fmt(v);
+                b.append_value("");
+            }
+            _ => self.null(),
+        }
+    }
+
+    fn bytes(&mut self, v: &[u8]) {
+        match self {
+            Buf::Bin(b) => b.append_value(v),
+            _ => self.null(),
         }
     }
 
@@ -237,10 +217,14 @@ impl Buf {
     }
 }
 
-/// The rows of one table not yet written.
+/// The rows of one table not yet written. A row is made by putting each column's value (by
+/// index in the schema; a column put twice in a row keeps the first) and ending it with
+/// [`TableBuf::end_row`], which makes the columns not put null.
 pub struct TableBuf {
     schema: SchemaRef,
     bufs: Vec<Buf>,
+    /// Columns put in the row being made.
+    set: Vec<bool>,
     rows: usize,
 }
 
@@ -249,13 +233,14 @@ impl TableBuf {
     pub fn new(schema: SchemaRef) -> Self {
         // Small to start with: hundreds of kind tables may be open with a few rows each (the
         // builders' default, 1024 values a column, was 8 KiB a column before any row).
-        let bufs = schema
+        let bufs: Vec<Buf> = schema
             .fields()
             .iter()
             .map(|f| Buf::new(f.data_type(), 64))
             .collect();
         TableBuf {
             schema,
+            set: vec![false; bufs.len()],
             bufs,
             rows: 0,
         }
@@ -266,10 +251,124 @@ impl TableBuf {
         self.rows
     }
 
-    /// Append a row (one value per column, in schema order; missing ones are null).
-    pub fn push(&mut self, row: &[V<'_>]) {
-        for (i, b) in self.bufs.iter_mut().enumerate() {
-            b.push(row.get(i).unwrap_or(&V::Null));
+    /// Column `i` if it has no value in this row yet.
+    fn col(&mut self, i: usize) -> Option<&mut Buf> {
+        let s = self.set.get_mut(i)?;
+        if *s {
+            return None;
+        }
+        *s = true;
+        self.bufs.get_mut(i)
+    }
+
+    /// A signed integer.
+    pub fn int(&mut self, i: usize, v: i64) {
+        if let Some(b) = self.col(i) {
+            b.int(v);
+        }
+    }
+
+    /// An unsigned integer.
+    pub fn uint(&mut self, i: usize, v: u64) {
+        if let Some(b) = self.col(i) {
+            b.uint(v);
+        }
+    }
+
+    /// A float.
+    pub fn float(&mut self, i: usize, v: f64) {
+        if let Some(b) = self.col(i) {
+            b.float(v);
+        }
+    }
+
+    /// Text.
+    pub fn text(&mut self, i: usize, v: &str) {
+        if let Some(b) = self.col(i) {
+            b.text(v);
+        }
+    }
+
+    /// Text made by formatting (`format_args!`), without a `String` in between.
+    pub fn text_fmt(&mut self, i: usize, v: fmt::Arguments<'_>) {
+        if let Some(b) = self.col(i) {
+            b.text_fmt(v);
+        }
+    }
+
+    /// Bytes.
+    pub fn bytes(&mut self, i: usize, v: &[u8]) {
+        if let Some(b) = self.col(i) {
+            b.bytes(v);
+        }
+    }
+
+    /// A list of names (null in a column of another type).
+    pub fn list_text<'a>(&mut self, i: usize, v: impl Iterator<Item = &'a str>) {
+        if let Some(b) = self.col(i) {
+            match b {
+                Buf::ListS(l) => {
+                    for s in v {
+                        l.values().append_value(s);
+                    }
+                    l.append(true);
+                }
+                b => b.null(),
+            }
+        }
+    }
+
+    /// A list of integers.
+    pub fn list_num(&mut self, i: usize, ints: impl Iterator<Item = i64>) {
+        if let Some(b) = self.col(i) {
+            match b {
+                Buf::ListI(l) => {
+                    l.values().extend(ints.map(Some));
+                    l.append(true);
+                }
+                b => b.null(),
+            }
+        }
+    }
+
+    /// A list of floats.
+    pub fn list_float(&mut self, i: usize, v: impl Iterator<Item = f64>) {
+        if let Some(b) = self.col(i) {
+            match b {
+                Buf::ListF(l) => {
+                    l.values().extend(v.map(Some));
+                    l.append(true);
+                }
+                b => b.null(),
+            }
+        }
+    }
+
+    /// One element of the diagnostics column `i` (the list is closed by [`Self::end_row`]).
+    pub fn diag(&mut self, i: usize, kind: &str, offset: u64, msg: &dyn fmt::Display) {
+        let Some(Buf::Diags(b)) = self.bufs.get_mut(i) else {
+            return;
+        };
+        let s = b.values();
+        if let Some(k) = s.field_builder::<StringBuilder>(0) {
+            k.append_value(kind);
+        }
+        if let Some(o) = s.field_builder::<UInt64Builder>(1) {
+            o.append_value(offset);
+        }
+        if let Some(m) = s.field_builder::<StringBuilder>(2) {
+            let _ = write!(m, "{msg}");
+            m.append_value("");
+        }
+        s.append(true);
+    }
+
+    /// End the row: the columns not put are null.
+    pub fn end_row(&mut self) {
+        for (b, s) in self.bufs.iter_mut().zip(self.set.iter_mut()) {
+            if !std::mem::take(s) {
+                b.null();
+            }
         }
         self.rows += 1;
     }

@@ -24,7 +24,6 @@ mod buf;
 mod file;
 pub mod schema;
 
-pub use buf::V;
 pub use file::{decode_file, not_a_capture, not_a_capture_error, DecodeOpts};
 
 use aptscope_dissector::apt::phys_or_scaled;
@@ -43,7 +42,6 @@ use parquet::basic::Compression;
 use parquet::file::properties::{EnabledStatistics, WriterProperties};
 use parquet::schema::types::ColumnPath;
 use schema::{Fill, KindSchema, Kinds, RECORDS};
-use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap};
 use std::io;
 use std::path::{Path, PathBuf};
@@ -76,7 +74,7 @@ impl Default for Options {
 /// the text columns (names, labels, units: few distinct values); numbers, times and raw bytes
 /// are mostly distinct, and hashing each value for a dictionary that overflows was a sixth of
 /// the writer's time.
-fn props(rows: usize, schema: &Schema) -> WriterProperties {
+pub fn writer_properties(rows: usize, schema: &Schema) -> WriterProperties {
     let mut b = WriterProperties::builder()
         .set_compression(Compression::SNAPPY)
         .set_max_row_group_row_count(Some(rows.max(1)))
@@ -132,7 +130,7 @@ impl Sink for DirSink {
         if !self.props.contains_key(table) {
             std::fs::create_dir_all(&dir)
                 .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", dir.display())))?;
-            let p = props(self.rows, &batch.schema());
+            let p = writer_properties(self.rows, &batch.schema());
             self.props.insert(table.to_string(), p);
         }
         let props = self.props.get(table).cloned();
@@ -177,7 +175,7 @@ impl MemSink {
 impl Sink for MemSink {
     fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
         if !self.tables.contains_key(table) {
-            let p = props(self.rows, &batch.schema());
+            let p = writer_properties(self.rows, &batch.schema());
             let w = ArrowWriter::try_new(Vec::new(), batch.schema(), Some(p)).map_err(perr)?;
             self.tables.insert(table.to_string(), w);
         }
@@ -241,6 +239,8 @@ struct Open {
     buf: TableBuf,
     part: u32,
     used: u64,
+    /// The kind table's name (empty for `records`).
+    name: String,
 }
 
 /// Writes one capture's records as rows (see the crate documentation).
@@ -249,6 +249,8 @@ pub struct CaptureWriter<S: Sink> {
     file: Arc<str>,
     opts: Options,
     records: Open,
+    /// Kind tables buffering rows, by name (the order of this map picks which of equally big
+    /// ones is written first: keyed otherwise, the part files would be cut elsewhere).
     kinds: NumMap<String, Open>,
     /// Part numbers of kind tables flushed and closed, to continue from when they reopen.
     parts: HashMap<String, u32>,
@@ -262,23 +264,53 @@ pub struct CaptureWriter<S: Sink> {
     kind_rows: usize,
 }
 
-fn diag_v(d: &Diag) -> (Cow<'static, str>, u64, String) {
-    (Cow::Borrowed(d.kind.name()), d.offset, d.kind.to_string())
+/// Columns of `records`, in schema order.
+mod col {
+    pub const FILE: usize = 0;
+    pub const STREAM: usize = 1;
+    pub const N: usize = 2;
+    pub const TS: usize = 3;
+    pub const TIME: usize = 4;
+    pub const REL: usize = 5;
+    pub const DIR: usize = 6;
+    pub const PROTO: usize = 7;
+    pub const TYPE: usize = 8;
+    pub const OFFSET: usize = 9;
+    pub const MSGID: usize = 10;
+    pub const NAME: usize = 11;
+    pub const SUB: usize = 12;
+    pub const CODE: usize = 13;
+    pub const KIND: usize = 14;
+    pub const SRC: usize = 15;
+    pub const DST: usize = 16;
+    pub const CHANNEL: usize = 17;
+    pub const LEN: usize = 18;
+    pub const RAW: usize = 19;
+    pub const DIAGS: usize = 20;
+    pub const PAIR: usize = 21;
+    pub const LATENCY: usize = 22;
+    pub const REF: usize = 23;
+    pub const DETAIL: usize = 24;
 }
 
-fn dir_v(d: Option<Dir>) -> V<'static> {
+/// The `dir` column: null for both directions or none.
+fn put_dir(b: &mut TableBuf, d: Option<Dir>) {
     match d {
-        Some(Dir::Both) | None => V::Null,
-        Some(d) => V::S(Cow::Borrowed(d.as_str())),
+        Some(Dir::Both) | None => {}
+        Some(d) => b.text(col::DIR, d.as_str()),
     }
 }
 
-fn opt_u(x: Option<u64>) -> V<'static> {
-    x.map_or(V::Null, V::U)
+fn put_opt_u(b: &mut TableBuf, i: usize, x: Option<u64>) {
+    if let Some(x) = x {
+        b.uint(i, x);
+    }
 }
 
-fn s(x: &str) -> V<'_> {
-    V::S(Cow::Borrowed(x))
+/// One diagnostic into the `diagnostics` column; counts it.
+fn put_diag(b: &mut TableBuf, n: &mut u64, d: &Diag) {
+    b.diag(col::DIAGS, d.kind.name(), d.offset, &d.kind);
+    *n += 1;
 }
 
 impl<S: Sink> CaptureWriter<S> {
@@ -292,6 +324,7 @@ impl<S: Sink> CaptureWriter<S> {
                 buf: TableBuf::new(schema::records_schema()),
                 part: 0,
                 used: 0,
+                name: RECORDS.to_string(),
             },
             kinds: NumMap::default(),
             parts: HashMap::new(),
@@ -305,141 +338,136 @@ impl<S: Sink> CaptureWriter<S> {
 
     /// Add one record.
     pub fn record(&mut self, rec: &Record<'_>) -> io::Result<()> {
+        use col::*;
         let (kname, kind) = self.kind_of(rec);
-        // Columns of `records`, in schema order.
-        let file = self.file.clone();
-        let mut row: [V<'_>; 25] = Default::default();
-        row[0] = s(&file);
-        const STREAM: usize = 1;
-        const N: usize = 2;
-        const TS: usize = 3;
-        const TIME: usize = 4;
-        const REL: usize = 5;
-        const DIR: usize = 6;
-        const PROTO: usize = 7;
-        const TYPE: usize = 8;
-        const OFFSET: usize = 9;
-        const MSGID: usize = 10;
-        const NAME: usize = 11;
-        const SUB: usize = 12;
-        const CODE: usize = 13;
-        const KIND: usize = 14;
-        const SRC: usize = 15;
-        const DST: usize = 16;
-        const CHANNEL: usize = 17;
-        const LEN: usize = 18;
-        const RAW: usize = 19;
-        const DIAGS: usize = 20;
-        const PAIR: usize = 21;
-        const LATENCY: usize = 22;
-        const REF: usize = 23;
-        const DETAIL: usize = 24;
-        row[DIAGS] = V::Diags(vec![]);
+        let b = &mut self.records.buf;
+        let sum = &mut self.summary;
+        b.text(FILE, &self.file);
         if let Some(m) = rec.meta() {
-            row[STREAM] = V::U(m.stream as u64);
-            row[N] = V::U(m.n);
-            row[TS] = opt_u(m.ts_ns);
-            row[TIME] = opt_u(m.ts_ns);
-            row[REL] = m.rel_s.map_or(V::Null, V::F);
+            b.uint(STREAM, m.stream as u64);
+            b.uint(N, m.n);
+            put_opt_u(b, TS, m.ts_ns);
+            put_opt_u(b, TIME, m.ts_ns);
+            if let Some(r) = m.rel_s {
+                b.float(REL, r);
+            }
         }
-        let mut diags: Vec<(Cow<'_, str>, u64, String)> = vec![];
         match rec {
             Record::Detect {
                 proto, detection, ..
             } => {
-                row[TYPE] = s("detect");
-                row[PROTO] = s(proto.code());
-                row[DETAIL] = V::S(Cow::Owned(format!(
-                    "{} apt={:.3} ell={:.3}",
-                    if detection.proto.is_some() {
-                        "certain"
-                    } else {
-                        "best guess"
-                    },
-                    detection.apt,
-                    detection.elliptec
-                )));
+                b.text(TYPE, "detect");
+                b.text(PROTO, proto.code());
+                b.text_fmt(
+                    DETAIL,
+                    format_args!(
+                        "{} apt={:.3} ell={:.3}",
+                        if detection.proto.is_some() {
+                            "certain"
+                        } else {
+                            "best guess"
+                        },
+                        detection.apt,
+                        detection.elliptec
+                    ),
+                );
             }
             Record::Stream { id, name, settings } => {
-                row[TYPE] = s("stream");
-                row[STREAM] = V::U(*id as u64);
-                row[DETAIL] = V::S(match settings {
-                    Some(x) => Cow::Owned(format!("{name} ({x})")),
-                    None => Cow::Borrowed(name),
-                });
+                b.text(TYPE, "stream");
+                // A stream record has no meta: its id is the stream column.
+                b.uint(STREAM, *id as u64);
+                match settings {
+                    Some(x) => b.text_fmt(DETAIL, format_args!("{name} ({x})")),
+                    None => b.text(DETAIL, name),
+                }
             }
             Record::Input(d) => {
-                row[TYPE] = s("input");
-                row[OFFSET] = V::U(d.offset);
-                diags.push(diag_v(d));
+                b.text(TYPE, "input");
+                b.uint(OFFSET, d.offset);
+                put_diag(b, &mut sum.diagnostics, d);
             }
             Record::FileDiag { offset, kind, msg } => {
-                row[TYPE] = s("input");
-                row[OFFSET] = V::U(*offset);
-                diags.push((Cow::Borrowed(kind), *offset, msg.to_string()));
+                b.text(TYPE, "input");
+                b.uint(OFFSET, *offset);
+                b.diag(DIAGS, kind, *offset, msg);
+                sum.diagnostics += 1;
             }
             Record::Units(nt) => {
-                row[TYPE] = s("units");
-                row[PROTO] = s("apt");
-                row[STREAM] = V::U(nt.stream as u64);
+                b.text(TYPE, "units");
+                b.text(PROTO, "apt");
+                b.uint(STREAM, nt.stream as u64);
                 let mut d = String::new();
                 json::units_notice(&mut d, nt);
-                row[DETAIL] = V::S(Cow::Owned(d));
+                b.text(DETAIL, &d);
             }
             Record::Apt(a) => {
                 let f = a.frame;
                 let h = f.header();
-                row[TYPE] = s("frame");
-                row[PROTO] = s("apt");
-                row[DIR] = dir_v(a.dir());
-                row[OFFSET] = V::U(f.offset);
-                row[MSGID] = V::U(h.msg_id() as u64);
+                b.text(TYPE, "frame");
+                b.text(PROTO, "apt");
+                put_dir(b, a.dir());
+                b.uint(OFFSET, f.offset);
+                b.uint(MSGID, h.msg_id() as u64);
                 if let Some(m) = f.msg {
-                    row[NAME] = s(m.name);
-                    row[KIND] = kname.as_deref().map_or(V::Null, s);
+                    b.text(NAME, m.name);
+                    if let Some(k) = kname.as_deref() {
+                        b.text(KIND, k);
+                    }
                 }
                 if let Some(x) = f.sub {
-                    row[SUB] = s(x.name);
+                    b.text(SUB, x.name);
                 }
-                row[SRC] = V::U(h.src().byte() as u64);
-                row[DST] = V::U(h.dst().byte() as u64);
-                row[CHANNEL] = f.channel().map_or(V::Null, V::I);
-                row[LEN] = V::U(f.bytes.len() as u64);
-                row[RAW] = V::B(f.bytes);
-                diags.extend(f.diags().chain(a.pair.diags(f.offset)).map(|d| diag_v(&d)));
-                row[PAIR] = opt_u(a.pair.pair);
-                row[LATENCY] = a.pair.latency_ns.map_or(V::Null, |l| V::F(l as f64 / 1e6));
-                self.summary.frames += 1;
+                b.uint(SRC, h.src().byte() as u64);
+                b.uint(DST, h.dst().byte() as u64);
+                if let Some(c) = f.channel() {
+                    b.int(CHANNEL, c);
+                }
+                b.uint(LEN, f.bytes.len() as u64);
+                b.bytes(RAW, f.bytes);
+                for d in f.diags().chain(a.pair.diags(f.offset)) {
+                    put_diag(b, &mut sum.diagnostics, &d);
+                }
+                put_opt_u(b, PAIR, a.pair.pair);
+                if let Some(l) = a.pair.latency_ns {
+                    b.float(LATENCY, l as f64 / 1e6);
+                }
+                sum.frames += 1;
             }
             Record::Ell(e) => {
                 let f = e.frame;
-                row[TYPE] = s("frame");
-                row[PROTO] = s("ell");
+                b.text(TYPE, "frame");
+                b.text(PROTO, "ell");
                 let d = f.dir();
-                row[DIR] = dir_v(Some(d));
-                row[OFFSET] = V::U(f.offset);
-                row[CODE] = s(f.code_str());
+                put_dir(b, Some(d));
+                b.uint(OFFSET, f.offset);
+                b.text(CODE, f.code_str());
                 if let Some(c) = f.cmd {
-                    row[NAME] = s(c.name);
-                    row[KIND] = kname.as_deref().map_or(V::Null, s);
+                    b.text(NAME, c.name);
+                    if let Some(k) = kname.as_deref() {
+                        b.text(KIND, k);
+                    }
                 }
                 // The module's address is the destination of a command, the source of a reply.
                 let at = if d == Dir::HostToDevice { DST } else { SRC };
-                row[at] = V::U(f.addr as u64);
-                row[LEN] = V::U(f.bytes.len() as u64);
-                row[RAW] = V::B(f.bytes);
-                diags.extend(f.diags().iter().copied().map(|d| diag_v(&d)));
-                row[PAIR] = opt_u(e.obs.pair);
-                row[LATENCY] = e.obs.latency_ns.map_or(V::Null, |l| V::F(l as f64 / 1e6));
-                self.summary.frames += 1;
+                b.uint(at, f.addr as u64);
+                b.uint(LEN, f.bytes.len() as u64);
+                b.bytes(RAW, f.bytes);
+                for d in f.diags() {
+                    put_diag(b, &mut sum.diagnostics, d);
+                }
+                put_opt_u(b, PAIR, e.obs.pair);
+                if let Some(l) = e.obs.latency_ns {
+                    b.float(LATENCY, l as f64 / 1e6);
+                }
+                sum.frames += 1;
             }
             Record::Garbage(g) => {
-                row[TYPE] = s("garbage");
-                row[PROTO] = s(g.proto.code());
-                row[DIR] = dir_v(g.meta.cap_dir);
-                row[OFFSET] = V::U(g.offset);
-                row[LEN] = V::U(g.bytes.len() as u64);
-                row[RAW] = V::B(g.bytes);
+                b.text(TYPE, "garbage");
+                b.text(PROTO, g.proto.code());
+                put_dir(b, g.meta.cap_dir);
+                b.uint(OFFSET, g.offset);
+                b.uint(LEN, g.bytes.len() as u64);
+                b.bytes(RAW, g.bytes);
                 let d = match g.kind {
                     Some(k) => json::garbage_diag(g.offset, g.bytes.len(), k),
                     None => Diag {
@@ -449,38 +477,48 @@ impl<S: Sink> CaptureWriter<S> {
                         },
                     },
                 };
-                diags.push(diag_v(&d));
+                put_diag(b, &mut sum.diagnostics, &d);
             }
             Record::NoReply(e) => {
-                row[TYPE] = s("no_reply");
-                row[PROTO] = s(e.proto.code());
-                row[STREAM] = V::U(e.stream as u64);
-                row[OFFSET] = V::U(e.offset);
-                row[if e.proto == aptscope_dissector::detect::Proto::Apt {
+                b.text(TYPE, "no_reply");
+                b.text(PROTO, e.proto.code());
+                b.uint(STREAM, e.stream as u64);
+                b.uint(OFFSET, e.offset);
+                let at = if e.proto == aptscope_dissector::detect::Proto::Apt {
                     NAME
                 } else {
                     CODE
-                }] = s(e.name);
-                row[REF] = V::U(e.n);
-                diags.push(diag_v(&e.diag()));
+                };
+                b.text(at, e.name);
+                b.uint(REF, e.n);
+                put_diag(b, &mut sum.diagnostics, &e.diag());
             }
         }
-        self.summary.diagnostics += diags.len() as u64;
-        row[DIAGS] = V::Diags(diags);
-        self.summary.records += 1;
-        self.records.buf.push(&row);
+        b.end_row();
+        sum.records += 1;
         if self.records.buf.rows() >= self.opts.rows_per_group {
             self.flush_records()?;
         }
         if let (Some(k), Some(m)) = (kind, rec.meta()) {
-            let mut row = Vec::with_capacity(4 + k.cols.len());
-            row.extend([s(&file), V::U(m.n), V::U(m.stream as u64), opt_u(m.ts_ns)]);
+            let file = self.file.clone();
+            self.open_kind(&k)?;
+            let Some(o) = self.kinds.get_mut(&k.name) else {
+                return Ok(());
+            };
+            o.used = self.clock;
+            let b = &mut o.buf;
+            b.text(0, &file);
+            b.uint(1, m.n);
+            b.uint(2, m.stream as u64);
+            put_opt_u(b, 3, m.ts_ns);
             match rec {
-                Record::Apt(a) => apt_values(&mut self.layouts, &k, a, &mut row),
-                Record::Ell(e) => ell_values(&mut self.layouts, &k, e, &mut row),
+                Record::Apt(a) => apt_values(&mut self.layouts, &k, a, b),
+                Record::Ell(e) => ell_values(&mut self.layouts, &k, e, b),
                 _ => {}
             }
-            self.kind_row(&k, &row)?;
+            b.end_row();
+            self.kind_rows += 1;
+            self.kind_row_done(&k)?;
         }
         Ok(())
     }
@@ -516,7 +554,9 @@ impl<S: Sink> CaptureWriter<S> {
         (Some(n.clone()), k.clone())
     }
 
-    fn kind_row(&mut self, k: &Arc<KindSchema>, row: &[V<'_>]) -> io::Result<()> {
+    /// Open kind table `k`'s buffer unless it is (closing another when too many are); a tick of
+    /// the clock that says which was used least recently.
+    fn open_kind(&mut self, k: &Arc<KindSchema>) -> io::Result<()> {
         self.clock += 1;
         if !self.kinds.contains_key(&k.name) {
             if self.kinds.len() >= self.opts.max_open_kinds {
@@ -537,21 +577,24 @@ impl<S: Sink> CaptureWriter<S> {
                     buf: TableBuf::new(k.schema.clone()),
                     part,
                     used: 0,
+                    name: k.name.clone(),
                 },
             );
         }
+        Ok(())
+    }
+
+    /// After a row of kind table `k`: write what is due.
+    fn kind_row_done(&mut self, k: &Arc<KindSchema>) -> io::Result<()> {
         // One row group's worth across kinds (with the records table's own, the writer stays
         // under 64 MiB; four row groups' worth peaked at 100 MiB).
         let budget = self.opts.rows_per_group;
         let Some(o) = self.kinds.get_mut(&k.name) else {
             return Ok(());
         };
-        o.used = self.clock;
-        o.buf.push(row);
-        self.kind_rows += 1;
         if o.buf.rows() >= self.opts.rows_per_group {
             self.kind_rows -= o.buf.rows();
-            Self::flush(&mut self.sink, &k.name, o, &mut self.summary)?;
+            Self::flush(&mut self.sink, o, &mut self.summary)?;
         }
         if self.kind_rows > budget {
             // Many kinds each short of a row group: the biggest is written early.
@@ -570,27 +613,22 @@ impl<S: Sink> CaptureWriter<S> {
     fn close_kind(&mut self, name: &str) -> io::Result<()> {
         if let Some(mut o) = self.kinds.remove(name) {
             self.kind_rows -= o.buf.rows();
-            Self::flush(&mut self.sink, name, &mut o, &mut self.summary)?;
-            self.parts.insert(name.to_string(), o.part);
+            Self::flush(&mut self.sink, &mut o, &mut self.summary)?;
+            self.parts.insert(std::mem::take(&mut o.name), o.part);
         }
         Ok(())
     }
 
     fn flush_records(&mut self) -> io::Result<()> {
-        Self::flush(
-            &mut self.sink,
-            RECORDS,
-            &mut self.records,
-            &mut self.summary,
-        )
+        Self::flush(&mut self.sink, &mut self.records, &mut self.summary)
     }
 
-    fn flush(sink: &mut S, table: &str, o: &mut Open, summary: &mut Summary) -> io::Result<()> {
+    fn flush(sink: &mut S, o: &mut Open, summary: &mut Summary) -> io::Result<()> {
         if o.buf.rows() == 0 {
             return Ok(());
         }
         let batch = o.buf.take().map_err(perr)?;
-        sink.write(table, o.part, &batch)?;
+        sink.write(&o.name, o.part, &batch)?;
         o.part += 1;
         summary.row_groups += 1;
         Ok(())
@@ -638,8 +676,12 @@ impl Layouts {
     }
 }
 
+/// The first column of a kind table's fields (after [`schema::KEYS`]).
+const FIELDS: usize = schema::KEYS.len();
+
 /// The field columns of an APT frame's kind row.
-fn apt_values<'a>(lay: &mut Layouts, k: &KindSchema, a: &'a AptRec<'a>, out: &mut Vec<V<'a>>) {
+fn apt_values<'a>(lay: &mut Layouts, k: &KindSchema, a: &'a AptRec<'a>, b: &mut TableBuf) {
+    use aptscope_dissector::apt::Value;
     let f = a.frame;
     let t = f.table();
     // Sized once: the iterator does not know its length, and growing by doubling was a
@@ -647,89 +689,103 @@ fn apt_values<'a>(lay: &mut Layouts, k: &KindSchema, a: &'a AptRec<'a>, out: &mu
     let mut fields = Vec::with_capacity(32);
     fields.extend(f.fields());
     let idx = lay.get(k, &fields, |fd| fd.name);
-    let vals = k.cols.iter().zip(idx).map(|(c, i)| {
-        let Some((fd, v)) = i.map(|i| &fields[i]) else {
-            return V::Null;
+    let mut last_phys = None;
+    for (j, (c, i)) in k.cols.iter().zip(idx).enumerate() {
+        let Some((i, (fd, v))) = i.and_then(|i| Some((i, fields.get(i)?))) else {
+            continue;
         };
-        use aptscope_dissector::apt::Value;
+        let at = FIELDS + j;
         match c.fill {
             Fill::Int => match *v {
-                Value::U(x) => V::U(x),
-                Value::I(x) => V::I(x),
-                _ => V::Null,
+                Value::U(x) => b.uint(at, x),
+                Value::I(x) => b.int(at, x),
+                _ => {}
             },
-            Fill::Float => v.as_f64().map_or(V::Null, V::F),
+            Fill::Float => {
+                if let Some(x) = v.as_f64() {
+                    b.float(at, x);
+                }
+            }
             Fill::EnumLabel => {
                 let label = fd
                     .enumeration
                     .zip(v.as_i64())
                     .and_then(|(e, x)| t.enum_def(e).label(x));
-                label.map_or(V::Null, s)
+                if let Some(l) = label {
+                    b.text(at, l);
+                }
             }
-            Fill::FlagNames => match (fd.flags, *v) {
-                (Some(fl), Value::U(x)) => V::ListS(
-                    t.flags_def(fl)
-                        .items
-                        .iter()
-                        .filter(|(m, _)| x & m == *m)
-                        .map(|(_, l)| *l)
-                        .collect(),
-                ),
-                _ => V::Null,
-            },
-            Fill::Text => match *v {
-                Value::Str(b) => V::S(Cow::Owned(aptscope_dissector::apt::text_of(b).into_owned())),
-                _ => V::Null,
-            },
-            Fill::Bytes => match *v {
-                Value::Bytes(b) => V::B(b),
-                _ => V::Null,
-            },
+            Fill::FlagNames => {
+                if let (Some(fl), Value::U(x)) = (fd.flags, *v) {
+                    let items = t.flags_def(fl).items.iter();
+                    b.list_text(at, items.filter(|(m, _)| x & m == *m).map(|(_, l)| *l));
+                }
+            }
+            Fill::Text => {
+                if let Value::Str(s) = *v {
+                    b.text(at, &aptscope_dissector::apt::text_of(s));
+                }
+            }
+            Fill::Bytes => {
+                if let Value::Bytes(x) = *v {
+                    b.bytes(at, x);
+                }
+            }
             Fill::List => {
                 let els = v.elements();
                 if matches!(v, Value::Array(aptscope_dissector::table::Prim::F32, _)) {
-                    V::ListF(els.filter_map(|e| e.as_f64()).collect())
+                    b.list_float(at, els.filter_map(|e| e.as_f64()));
                 } else {
-                    V::ListI(els.filter_map(|e| e.as_i64()).collect())
+                    b.list_num(at, els.filter_map(|e| e.as_i64()));
                 }
             }
-            Fill::Phys => phys_or_scaled(fd, v, a.scale).map_or(V::Null, |(x, _)| V::F(x)),
-            Fill::PhysUnit => phys_or_scaled(fd, v, a.scale).map_or(V::Null, |(_, u)| s(u)),
-            Fill::StatusName => V::Null,
+            Fill::Phys | Fill::PhysUnit => {
+                // The unit's column follows the value's: converted (and rounded) once.
+                let p = match last_phys {
+                    Some((at_field, p)) if at_field == i => p,
+                    _ => phys_or_scaled(fd, v, a.scale),
+                };
+                last_phys = Some((i, p));
+                match (c.fill, p) {
+                    (Fill::Phys, Some((x, _))) => b.float(at, x),
+                    (_, Some((_, u))) => b.text(at, u),
+                    _ => {}
+                }
+            }
+            Fill::StatusName => {}
         }
-    });
-    out.extend(vals);
+    }
 }
 
 /// The field columns of an Elliptec frame's kind row.
-fn ell_values<'a>(lay: &mut Layouts, k: &KindSchema, e: &'a EllRec<'a>, out: &mut Vec<V<'a>>) {
+fn ell_values<'a>(lay: &mut Layouts, k: &KindSchema, e: &'a EllRec<'a>, b: &mut TableBuf) {
     let f = e.frame;
     let mut fields = Vec::with_capacity(16);
     fields.extend(f.fields());
     let scale = e.obs.module.as_ref().and_then(|m| m.scale());
     let idx = lay.get(k, &fields, |fd| fd.name);
-    let vals = k.cols.iter().zip(idx).map(|(c, i)| {
-        let Some((fd, v)) = i.map(|i| &fields[i]) else {
-            return V::Null;
+    for (j, (c, i)) in k.cols.iter().zip(idx).enumerate() {
+        let Some((fd, v)) = i.and_then(|i| fields.get(i)) else {
+            continue;
         };
+        let at = FIELDS + j;
         match (c.fill, *v) {
-            (Fill::StatusName, EllValue::U(x)) => s(status_name(x as u32)),
-            (Fill::Int, EllValue::U(x)) => V::U(x),
-            (Fill::Int, EllValue::I(x)) => V::I(x),
-            (Fill::Text, EllValue::Char(ch)) => V::S(Cow::Owned(ch.to_string())),
-            (Fill::Text, EllValue::Digits(d)) => V::S(Cow::Owned(d.to_string())),
-            (Fill::Bytes, EllValue::Raw(b)) => V::B(b),
+            (Fill::StatusName, EllValue::U(x)) => b.text(at, status_name(x as u32)),
+            (Fill::Int, EllValue::U(x)) => b.uint(at, x),
+            (Fill::Int, EllValue::I(x)) => b.int(at, x),
+            (Fill::Text, EllValue::Char(ch)) => b.text(at, ch.encode_utf8(&mut [0; 4])),
+            (Fill::Text, EllValue::Digits(d)) => b.text(at, d),
+            (Fill::Bytes, EllValue::Raw(x)) => b.bytes(at, x),
             (Fill::Phys | Fill::PhysUnit, EllValue::I(p)) if fd.kind == EllKind::Position => {
                 match scale.filter(|(ppu, _)| *ppu > 0.0) {
                     Some((ppu, _)) if c.fill == Fill::Phys => {
-                        V::F(aptscope_dissector::apt::round_sig(p as f64 / ppu))
+                        b.float(at, aptscope_dissector::apt::round_sig(p as f64 / ppu))
                     }
-                    Some((_, unit)) => s(unit),
-                    None => V::Null,
+                    Some((_, unit)) => b.text(at, unit),
+                    None => {}
                 }
             }
-            _ => V::Null,
+            _ => {}
         }
-    });
-    out.extend(vals);
+    }
 }

@@ -1,0 +1,35 @@
+"""Speed of to_arrow() and of batches() into DuckDB: `python arrow_speed.py CAPTURE [to_arrow|duckdb]`.
+
+Prints records, CPU seconds (this process), wall seconds, records per CPU-second and peak RSS.
+The DuckDB mode streams every table's batches into a DuckDB table of its name, as a notebook
+streaming a capture larger than memory would.
+"""
+import sys, time, resource
+import aptscope, pyarrow as pa
+path = sys.argv[1]
+what = sys.argv[2] if len(sys.argv) > 2 else "to_arrow"
+t0, w0 = time.process_time(), time.perf_counter()
+if what == "to_arrow":
+    tables = aptscope.to_arrow(path)
+    n = tables["records"].num_rows
+    extra = f"{len(tables)} tables"
+else:
+    import duckdb
+    con = duckdb.connect()
+    made = set()
+    n = 0
+    for table, batch in aptscope.batches(path):
+        if table == "records":
+            n += batch.num_rows
+        con.register("b", batch)
+        t = '"' + table + '"'
+        if table in made:
+            con.execute(f"INSERT INTO {t} SELECT * FROM b")
+        else:
+            con.execute(f"CREATE TABLE {t} AS SELECT * FROM b")
+            made.add(table)
+        con.unregister("b")
+    extra = f"{con.execute('SELECT count(*) FROM records').fetchone()[0]} rows in duckdb records"
+cpu, wall = time.process_time() - t0, time.perf_counter() - w0
+rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print(f"{what}: {n} records, {extra}: {cpu:.3f} CPU-s, {wall:.3f} s wall, {n/cpu/1e6:.2f} M records per CPU-s, peak {rss:.0f} MiB")
