@@ -8,7 +8,7 @@
 //! nothing — reading, framing, decoding, pairing, numbering — takes 0.74 CPU-s, an eighth of
 //! `decode --json`'s 6.1 CPU-s (a sixth of text's 4.2); rendering the lines takes the rest, and
 //! each record renders on its own. So one thread runs the chain exactly as `-j 1` does and hands
-//! the records, owned ([`Batch`]), in batches of a few hundred to render threads; what they
+//! the records, owned ([`Batch`]), in batches of a couple of thousand to render threads; what they
 //! render is written in batch order. The output is that of `-j 1` by construction, whatever the
 //! container (pcap, pcapng, MCAP, raw, hex text), with no stitching to get wrong; memory is
 //! bounded by the batches in flight ([`IN_FLIGHT`]).
