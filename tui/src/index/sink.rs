@@ -7,7 +7,7 @@ use aptscope_dissector::detect::Proto;
 use aptscope_dissector::diag::DiagKind;
 use aptscope_dissector::ell::Module;
 use aptscope_dissector::hash::NumMap;
-use aptscope_dissector::record::{AptRec, EllRec, GarbageRec, Record};
+use aptscope_dissector::record::{AptRec, EllRec, GarbageRec, Meta, Record};
 use aptscope_dissector::table::Class;
 use aptscope_dissector::units::Scale;
 use std::collections::HashMap;
@@ -318,21 +318,14 @@ impl Sink {
             }
         }
         let rec = Rec {
-            start: 0,
-            offset: fr.offset,
-            cap_offset: m.cap_offset,
-            ts: m.ts_ns.unwrap_or(u64::MAX),
             pair: p.pair.map_or(0, |r| r as u32),
-            len: 0,
             module,
-            stream: m.stream.min(u16::MAX as u32) as u16,
-            flags,
-            dir: dir_code(m.cap_dir),
             src: h.src_byte(),
             dst: h.dst_byte(),
             id: h.msg_id(),
             diags,
             chan: chan_code(fr.channel()),
+            ..rec_at(m, fr.offset, flags)
         };
         self.add(m.n, rec, fr.bytes);
     }
@@ -394,21 +387,12 @@ impl Sink {
             }
         }
         let rec = Rec {
-            start: 0,
-            offset: fr.offset,
-            cap_offset: m.cap_offset,
-            ts: m.ts_ns.unwrap_or(u64::MAX),
             pair: o.pair.map_or(0, |r| r as u32),
-            len: 0,
             module,
-            stream: m.stream.min(u16::MAX as u32) as u16,
-            flags,
-            dir: dir_code(m.cap_dir),
             src: fr.addr,
-            dst: 0,
             id: u16::from_be_bytes(fr.code),
             diags,
-            chan: 0,
+            ..rec_at(m, fr.offset, flags)
         };
         self.add(m.n, rec, fr.bytes);
     }
@@ -422,24 +406,7 @@ impl Sink {
                 Some(GarbageKind::AbsurdLength { .. }) => F_ABSURD,
                 Some(GarbageKind::TrailingBytes) => F_TRAILING,
             };
-        let rec = Rec {
-            start: 0,
-            offset: g.offset,
-            cap_offset: m.cap_offset,
-            ts: m.ts_ns.unwrap_or(u64::MAX),
-            pair: 0,
-            len: 0,
-            module: 0,
-            stream: m.stream.min(u16::MAX as u32) as u16,
-            flags,
-            dir: dir_code(m.cap_dir),
-            src: 0,
-            dst: 0,
-            id: 0,
-            diags: 0,
-            chan: 0,
-        };
-        self.add(m.n, rec, g.bytes);
+        self.add(m.n, rec_at(m, g.offset, flags), g.bytes);
     }
 
     /// Take what was indexed since the last publication (`done`: and the source has ended),
@@ -506,6 +473,28 @@ impl Sink {
             done,
             fallback_proto: None,
         }
+    }
+}
+
+/// A record's fields that its [`Meta`] gives (`start` and `len` are set when it is added);
+/// the rest zero, for the kind of record to fill in.
+fn rec_at(m: &Meta, offset: u64, flags: u16) -> Rec {
+    Rec {
+        start: 0,
+        offset,
+        cap_offset: m.cap_offset,
+        ts: m.ts_ns.unwrap_or(u64::MAX),
+        pair: 0,
+        len: 0,
+        module: 0,
+        stream: m.stream.min(u16::MAX as u32) as u16,
+        flags,
+        dir: dir_code(m.cap_dir),
+        src: 0,
+        dst: 0,
+        id: 0,
+        diags: 0,
+        chan: 0,
     }
 }
 
