@@ -54,23 +54,11 @@ impl AptSim {
             (msg::LA_GET_PARAMS, msg::la::STATUS_BITS) => {
                 vec![("status_bits", int(self.laser(ui).2 as i64))]
             }
-            (msg::TEC_GET_PARAMS, msg::tec::READINGS) => {
-                let (i, ta, ts, _) = self.tec(ui);
-                vec![("i_tec", int(i)), ("t_act", int(ta)), ("t_set", int(ts))]
-            }
+            (msg::TEC_GET_PARAMS, msg::tec::READINGS) => tec_readings(self.tec(ui)),
             (msg::TEC_GET_PARAMS, msg::tec::STATUS_BITS) => {
                 vec![("status_bits", int(self.tec(ui).3 as i64))]
             }
-            (msg::QUAD_GET_PARAMS, msg::quad::READINGS) => {
-                let q = self.quad(ui);
-                vec![
-                    ("x_diff", int(q.0)),
-                    ("y_diff", int(q.1)),
-                    ("sum", int(q.2)),
-                    ("x_pos", int(q.3)),
-                    ("y_pos", int(q.4)),
-                ]
-            }
+            (msg::QUAD_GET_PARAMS, msg::quad::READINGS) => quad_readings(self.quad(ui)),
             (msg::PZMOT_GET_PARAMS, msg::pzmot::POS_COUNTS) => {
                 vec![("position", int(self.unit_pos(ui, now)))]
             }
@@ -137,4 +125,21 @@ impl AptSim {
             _ => (bx, by, sum, 0, 0, 0x1),
         }
     }
+}
+
+/// TEC_GET_PARAMS READINGS from [`AptSim::tec`]'s values: also the start of TEC_GET_STATUSUPDATE.
+pub(super) fn tec_readings((i, ta, ts, _): (i64, i64, i64, u32)) -> Params {
+    vec![("i_tec", int(i)), ("t_act", int(ta)), ("t_set", int(ts))]
+}
+
+/// QUAD_GET_PARAMS READINGS from [`AptSim::quad`]'s values: also the start of
+/// QUAD_GET_STATUSUPDATE.
+pub(super) fn quad_readings(q: (i64, i64, i64, i64, i64, u32)) -> Params {
+    vec![
+        ("x_diff", int(q.0)),
+        ("y_diff", int(q.1)),
+        ("sum", int(q.2)),
+        ("x_pos", int(q.3)),
+        ("y_pos", int(q.4)),
+    ]
 }

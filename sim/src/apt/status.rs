@@ -176,24 +176,16 @@ impl AptSim {
                 vals
             }
             msg::TEC_GET_STATUSUPDATE => {
-                let (i, ta, ts, bits) = self.tec(ui);
-                vec![
-                    ("i_tec", int(i)),
-                    ("t_act", int(ta)),
-                    ("t_set", int(ts)),
-                    ("status_bits", int(bits as i64)),
-                ]
+                let t = self.tec(ui);
+                let mut vals = outputs::tec_readings(t);
+                vals.push(("status_bits", int(t.3 as i64)));
+                vals
             }
             msg::QUAD_GET_STATUSUPDATE => {
                 let q = self.quad(ui);
-                vec![
-                    ("x_diff", int(q.0)),
-                    ("y_diff", int(q.1)),
-                    ("sum", int(q.2)),
-                    ("x_pos", int(q.3)),
-                    ("y_pos", int(q.4)),
-                    ("status_bits", int(q.5 as i64)),
-                ]
+                let mut vals = outputs::quad_readings(q);
+                vals.push(("status_bits", int(q.5 as i64)));
+                vals
             }
             msg::PZMOT_GET_STATUSUPDATE => {
                 // All four channels of the controller in one message.
