@@ -232,14 +232,17 @@ fn serve_on_pty<S: Simulator>(
 }
 
 /// Open our own copy of a pseudo-terminal's slave again (so the master sees no hang-up while no
-/// program has it open), dropping what the last program left unread.
+/// program has it open), dropping what the last program left unread. Only that direction: the
+/// next program may already have opened the line and sent its first request before the hang-up
+/// was seen (flushing both ways lost it: a CI run of the sessions test waited a minute for a
+/// reply).
 fn reopen_slave(path: &Path) -> Result<OwnedFd, LiveError> {
     let fd = nix::fcntl::open(
         path,
         OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_NONBLOCK | OFlag::O_CLOEXEC,
         nix::sys::stat::Mode::empty(),
     )?;
-    let _ = nix::sys::termios::tcflush(&fd, nix::sys::termios::FlushArg::TCIOFLUSH);
+    let _ = nix::sys::termios::tcflush(&fd, nix::sys::termios::FlushArg::TCIFLUSH);
     Ok(fd)
 }
 
