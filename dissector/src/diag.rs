@@ -128,6 +128,40 @@ pub enum DiagKind {
 }
 
 impl DiagKind {
+    /// Every [`DiagKind::name`], once: what a name saved elsewhere (the viewer's index cache)
+    /// is mapped back through.
+    pub const NAMES: [&'static str; 24] = [
+        "garbage",
+        "absurd_length",
+        "trailing_bytes",
+        "truncated",
+        "unknown_id",
+        "unknown_address",
+        "length_mismatch",
+        "header_only_with_data",
+        "unknown_sub_id",
+        "bad_hex",
+        "odd_hex_digit",
+        "unknown_command",
+        "bad_data_char",
+        "data_length",
+        "missing_data",
+        "missing_terminator",
+        "separators",
+        "letter_o",
+        "no_reply",
+        "unsolicited",
+        "duplicate_reply",
+        "not_for_model",
+        "missing_data_flag",
+        "zero_addresses",
+    ];
+
+    /// The `'static` name equal to `name`, when it is one of [`DiagKind::NAMES`].
+    pub fn static_name(name: &str) -> Option<&'static str> {
+        Self::NAMES.iter().copied().find(|n| *n == name)
+    }
+
     /// A stable snake_case name (JSON `diag[].kind`, filters).
     pub fn name(&self) -> &'static str {
         match self {
@@ -251,5 +285,93 @@ impl fmt::Display for DiagKind {
 impl fmt::Display for Diag {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "@{}: {}", self.offset, self.kind)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// [`DiagKind::NAMES`] holds every kind's name once (a kind added without its name there
+    /// would make the viewer's index cache of a capture with it invalid, not wrong).
+    #[test]
+    fn names_lists_every_kind_once() {
+        let all = [
+            DiagKind::Garbage { len: 1 },
+            DiagKind::AbsurdLength { msg_id: 1, len: 1 },
+            DiagKind::TrailingBytes { len: 1 },
+            DiagKind::Truncated {
+                expected: 1,
+                got: 0,
+            },
+            DiagKind::UnknownId { msg_id: 1 },
+            DiagKind::UnknownAddress {
+                which: Which::Source,
+                value: 1,
+            },
+            DiagKind::LengthMismatch {
+                len: 1,
+                has_data: false,
+            },
+            DiagKind::HeaderOnlyWithData { len: 1 },
+            DiagKind::UnknownSubId { sub_id: 1 },
+            DiagKind::BadHex { ch: 'x' },
+            DiagKind::OddHexDigit,
+            DiagKind::UnknownCommand,
+            DiagKind::BadDataChar { ch: 'x' },
+            DiagKind::DataLength {
+                expected: 1,
+                got: 0,
+            },
+            DiagKind::MissingData { expected: 1 },
+            DiagKind::MissingTerminator,
+            DiagKind::Separators,
+            DiagKind::LetterO,
+            DiagKind::NoReply { cmd: 1 },
+            DiagKind::Unsolicited,
+            DiagKind::DuplicateReply { request: 1 },
+            DiagKind::MissingDataFlag { len: 1 },
+            DiagKind::ZeroAddresses,
+            DiagKind::NotForModel { model: [0; 8] },
+        ];
+        // Exhaustive: a new kind fails to compile here until it is listed above.
+        for k in &all {
+            match k {
+                DiagKind::Garbage { .. }
+                | DiagKind::AbsurdLength { .. }
+                | DiagKind::TrailingBytes { .. }
+                | DiagKind::Truncated { .. }
+                | DiagKind::UnknownId { .. }
+                | DiagKind::UnknownAddress { .. }
+                | DiagKind::LengthMismatch { .. }
+                | DiagKind::HeaderOnlyWithData { .. }
+                | DiagKind::UnknownSubId { .. }
+                | DiagKind::BadHex { .. }
+                | DiagKind::OddHexDigit
+                | DiagKind::UnknownCommand
+                | DiagKind::BadDataChar { .. }
+                | DiagKind::DataLength { .. }
+                | DiagKind::MissingData { .. }
+                | DiagKind::MissingTerminator
+                | DiagKind::Separators
+                | DiagKind::LetterO
+                | DiagKind::NoReply { .. }
+                | DiagKind::Unsolicited
+                | DiagKind::DuplicateReply { .. }
+                | DiagKind::MissingDataFlag { .. }
+                | DiagKind::ZeroAddresses
+                | DiagKind::NotForModel { .. } => {}
+            }
+        }
+        let names: Vec<&str> = all.iter().map(|k| k.name()).collect();
+        let mut listed = DiagKind::NAMES.to_vec();
+        listed.sort_unstable();
+        let mut got = names.clone();
+        got.sort_unstable();
+        assert_eq!(got, listed);
+        for n in names {
+            assert_eq!(DiagKind::static_name(n), Some(n));
+        }
+        assert_eq!(DiagKind::static_name("nonsense"), None);
     }
 }

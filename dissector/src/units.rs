@@ -528,6 +528,16 @@ impl PartialEq for Scale {
     }
 }
 
+/// The `'static` form of a [`Scale::stage`] name: a stage of section 8, `custom` or `piezo`
+/// (what a conversion saved elsewhere, the viewer's index cache, is rebuilt with through
+/// [`Scale::new`]).
+pub fn scale_stage(name: &str) -> Option<&'static str> {
+    ["custom", "piezo"]
+        .into_iter()
+        .chain(STAGES.iter().map(|s| s.name))
+        .find(|n| *n == name)
+}
+
 /// A number no other scale value has had in this process.
 fn next_revision() -> u64 {
     static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
@@ -1204,5 +1214,16 @@ mod tests {
         };
         let v = s.convert(Quantity::Vel, 134217.73).map_or(0.0, |x| x.0);
         assert!(near(v, 1.0, 1e-6), "{v}");
+    }
+
+    /// Every stage name a conversion can have maps back to itself.
+    #[test]
+    fn scale_stage_names_map_back() {
+        for s in STAGES {
+            assert_eq!(scale_stage(s.name), Some(s.name));
+        }
+        assert_eq!(scale_stage(Scale::piezo().stage), Some("piezo"));
+        assert_eq!(scale_stage("custom"), Some("custom"));
+        assert_eq!(scale_stage("no such stage"), None);
     }
 }
