@@ -10,7 +10,10 @@ use aptscope_dissector::pipeline::{Format, Pipeline};
 use aptscope_dissector::stats::Stats;
 use aptscope_dissector::{synth, Table};
 use aptscope_tui::fields::{with_record, View};
-use aptscope_tui::index::{load, load_in_memory, load_spilling, Rec, Shared, F_NO_REPLY};
+use aptscope_tui::index::{
+    cache_file_of, load, load_cached, load_in_memory, load_spilling, Rec, Shared, CACHE_NOT_SAVED,
+    CACHE_READ, CACHE_SAVED, F_NO_REPLY,
+};
 use aptscope_tui::scan::{Scan, BIN_NS};
 use serde_json::Value;
 use std::sync::Arc;
@@ -462,4 +465,241 @@ fn the_parallel_scan_and_a_kept_one_equal_the_sequential_scan() {
         }
         assert!(!three.is_kept(filters.first(), len));
     }
+}
+
+/// Everything an index holds besides its records and bytes is the same in both.
+fn same_index(path: &str, a: &Arc<Shared>, b: &Arc<Shared>) {
+    let (a, b) = (a.index.read().expect("lock"), b.index.read().expect("lock"));
+    assert_eq!(a.modules, b.modules, "{path}");
+    assert_eq!(a.scales, b.scales, "{path}");
+    assert_eq!(a.units_notes, b.units_notes, "{path}");
+    assert_eq!(
+        (a.proto, a.proto_certain, a.proto_share),
+        (b.proto, b.proto_certain, b.proto_share),
+        "{path}"
+    );
+    assert_eq!(a.first_ts, b.first_ts, "{path}");
+    assert_eq!(
+        (&a.streams, a.streams_seen),
+        (&b.streams, b.streams_seen),
+        "{path}"
+    );
+    assert_eq!(a.format, b.format, "{path}");
+    assert_eq!(a.file_diags, b.file_diags, "{path}");
+    assert_eq!(a.diag_sets, b.diag_sets, "{path}");
+    assert_eq!(a.not_for_model, b.not_for_model, "{path}");
+    assert_eq!(a.late_no_reply, b.late_no_reply, "{path}");
+    assert_eq!((a.done, &a.error), (b.done, &b.error), "{path}");
+    // Records whole, their arena starts included.
+    assert!(a.recs.iter().eq(b.recs.iter()), "{path}");
+}
+
+/// What became of the cache for an index ([`Shared::cache`]), and whether it was read from it.
+fn cache_state(s: &Arc<Shared>) -> (u8, bool) {
+    let from = s.index.read().expect("lock").from_cache;
+    (s.cache.load(std::sync::atomic::Ordering::Relaxed), from)
+}
+
+/// An index written to the cache and read back on the next opening (complete at once, its
+/// records left in the cache file) gives the same answers as the one written: on every sample
+/// (every format), with the default memory budget and with records spilled over a tiny one.
+#[test]
+fn an_index_read_back_from_the_cache_changes_no_answer() {
+    let filters = filters();
+    let (_dir, synth) = synthetic();
+    let mut paths = every_sample();
+    paths.push(synth);
+    let cache = tempdir::Dir::new("cache-every");
+    for budget in [None, Some(1)] {
+        let _ = std::fs::remove_dir_all(&cache.0);
+        for path in &paths {
+            let opts = OpenOptions::default();
+            let first = load_cached(path, opts, budget, &cache.0).expect("opens");
+            assert_eq!(cache_state(&first), (CACHE_SAVED, false), "{path}");
+            let again = load_cached(path, opts, budget, &cache.0).expect("opens");
+            assert_eq!(cache_state(&again), (CACHE_READ, true), "{path}");
+            {
+                let ix = again.index.read().expect("lock");
+                assert!(ix.done, "{path}");
+                assert!(ix.arena.is_empty(), "{path}");
+                let raw = ix.format == "raw bytes";
+                assert_eq!(
+                    (ix.file.is_some(), ix.arena_file.is_some()),
+                    (raw, !raw),
+                    "{path}"
+                );
+                // None of its records loaded.
+                assert_eq!(
+                    ix.recs.spilled_chunks(),
+                    ix.recs.len().div_ceil(1 << 16),
+                    "{path}"
+                );
+            }
+            same_index(path, &first, &again);
+            same_answers(path, &first, &again, &filters);
+        }
+    }
+}
+
+/// A copy of a sample in a directory of its own.
+fn copy_of(dir: &tempdir::Dir, name: &str) -> String {
+    let to = dir.0.join(name.replace('/', "-"));
+    std::fs::copy(sample(name), &to).expect("copy");
+    to.to_string_lossy().to_string()
+}
+
+/// A changed capture (a frame appended; only its modification time changed) is indexed again,
+/// with the new record, and its cache replaced.
+#[test]
+fn a_changed_capture_is_indexed_again() {
+    let dir = tempdir::Dir::new("cache-changed");
+    let cache = dir.0.join("cache");
+    let filters: Vec<Filter> = ["unpaired", "diag", "apt.position > 1000"]
+        .iter()
+        .map(|t| Filter::parse(t).expect("filter"))
+        .collect();
+    for name in ["sessions/kdc101.bin", "sessions/kdc101.pcapng"] {
+        let path = copy_of(&dir, name);
+        let opts = OpenOptions::default();
+        let first = load_cached(&path, opts, None, &cache).expect("opens");
+        let n = first.index.read().expect("lock").recs.len();
+        assert!(cache_state(&load_cached(&path, opts, None, &cache).expect("opens")).1);
+        // Only the time changes: the same records, not read from the cache.
+        let f = std::fs::File::options()
+            .write(true)
+            .open(&path)
+            .expect("open");
+        f.set_modified(std::time::SystemTime::now() + std::time::Duration::from_secs(60))
+            .expect("touch");
+        drop(f);
+        let touched = load_cached(&path, opts, None, &cache).expect("opens");
+        assert_eq!(cache_state(&touched), (CACHE_SAVED, false), "{path}");
+        assert_eq!(touched.index.read().expect("lock").recs.len(), n, "{path}");
+        assert!(cache_state(&load_cached(&path, opts, None, &cache).expect("opens")).1);
+        // A frame appended: the raw copy gets a MOT_MOVE_HOME (0x0443) to channel 1 of the
+        // USB device; the pcapng copy is rewritten from it with one more packet.
+        let raw = dir.0.join("grown.bin");
+        let mut bytes = std::fs::read(sample("sessions/kdc101.bin")).expect("read");
+        bytes.extend_from_slice(&[0x43, 0x04, 0x01, 0x00, 0x50, 0x01]);
+        std::fs::write(&raw, &bytes).expect("write");
+        if path.ends_with(".bin") {
+            std::fs::write(&path, &bytes).expect("append");
+        } else {
+            let (mut r, _) =
+                aptscope_capture::open::open(&raw.to_string_lossy(), opts).expect("open");
+            let tmp = dir.0.join("grown.pcapng");
+            let mut w = aptscope_capture::open::create(
+                &tmp.to_string_lossy(),
+                aptscope_capture::open::Format::parse("pcapng").expect("pcapng"),
+                true,
+            )
+            .expect("create");
+            w.stream(&Default::default()).expect("stream");
+            while let Some(ev) = r.next_event() {
+                if let Event::Chunk(c) = ev {
+                    w.chunk(&c).expect("chunk");
+                }
+            }
+            w.finish().expect("finish");
+            std::fs::rename(&tmp, &path).expect("replace");
+        }
+        let grown = load_cached(&path, opts, None, &cache).expect("opens");
+        assert_eq!(cache_state(&grown), (CACHE_SAVED, false), "{path}");
+        let fresh = load(&path, opts).expect("opens");
+        {
+            let (g, f) = (
+                grown.index.read().expect("lock"),
+                fresh.index.read().expect("lock"),
+            );
+            assert!(g.recs.len() > n, "{path}");
+            let last = g.recs.last().expect("a record");
+            assert_eq!(
+                g.bytes(&last).as_ref(),
+                &[0x43, 0x04, 0x01, 0x00, 0x50, 0x01],
+                "{path}"
+            );
+            assert_eq!(g.recs.len(), f.recs.len(), "{path}");
+        }
+        same_answers(&path, &grown, &fresh, &filters);
+        let again = load_cached(&path, opts, None, &cache).expect("opens");
+        assert_eq!(cache_state(&again), (CACHE_READ, true), "{path}");
+        same_answers(&path, &grown, &again, &filters);
+    }
+}
+
+/// A cache file cut short (anywhere: in its header, records, bytes or metadata), filled with
+/// garbage, or damaged in its header or metadata is ignored: the capture is indexed again, the
+/// same answers, no panic, and the file is replaced by a sound one.
+#[test]
+fn a_damaged_cache_file_is_ignored_and_replaced() {
+    let dir = tempdir::Dir::new("cache-damaged");
+    let cache = dir.0.join("cache");
+    let filters: Vec<Filter> = ["unpaired", "diag", "apt.position > 1000", "ell"]
+        .iter()
+        .map(|t| Filter::parse(t).expect("filter"))
+        .collect();
+    for name in [
+        "sessions/bsc203.bin",
+        "sessions/bsc203.pcapng",
+        "sessions/elliptec.mcap",
+    ] {
+        let path = copy_of(&dir, name);
+        let opts = OpenOptions::default();
+        let fresh = load_cached(&path, opts, None, &cache).expect("opens");
+        let file = cache_file_of(&path, &cache).expect("a cache file");
+        let sound = std::fs::read(&file).expect("cache file");
+        let len = sound.len();
+        let damaged: Vec<(String, Vec<u8>)> = vec![
+            ("empty".into(), vec![]),
+            ("header cut".into(), sound[..20].to_vec()),
+            ("records cut".into(), sound[..len / 3].to_vec()),
+            ("one byte short".into(), sound[..len - 1].to_vec()),
+            ("one byte more".into(), [&sound[..], &[0]].concat()),
+            (
+                "garbage".into(),
+                (0..len).map(|i| (i * 7919 % 251) as u8).collect(),
+            ),
+            ("magic".into(), {
+                let mut b = sound.clone();
+                b[0] ^= 1;
+                b
+            }),
+            ("version".into(), {
+                // The version's first character (after magic, layout, length and its own).
+                let mut b = sound.clone();
+                b[24] ^= 1;
+                b
+            }),
+            ("metadata".into(), {
+                let mut b = sound.clone();
+                b[len - 3] ^= 0x40;
+                b
+            }),
+        ];
+        for (what, bytes) in damaged {
+            std::fs::write(&file, &bytes).expect("damage");
+            let got = load_cached(&path, opts, None, &cache).expect("opens");
+            assert_eq!(cache_state(&got), (CACHE_SAVED, false), "{path}: {what}");
+            same_answers(&path, &fresh, &got, &filters);
+            // Replaced by a sound one.
+            let again = load_cached(&path, opts, None, &cache).expect("opens");
+            assert_eq!(cache_state(&again), (CACHE_READ, true), "{path}: {what}");
+            same_index(&path, &got, &again);
+        }
+    }
+}
+
+/// A capture that is not there to read back, or a cache directory that cannot be made, does not
+/// stop the view: the index is made and not saved.
+#[test]
+fn a_cache_that_cannot_be_written_is_skipped() {
+    let dir = tempdir::Dir::new("cache-unwritable");
+    // A file where the cache directory should be.
+    let cache = dir.0.join("not-a-dir");
+    std::fs::write(&cache, b"x").expect("write");
+    let path = sample("sessions/kdc101.bin");
+    let got = load_cached(&path, OpenOptions::default(), None, &cache).expect("opens");
+    assert_eq!(cache_state(&got), (CACHE_NOT_SAVED, false));
+    let fresh = load(&path, OpenOptions::default()).expect("opens");
+    same_answers(&path, &fresh, &got, &[]);
 }

@@ -17,7 +17,8 @@ use aptscope_dissector::table::Dir;
 use aptscope_dissector::units::{Scale, UnitsOpts};
 use std::borrow::Cow;
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
 use std::sync::{Arc, RwLock};
 use std::time::Instant;
 
@@ -89,12 +90,17 @@ pub struct Rec {
     pub chan: u8,
 }
 
+mod cache;
 mod readback;
 mod recs;
 mod sink;
 #[cfg(test)]
 mod tests;
 
+pub use cache::{
+    cache_file_of, cache_max, default_cache, set_index_cache, CACHE_NONE, CACHE_NOT_SAVED,
+    CACHE_READ, CACHE_SAVED, CACHE_SAVING, DEFAULT_CACHE_MAX,
+};
 pub use readback::*;
 pub use recs::*;
 use sink::*;
@@ -221,6 +227,8 @@ pub struct Index {
     pub done: bool,
     /// Error that stopped reading.
     pub error: Option<String>,
+    /// The index was read back from the cache of an earlier opening (not indexed again).
+    pub from_cache: bool,
 }
 
 impl Index {
@@ -264,6 +272,9 @@ pub struct Shared {
     /// The source is live (a tap, a simulator, a file being written): the index keeps growing
     /// until it stops, and every record read is published at once.
     pub live: AtomicBool,
+    /// What became of the index cache: [`CACHE_NONE`], [`CACHE_SAVING`], [`CACHE_SAVED`],
+    /// [`CACHE_NOT_SAVED`] or [`CACHE_READ`].
+    pub cache: AtomicU8,
 }
 
 impl Shared {
@@ -320,6 +331,26 @@ pub fn spawn_with(
     proto: Option<Proto>,
     units: UnitsOpts,
 ) -> std::io::Result<Arc<Shared>> {
+    spawn_cached(path, opts, proto, units, default_cache())
+}
+
+/// [`spawn_with`], with the index cache in `cache` (`None`: neither read nor written). A
+/// capture indexed before and unchanged since comes back complete at once; one indexed
+/// completely now is written there for the next opening (on the indexing thread, after the
+/// index is complete: [`Shared::cache`] says when it is written).
+pub fn spawn_cached(
+    path: &str,
+    opts: OpenOptions,
+    proto: Option<Proto>,
+    units: UnitsOpts,
+    cache: Option<PathBuf>,
+) -> std::io::Result<Arc<Shared>> {
+    let key = cache
+        .as_deref()
+        .and_then(|d| cache::Key::new(path, &opts, proto, &units, d));
+    if let Some(shared) = key.as_ref().and_then(from_cache) {
+        return Ok(shared);
+    }
     let path = path.to_string();
     let iopts = IndexOpts {
         proto,
@@ -331,13 +362,26 @@ pub fn spawn_with(
         file: (opts.follow.is_none() && path != "-").then(|| path.clone()),
         ..IndexOpts::default()
     };
-    spawn_source(
+    spawn_inner(
         move || {
             let (reader, _, progress) = open_with_progress(&path, opts)?;
             Ok((reader, Some(progress)))
         },
         iopts,
+        key,
     )
+}
+
+/// The shared index read back from the cache file of `key`, when it has a sound one.
+fn from_cache(key: &cache::Key) -> Option<Arc<Shared>> {
+    let ix = cache::read(key)?;
+    Some(Arc::new(Shared {
+        index: RwLock::new(ix),
+        read: Arc::new(AtomicU64::new(key.size)),
+        total: Some(key.size),
+        cache: AtomicU8::new(CACHE_READ),
+        ..Shared::default()
+    }))
 }
 
 /// What a source opener gives: the reader, and how far it has read when that is known.
@@ -350,6 +394,14 @@ pub fn spawn_source<F>(open: F, opts: IndexOpts) -> std::io::Result<Arc<Shared>>
 where
     F: FnOnce() -> std::io::Result<Opened> + Send + 'static,
 {
+    spawn_inner(open, opts, None)
+}
+
+/// [`spawn_source`], writing the index to the cache file of `key` once complete.
+fn spawn_inner<F>(open: F, opts: IndexOpts, key: Option<cache::Key>) -> std::io::Result<Arc<Shared>>
+where
+    F: FnOnce() -> std::io::Result<Opened> + Send + 'static,
+{
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::Builder::new()
         .name("aptscope-index".into())
@@ -358,12 +410,18 @@ where
                 let input = progress.clone();
                 let shared = shared_for(reader.as_ref(), progress, &opts);
                 let from_file = read_back(&shared, reader.as_ref(), opts.file.as_deref());
+                if key.is_some() {
+                    shared.cache.store(CACHE_SAVING, Ordering::Relaxed);
+                }
                 let _ = tx.send(Ok(shared.clone()));
-                let mut ix = Indexer::new(shared, opts.proto, opts.units);
+                let mut ix = Indexer::new(shared.clone(), opts.proto, opts.units);
                 ix.sink.from_file = from_file;
                 ix.follow = opts.follow.and_then(|p| std::fs::File::open(p).ok());
                 ix.input = input;
                 ix.run(reader);
+                if let Some(key) = &key {
+                    cache::save(&shared, key);
+                }
             }
             Err(e) => {
                 let _ = tx.send(Err(e));
@@ -444,6 +502,26 @@ pub fn load_in_memory(path: &str, opts: OpenOptions) -> std::io::Result<Arc<Shar
 /// file), whatever [`index_memory`] says: tests compare it with the index kept in memory.
 pub fn load_spilling(path: &str, opts: OpenOptions, budget: usize) -> std::io::Result<Arc<Shared>> {
     load_inner(path, opts, UnitsOpts::default(), false, Some(budget))
+}
+
+/// [`load_spilling`] (`budget`: `None` for [`index_memory`]) with the index cache in `cache`:
+/// the index read back from there when the capture was indexed before and has not changed
+/// since, else indexed and written there ([`Shared::cache`] says which).
+pub fn load_cached(
+    path: &str,
+    opts: OpenOptions,
+    budget: Option<usize>,
+    cache: &Path,
+) -> std::io::Result<Arc<Shared>> {
+    let key = cache::Key::new(path, &opts, None, &UnitsOpts::default(), cache);
+    if let Some(shared) = key.as_ref().and_then(from_cache) {
+        return Ok(shared);
+    }
+    let shared = load_inner(path, opts, UnitsOpts::default(), false, budget)?;
+    if let Some(key) = &key {
+        cache::save(&shared, key);
+    }
+    Ok(shared)
 }
 
 fn load_inner(

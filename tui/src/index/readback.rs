@@ -48,6 +48,8 @@ pub struct ReadBack {
     pub(super) file: std::fs::File,
     /// Tells this file's [`WINDOW`] from another index's.
     pub(super) id: u64,
+    /// Where position 0 is in the file (a section of a cached index's file).
+    pub(super) base: u64,
 }
 
 /// Bytes read back at once: records read in order (a filter's scan, a screen of rows) cost one
@@ -69,16 +71,23 @@ impl ReadBack {
 
     /// Read back from an open file.
     pub(super) fn of(file: std::fs::File) -> Self {
+        Self::at(file, 0)
+    }
+
+    /// Read back from an open file whose position 0 is at `base`.
+    pub(super) fn at(file: std::fs::File, base: u64) -> Self {
         static NEXT: AtomicU64 = AtomicU64::new(1);
         ReadBack {
             file,
             id: NEXT.fetch_add(1, Ordering::Relaxed),
+            base,
         }
     }
 
     /// The `len` bytes at `at`, when the file has them.
     pub(super) fn read(&self, at: u64, len: usize) -> Option<Vec<u8>> {
         use std::os::unix::fs::FileExt;
+        let at = at.checked_add(self.base)?;
         if len > WINDOW_LEN {
             let mut buf = vec![0; len];
             return self.file.read_exact_at(&mut buf, at).ok().map(|()| buf);

@@ -166,6 +166,14 @@ pub(super) struct Spill {
     pub(super) file: std::fs::File,
     /// Tells this file's chunks from another index's in [`SPILLED`].
     pub(super) id: u64,
+    /// Where the first chunk starts in the file (the record section of a cached index).
+    pub(super) base: u64,
+}
+
+/// A [`Spill::id`] no other spill of this process has.
+pub(super) fn next_spill_id() -> u64 {
+    static NEXT: AtomicU64 = AtomicU64::new(1);
+    NEXT.fetch_add(1, Ordering::Relaxed)
 }
 
 /// Bytes of a chunk of records in a [`Spill`].
@@ -316,10 +324,12 @@ impl Recs {
                 return kept[k].3.get(i % CHUNK).copied();
             }
             use std::os::unix::fs::FileExt;
-            let mut buf = vec![0u8; CHUNK_BYTES];
+            // The last chunk of a cached index may be partly filled.
+            let n = CHUNK.min(self.len.checked_sub(c * CHUNK)?);
+            let mut buf = vec![0u8; n * std::mem::size_of::<Packed>()];
             spill
                 .file
-                .read_exact_at(&mut buf, (c * CHUNK_BYTES) as u64)
+                .read_exact_at(&mut buf, spill.base + (c * CHUNK_BYTES) as u64)
                 .ok()?;
             let recs: Vec<Packed> = buf
                 .chunks_exact(24)
@@ -342,11 +352,10 @@ impl Recs {
             && self.spilled + 1 < self.packed.len()
         {
             if self.spill.is_none() {
-                static NEXT: AtomicU64 = AtomicU64::new(1);
                 match scratch_file("index") {
                     Some(file) => {
-                        let id = NEXT.fetch_add(1, Ordering::Relaxed);
-                        self.spill = Some(Arc::new(Spill { file, id }));
+                        let id = next_spill_id();
+                        self.spill = Some(Arc::new(Spill { file, id, base: 0 }));
                     }
                     None => {
                         // Nowhere to write: the records stay in memory.
@@ -366,7 +375,7 @@ impl Recs {
             use std::os::unix::fs::FileExt;
             if spill
                 .file
-                .write_all_at(&buf, (c * CHUNK_BYTES) as u64)
+                .write_all_at(&buf, spill.base + (c * CHUNK_BYTES) as u64)
                 .is_err()
             {
                 self.budget = Some(usize::MAX);
@@ -583,8 +592,9 @@ impl Recs {
             // Rare (a request's timeout passing long after it): patched in the file, read
             // alone (not through its chunk: the next patch would read that again).
             use std::os::unix::fs::FileExt;
-            let at = (i * std::mem::size_of::<Packed>()) as u64;
-            let file = &self.spill.as_ref()?.file;
+            let spill = self.spill.as_ref()?;
+            let at = spill.base + (i * std::mem::size_of::<Packed>()) as u64;
+            let file = &spill.file;
             let mut b = [0u8; 24];
             file.read_exact_at(&mut b, at).ok()?;
             let mut p = Packed::from_bytes(&b);
@@ -619,6 +629,32 @@ impl Recs {
     /// Number of blocks (the records' bases).
     pub fn blocks(&self) -> usize {
         self.blocks.len()
+    }
+    /// Write every record as a [`Spill`] holds them (24 bytes each, in order) to `out`, a chunk
+    /// at a time: those in memory packed, the spilled ones copied from their file.
+    pub(super) fn write_packed(&self, out: &mut impl std::io::Write) -> std::io::Result<()> {
+        use std::os::unix::fs::FileExt;
+        let mut buf = Vec::with_capacity(CHUNK_BYTES);
+        for (c, chunk) in self.packed.iter().enumerate() {
+            buf.clear();
+            if c < self.spilled {
+                let spill = self
+                    .spill
+                    .as_ref()
+                    .ok_or_else(|| std::io::Error::other("spilled records without their file"))?;
+                let n = CHUNK.min(self.len.saturating_sub(c * CHUNK));
+                buf.resize(n * std::mem::size_of::<Packed>(), 0);
+                spill
+                    .file
+                    .read_exact_at(&mut buf, spill.base + (c * CHUNK_BYTES) as u64)?;
+            } else {
+                for p in chunk {
+                    buf.extend_from_slice(&p.to_bytes());
+                }
+            }
+            out.write_all(&buf)?;
+        }
+        Ok(())
     }
 }
 
