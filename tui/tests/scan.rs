@@ -649,6 +649,15 @@ fn a_damaged_cache_file_is_ignored_and_replaced() {
         let file = cache_file_of(&path, &cache).expect("a cache file");
         let sound = std::fs::read(&file).expect("cache file");
         let len = sound.len();
+        // The header: magic, layout, its length, version, key, then the sections' places.
+        let u64_at = |i: usize| {
+            let mut a = [0u8; 8];
+            a.copy_from_slice(&sound[i..i + 8]);
+            u64::from_le_bytes(a) as usize
+        };
+        let version_len = u64_at(16);
+        let key_len = u64_at(24 + version_len);
+        let meta_off = u64_at(32 + version_len + key_len + 32);
         let damaged: Vec<(String, Vec<u8>)> = vec![
             ("empty".into(), vec![]),
             ("header cut".into(), sound[..20].to_vec()),
@@ -670,9 +679,16 @@ fn a_damaged_cache_file_is_ignored_and_replaced() {
                 b[24] ^= 1;
                 b
             }),
-            ("metadata".into(), {
+            ("metadata's end".into(), {
                 let mut b = sound.clone();
                 b[len - 3] ^= 0x40;
+                b
+            }),
+            ("metadata's format".into(), {
+                // A value that still decodes: only the checksum tells (the format's first
+                // letter, after its length, at the start of the metadata).
+                let mut b = sound.clone();
+                b[meta_off + 8] ^= 1;
                 b
             }),
         ];
