@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Time to the first screen of the terminal UI on a generated capture of 10 M frames (154 MB of
 # mixed APT traffic), the time to index it all, the time to jump to the end and draw, and the
-# peak resident memory of the process once indexed (`/usr/bin/time`).
-# Usage: bench/tui-first-screen.sh [MB] [--index-memory SIZE]
+# peak resident memory of the process once indexed (`/usr/bin/time`). It opens the capture
+# twice, with the index cache in a directory of its own: the first opening indexes and writes
+# the cache, the second reads it back (`"cache":"read"`); the cache file's size is printed.
+# Usage: bench/tui-first-screen.sh [MB] [--index-memory SIZE] [--no-cache]
 # FORMAT=pcapng converts the generated raw capture to pcapng first (record bytes then go to the
 # viewer's scratch file instead of being read back from the capture). The capture is made in a
 # temporary directory (TMPDIR: a 4 GB one needs the room) and deleted at the end.
@@ -22,6 +24,11 @@ if [ "${FORMAT:-raw}" = pcapng ]; then
     rm "$tmp/big.bin"
     file=$tmp/big.pcapng
 fi
+export XDG_CACHE_HOME=$tmp/cache
 uptime
-/usr/bin/time -f 'peak RSS %M KiB, CPU %U s user %S s sys, %e s wall' \
-    target/release/examples/first_screen "$file" "$@"
+for opening in first second; do
+    echo "$opening opening:"
+    /usr/bin/time -f 'peak RSS %M KiB, CPU %U s user %S s sys, %e s wall' \
+        target/release/examples/first_screen "$file" "$@"
+done
+ls -l "$XDG_CACHE_HOME"/aptscope/index/ 2>/dev/null || echo "no index cache"

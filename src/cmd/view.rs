@@ -30,6 +30,11 @@ pub(crate) struct ViewArgs {
     /// `$XDG_CACHE_HOME/aptscope` (or the temporary directory) and read back when shown.
     #[arg(long, value_name = "SIZE", value_parser = parse_size)]
     pub(crate) index_memory: Option<u64>,
+    /// Neither read nor write the index cache (`$XDG_CACHE_HOME/aptscope/index`: a capture
+    /// indexed completely before and unchanged since opens at once from there);
+    /// `APTSCOPE_NO_INDEX_CACHE=1` does the same.
+    #[arg(long)]
+    pub(crate) no_cache: bool,
 }
 
 fn parse_size(s: &str) -> std::result::Result<u64, String> {
@@ -41,6 +46,9 @@ fn parse_size(s: &str) -> std::result::Result<u64, String> {
 pub(crate) fn run(a: ViewArgs) -> Result<()> {
     if let Some(bytes) = a.index_memory {
         aptscope_tui::index::set_index_memory(bytes);
+    }
+    if a.no_cache {
+        aptscope_tui::index::set_index_cache(false);
     }
     let mut o = open_opts(a.format.as_deref(), false, a.usb_device.as_deref())?;
     // Standard input is followed as it comes, with or without --follow (a pipe ends when its
