@@ -17,6 +17,7 @@
 //! file replaced), never trusted.
 
 use super::*;
+use std::collections::HashMap;
 use std::io::Write;
 use std::os::unix::fs::{FileExt, MetadataExt};
 use std::path::{Path, PathBuf};
@@ -33,8 +34,8 @@ pub(super) const VERSION: &str = env!("CARGO_PKG_VERSION");
 /// Total size the cache directory is kept under by default ([`cache_max`]).
 pub const DEFAULT_CACHE_MAX: u64 = 4 << 30;
 
-/// Cache files not used for this long whose write never finished (a viewer that quit while
-/// writing) are removed.
+/// Cache files whose write never finished (a viewer that quit while writing) are removed
+/// once this old.
 const STALE_TMP: std::time::Duration = std::time::Duration::from_secs(3600);
 
 static CACHE_OFF: AtomicBool = AtomicBool::new(false);
@@ -241,8 +242,16 @@ impl<'a> Dec<'a> {
         }
     }
     fn str(&mut self) -> Option<String> {
+        self.str_ref().map(str::to_string)
+    }
+    fn str_ref(&mut self) -> Option<&'a str> {
         let n = self.len(1)?;
-        String::from_utf8(self.take(n)?.to_vec()).ok()
+        std::str::from_utf8(self.take(n)?).ok()
+    }
+    fn opt_str_ref(&mut self) -> Option<Option<&'a str>> {
+        let some = self.bool()?;
+        let s = self.str_ref()?;
+        Some(some.then_some(s))
     }
     fn opt_u64(&mut self) -> Option<Option<u64>> {
         let some = self.bool()?;
@@ -395,20 +404,30 @@ fn decode_meta(d: &mut Dec<'_>, spill: Spill) -> Option<Index> {
             first_addr: d.u8()?,
         })
     })?;
+    // Conversions repeat (a device's, each time it changes back): each different one is built
+    // once and copied (found by its bytes).
+    let mut built: HashMap<&[u8], Scale> = HashMap::new();
     let scales = d.list(42, |d| {
-        let stage = scale_stage(&d.str()?)?;
-        let family = match d.opt_str()? {
+        let from = d.0;
+        let (stage, family) = (d.str_ref()?, d.opt_str_ref()?);
+        let counts_per_unit = d.f64()?;
+        let unit = d.str_ref()?;
+        let maxima = [d.opt_f64()?, d.opt_f64()?];
+        let bytes = &from[..from.len() - d.0.len()];
+        if let Some(s) = built.get(bytes) {
+            return Some(s.clone());
+        }
+        let family = match family {
             None => None,
             Some(f) => Some(Family::ALL.into_iter().find(|x| x.name() == f)?),
         };
-        let counts_per_unit = d.f64()?;
-        let unit = d.str()?;
-        let mut s = Scale::new(stage, family, counts_per_unit, &unit);
-        for m in [Maximum::Volts, Maximum::Travel] {
-            if let Some(v) = d.opt_f64()? {
+        let mut s = Scale::new(scale_stage(stage)?, family, counts_per_unit, unit);
+        for (m, v) in [Maximum::Volts, Maximum::Travel].into_iter().zip(maxima) {
+            if let Some(v) = v {
                 s.set_maximum(m, v);
             }
         }
+        built.insert(bytes, s.clone());
         Some(s)
     })?;
     let diag_sets = d.list(8, |d| {

@@ -190,7 +190,7 @@ thread_local! {
 }
 
 /// A spilled chunk read back: (spill id, generation, chunk number, its records).
-pub(super) type KeptChunk = (u64, u64, usize, Vec<Packed>);
+pub(super) type KeptChunk = (u64, u64, usize, Arc<Vec<Packed>>);
 
 impl Packed {
     /// The record as it is written to a [`Spill`].
@@ -310,18 +310,36 @@ impl Recs {
     pub fn get(&self, i: usize) -> Option<Rec> {
         self.unpack(i, self.block_of(i), None)
     }
-    /// The packed record at index `i`, from memory or its spilled chunk.
+    /// The packed record at index `i`: from memory, from its spilled chunk when this thread
+    /// keeps it, else read alone (records looked up far apart, the statistics' one record of
+    /// each message or a screen of rows, would otherwise read and push out a 1.5 MB chunk
+    /// each; iterations read whole chunks, [`Recs::iter_from`]).
     #[inline]
     pub(super) fn packed_at(&self, i: usize) -> Option<Packed> {
         let c = i / CHUNK;
         if c >= self.spilled {
             return self.packed.get(c)?.get(i % CHUNK).copied();
         }
+        if let Some(p) = self.kept_chunk(c, false) {
+            return p.get(i % CHUNK).copied();
+        }
+        use std::os::unix::fs::FileExt;
+        let spill = self.spill.as_ref()?;
+        let mut b = [0u8; 24];
+        let at = spill.base + (i * std::mem::size_of::<Packed>()) as u64;
+        spill.file.read_exact_at(&mut b, at).ok()?;
+        Some(Packed::from_bytes(&b))
+    }
+    /// Spilled chunk `c` as this thread keeps it; read (and kept) when `read` and it is not.
+    pub(super) fn kept_chunk(&self, c: usize, read: bool) -> Option<Arc<Vec<Packed>>> {
         let spill = self.spill.as_ref()?;
         let key = (spill.id, self.spill_gen, c);
         SPILLED.with_borrow_mut(|kept| {
             if let Some(k) = kept.iter().position(|e| (e.0, e.1, e.2) == key) {
-                return kept[k].3.get(i % CHUNK).copied();
+                return Some(kept[k].3.clone());
+            }
+            if !read {
+                return None;
             }
             use std::os::unix::fs::FileExt;
             // The last chunk of a cached index may be partly filled.
@@ -331,16 +349,16 @@ impl Recs {
                 .file
                 .read_exact_at(&mut buf, spill.base + (c * CHUNK_BYTES) as u64)
                 .ok()?;
-            let recs: Vec<Packed> = buf
-                .chunks_exact(24)
-                .filter_map(|b| b.try_into().ok().map(Packed::from_bytes))
-                .collect();
-            let p = recs.get(i % CHUNK).copied();
+            let recs: Arc<Vec<Packed>> = Arc::new(
+                buf.chunks_exact(24)
+                    .filter_map(|b| b.try_into().ok().map(Packed::from_bytes))
+                    .collect(),
+            );
             if kept.len() >= SPILLED_KEPT {
                 kept.remove(0);
             }
-            kept.push((key.0, key.1, key.2, recs));
-            p
+            kept.push((key.0, key.1, key.2, recs.clone()));
+            Some(recs)
         })
     }
     /// Keep the records in memory within the budget: write the oldest full chunks to the
@@ -397,7 +415,18 @@ impl Recs {
     /// Record at index `i` of block `b` (`start_hint`: its arena start, when the caller knows
     /// it).
     pub(super) fn unpack(&self, i: usize, b: usize, start_hint: Option<u64>) -> Option<Rec> {
-        let p = &self.packed_at(i)?;
+        let p = self.packed_at(i)?;
+        self.unpack_packed(i, b, &p, start_hint)
+    }
+    /// Record at index `i` of block `b`, packed as `p`.
+    #[inline]
+    fn unpack_packed(
+        &self,
+        i: usize,
+        b: usize,
+        p: &Packed,
+        start_hint: Option<u64>,
+    ) -> Option<Rec> {
         let b = self.blocks.get(b)?;
         let [x, y, z] = p.cap;
         let cap_offset = b.cap + u64::from(u32::from_le_bytes([x, y, z, 0]));
@@ -481,11 +510,22 @@ impl Recs {
         let mut b = self.block_of(from);
         // The next record's arena start, after the one before (records are contiguous there).
         let mut next = None;
+        // The spilled chunk being read (not looked up again for every record).
+        let mut chunk: Option<(usize, Arc<Vec<Packed>>)> = None;
         (from..self.len()).filter_map(move |i| {
             while self.blocks.get(b + 1).is_some_and(|x| x.first <= i as u64) {
                 b += 1;
             }
-            let r = self.unpack(i, b, next)?;
+            let c = i / CHUNK;
+            let p = if c >= self.spilled {
+                self.packed.get(c)?.get(i % CHUNK).copied()?
+            } else {
+                if chunk.as_ref().is_none_or(|(k, _)| *k != c) {
+                    chunk = Some((c, self.kept_chunk(c, true)?));
+                }
+                chunk.as_ref()?.1.get(i % CHUNK).copied()?
+            };
+            let r = self.unpack_packed(i, b, &p, next)?;
             next = Some(r.start + u64::from(r.len));
             Some(r)
         })
