@@ -118,7 +118,9 @@ pub fn run(source: Source<'_>, options: Options<'_>) -> io::Result<()> {
             units,
         } => {
             let live = opts.follow.is_some() || options.quit.is_some();
-            let shared = index::spawn_with(path, opts, proto, units)?;
+            // A file still being written is not cached.
+            let cache = if live { None } else { index::default_cache() };
+            let shared = index::spawn_cached(path, opts, proto, units, cache)?;
             let title = std::path::Path::new(path)
                 .file_name()
                 .map_or_else(|| path.to_string(), |n| n.to_string_lossy().into_owned());

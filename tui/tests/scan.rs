@@ -426,6 +426,15 @@ fn an_index_over_its_budget_changes_no_answer() {
         let chunks = spilled.index.read().expect("lock").recs.spilled_chunks();
         assert!(chunks >= 1, "{path}: {chunks}");
         same_answers(&path, &spilled, &mem, &filters);
+        // Written to the cache from memory and from the scratch file, read back from it.
+        let cache = dir.0.join("cache");
+        let first = load_cached(&path, OpenOptions::default(), Some(1), &cache).expect("opens");
+        assert_eq!(cache_state(&first), (CACHE_SAVED, false), "{path}");
+        assert!(first.index.read().expect("lock").recs.spilled_chunks() >= 1);
+        let again = load_cached(&path, OpenOptions::default(), Some(1), &cache).expect("opens");
+        assert_eq!(cache_state(&again), (CACHE_READ, true), "{path}");
+        same_index(&path, &first, &again);
+        same_answers(&path, &again, &mem, &filters);
     }
 }
 
