@@ -11,7 +11,8 @@
 //! the records, owned ([`Batch`]), in batches of a couple of thousand to render threads; what they
 //! render is written in batch order. The output is that of `-j 1` by construction, whatever the
 //! container (pcap, pcapng, MCAP, raw, hex text), with no stitching to get wrong; memory is
-//! bounded by the batches in flight ([`IN_FLIGHT`]).
+//! bounded by the batches in flight ([`IN_FLIGHT`]) and the rendered ones in the file's channel
+//! to the writer (handed over whole, see `ChanWriter::write_rendered`).
 //!
 //! The display filter (`-Y`) reads one record at a time, so the render threads apply it too.
 
