@@ -24,7 +24,7 @@ done
 total=$(du -cb "$tmp"/in/*.bin | tail -n1 | cut -f1)
 printf 'input: %d files, %.1f MB; %s, %d cores\n' "$FILES" "$(echo "$total / 1000000" | bc -l)" \
   "$(lscpu | sed -n 's/^Model name: *//p' | head -n1)" "$(nproc)"
-declare -A rate
+declare -A rate cpus
 run() { # label, jobs, command...   (MB/s of $total bytes)
   local label=$1 jobs=$2
   shift 2
@@ -34,10 +34,12 @@ run() { # label, jobs, command...   (MB/s of $total bytes)
   read -r wall user sys rss <<< "$out"
   cpu=$(echo "$user + $sys" | bc -l)
   rate[$label.$jobs]=$(echo "$total / 1000000 / $wall" | bc -l)
+  cpus[$label.$jobs]=$cpu
   printf '%-7s -j %s: %6.1f MB/s (%5.2f s wall, %5.2f CPU-s), peak RSS %6d KiB' "$label" "$jobs" \
     "${rate[$label.$jobs]}" "$wall" "$cpu" "$rss"
   if [ "$jobs" != 1 ]; then
-    printf ', %.2f× -j 1' "$(echo "${rate[$label.$jobs]} / ${rate[$label.1]}" | bc -l)"
+    printf ', %.2f× -j 1 (CPU %.2f×)' "$(echo "${rate[$label.$jobs]} / ${rate[$label.1]}" | bc -l)" \
+      "$(echo "$cpu / ${cpus[$label.1]}" | bc -l)"
   fi
   printf '\n'
 }

@@ -223,3 +223,46 @@ fn fewer_files_than_jobs_render_inside_each_file() {
         }
     }
 }
+
+/// A reader that closes the pipe early (`| head -c N`): `-j 2` leaves off as `-j 1` does —
+/// the same first bytes, nothing on standard error, exit status 0 — wherever the pipe closes
+/// (inside the first block, inside a later one, past a rendered batch).
+#[test]
+fn a_closed_pipe_ends_several_cores_as_one() {
+    use std::io::Read;
+    let dir = common::Scratch::new("parallel-pipe");
+    let f = dir.join("apt.bin");
+    std::fs::write(&f, apt_stream(3, 60_000)).expect("write");
+    let f = f.to_str().expect("utf-8");
+    let whole = run(&["decode", "--json", "-j", "1", f], None).0;
+    assert!(whole.len() > 4_000_000, "{} bytes", whole.len());
+    for n in [10, 70_000, 1_000_000] {
+        for j in ["1", "2"] {
+            let mut child = Command::new(env!("CARGO_BIN_EXE_aptscope"))
+                .args(["decode", "--json", "-j", j, f])
+                .stdin(Stdio::null())
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .expect("run aptscope");
+            let mut got = vec![0; n];
+            child
+                .stdout
+                .take()
+                .expect("stdout")
+                .read_exact(&mut got)
+                .expect("read");
+            // The pipe is closed here; what is still to be written meets a broken pipe.
+            let o = child.wait_with_output().expect("wait");
+            assert!(
+                got[..] == whole[..n],
+                "-j {j}, {n} bytes: not the first bytes"
+            );
+            assert_eq!(
+                (String::from_utf8_lossy(&o.stderr).as_ref(), o.status.code()),
+                ("", Some(0)),
+                "-j {j}, pipe closed after {n} bytes"
+            );
+        }
+    }
+}

@@ -130,9 +130,21 @@ impl Bar {
 }
 
 /// Output of one file's worker: blocks of bytes (with whether to flush them out now: a live
-/// input's records as they come), ranges of its spill file, then its result.
+/// input's records as they come), rendered buffers handed over whole, ranges of its spill
+/// file, then its result.
+///
+/// The bytes `-j 1` writes before an error ends a file are its whole 64 KiB blocks (what
+/// [`ChanWriter`] had not sent yet is dropped), so what reaches the output in `-j N` must end
+/// at the same points. A [`Msg::Part`] says where its buffer closes a block; the writer holds
+/// back what follows until a later message closes that block, and drops it if the file ends
+/// in error instead.
 enum Msg {
+    /// Everything held back, then these bytes: written out.
     Data(Vec<u8>, bool),
+    /// A buffer of whole rendered lines, and how many of its bytes close the blocks begun
+    /// before it (0: none). Those are written out after everything held back; the rest is
+    /// held back.
+    Part(Vec<u8>, usize),
     /// Bytes `start..end` of the worker's spill file, in order with the blocks.
     Spilled(Arc<File>, u64, u64),
     Done(io::Result<Stats>),
@@ -146,8 +158,64 @@ struct Stats {
 }
 
 /// Blocks a file's channel holds (1 MiB): enough to ride out the writer's pauses; a file
-/// further ahead spills.
+/// further ahead spills. (Rendered buffers are bigger, a batch each: 16 of them are at most
+/// a few MiB.)
 const CHANNEL_BLOCKS: usize = 16;
+
+/// Spare buffers a [`Pool`] keeps at most (it keeps only what was in use at once).
+const POOL_MAX: usize = 64;
+
+/// Buffers written out, for the next rendered batches: in the steady state no batch
+/// allocates (fresh memory costs page faults on every batch).
+#[derive(Default)]
+struct Pool(Mutex<Vec<Vec<u8>>>);
+
+impl Pool {
+    /// An empty buffer, with the capacity of one used before when there is one.
+    fn get(&self) -> Vec<u8> {
+        self.0
+            .lock()
+            .ok()
+            .and_then(|mut v| v.pop())
+            .unwrap_or_default()
+    }
+
+    /// Keep `b` for later (emptied).
+    fn put(&self, mut b: Vec<u8>) {
+        if b.capacity() == 0 {
+            return;
+        }
+        b.clear();
+        if let Ok(mut v) = self.0.lock() {
+            if v.len() < POOL_MAX {
+                v.push(b);
+            }
+        }
+    }
+}
+
+/// What the writer holds back of a file's output: the tails of rendered buffers after the
+/// last block they closed (see [`Msg`]), each with where its tail starts.
+#[derive(Default)]
+struct HeldBack(Vec<(Vec<u8>, usize)>);
+
+impl HeldBack {
+    /// Write out everything held back (the block it began is closed).
+    fn write_out(&mut self, out: &mut impl Write, pool: &Pool) -> io::Result<()> {
+        for (b, at) in self.0.drain(..) {
+            out.write_all(&b[at..])?;
+            pool.put(b);
+        }
+        Ok(())
+    }
+
+    /// Drop everything held back (the file ended in error: `-j 1` dropped its last block).
+    fn drop_all(&mut self, pool: &Pool) {
+        for (b, _) in self.0.drain(..) {
+            pool.put(b);
+        }
+    }
+}
 
 const BLOCK: usize = 1 << 16;
 
@@ -189,6 +257,10 @@ impl Spill {
 struct ChanWriter<'a> {
     tx: &'a SyncSender<Msg>,
     buf: Vec<u8>,
+    /// Bytes of the block being filled that went to the writer in [`Msg::Part`]s (before
+    /// those in `buf`): held back there until the block is closed.
+    open: usize,
+    pool: &'a Pool,
     held: &'a Cell<bool>,
     /// The file's index in the run (names its spill file).
     index: usize,
@@ -206,10 +278,13 @@ impl ChanWriter<'_> {
         held: &'a Cell<bool>,
         index: usize,
         head: &'a AtomicUsize,
+        pool: &'a Pool,
     ) -> ChanWriter<'a> {
         ChanWriter {
             tx,
             buf: Vec::with_capacity(BLOCK),
+            open: 0,
+            pool,
             held,
             index,
             head,
@@ -268,14 +343,16 @@ impl ChanWriter<'_> {
 
     /// Send the block; `now`: and have it written out at once (waiting for the writer).
     fn send(&mut self, now: bool) -> io::Result<()> {
-        if self.held.get() || self.buf.is_empty() {
+        if self.held.get() || (self.buf.is_empty() && self.open == 0) {
             return Ok(());
         }
         let b = std::mem::replace(&mut self.buf, Vec::with_capacity(BLOCK));
         // The file being written out: the writer is reading this channel, so waiting costs
-        // nothing and spilling would only copy the bytes twice.
-        if now || self.head.load(Ordering::Relaxed) == self.index {
+        // nothing and spilling would only copy the bytes twice. (Bytes held back by the
+        // writer mean it was, and still is: the head never goes back.)
+        if now || self.open > 0 || self.head.load(Ordering::Relaxed) == self.index {
             self.announce(true)?;
+            self.open = 0;
             return self.tx.send(Msg::Data(b, now)).map_err(|_| Self::gone());
         }
         // Blocks after spilled bytes follow them into the spill until those are announced.
@@ -308,25 +385,69 @@ impl ChanWriter<'_> {
     /// output before an error ends a file is the same too).
     fn write_lines(&mut self, mut b: &[u8]) -> io::Result<()> {
         while !b.is_empty() {
-            let need = BLOCK.saturating_sub(self.buf.len()).max(1);
+            let need = BLOCK.saturating_sub(self.open + self.buf.len()).max(1);
             if b.len() < need {
                 self.buf.extend_from_slice(b);
                 return Ok(());
             }
-            // `-j 1` checks the block's size after each line's text and after its newline:
-            // the first such point at or past `need` bytes.
-            let cut = b[need - 1..]
-                .iter()
-                .position(|&c| c == b'\n')
-                .map_or(b.len(), |q| (need - 1 + q).max(need));
+            let cut = block_end(b, need);
             self.buf.extend_from_slice(&b[..cut]);
             b = &b[cut..];
-            if self.buf.len() >= BLOCK {
+            if self.open + self.buf.len() >= BLOCK {
                 self.send(false)?;
             }
         }
         Ok(())
     }
+
+    /// [`write_lines`](Self::write_lines) of a whole buffer, handed to the writer as it is
+    /// (no copy): with where its last block ends, as `-j 1` would have cut it. Held output,
+    /// or a file the writer is not copying out yet (its blocks may go to the spill file), is
+    /// cut here as before.
+    fn write_rendered(&mut self, b: Vec<u8>) -> io::Result<()> {
+        if self.held.get() || self.head.load(Ordering::Relaxed) != self.index {
+            self.write_lines(&b)?;
+            self.pool.put(b);
+            return Ok(());
+        }
+        if b.is_empty() {
+            self.pool.put(b);
+            return Ok(());
+        }
+        // The blocks `write_lines` would have sent: each ends at the first line end at or
+        // past the bytes its block lacks; all but the last lie wholly inside `b`.
+        let mut open = self.open + self.buf.len();
+        let (mut at, mut commit) = (0, 0);
+        loop {
+            let need = BLOCK.saturating_sub(open).max(1);
+            let rest = &b[at..];
+            if rest.len() < need {
+                open += rest.len();
+                break;
+            }
+            at += block_end(rest, need);
+            commit = at;
+            open = 0;
+        }
+        // What spilled before goes first, then what this writer holds.
+        self.announce(true)?;
+        if !self.buf.is_empty() {
+            let head = std::mem::take(&mut self.buf);
+            self.tx.send(Msg::Part(head, 0)).map_err(|_| Self::gone())?;
+        }
+        self.open = open;
+        self.tx.send(Msg::Part(b, commit)).map_err(|_| Self::gone())
+    }
+}
+
+/// Where `-j 1` ends a block in `b` (lines, each ending in a newline) when it lacks `need`
+/// bytes (`need` ≤ `b.len()`): it checks the block's size after each line's text and after its
+/// newline, so the first such point at or past `need` bytes.
+fn block_end(b: &[u8], need: usize) -> usize {
+    b[need - 1..]
+        .iter()
+        .position(|&c| c == b'\n')
+        .map_or(b.len(), |q| (need - 1 + q).max(need))
 }
 
 impl Drop for ChanWriter<'_> {
@@ -342,7 +463,7 @@ impl Drop for ChanWriter<'_> {
 impl Write for ChanWriter<'_> {
     fn write(&mut self, b: &[u8]) -> io::Result<usize> {
         self.buf.extend_from_slice(b);
-        if self.buf.len() >= BLOCK {
+        if self.open + self.buf.len() >= BLOCK {
             self.send(false)?;
         }
         Ok(b.len())
@@ -395,7 +516,8 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
     // decoded on one thread and rendered on two.
     let helpers = if job.jobs > jobs { job.jobs / jobs } else { 0 };
     let job = &job;
-    let (bar, stop, next, txs, head) = (&bar, &stop, &next, &txs, &head);
+    let pool = Pool::default();
+    let (bar, stop, next, txs, head, pool) = (&bar, &stop, &next, &txs, &head, &pool);
     let result = std::thread::scope(|sc| {
         for _ in 0..jobs {
             sc.spawn(move || loop {
@@ -406,7 +528,7 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
                 let Some(tx) = txs[i].lock().ok().and_then(|mut t| t.take()) else {
                     break;
                 };
-                let r = one(job, i, &tx, bar, head, helpers);
+                let r = one(job, i, &tx, bar, head, pool, helpers);
                 bar.file_done();
                 // The receiver is gone only when the writer stopped: nothing left to do.
                 if tx.send(Msg::Done(r)).is_err() {
@@ -414,7 +536,7 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
                 }
             });
         }
-        collect(job, rxs, bar, stop, head)
+        collect(job, rxs, bar, stop, head, pool)
     });
     bar.finish();
     result
@@ -427,6 +549,7 @@ fn collect(
     bar: &Bar,
     stop: &AtomicBool,
     head: &AtomicUsize,
+    pool: &Pool,
 ) -> io::Result<()> {
     let n = job.files.len();
     let mut out = io::stdout().lock();
@@ -434,15 +557,33 @@ fn collect(
     for (i, rx) in rxs.into_iter().enumerate() {
         let file = &job.files[i];
         head.store(i, Ordering::Relaxed);
+        let mut back = HeldBack::default();
         loop {
             match rx.recv() {
                 Ok(Msg::Data(b, now)) => {
-                    let w = out
-                        .write_all(&b)
+                    let w = back
+                        .write_out(&mut out, pool)
+                        .and_then(|_| out.write_all(&b))
                         .and_then(|_| if now { out.flush() } else { Ok(()) });
                     if let Err(e) = w {
                         stop.store(true, Ordering::Relaxed);
                         return Err(e);
+                    }
+                }
+                Ok(Msg::Part(b, commit)) => {
+                    if commit > 0 {
+                        let w = back
+                            .write_out(&mut out, pool)
+                            .and_then(|_| out.write_all(&b[..commit]));
+                        if let Err(e) = w {
+                            stop.store(true, Ordering::Relaxed);
+                            return Err(e);
+                        }
+                    }
+                    if commit < b.len() {
+                        back.0.push((b, commit));
+                    } else {
+                        pool.put(b);
                     }
                 }
                 Ok(Msg::Spilled(f, start, end)) => {
@@ -452,11 +593,14 @@ fn collect(
                     }
                 }
                 Ok(Msg::Done(Ok(s))) => {
+                    // A file that ends well closed its last block (its final flush).
+                    back.drop_all(pool);
                     records += s.records;
                     groups += s.row_groups;
                     break;
                 }
                 Ok(Msg::Done(Err(e))) => {
+                    back.drop_all(pool);
                     if n == 1 {
                         return Err(e);
                     }
@@ -499,6 +643,7 @@ fn one(
     tx: &SyncSender<Msg>,
     bar: &Bar,
     head: &AtomicUsize,
+    pool: &Pool,
     helpers: usize,
 ) -> io::Result<Stats> {
     let file = job.files[i].as_str();
@@ -527,7 +672,7 @@ fn one(
             // Held until the detector has judged the first 4 KiB, so that what is not a capture
             // prints nothing (a given protocol: nothing to judge).
             let held = Cell::new(job.proto == ProtoArg::Auto);
-            let mut out = ChanWriter::new(tx, &held, i, head);
+            let mut out = ChanWriter::new(tx, &held, i, head, pool);
             let tag = (job.files.len() > 1).then_some((i, file));
             if let Some((i, name)) = tag {
                 if *as_json {
@@ -588,7 +733,7 @@ fn one(
                 drop(done_tx);
                 // Dropped when `lines` returns, however it ends: the render threads then stop.
                 let mut engine =
-                    Engine::Split(Box::new(Split::new(dec, helpers, work_tx, &done_rx)));
+                    Engine::Split(Box::new(Split::new(dec, helpers, work_tx, &done_rx, pool)));
                 lines(job, file, &mut engine, reader, format, &progress, out, bar)
             })
         }
@@ -715,4 +860,103 @@ fn forced_note(forced: Proto, sample: &[u8]) -> Option<String> {
         forced.name(),
         share(forced) * 100.0
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use aptscope_dissector::synth::Rng;
+
+    /// What the writer has written out of one file, applying its messages as `collect` does.
+    #[derive(Default)]
+    struct Sink {
+        out: Vec<u8>,
+        back: HeldBack,
+    }
+
+    impl Sink {
+        fn take(&mut self, rx: &Receiver<Msg>, pool: &Pool) {
+            while let Ok(m) = rx.try_recv() {
+                match m {
+                    Msg::Data(b, _) => {
+                        self.back.write_out(&mut self.out, pool).unwrap();
+                        self.out.extend_from_slice(&b);
+                    }
+                    Msg::Part(b, commit) => {
+                        if commit > 0 {
+                            self.back.write_out(&mut self.out, pool).unwrap();
+                            self.out.extend_from_slice(&b[..commit]);
+                        }
+                        if commit < b.len() {
+                            self.back.0.push((b, commit));
+                        }
+                    }
+                    Msg::Spilled(..) | Msg::Done(_) => panic!("not sent here"),
+                }
+            }
+        }
+    }
+
+    /// Random lines (each ending in a newline), some longer than a block.
+    fn lines(r: &mut Rng) -> Vec<u8> {
+        let mut b = vec![];
+        for _ in 0..r.below(400) {
+            let len = match r.below(50) {
+                0 => BLOCK as u64 + r.below(2 * BLOCK as u64),
+                1 => 0,
+                _ => 1 + r.below(600),
+            };
+            b.extend((0..len).map(|i| b'a' + (i % 26) as u8));
+            b.push(b'\n');
+        }
+        b
+    }
+
+    /// A rendered buffer handed over whole puts on the output, at every point, exactly the
+    /// bytes that cutting it into blocks (what `-j 1` sends) does: the same bytes are written
+    /// out before an error ends the file, and all of them at its end. Held output, lines
+    /// written through `Write` between buffers, and empty buffers included.
+    #[test]
+    fn whole_rendered_buffers_reach_the_output_at_the_blocks_ends() {
+        let pool = Pool::default();
+        let head = AtomicUsize::new(0);
+        for seed in 1..=12u64 {
+            let mut r = Rng(seed);
+            let (ta, ra) = sync_channel(1 << 16);
+            let (tb, rb) = sync_channel(1 << 16);
+            let hold = seed % 3 == 0;
+            let (held_a, held_b) = (Cell::new(hold), Cell::new(hold));
+            let mut a = ChanWriter::new(&ta, &held_a, 0, &head, &pool);
+            let mut b = ChanWriter::new(&tb, &held_b, 0, &head, &pool);
+            let (mut sa, mut sb) = (Sink::default(), Sink::default());
+            let mut whole = vec![];
+            for step in 0..40 {
+                if hold && step == 5 {
+                    held_a.set(false);
+                    held_b.set(false);
+                }
+                if r.below(8) == 0 {
+                    writeln!(a, "# a line written {step}").unwrap();
+                    writeln!(b, "# a line written {step}").unwrap();
+                    whole.extend_from_slice(format!("# a line written {step}\n").as_bytes());
+                }
+                let buf = lines(&mut r);
+                whole.extend_from_slice(&buf);
+                a.write_lines(&buf).unwrap();
+                b.write_rendered(buf).unwrap();
+                sa.take(&ra, &pool);
+                sb.take(&rb, &pool);
+                assert_eq!(sa.out.len(), sb.out.len(), "seed {seed} step {step}");
+                assert!(sa.out == sb.out, "seed {seed} step {step}");
+            }
+            a.flush().unwrap();
+            b.flush().unwrap();
+            sa.take(&ra, &pool);
+            sb.take(&rb, &pool);
+            assert!(
+                sa.out == whole && sb.out == whole,
+                "seed {seed}: all at the end"
+            );
+        }
+    }
 }

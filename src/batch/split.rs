@@ -11,11 +11,12 @@
 //! the records, owned ([`Batch`]), in batches of a couple of thousand to render threads; what they
 //! render is written in batch order. The output is that of `-j 1` by construction, whatever the
 //! container (pcap, pcapng, MCAP, raw, hex text), with no stitching to get wrong; memory is
-//! bounded by the batches in flight ([`IN_FLIGHT`]).
+//! bounded by the batches in flight ([`IN_FLIGHT`]) and the rendered ones in the file's channel
+//! to the writer (handed over whole, see `ChanWriter::write_rendered`).
 //!
 //! The display filter (`-Y`) reads one record at a time, so the render threads apply it too.
 
-use super::ChanWriter;
+use super::{ChanWriter, Pool};
 use aptscope_capture::Event;
 use aptscope_dissector::filter::Filter;
 use aptscope_dissector::owned::Batch;
@@ -132,8 +133,10 @@ struct Queue<'a> {
     written: u64,
     /// Rendered batches waiting for an earlier one.
     ready: BTreeMap<u64, Work>,
-    /// Buffers back from written batches, for the next.
-    spare: Vec<(Batch, Vec<u8>)>,
+    /// Batches (and their lists of streams) back from written batches, for the next.
+    spare: Vec<(Batch, Vec<u32>)>,
+    /// Buffers to render into: what the writer has written out comes back here.
+    pool: &'a Pool,
 }
 
 type Out<'w, 'a> = RefCell<ChanWriter<'w>>;
@@ -150,6 +153,7 @@ impl<'a> Split<'a> {
         threads: usize,
         work: Sender<Work>,
         done: &'a Receiver<Work>,
+        pool: &'a Pool,
     ) -> Split<'a> {
         Split {
             dec,
@@ -165,6 +169,7 @@ impl<'a> Split<'a> {
                 written: 0,
                 ready: BTreeMap::new(),
                 spare: vec![],
+                pool,
             },
         }
     }
@@ -193,12 +198,14 @@ impl Queue<'_> {
         while self.sent - self.written >= self.in_flight as u64 {
             self.wait_one(out)?;
         }
-        let (b, buf) = self.spare.pop().unwrap_or_default();
+        let (b, mut streams) = self.spare.pop().unwrap_or_default();
+        streams.clear();
+        streams.extend_from_slice(&self.start);
         let w = Work {
             seq: self.sent,
             batch: std::mem::replace(&mut self.batch, b),
-            streams: self.start.clone(),
-            out: buf,
+            streams,
+            out: self.pool.get(),
         };
         self.work.send(w).map_err(|_| stopped())?;
         self.sent += 1;
@@ -213,15 +220,15 @@ impl Queue<'_> {
         self.take(w, out)
     }
 
-    /// A rendered batch: written out with every one before it that is ready.
+    /// A rendered batch: written out with every one before it that is ready (its buffer
+    /// handed to the writer whole, which returns it to the pool once written).
     fn take(&mut self, w: Work, out: &Out<'_, '_>) -> io::Result<()> {
         self.ready.insert(w.seq, w);
         while let Some(mut w) = self.ready.remove(&self.written) {
-            out.borrow_mut().write_lines(&w.out)?;
+            out.borrow_mut().write_rendered(w.out)?;
             self.written += 1;
             w.batch.clear();
-            w.out.clear();
-            self.spare.push((w.batch, w.out));
+            self.spare.push((w.batch, w.streams));
         }
         Ok(())
     }
