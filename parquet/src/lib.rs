@@ -26,14 +26,15 @@ pub mod schema;
 
 pub use file::{decode_file, not_a_capture, not_a_capture_error, DecodeOpts};
 
-use aptscope_dissector::apt::phys_or_scaled;
+use aptscope_dissector::apt::{phys_or_scaled, Value as AptValue};
 use aptscope_dissector::diag::{Diag, DiagKind};
 use aptscope_dissector::ell::table::{status_name, Kind as EllKind};
 use aptscope_dissector::ell::EllValue;
 use aptscope_dissector::hash::NumMap;
 use aptscope_dissector::json;
 use aptscope_dissector::record::{AptRec, EllRec, Record};
-use aptscope_dissector::table::Dir;
+use aptscope_dissector::table::{Dir, Field as AptField};
+use aptscope_dissector::Table;
 use arrow_array::RecordBatch;
 use arrow_schema::{DataType, Schema};
 use buf::TableBuf;
@@ -233,14 +234,14 @@ pub struct Summary {
 }
 
 /// A message's kind table: its name, and its schema when it has one.
-type KindOf = (Arc<str>, Option<Arc<KindSchema>>);
+type KindOf = (Box<str>, Option<&'static KindSchema>);
 
 struct Open {
     buf: TableBuf,
     part: u32,
     used: u64,
-    /// The kind table's name (empty for `records`).
-    name: String,
+    /// The kind table's name (`records` for the records table).
+    name: &'static str,
 }
 
 /// Writes one capture's records as rows (see the crate documentation).
@@ -249,17 +250,25 @@ pub struct CaptureWriter<S: Sink> {
     file: Arc<str>,
     opts: Options,
     records: Open,
-    /// Kind tables buffering rows, by name (the order of this map picks which of equally big
-    /// ones is written first: keyed otherwise, the part files would be cut elsewhere).
-    kinds: NumMap<String, Open>,
-    /// Part numbers of kind tables flushed and closed, to continue from when they reopen.
-    parts: HashMap<String, u32>,
+    /// Kind tables buffering rows, by [`KindSchema::index`] (a vector, not a map by name: three
+    /// lookups by name a frame were a tenth of building its rows). Scanned in that order (by
+    /// name) when the least used or the biggest is picked, so the part files are cut at the
+    /// same rows in every run.
+    kinds: Vec<Option<Open>>,
+    /// Kind tables buffering rows now.
+    open: usize,
+    /// Part numbers of kind tables flushed and closed, to continue from when they reopen (by
+    /// index).
+    parts: Vec<u32>,
     clock: u64,
     summary: Summary,
-    /// Kind table names and schemas by message (the address of its table entry, and of its
-    /// sub-message's).
-    kind_names: NumMap<(usize, usize), KindOf>,
+    /// The kind table of each message met (the address of its table entry, and of its
+    /// sub-message's), as its place in `kind_list`.
+    kind_names: NumMap<(usize, usize), usize>,
+    kind_list: Vec<KindOf>,
     layouts: Layouts,
+    /// Fields of the frame being written (kept for its allocation).
+    scratch: Scratch,
     /// Rows the kind tables buffer, together.
     kind_rows: usize,
 }
@@ -316,22 +325,29 @@ fn put_diag(b: &mut TableBuf, n: &mut u64, d: &Diag) {
 impl<S: Sink> CaptureWriter<S> {
     /// A writer of the records of capture `file` (its name in the `file` column) into `sink`.
     pub fn new(sink: S, file: &str, opts: Options) -> Self {
+        let file: Arc<str> = Arc::from(file);
+        let mut buf = TableBuf::new(schema::records_schema());
+        buf.constant_text(col::FILE, file.clone());
+        let n = Kinds::global().len();
         CaptureWriter {
             sink,
-            file: Arc::from(file),
+            file,
             opts,
             records: Open {
-                buf: TableBuf::new(schema::records_schema()),
+                buf,
                 part: 0,
                 used: 0,
-                name: RECORDS.to_string(),
+                name: RECORDS,
             },
-            kinds: NumMap::default(),
-            parts: HashMap::new(),
+            kinds: (0..n).map(|_| None).collect(),
+            open: 0,
+            parts: vec![0; n],
             clock: 0,
             summary: Summary::default(),
             kind_names: NumMap::default(),
+            kind_list: Vec::new(),
             layouts: Layouts::default(),
+            scratch: Scratch::default(),
             kind_rows: 0,
         }
     }
@@ -339,10 +355,13 @@ impl<S: Sink> CaptureWriter<S> {
     /// Add one record.
     pub fn record(&mut self, rec: &Record<'_>) -> io::Result<()> {
         use col::*;
-        let (kname, kind) = self.kind_of(rec);
+        let ki = self.kind_of(rec);
+        let (kname, kind) = match ki.and_then(|i| self.kind_list.get(i)) {
+            Some((n, k)) => (Some(&**n), *k),
+            None => (None, None),
+        };
         let b = &mut self.records.buf;
         let sum = &mut self.summary;
-        b.text(FILE, &self.file);
         if let Some(m) = rec.meta() {
             b.uint(STREAM, m.stream as u64);
             b.uint(N, m.n);
@@ -410,7 +429,7 @@ impl<S: Sink> CaptureWriter<S> {
                 b.uint(MSGID, h.msg_id() as u64);
                 if let Some(m) = f.msg {
                     b.text(NAME, m.name);
-                    if let Some(k) = kname.as_deref() {
+                    if let Some(k) = kname {
                         b.text(KIND, k);
                     }
                 }
@@ -443,7 +462,7 @@ impl<S: Sink> CaptureWriter<S> {
                 b.text(CODE, f.code_str());
                 if let Some(c) = f.cmd {
                     b.text(NAME, c.name);
-                    if let Some(k) = kname.as_deref() {
+                    if let Some(k) = kname {
                         b.text(KIND, k);
                     }
                 }
@@ -500,96 +519,97 @@ impl<S: Sink> CaptureWriter<S> {
             self.flush_records()?;
         }
         if let (Some(k), Some(m)) = (kind, rec.meta()) {
-            let file = self.file.clone();
-            self.open_kind(&k)?;
-            let Some(o) = self.kinds.get_mut(&k.name) else {
+            self.open_kind(k)?;
+            let Some(Some(o)) = self.kinds.get_mut(k.index) else {
                 return Ok(());
             };
             o.used = self.clock;
             let b = &mut o.buf;
-            b.text(0, &file);
             b.uint(1, m.n);
             b.uint(2, m.stream as u64);
             put_opt_u(b, 3, m.ts_ns);
             match rec {
-                Record::Apt(a) => apt_values(&mut self.layouts, &k, a, b),
-                Record::Ell(e) => ell_values(&mut self.layouts, &k, e, b),
+                Record::Apt(a) => apt_values(&mut self.layouts, &mut self.scratch, k, a, b),
+                Record::Ell(e) => ell_values(&mut self.layouts, k, e, b),
                 _ => {}
             }
             b.end_row();
             self.kind_rows += 1;
-            self.kind_row_done(&k)?;
+            self.kind_row_done(k)?;
         }
         Ok(())
     }
 
-    /// The kind table of a frame's message (its name, and its schema when it has one), looked
-    /// up once per message rather than by a name made for every frame.
-    fn kind_of(&mut self, rec: &Record<'_>) -> (Option<Arc<str>>, Option<Arc<KindSchema>>) {
+    /// The kind table of a frame's message (its place in `kind_list`), looked up once per
+    /// message rather than by a name made for every frame.
+    fn kind_of(&mut self, rec: &Record<'_>) -> Option<usize> {
         let (key, name): ((usize, usize), &dyn Fn() -> String) = match rec {
-            Record::Apt(a) => match a.frame.msg {
-                Some(m) => {
-                    let sub = a.frame.sub;
-                    let key = (
-                        m as *const _ as usize,
-                        sub.map_or(0, |x| x as *const _ as usize),
-                    );
-                    (key, &move || schema::apt_kind_name(m, sub))
-                }
-                None => return (None, None),
-            },
-            Record::Ell(e) => match e.frame.cmd {
-                Some(c) => ((c as *const _ as usize, 1), &move || {
+            Record::Apt(a) => {
+                let m = a.frame.msg?;
+                let sub = a.frame.sub;
+                let key = (
+                    m as *const _ as usize,
+                    sub.map_or(0, |x| x as *const _ as usize),
+                );
+                (key, &move || schema::apt_kind_name(m, sub))
+            }
+            Record::Ell(e) => {
+                let c = e.frame.cmd?;
+                ((c as *const _ as usize, 1), &move || {
                     schema::ell_kind_name(c)
-                }),
-                None => return (None, None),
-            },
-            _ => return (None, None),
+                })
+            }
+            _ => return None,
         };
-        let (n, k) = self.kind_names.entry(key).or_insert_with(|| {
+        let list = &mut self.kind_list;
+        let i = *self.kind_names.entry(key).or_insert_with(|| {
             let n = name();
-            let k = Kinds::global().get(&n).cloned();
-            (Arc::from(n), k)
+            let k = Kinds::global().get(&n).map(|k| &**k);
+            list.push((n.into_boxed_str(), k));
+            list.len() - 1
         });
-        (Some(n.clone()), k.clone())
+        Some(i)
     }
 
     /// Open kind table `k`'s buffer unless it is (closing another when too many are); a tick of
     /// the clock that says which was used least recently.
-    fn open_kind(&mut self, k: &Arc<KindSchema>) -> io::Result<()> {
+    fn open_kind(&mut self, k: &'static KindSchema) -> io::Result<()> {
         self.clock += 1;
-        if !self.kinds.contains_key(&k.name) {
-            if self.kinds.len() >= self.opts.max_open_kinds {
+        if matches!(self.kinds.get(k.index), Some(None)) {
+            if self.open >= self.opts.max_open_kinds {
                 // Too many open: the least recently used gives its rows up first.
                 let lru = self
                     .kinds
                     .iter()
-                    .min_by_key(|(_, o)| o.used)
-                    .map(|(n, _)| n.clone());
-                if let Some(n) = lru {
-                    self.close_kind(&n)?;
+                    .enumerate()
+                    .filter_map(|(i, o)| Some((i, o.as_ref()?.used)))
+                    .min_by_key(|(_, used)| *used)
+                    .map(|(i, _)| i);
+                if let Some(i) = lru {
+                    self.close_kind(i)?;
                 }
             }
-            let part = self.parts.get(&k.name).copied().unwrap_or(0);
-            self.kinds.insert(
-                k.name.clone(),
-                Open {
-                    buf: TableBuf::new(k.schema.clone()),
-                    part,
+            let mut buf = TableBuf::new(k.schema.clone());
+            buf.constant_text(0, self.file.clone());
+            if let Some(slot) = self.kinds.get_mut(k.index) {
+                *slot = Some(Open {
+                    buf,
+                    part: self.parts.get(k.index).copied().unwrap_or(0),
                     used: 0,
-                    name: k.name.clone(),
-                },
-            );
+                    name: &k.name,
+                });
+                self.open += 1;
+            }
         }
         Ok(())
     }
 
     /// After a row of kind table `k`: write what is due.
-    fn kind_row_done(&mut self, k: &Arc<KindSchema>) -> io::Result<()> {
+    fn kind_row_done(&mut self, k: &KindSchema) -> io::Result<()> {
         // One row group's worth across kinds (with the records table's own, the writer stays
         // under 64 MiB; four row groups' worth peaked at 100 MiB).
         let budget = self.opts.rows_per_group;
-        let Some(o) = self.kinds.get_mut(&k.name) else {
+        let Some(Some(o)) = self.kinds.get_mut(k.index) else {
             return Ok(());
         };
         if o.buf.rows() >= self.opts.rows_per_group {
@@ -597,24 +617,31 @@ impl<S: Sink> CaptureWriter<S> {
             Self::flush(&mut self.sink, o, &mut self.summary)?;
         }
         if self.kind_rows > budget {
-            // Many kinds each short of a row group: the biggest is written early.
-            let big = self
-                .kinds
-                .iter()
-                .max_by_key(|(_, o)| o.buf.rows())
-                .map(|(n, _)| n.clone());
-            if let Some(n) = big {
-                self.close_kind(&n)?;
+            // Many kinds each short of a row group: the biggest is written early (the first
+            // by name of equally big ones).
+            let mut big: Option<(usize, usize)> = None;
+            for (i, o) in self.kinds.iter().enumerate() {
+                if let Some(o) = o {
+                    if big.is_none_or(|(_, r)| o.buf.rows() > r) {
+                        big = Some((i, o.buf.rows()));
+                    }
+                }
+            }
+            if let Some((i, _)) = big {
+                self.close_kind(i)?;
             }
         }
         Ok(())
     }
 
-    fn close_kind(&mut self, name: &str) -> io::Result<()> {
-        if let Some(mut o) = self.kinds.remove(name) {
+    fn close_kind(&mut self, i: usize) -> io::Result<()> {
+        if let Some(mut o) = self.kinds.get_mut(i).and_then(Option::take) {
+            self.open -= 1;
             self.kind_rows -= o.buf.rows();
             Self::flush(&mut self.sink, &mut o, &mut self.summary)?;
-            self.parts.insert(std::mem::take(&mut o.name), o.part);
+            if let Some(p) = self.parts.get_mut(i) {
+                *p = o.part;
+            }
         }
         Ok(())
     }
@@ -628,7 +655,7 @@ impl<S: Sink> CaptureWriter<S> {
             return Ok(());
         }
         let batch = o.buf.take().map_err(perr)?;
-        sink.write(&o.name, o.part, &batch)?;
+        sink.write(o.name, o.part, &batch)?;
         o.part += 1;
         summary.row_groups += 1;
         Ok(())
@@ -637,10 +664,9 @@ impl<S: Sink> CaptureWriter<S> {
     /// Write what is buffered; returns the sink and what was written.
     pub fn finish(mut self) -> io::Result<(S, Summary)> {
         self.flush_records()?;
-        let mut names: Vec<String> = self.kinds.keys().cloned().collect();
-        names.sort();
-        for n in names {
-            self.close_kind(&n)?;
+        // By name, as the kinds are numbered.
+        for i in 0..self.kinds.len() {
+            self.close_kind(i)?;
         }
         Ok((self.sink, self.summary))
     }
@@ -676,19 +702,62 @@ impl Layouts {
     }
 }
 
+/// The fields of the APT frame being written, in a vector whose allocation is kept from frame
+/// to frame (a vector allocated and freed per frame, and grown by doubling before it was sized,
+/// was a tenth of building a kind row). The fields borrow each frame's bytes: the vector is
+/// emptied and given back under another lifetime, collected in place (same layout, same
+/// allocation).
+struct Scratch(Vec<(&'static AptField, AptValue<'static>)>);
+
+impl Default for Scratch {
+    fn default() -> Self {
+        Scratch(Vec::with_capacity(32))
+    }
+}
+
+impl Scratch {
+    fn take<'a>(&mut self) -> Vec<(&'static AptField, AptValue<'a>)> {
+        let mut v = std::mem::take(&mut self.0);
+        v.clear();
+        v.into_iter().filter_map(|_| None).collect()
+    }
+
+    fn put(&mut self, mut v: Vec<(&'static AptField, AptValue<'_>)>) {
+        v.clear();
+        self.0 = v.into_iter().filter_map(|_| None).collect();
+    }
+}
+
 /// The first column of a kind table's fields (after [`schema::KEYS`]).
 const FIELDS: usize = schema::KEYS.len();
 
 /// The field columns of an APT frame's kind row.
-fn apt_values<'a>(lay: &mut Layouts, k: &KindSchema, a: &'a AptRec<'a>, b: &mut TableBuf) {
-    use aptscope_dissector::apt::Value;
+fn apt_values<'a>(
+    lay: &mut Layouts,
+    scratch: &mut Scratch,
+    k: &KindSchema,
+    a: &'a AptRec<'a>,
+    b: &mut TableBuf,
+) {
     let f = a.frame;
     let t = f.table();
-    // Sized once: the iterator does not know its length, and growing by doubling was a
-    // reallocation or two per frame.
-    let mut fields = Vec::with_capacity(32);
+    let mut fields = scratch.take();
     fields.extend(f.fields());
-    let idx = lay.get(k, &fields, |fd| fd.name);
+    apt_columns(lay, k, a, t, &fields, b);
+    scratch.put(fields);
+}
+
+/// The kind row's columns from the fields of [`apt_values`].
+fn apt_columns<'a>(
+    lay: &mut Layouts,
+    k: &KindSchema,
+    a: &'a AptRec<'a>,
+    t: &Table,
+    fields: &[(&'static AptField, AptValue<'a>)],
+    b: &mut TableBuf,
+) {
+    use aptscope_dissector::apt::Value;
+    let idx = lay.get(k, fields, |fd| fd.name);
     let mut last_phys = None;
     for (j, (c, i)) in k.cols.iter().zip(idx).enumerate() {
         let Some((i, (fd, v))) = i.and_then(|i| Some((i, fields.get(i)?))) else {
