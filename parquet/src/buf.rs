@@ -433,11 +433,82 @@ impl TableBuf {
         let cols: Vec<ArrayRef> = self.bufs.iter_mut().map(Buf::finish).collect();
         // A table that filled a batch will likely fill the next: room for as many rows again
         // (a finished builder starts empty, and growing it by doubling was a tenth of the
-        // run in reallocations).
+        // run in reallocations), up to 8192: room for a whole row group in every column
+        // raised the peak from 56 to 66 MiB.
         for (b, f) in self.bufs.iter_mut().zip(self.schema.fields()) {
             *b = Buf::new(f.data_type(), rows.min(8192));
         }
         self.rows = 0;
         RecordBatch::try_new(self.schema.clone(), cols)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arrow_array::cast::AsArray;
+    use arrow_array::types::UInt64Type;
+    use arrow_array::Array;
+    use arrow_schema::Schema;
+
+    fn schema() -> SchemaRef {
+        Arc::new(Schema::new(vec![
+            Field::new("file", DataType::Utf8, false),
+            Field::new("n", DataType::UInt64, true),
+            Field::new("name", DataType::Utf8, true),
+            Field::new(
+                "diagnostics",
+                DataType::List(item(DataType::Struct(crate::schema::diag_struct()))),
+                false,
+            ),
+        ]))
+    }
+
+    /// Rows with columns missing here and there, a column put twice, diagnostics in rows apart:
+    /// the batch has the nulls (and empty lists) of the rows a column missed, wherever they are.
+    #[test]
+    fn columns_not_put_are_null_in_their_rows() {
+        let mut t = TableBuf::new(schema());
+        t.constant_text(0, Arc::from("cap.bin"));
+        // Row 0: n and a diagnostic.
+        t.uint(1, 10);
+        t.diag(3, "a", 1, &"first");
+        t.end_row();
+        // Row 1: nothing.
+        t.end_row();
+        // Row 2: name twice (the first kept), two diagnostics; a put into the constant column.
+        t.text(2, "x");
+        t.text(2, "y");
+        t.text(0, "other");
+        t.diag(3, "b", 2, &"second");
+        t.diag(3, "c", 3, &"third");
+        t.end_row();
+        // Row 3: n only.
+        t.uint(1, 13);
+        t.end_row();
+        let b = t.take().expect("batch");
+        assert_eq!(b.num_rows(), 4);
+        let file = b.column(0).as_string::<i32>();
+        assert!((0..4).all(|i| file.value(i) == "cap.bin"), "{file:?}");
+        let n = b.column(1).as_primitive::<UInt64Type>();
+        let n: Vec<Option<u64>> = n.iter().collect();
+        assert_eq!(n, [Some(10), None, None, Some(13)]);
+        let name: Vec<Option<&str>> = b.column(2).as_string::<i32>().iter().collect();
+        assert_eq!(name, [None, None, Some("x"), None]);
+        let d = b.column(3).as_list::<i32>();
+        assert_eq!(d.null_count(), 0);
+        let lens: Vec<usize> = (0..4).map(|i| d.value(i).len()).collect();
+        assert_eq!(lens, [1, 0, 2, 0]);
+        let msgs = d.value(2);
+        let msgs = msgs.as_struct().column(2).as_string::<i32>();
+        assert_eq!(msgs.value(0), "second");
+        assert_eq!(msgs.value(1), "third");
+        // Taken, the buffer starts again: the constant column too.
+        t.uint(1, 20);
+        t.end_row();
+        let b = t.take().expect("batch");
+        assert_eq!(b.num_rows(), 1);
+        assert_eq!(b.column(0).as_string::<i32>().value(0), "cap.bin");
+        assert_eq!(b.column(3).as_list::<i32>().value(0).len(), 0);
     }
 }

@@ -71,18 +71,23 @@ impl Default for Options {
 }
 
 /// How a table of `schema` is written. Snappy: fast, and read everywhere (see
-/// docs/parquet.md for why not zstd). Dictionary encoding only for
-/// the text columns (names, labels, units: few distinct values); numbers, times and raw bytes
-/// are mostly distinct, and hashing each value for a dictionary that overflows was a sixth of
-/// the writer's time.
+/// docs/parquet.md for why not zstd). Dictionary encoding only for the text columns, also those
+/// inside lists (names, labels, units, flag names, diagnostics: few distinct values, so the
+/// pages Snappy compresses are indices, not the same words again); numbers, times and raw
+/// bytes are mostly distinct, and hashing each value for a dictionary that overflows was a
+/// sixth of the writer's time.
 pub fn writer_properties(rows: usize, schema: &Schema) -> WriterProperties {
     let mut b = WriterProperties::builder()
         .set_compression(Compression::SNAPPY)
         .set_max_row_group_row_count(Some(rows.max(1)))
         .set_dictionary_enabled(false);
+    let mut leaves = Vec::new();
     for f in schema.fields() {
-        let col = || ColumnPath::from(f.name().as_str());
-        match f.data_type() {
+        leaf_columns(vec![f.name().clone()], f.data_type(), &mut leaves);
+    }
+    for (path, dt) in leaves {
+        let col = || ColumnPath::new(path.clone());
+        match dt {
             DataType::Utf8 => b = b.set_column_dictionary_enabled(col(), true),
             // Raw frames: a minimum and maximum of random bytes prune nothing, and comparing
             // every value for them cost a twentieth of the run.
@@ -91,6 +96,27 @@ pub fn writer_properties(rows: usize, schema: &Schema) -> WriterProperties {
         }
     }
     b.build()
+}
+
+/// The Parquet leaf columns under a column of type `dt` at `path`, with their Arrow types (a
+/// list's elements are under `list.<field>`, as the Arrow writer names them).
+fn leaf_columns(path: Vec<String>, dt: &DataType, out: &mut Vec<(Vec<String>, DataType)>) {
+    match dt {
+        DataType::List(f) => {
+            let mut p = path;
+            p.push("list".into());
+            p.push(f.name().clone());
+            leaf_columns(p, f.data_type(), out);
+        }
+        DataType::Struct(fs) => {
+            for f in fs {
+                let mut p = path.clone();
+                p.push(f.name().clone());
+                leaf_columns(p, f.data_type(), out);
+            }
+        }
+        _ => out.push((path, dt.clone())),
+    }
 }
 
 fn perr(e: impl std::fmt::Display) -> io::Error {
@@ -233,7 +259,7 @@ pub struct Summary {
     pub row_groups: u64,
 }
 
-/// A message's kind table: its name, and its schema when it has one.
+/// A message's kind table: its name, and its schema when it has one and the table is kept.
 type KindOf = (Box<str>, Option<&'static KindSchema>);
 
 struct Open {
@@ -271,6 +297,10 @@ pub struct CaptureWriter<S: Sink> {
     scratch: Scratch,
     /// Rows the kind tables buffer, together.
     kind_rows: usize,
+    /// Whether the `records` table is written ([`CaptureWriter::only_tables`]).
+    keep_records: bool,
+    /// Which kind tables are written; `None`: all.
+    keep_kinds: Option<Box<dyn Fn(&str) -> bool>>,
 }
 
 /// Columns of `records`, in schema order.
@@ -349,175 +379,34 @@ impl<S: Sink> CaptureWriter<S> {
             layouts: Layouts::default(),
             scratch: Scratch::default(),
             kind_rows: 0,
+            keep_records: true,
+            keep_kinds: None,
         }
+    }
+
+    /// Write only the tables `keep` says yes to (by name: [`RECORDS`], or a kind table's); the
+    /// others are not built at all, which is what makes this cheaper than dropping them
+    /// afterwards. Call before the first record. Without the records table, [`Summary`] still
+    /// counts records but not frames and diagnostics.
+    pub fn only_tables(&mut self, keep: impl Fn(&str) -> bool + 'static) {
+        self.keep_records = keep(RECORDS);
+        self.keep_kinds = Some(Box::new(keep));
     }
 
     /// Add one record.
     pub fn record(&mut self, rec: &Record<'_>) -> io::Result<()> {
-        use col::*;
         let ki = self.kind_of(rec);
         let (kname, kind) = match ki.and_then(|i| self.kind_list.get(i)) {
             Some((n, k)) => (Some(&**n), *k),
             None => (None, None),
         };
-        let b = &mut self.records.buf;
-        let sum = &mut self.summary;
-        if let Some(m) = rec.meta() {
-            b.uint(STREAM, m.stream as u64);
-            b.uint(N, m.n);
-            put_opt_u(b, TS, m.ts_ns);
-            put_opt_u(b, TIME, m.ts_ns);
-            if let Some(r) = m.rel_s {
-                b.float(REL, r);
+        if self.keep_records {
+            records_row(&mut self.records.buf, &mut self.summary, rec, kname);
+            if self.records.buf.rows() >= self.opts.rows_per_group {
+                self.flush_records()?;
             }
         }
-        match rec {
-            Record::Detect {
-                proto, detection, ..
-            } => {
-                b.text(TYPE, "detect");
-                b.text(PROTO, proto.code());
-                b.text_fmt(
-                    DETAIL,
-                    format_args!(
-                        "{} apt={:.3} ell={:.3}",
-                        if detection.proto.is_some() {
-                            "certain"
-                        } else {
-                            "best guess"
-                        },
-                        detection.apt,
-                        detection.elliptec
-                    ),
-                );
-            }
-            Record::Stream { id, name, settings } => {
-                b.text(TYPE, "stream");
-                // A stream record has no meta: its id is the stream column.
-                b.uint(STREAM, *id as u64);
-                match settings {
-                    Some(x) => b.text_fmt(DETAIL, format_args!("{name} ({x})")),
-                    None => b.text(DETAIL, name),
-                }
-            }
-            Record::Input(d) => {
-                b.text(TYPE, "input");
-                b.uint(OFFSET, d.offset);
-                put_diag(b, &mut sum.diagnostics, d);
-            }
-            Record::FileDiag { offset, kind, msg } => {
-                b.text(TYPE, "input");
-                b.uint(OFFSET, *offset);
-                b.diag(DIAGS, kind, *offset, msg);
-                sum.diagnostics += 1;
-            }
-            Record::Units(nt) => {
-                b.text(TYPE, "units");
-                b.text(PROTO, "apt");
-                b.uint(STREAM, nt.stream as u64);
-                let mut d = String::new();
-                json::units_notice(&mut d, nt);
-                b.text(DETAIL, &d);
-            }
-            Record::Apt(a) => {
-                let f = a.frame;
-                let h = f.header();
-                b.text(TYPE, "frame");
-                b.text(PROTO, "apt");
-                put_dir(b, a.dir());
-                b.uint(OFFSET, f.offset);
-                b.uint(MSGID, h.msg_id() as u64);
-                if let Some(m) = f.msg {
-                    b.text(NAME, m.name);
-                    if let Some(k) = kname {
-                        b.text(KIND, k);
-                    }
-                }
-                if let Some(x) = f.sub {
-                    b.text(SUB, x.name);
-                }
-                b.uint(SRC, h.src().byte() as u64);
-                b.uint(DST, h.dst().byte() as u64);
-                if let Some(c) = f.channel() {
-                    b.int(CHANNEL, c);
-                }
-                b.uint(LEN, f.bytes.len() as u64);
-                b.bytes(RAW, f.bytes);
-                for d in f.diags().chain(a.pair.diags(f.offset)) {
-                    put_diag(b, &mut sum.diagnostics, &d);
-                }
-                put_opt_u(b, PAIR, a.pair.pair);
-                if let Some(l) = a.pair.latency_ns {
-                    b.float(LATENCY, l as f64 / 1e6);
-                }
-                sum.frames += 1;
-            }
-            Record::Ell(e) => {
-                let f = e.frame;
-                b.text(TYPE, "frame");
-                b.text(PROTO, "ell");
-                let d = f.dir();
-                put_dir(b, Some(d));
-                b.uint(OFFSET, f.offset);
-                b.text(CODE, f.code_str());
-                if let Some(c) = f.cmd {
-                    b.text(NAME, c.name);
-                    if let Some(k) = kname {
-                        b.text(KIND, k);
-                    }
-                }
-                // The module's address is the destination of a command, the source of a reply.
-                let at = if d == Dir::HostToDevice { DST } else { SRC };
-                b.uint(at, f.addr as u64);
-                b.uint(LEN, f.bytes.len() as u64);
-                b.bytes(RAW, f.bytes);
-                for d in f.diags() {
-                    put_diag(b, &mut sum.diagnostics, d);
-                }
-                put_opt_u(b, PAIR, e.obs.pair);
-                if let Some(l) = e.obs.latency_ns {
-                    b.float(LATENCY, l as f64 / 1e6);
-                }
-                sum.frames += 1;
-            }
-            Record::Garbage(g) => {
-                b.text(TYPE, "garbage");
-                b.text(PROTO, g.proto.code());
-                put_dir(b, g.meta.cap_dir);
-                b.uint(OFFSET, g.offset);
-                b.uint(LEN, g.bytes.len() as u64);
-                b.bytes(RAW, g.bytes);
-                let d = match g.kind {
-                    Some(k) => json::garbage_diag(g.offset, g.bytes.len(), k),
-                    None => Diag {
-                        offset: g.offset,
-                        kind: DiagKind::Garbage {
-                            len: g.bytes.len() as u32,
-                        },
-                    },
-                };
-                put_diag(b, &mut sum.diagnostics, &d);
-            }
-            Record::NoReply(e) => {
-                b.text(TYPE, "no_reply");
-                b.text(PROTO, e.proto.code());
-                b.uint(STREAM, e.stream as u64);
-                b.uint(OFFSET, e.offset);
-                let at = if e.proto == aptscope_dissector::detect::Proto::Apt {
-                    NAME
-                } else {
-                    CODE
-                };
-                b.text(at, e.name);
-                b.uint(REF, e.n);
-                put_diag(b, &mut sum.diagnostics, &e.diag());
-            }
-        }
-        b.end_row();
-        sum.records += 1;
-        if self.records.buf.rows() >= self.opts.rows_per_group {
-            self.flush_records()?;
-        }
+        self.summary.records += 1;
         if let (Some(k), Some(m)) = (kind, rec.meta()) {
             self.open_kind(k)?;
             let Some(Some(o)) = self.kinds.get_mut(k.index) else {
@@ -562,9 +451,11 @@ impl<S: Sink> CaptureWriter<S> {
             _ => return None,
         };
         let list = &mut self.kind_list;
+        let keep = &self.keep_kinds;
         let i = *self.kind_names.entry(key).or_insert_with(|| {
             let n = name();
             let k = Kinds::global().get(&n).map(|k| &**k);
+            let k = k.filter(|_| keep.as_ref().is_none_or(|f| f(&n)));
             list.push((n.into_boxed_str(), k));
             list.len() - 1
         });
@@ -670,6 +561,163 @@ impl<S: Sink> CaptureWriter<S> {
         }
         Ok((self.sink, self.summary))
     }
+}
+
+/// The `records` row of `rec` (`kname`: its kind table), counting its frames and diagnostics.
+fn records_row(b: &mut TableBuf, sum: &mut Summary, rec: &Record<'_>, kname: Option<&str>) {
+    use col::*;
+    if let Some(m) = rec.meta() {
+        b.uint(STREAM, m.stream as u64);
+        b.uint(N, m.n);
+        put_opt_u(b, TS, m.ts_ns);
+        put_opt_u(b, TIME, m.ts_ns);
+        if let Some(r) = m.rel_s {
+            b.float(REL, r);
+        }
+    }
+    match rec {
+        Record::Detect {
+            proto, detection, ..
+        } => {
+            b.text(TYPE, "detect");
+            b.text(PROTO, proto.code());
+            b.text_fmt(
+                DETAIL,
+                format_args!(
+                    "{} apt={:.3} ell={:.3}",
+                    if detection.proto.is_some() {
+                        "certain"
+                    } else {
+                        "best guess"
+                    },
+                    detection.apt,
+                    detection.elliptec
+                ),
+            );
+        }
+        Record::Stream { id, name, settings } => {
+            b.text(TYPE, "stream");
+            // A stream record has no meta: its id is the stream column.
+            b.uint(STREAM, *id as u64);
+            match settings {
+                Some(x) => b.text_fmt(DETAIL, format_args!("{name} ({x})")),
+                None => b.text(DETAIL, name),
+            }
+        }
+        Record::Input(d) => {
+            b.text(TYPE, "input");
+            b.uint(OFFSET, d.offset);
+            put_diag(b, &mut sum.diagnostics, d);
+        }
+        Record::FileDiag { offset, kind, msg } => {
+            b.text(TYPE, "input");
+            b.uint(OFFSET, *offset);
+            b.diag(DIAGS, kind, *offset, msg);
+            sum.diagnostics += 1;
+        }
+        Record::Units(nt) => {
+            b.text(TYPE, "units");
+            b.text(PROTO, "apt");
+            b.uint(STREAM, nt.stream as u64);
+            let mut d = String::new();
+            json::units_notice(&mut d, nt);
+            b.text(DETAIL, &d);
+        }
+        Record::Apt(a) => {
+            let f = a.frame;
+            let h = f.header();
+            b.text(TYPE, "frame");
+            b.text(PROTO, "apt");
+            put_dir(b, a.dir());
+            b.uint(OFFSET, f.offset);
+            b.uint(MSGID, h.msg_id() as u64);
+            if let Some(m) = f.msg {
+                b.text(NAME, m.name);
+                if let Some(k) = kname {
+                    b.text(KIND, k);
+                }
+            }
+            if let Some(x) = f.sub {
+                b.text(SUB, x.name);
+            }
+            b.uint(SRC, h.src().byte() as u64);
+            b.uint(DST, h.dst().byte() as u64);
+            if let Some(c) = f.channel() {
+                b.int(CHANNEL, c);
+            }
+            b.uint(LEN, f.bytes.len() as u64);
+            b.bytes(RAW, f.bytes);
+            for d in f.diags().chain(a.pair.diags(f.offset)) {
+                put_diag(b, &mut sum.diagnostics, &d);
+            }
+            put_opt_u(b, PAIR, a.pair.pair);
+            if let Some(l) = a.pair.latency_ns {
+                b.float(LATENCY, l as f64 / 1e6);
+            }
+            sum.frames += 1;
+        }
+        Record::Ell(e) => {
+            let f = e.frame;
+            b.text(TYPE, "frame");
+            b.text(PROTO, "ell");
+            let d = f.dir();
+            put_dir(b, Some(d));
+            b.uint(OFFSET, f.offset);
+            b.text(CODE, f.code_str());
+            if let Some(c) = f.cmd {
+                b.text(NAME, c.name);
+                if let Some(k) = kname {
+                    b.text(KIND, k);
+                }
+            }
+            // The module's address is the destination of a command, the source of a reply.
+            let at = if d == Dir::HostToDevice { DST } else { SRC };
+            b.uint(at, f.addr as u64);
+            b.uint(LEN, f.bytes.len() as u64);
+            b.bytes(RAW, f.bytes);
+            for d in f.diags() {
+                put_diag(b, &mut sum.diagnostics, d);
+            }
+            put_opt_u(b, PAIR, e.obs.pair);
+            if let Some(l) = e.obs.latency_ns {
+                b.float(LATENCY, l as f64 / 1e6);
+            }
+            sum.frames += 1;
+        }
+        Record::Garbage(g) => {
+            b.text(TYPE, "garbage");
+            b.text(PROTO, g.proto.code());
+            put_dir(b, g.meta.cap_dir);
+            b.uint(OFFSET, g.offset);
+            b.uint(LEN, g.bytes.len() as u64);
+            b.bytes(RAW, g.bytes);
+            let d = match g.kind {
+                Some(k) => json::garbage_diag(g.offset, g.bytes.len(), k),
+                None => Diag {
+                    offset: g.offset,
+                    kind: DiagKind::Garbage {
+                        len: g.bytes.len() as u32,
+                    },
+                },
+            };
+            put_diag(b, &mut sum.diagnostics, &d);
+        }
+        Record::NoReply(e) => {
+            b.text(TYPE, "no_reply");
+            b.text(PROTO, e.proto.code());
+            b.uint(STREAM, e.stream as u64);
+            b.uint(OFFSET, e.offset);
+            let at = if e.proto == aptscope_dissector::detect::Proto::Apt {
+                NAME
+            } else {
+                CODE
+            };
+            b.text(at, e.name);
+            b.uint(REF, e.n);
+            put_diag(b, &mut sum.diagnostics, &e.diag());
+        }
+    }
+    b.end_row();
 }
 
 /// Which of a frame's fields fills each column of its kind table, by layout of fields: the
@@ -856,5 +904,53 @@ fn ell_values<'a>(lay: &mut Layouts, k: &KindSchema, e: &'a EllRec<'a>, b: &mut 
             }
             _ => {}
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Text columns are dictionary-encoded also inside lists (the diagnostics' messages, flag
+    /// names), raw bytes have no statistics, numbers neither dictionary nor lost statistics.
+    #[test]
+    fn dictionaries_for_text_also_in_lists() {
+        let path = |p: &[&str]| ColumnPath::new(p.iter().map(|s| s.to_string()).collect());
+        let rec = schema::records_schema();
+        let p = writer_properties(100, &rec);
+        for c in [
+            &["name"][..],
+            &["diagnostics", "list", "item", "msg"],
+            &["diagnostics", "list", "item", "kind"],
+        ] {
+            assert!(p.dictionary_enabled(&path(c)), "{c:?}");
+        }
+        assert!(!p.dictionary_enabled(&path(&["n"])));
+        assert!(!p.dictionary_enabled(&path(&["diagnostics", "list", "item", "offset"])));
+        assert_eq!(
+            p.statistics_enabled(&path(&["raw"])),
+            EnabledStatistics::None
+        );
+        assert_ne!(p.statistics_enabled(&path(&["n"])), EnabledStatistics::None);
+        let k = Kinds::global().get("MOT_GET_DCSTATUSUPDATE").expect("kind");
+        let flags = k
+            .schema
+            .fields()
+            .iter()
+            .find(|f| f.metadata().contains_key("flags"))
+            .expect("a flags column");
+        let p = writer_properties(100, &k.schema);
+        assert!(p.dictionary_enabled(&path(&[flags.name(), "list", "item"])));
+    }
+
+    /// Kinds are numbered by name.
+    #[test]
+    fn kinds_are_numbered_in_name_order() {
+        let all = Kinds::global().all();
+        assert_eq!(all.len(), Kinds::global().len());
+        for (i, k) in all.iter().enumerate() {
+            assert_eq!(k.index, i, "{}", k.name);
+        }
+        assert!(all.windows(2).all(|w| w[0].name < w[1].name));
     }
 }
