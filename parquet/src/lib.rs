@@ -270,6 +270,9 @@ struct Open {
     name: &'static str,
 }
 
+/// Which tables to write, by name ([`CaptureWriter::only_tables`]).
+type Keep = Box<dyn Fn(&str) -> bool>;
+
 /// Writes one capture's records as rows (see the crate documentation).
 pub struct CaptureWriter<S: Sink> {
     sink: S,
@@ -300,7 +303,7 @@ pub struct CaptureWriter<S: Sink> {
     /// Whether the `records` table is written ([`CaptureWriter::only_tables`]).
     keep_records: bool,
     /// Which kind tables are written; `None`: all.
-    keep_kinds: Option<Box<dyn Fn(&str) -> bool>>,
+    keep_kinds: Option<Keep>,
 }
 
 /// Columns of `records`, in schema order.
@@ -763,6 +766,9 @@ impl Default for Scratch {
     }
 }
 
+// `filter_map(|_| None)`, not `filter`: the element type changes (its lifetime), which a
+// filter cannot do; the vector is empty, so nothing is dropped or made.
+#[allow(clippy::unnecessary_filter_map)]
 impl Scratch {
     fn take<'a>(&mut self) -> Vec<(&'static AptField, AptValue<'a>)> {
         let mut v = std::mem::take(&mut self.0);
