@@ -26,14 +26,15 @@ pub mod schema;
 
 pub use file::{decode_file, not_a_capture, not_a_capture_error, DecodeOpts};
 
-use aptscope_dissector::apt::phys_or_scaled;
+use aptscope_dissector::apt::{phys_or_scaled, Value as AptValue};
 use aptscope_dissector::diag::{Diag, DiagKind};
 use aptscope_dissector::ell::table::{status_name, Kind as EllKind};
 use aptscope_dissector::ell::EllValue;
 use aptscope_dissector::hash::NumMap;
 use aptscope_dissector::json;
 use aptscope_dissector::record::{AptRec, EllRec, Record};
-use aptscope_dissector::table::Dir;
+use aptscope_dissector::table::{Dir, Field as AptField};
+use aptscope_dissector::Table;
 use arrow_array::RecordBatch;
 use arrow_schema::{DataType, Schema};
 use buf::TableBuf;
@@ -70,18 +71,23 @@ impl Default for Options {
 }
 
 /// How a table of `schema` is written. Snappy: fast, and read everywhere (see
-/// docs/parquet.md for why not zstd). Dictionary encoding only for
-/// the text columns (names, labels, units: few distinct values); numbers, times and raw bytes
-/// are mostly distinct, and hashing each value for a dictionary that overflows was a sixth of
-/// the writer's time.
+/// docs/parquet.md for why not zstd). Dictionary encoding only for the text columns, also those
+/// inside lists (names, labels, units, flag names, diagnostics: few distinct values, so the
+/// pages Snappy compresses are indices, not the same words again); numbers, times and raw
+/// bytes are mostly distinct, and hashing each value for a dictionary that overflows was a
+/// sixth of the writer's time.
 pub fn writer_properties(rows: usize, schema: &Schema) -> WriterProperties {
     let mut b = WriterProperties::builder()
         .set_compression(Compression::SNAPPY)
         .set_max_row_group_row_count(Some(rows.max(1)))
         .set_dictionary_enabled(false);
+    let mut leaves = Vec::new();
     for f in schema.fields() {
-        let col = || ColumnPath::from(f.name().as_str());
-        match f.data_type() {
+        leaf_columns(vec![f.name().clone()], f.data_type(), &mut leaves);
+    }
+    for (path, dt) in leaves {
+        let col = || ColumnPath::new(path.clone());
+        match dt {
             DataType::Utf8 => b = b.set_column_dictionary_enabled(col(), true),
             // Raw frames: a minimum and maximum of random bytes prune nothing, and comparing
             // every value for them cost a twentieth of the run.
@@ -90,6 +96,27 @@ pub fn writer_properties(rows: usize, schema: &Schema) -> WriterProperties {
         }
     }
     b.build()
+}
+
+/// The Parquet leaf columns under a column of type `dt` at `path`, with their Arrow types (a
+/// list's elements are under `list.<field>`, as the Arrow writer names them).
+fn leaf_columns(path: Vec<String>, dt: &DataType, out: &mut Vec<(Vec<String>, DataType)>) {
+    match dt {
+        DataType::List(f) => {
+            let mut p = path;
+            p.push("list".into());
+            p.push(f.name().clone());
+            leaf_columns(p, f.data_type(), out);
+        }
+        DataType::Struct(fs) => {
+            for f in fs {
+                let mut p = path.clone();
+                p.push(f.name().clone());
+                leaf_columns(p, f.data_type(), out);
+            }
+        }
+        _ => out.push((path, dt.clone())),
+    }
 }
 
 fn perr(e: impl std::fmt::Display) -> io::Error {
@@ -232,16 +259,19 @@ pub struct Summary {
     pub row_groups: u64,
 }
 
-/// A message's kind table: its name, and its schema when it has one.
-type KindOf = (Arc<str>, Option<Arc<KindSchema>>);
+/// A message's kind table: its name, and its schema when it has one and the table is kept.
+type KindOf = (Box<str>, Option<&'static KindSchema>);
 
 struct Open {
     buf: TableBuf,
     part: u32,
     used: u64,
-    /// The kind table's name (empty for `records`).
-    name: String,
+    /// The kind table's name (`records` for the records table).
+    name: &'static str,
 }
+
+/// Which tables to write, by name ([`CaptureWriter::only_tables`]).
+type Keep = Box<dyn Fn(&str) -> bool>;
 
 /// Writes one capture's records as rows (see the crate documentation).
 pub struct CaptureWriter<S: Sink> {
@@ -249,19 +279,31 @@ pub struct CaptureWriter<S: Sink> {
     file: Arc<str>,
     opts: Options,
     records: Open,
-    /// Kind tables buffering rows, by name (the order of this map picks which of equally big
-    /// ones is written first: keyed otherwise, the part files would be cut elsewhere).
-    kinds: NumMap<String, Open>,
-    /// Part numbers of kind tables flushed and closed, to continue from when they reopen.
-    parts: HashMap<String, u32>,
+    /// Kind tables buffering rows, by [`KindSchema::index`] (a vector, not a map by name: three
+    /// lookups by name a frame were a tenth of building its rows). Scanned in that order (by
+    /// name) when the least used or the biggest is picked, so the part files are cut at the
+    /// same rows in every run.
+    kinds: Vec<Option<Open>>,
+    /// Kind tables buffering rows now.
+    open: usize,
+    /// Part numbers of kind tables flushed and closed, to continue from when they reopen (by
+    /// index).
+    parts: Vec<u32>,
     clock: u64,
     summary: Summary,
-    /// Kind table names and schemas by message (the address of its table entry, and of its
-    /// sub-message's).
-    kind_names: NumMap<(usize, usize), KindOf>,
+    /// The kind table of each message met (the address of its table entry, and of its
+    /// sub-message's), as its place in `kind_list`.
+    kind_names: NumMap<(usize, usize), usize>,
+    kind_list: Vec<KindOf>,
     layouts: Layouts,
+    /// Fields of the frame being written (kept for its allocation).
+    scratch: Scratch,
     /// Rows the kind tables buffer, together.
     kind_rows: usize,
+    /// Whether the `records` table is written ([`CaptureWriter::only_tables`]).
+    keep_records: bool,
+    /// Which kind tables are written; `None`: all.
+    keep_kinds: Option<Keep>,
 }
 
 /// Columns of `records`, in schema order.
@@ -316,280 +358,152 @@ fn put_diag(b: &mut TableBuf, n: &mut u64, d: &Diag) {
 impl<S: Sink> CaptureWriter<S> {
     /// A writer of the records of capture `file` (its name in the `file` column) into `sink`.
     pub fn new(sink: S, file: &str, opts: Options) -> Self {
+        let file: Arc<str> = Arc::from(file);
+        let mut buf = TableBuf::new(schema::records_schema());
+        buf.constant_text(col::FILE, file.clone());
+        let n = Kinds::global().len();
         CaptureWriter {
             sink,
-            file: Arc::from(file),
+            file,
             opts,
             records: Open {
-                buf: TableBuf::new(schema::records_schema()),
+                buf,
                 part: 0,
                 used: 0,
-                name: RECORDS.to_string(),
+                name: RECORDS,
             },
-            kinds: NumMap::default(),
-            parts: HashMap::new(),
+            kinds: (0..n).map(|_| None).collect(),
+            open: 0,
+            parts: vec![0; n],
             clock: 0,
             summary: Summary::default(),
             kind_names: NumMap::default(),
+            kind_list: Vec::new(),
             layouts: Layouts::default(),
+            scratch: Scratch::default(),
             kind_rows: 0,
+            keep_records: true,
+            keep_kinds: None,
         }
+    }
+
+    /// Write only the tables `keep` says yes to (by name: [`RECORDS`], or a kind table's); the
+    /// others are not built at all, which is what makes this cheaper than dropping them
+    /// afterwards. Call before the first record. Without the records table, [`Summary`] still
+    /// counts records but not frames and diagnostics.
+    pub fn only_tables(&mut self, keep: impl Fn(&str) -> bool + 'static) {
+        self.keep_records = keep(RECORDS);
+        self.keep_kinds = Some(Box::new(keep));
     }
 
     /// Add one record.
     pub fn record(&mut self, rec: &Record<'_>) -> io::Result<()> {
-        use col::*;
-        let (kname, kind) = self.kind_of(rec);
-        let b = &mut self.records.buf;
-        let sum = &mut self.summary;
-        b.text(FILE, &self.file);
-        if let Some(m) = rec.meta() {
-            b.uint(STREAM, m.stream as u64);
-            b.uint(N, m.n);
-            put_opt_u(b, TS, m.ts_ns);
-            put_opt_u(b, TIME, m.ts_ns);
-            if let Some(r) = m.rel_s {
-                b.float(REL, r);
+        let ki = self.kind_of(rec);
+        let (kname, kind) = match ki.and_then(|i| self.kind_list.get(i)) {
+            Some((n, k)) => (Some(&**n), *k),
+            None => (None, None),
+        };
+        if self.keep_records {
+            records_row(&mut self.records.buf, &mut self.summary, rec, kname);
+            if self.records.buf.rows() >= self.opts.rows_per_group {
+                self.flush_records()?;
             }
         }
-        match rec {
-            Record::Detect {
-                proto, detection, ..
-            } => {
-                b.text(TYPE, "detect");
-                b.text(PROTO, proto.code());
-                b.text_fmt(
-                    DETAIL,
-                    format_args!(
-                        "{} apt={:.3} ell={:.3}",
-                        if detection.proto.is_some() {
-                            "certain"
-                        } else {
-                            "best guess"
-                        },
-                        detection.apt,
-                        detection.elliptec
-                    ),
-                );
-            }
-            Record::Stream { id, name, settings } => {
-                b.text(TYPE, "stream");
-                // A stream record has no meta: its id is the stream column.
-                b.uint(STREAM, *id as u64);
-                match settings {
-                    Some(x) => b.text_fmt(DETAIL, format_args!("{name} ({x})")),
-                    None => b.text(DETAIL, name),
-                }
-            }
-            Record::Input(d) => {
-                b.text(TYPE, "input");
-                b.uint(OFFSET, d.offset);
-                put_diag(b, &mut sum.diagnostics, d);
-            }
-            Record::FileDiag { offset, kind, msg } => {
-                b.text(TYPE, "input");
-                b.uint(OFFSET, *offset);
-                b.diag(DIAGS, kind, *offset, msg);
-                sum.diagnostics += 1;
-            }
-            Record::Units(nt) => {
-                b.text(TYPE, "units");
-                b.text(PROTO, "apt");
-                b.uint(STREAM, nt.stream as u64);
-                let mut d = String::new();
-                json::units_notice(&mut d, nt);
-                b.text(DETAIL, &d);
-            }
-            Record::Apt(a) => {
-                let f = a.frame;
-                let h = f.header();
-                b.text(TYPE, "frame");
-                b.text(PROTO, "apt");
-                put_dir(b, a.dir());
-                b.uint(OFFSET, f.offset);
-                b.uint(MSGID, h.msg_id() as u64);
-                if let Some(m) = f.msg {
-                    b.text(NAME, m.name);
-                    if let Some(k) = kname.as_deref() {
-                        b.text(KIND, k);
-                    }
-                }
-                if let Some(x) = f.sub {
-                    b.text(SUB, x.name);
-                }
-                b.uint(SRC, h.src().byte() as u64);
-                b.uint(DST, h.dst().byte() as u64);
-                if let Some(c) = f.channel() {
-                    b.int(CHANNEL, c);
-                }
-                b.uint(LEN, f.bytes.len() as u64);
-                b.bytes(RAW, f.bytes);
-                for d in f.diags().chain(a.pair.diags(f.offset)) {
-                    put_diag(b, &mut sum.diagnostics, &d);
-                }
-                put_opt_u(b, PAIR, a.pair.pair);
-                if let Some(l) = a.pair.latency_ns {
-                    b.float(LATENCY, l as f64 / 1e6);
-                }
-                sum.frames += 1;
-            }
-            Record::Ell(e) => {
-                let f = e.frame;
-                b.text(TYPE, "frame");
-                b.text(PROTO, "ell");
-                let d = f.dir();
-                put_dir(b, Some(d));
-                b.uint(OFFSET, f.offset);
-                b.text(CODE, f.code_str());
-                if let Some(c) = f.cmd {
-                    b.text(NAME, c.name);
-                    if let Some(k) = kname.as_deref() {
-                        b.text(KIND, k);
-                    }
-                }
-                // The module's address is the destination of a command, the source of a reply.
-                let at = if d == Dir::HostToDevice { DST } else { SRC };
-                b.uint(at, f.addr as u64);
-                b.uint(LEN, f.bytes.len() as u64);
-                b.bytes(RAW, f.bytes);
-                for d in f.diags() {
-                    put_diag(b, &mut sum.diagnostics, d);
-                }
-                put_opt_u(b, PAIR, e.obs.pair);
-                if let Some(l) = e.obs.latency_ns {
-                    b.float(LATENCY, l as f64 / 1e6);
-                }
-                sum.frames += 1;
-            }
-            Record::Garbage(g) => {
-                b.text(TYPE, "garbage");
-                b.text(PROTO, g.proto.code());
-                put_dir(b, g.meta.cap_dir);
-                b.uint(OFFSET, g.offset);
-                b.uint(LEN, g.bytes.len() as u64);
-                b.bytes(RAW, g.bytes);
-                let d = match g.kind {
-                    Some(k) => json::garbage_diag(g.offset, g.bytes.len(), k),
-                    None => Diag {
-                        offset: g.offset,
-                        kind: DiagKind::Garbage {
-                            len: g.bytes.len() as u32,
-                        },
-                    },
-                };
-                put_diag(b, &mut sum.diagnostics, &d);
-            }
-            Record::NoReply(e) => {
-                b.text(TYPE, "no_reply");
-                b.text(PROTO, e.proto.code());
-                b.uint(STREAM, e.stream as u64);
-                b.uint(OFFSET, e.offset);
-                let at = if e.proto == aptscope_dissector::detect::Proto::Apt {
-                    NAME
-                } else {
-                    CODE
-                };
-                b.text(at, e.name);
-                b.uint(REF, e.n);
-                put_diag(b, &mut sum.diagnostics, &e.diag());
-            }
-        }
-        b.end_row();
-        sum.records += 1;
-        if self.records.buf.rows() >= self.opts.rows_per_group {
-            self.flush_records()?;
-        }
+        self.summary.records += 1;
         if let (Some(k), Some(m)) = (kind, rec.meta()) {
-            let file = self.file.clone();
-            self.open_kind(&k)?;
-            let Some(o) = self.kinds.get_mut(&k.name) else {
+            self.open_kind(k)?;
+            let Some(Some(o)) = self.kinds.get_mut(k.index) else {
                 return Ok(());
             };
             o.used = self.clock;
             let b = &mut o.buf;
-            b.text(0, &file);
             b.uint(1, m.n);
             b.uint(2, m.stream as u64);
             put_opt_u(b, 3, m.ts_ns);
             match rec {
-                Record::Apt(a) => apt_values(&mut self.layouts, &k, a, b),
-                Record::Ell(e) => ell_values(&mut self.layouts, &k, e, b),
+                Record::Apt(a) => apt_values(&mut self.layouts, &mut self.scratch, k, a, b),
+                Record::Ell(e) => ell_values(&mut self.layouts, k, e, b),
                 _ => {}
             }
             b.end_row();
             self.kind_rows += 1;
-            self.kind_row_done(&k)?;
+            self.kind_row_done(k)?;
         }
         Ok(())
     }
 
-    /// The kind table of a frame's message (its name, and its schema when it has one), looked
-    /// up once per message rather than by a name made for every frame.
-    fn kind_of(&mut self, rec: &Record<'_>) -> (Option<Arc<str>>, Option<Arc<KindSchema>>) {
+    /// The kind table of a frame's message (its place in `kind_list`), looked up once per
+    /// message rather than by a name made for every frame.
+    fn kind_of(&mut self, rec: &Record<'_>) -> Option<usize> {
         let (key, name): ((usize, usize), &dyn Fn() -> String) = match rec {
-            Record::Apt(a) => match a.frame.msg {
-                Some(m) => {
-                    let sub = a.frame.sub;
-                    let key = (
-                        m as *const _ as usize,
-                        sub.map_or(0, |x| x as *const _ as usize),
-                    );
-                    (key, &move || schema::apt_kind_name(m, sub))
-                }
-                None => return (None, None),
-            },
-            Record::Ell(e) => match e.frame.cmd {
-                Some(c) => ((c as *const _ as usize, 1), &move || {
+            Record::Apt(a) => {
+                let m = a.frame.msg?;
+                let sub = a.frame.sub;
+                let key = (
+                    m as *const _ as usize,
+                    sub.map_or(0, |x| x as *const _ as usize),
+                );
+                (key, &move || schema::apt_kind_name(m, sub))
+            }
+            Record::Ell(e) => {
+                let c = e.frame.cmd?;
+                ((c as *const _ as usize, 1), &move || {
                     schema::ell_kind_name(c)
-                }),
-                None => return (None, None),
-            },
-            _ => return (None, None),
+                })
+            }
+            _ => return None,
         };
-        let (n, k) = self.kind_names.entry(key).or_insert_with(|| {
+        let list = &mut self.kind_list;
+        let keep = &self.keep_kinds;
+        let i = *self.kind_names.entry(key).or_insert_with(|| {
             let n = name();
-            let k = Kinds::global().get(&n).cloned();
-            (Arc::from(n), k)
+            let k = Kinds::global().get(&n).map(|k| &**k);
+            let k = k.filter(|_| keep.as_ref().is_none_or(|f| f(&n)));
+            list.push((n.into_boxed_str(), k));
+            list.len() - 1
         });
-        (Some(n.clone()), k.clone())
+        Some(i)
     }
 
     /// Open kind table `k`'s buffer unless it is (closing another when too many are); a tick of
     /// the clock that says which was used least recently.
-    fn open_kind(&mut self, k: &Arc<KindSchema>) -> io::Result<()> {
+    fn open_kind(&mut self, k: &'static KindSchema) -> io::Result<()> {
         self.clock += 1;
-        if !self.kinds.contains_key(&k.name) {
-            if self.kinds.len() >= self.opts.max_open_kinds {
+        if matches!(self.kinds.get(k.index), Some(None)) {
+            if self.open >= self.opts.max_open_kinds {
                 // Too many open: the least recently used gives its rows up first.
                 let lru = self
                     .kinds
                     .iter()
-                    .min_by_key(|(_, o)| o.used)
-                    .map(|(n, _)| n.clone());
-                if let Some(n) = lru {
-                    self.close_kind(&n)?;
+                    .enumerate()
+                    .filter_map(|(i, o)| Some((i, o.as_ref()?.used)))
+                    .min_by_key(|(_, used)| *used)
+                    .map(|(i, _)| i);
+                if let Some(i) = lru {
+                    self.close_kind(i)?;
                 }
             }
-            let part = self.parts.get(&k.name).copied().unwrap_or(0);
-            self.kinds.insert(
-                k.name.clone(),
-                Open {
-                    buf: TableBuf::new(k.schema.clone()),
-                    part,
+            let mut buf = TableBuf::new(k.schema.clone());
+            buf.constant_text(0, self.file.clone());
+            if let Some(slot) = self.kinds.get_mut(k.index) {
+                *slot = Some(Open {
+                    buf,
+                    part: self.parts.get(k.index).copied().unwrap_or(0),
                     used: 0,
-                    name: k.name.clone(),
-                },
-            );
+                    name: &k.name,
+                });
+                self.open += 1;
+            }
         }
         Ok(())
     }
 
     /// After a row of kind table `k`: write what is due.
-    fn kind_row_done(&mut self, k: &Arc<KindSchema>) -> io::Result<()> {
+    fn kind_row_done(&mut self, k: &KindSchema) -> io::Result<()> {
         // One row group's worth across kinds (with the records table's own, the writer stays
         // under 64 MiB; four row groups' worth peaked at 100 MiB).
         let budget = self.opts.rows_per_group;
-        let Some(o) = self.kinds.get_mut(&k.name) else {
+        let Some(Some(o)) = self.kinds.get_mut(k.index) else {
             return Ok(());
         };
         if o.buf.rows() >= self.opts.rows_per_group {
@@ -597,24 +511,31 @@ impl<S: Sink> CaptureWriter<S> {
             Self::flush(&mut self.sink, o, &mut self.summary)?;
         }
         if self.kind_rows > budget {
-            // Many kinds each short of a row group: the biggest is written early.
-            let big = self
-                .kinds
-                .iter()
-                .max_by_key(|(_, o)| o.buf.rows())
-                .map(|(n, _)| n.clone());
-            if let Some(n) = big {
-                self.close_kind(&n)?;
+            // Many kinds each short of a row group: the biggest is written early (the first
+            // by name of equally big ones).
+            let mut big: Option<(usize, usize)> = None;
+            for (i, o) in self.kinds.iter().enumerate() {
+                if let Some(o) = o {
+                    if big.is_none_or(|(_, r)| o.buf.rows() > r) {
+                        big = Some((i, o.buf.rows()));
+                    }
+                }
+            }
+            if let Some((i, _)) = big {
+                self.close_kind(i)?;
             }
         }
         Ok(())
     }
 
-    fn close_kind(&mut self, name: &str) -> io::Result<()> {
-        if let Some(mut o) = self.kinds.remove(name) {
+    fn close_kind(&mut self, i: usize) -> io::Result<()> {
+        if let Some(mut o) = self.kinds.get_mut(i).and_then(Option::take) {
+            self.open -= 1;
             self.kind_rows -= o.buf.rows();
             Self::flush(&mut self.sink, &mut o, &mut self.summary)?;
-            self.parts.insert(std::mem::take(&mut o.name), o.part);
+            if let Some(p) = self.parts.get_mut(i) {
+                *p = o.part;
+            }
         }
         Ok(())
     }
@@ -628,7 +549,7 @@ impl<S: Sink> CaptureWriter<S> {
             return Ok(());
         }
         let batch = o.buf.take().map_err(perr)?;
-        sink.write(&o.name, o.part, &batch)?;
+        sink.write(o.name, o.part, &batch)?;
         o.part += 1;
         summary.row_groups += 1;
         Ok(())
@@ -637,13 +558,169 @@ impl<S: Sink> CaptureWriter<S> {
     /// Write what is buffered; returns the sink and what was written.
     pub fn finish(mut self) -> io::Result<(S, Summary)> {
         self.flush_records()?;
-        let mut names: Vec<String> = self.kinds.keys().cloned().collect();
-        names.sort();
-        for n in names {
-            self.close_kind(&n)?;
+        // By name, as the kinds are numbered.
+        for i in 0..self.kinds.len() {
+            self.close_kind(i)?;
         }
         Ok((self.sink, self.summary))
     }
+}
+
+/// The `records` row of `rec` (`kname`: its kind table), counting its frames and diagnostics.
+fn records_row(b: &mut TableBuf, sum: &mut Summary, rec: &Record<'_>, kname: Option<&str>) {
+    use col::*;
+    if let Some(m) = rec.meta() {
+        b.uint(STREAM, m.stream as u64);
+        b.uint(N, m.n);
+        put_opt_u(b, TS, m.ts_ns);
+        put_opt_u(b, TIME, m.ts_ns);
+        if let Some(r) = m.rel_s {
+            b.float(REL, r);
+        }
+    }
+    match rec {
+        Record::Detect {
+            proto, detection, ..
+        } => {
+            b.text(TYPE, "detect");
+            b.text(PROTO, proto.code());
+            b.text_fmt(
+                DETAIL,
+                format_args!(
+                    "{} apt={:.3} ell={:.3}",
+                    if detection.proto.is_some() {
+                        "certain"
+                    } else {
+                        "best guess"
+                    },
+                    detection.apt,
+                    detection.elliptec
+                ),
+            );
+        }
+        Record::Stream { id, name, settings } => {
+            b.text(TYPE, "stream");
+            // A stream record has no meta: its id is the stream column.
+            b.uint(STREAM, *id as u64);
+            match settings {
+                Some(x) => b.text_fmt(DETAIL, format_args!("{name} ({x})")),
+                None => b.text(DETAIL, name),
+            }
+        }
+        Record::Input(d) => {
+            b.text(TYPE, "input");
+            b.uint(OFFSET, d.offset);
+            put_diag(b, &mut sum.diagnostics, d);
+        }
+        Record::FileDiag { offset, kind, msg } => {
+            b.text(TYPE, "input");
+            b.uint(OFFSET, *offset);
+            b.diag(DIAGS, kind, *offset, msg);
+            sum.diagnostics += 1;
+        }
+        Record::Units(nt) => {
+            b.text(TYPE, "units");
+            b.text(PROTO, "apt");
+            b.uint(STREAM, nt.stream as u64);
+            let mut d = String::new();
+            json::units_notice(&mut d, nt);
+            b.text(DETAIL, &d);
+        }
+        Record::Apt(a) => {
+            let f = a.frame;
+            let h = f.header();
+            b.text(TYPE, "frame");
+            b.text(PROTO, "apt");
+            put_dir(b, a.dir());
+            b.uint(OFFSET, f.offset);
+            b.uint(MSGID, h.msg_id() as u64);
+            if let Some(m) = f.msg {
+                b.text(NAME, m.name);
+                if let Some(k) = kname {
+                    b.text(KIND, k);
+                }
+            }
+            if let Some(x) = f.sub {
+                b.text(SUB, x.name);
+            }
+            b.uint(SRC, h.src().byte() as u64);
+            b.uint(DST, h.dst().byte() as u64);
+            if let Some(c) = f.channel() {
+                b.int(CHANNEL, c);
+            }
+            b.uint(LEN, f.bytes.len() as u64);
+            b.bytes(RAW, f.bytes);
+            for d in f.diags().chain(a.pair.diags(f.offset)) {
+                put_diag(b, &mut sum.diagnostics, &d);
+            }
+            put_opt_u(b, PAIR, a.pair.pair);
+            if let Some(l) = a.pair.latency_ns {
+                b.float(LATENCY, l as f64 / 1e6);
+            }
+            sum.frames += 1;
+        }
+        Record::Ell(e) => {
+            let f = e.frame;
+            b.text(TYPE, "frame");
+            b.text(PROTO, "ell");
+            let d = f.dir();
+            put_dir(b, Some(d));
+            b.uint(OFFSET, f.offset);
+            b.text(CODE, f.code_str());
+            if let Some(c) = f.cmd {
+                b.text(NAME, c.name);
+                if let Some(k) = kname {
+                    b.text(KIND, k);
+                }
+            }
+            // The module's address is the destination of a command, the source of a reply.
+            let at = if d == Dir::HostToDevice { DST } else { SRC };
+            b.uint(at, f.addr as u64);
+            b.uint(LEN, f.bytes.len() as u64);
+            b.bytes(RAW, f.bytes);
+            for d in f.diags() {
+                put_diag(b, &mut sum.diagnostics, d);
+            }
+            put_opt_u(b, PAIR, e.obs.pair);
+            if let Some(l) = e.obs.latency_ns {
+                b.float(LATENCY, l as f64 / 1e6);
+            }
+            sum.frames += 1;
+        }
+        Record::Garbage(g) => {
+            b.text(TYPE, "garbage");
+            b.text(PROTO, g.proto.code());
+            put_dir(b, g.meta.cap_dir);
+            b.uint(OFFSET, g.offset);
+            b.uint(LEN, g.bytes.len() as u64);
+            b.bytes(RAW, g.bytes);
+            let d = match g.kind {
+                Some(k) => json::garbage_diag(g.offset, g.bytes.len(), k),
+                None => Diag {
+                    offset: g.offset,
+                    kind: DiagKind::Garbage {
+                        len: g.bytes.len() as u32,
+                    },
+                },
+            };
+            put_diag(b, &mut sum.diagnostics, &d);
+        }
+        Record::NoReply(e) => {
+            b.text(TYPE, "no_reply");
+            b.text(PROTO, e.proto.code());
+            b.uint(STREAM, e.stream as u64);
+            b.uint(OFFSET, e.offset);
+            let at = if e.proto == aptscope_dissector::detect::Proto::Apt {
+                NAME
+            } else {
+                CODE
+            };
+            b.text(at, e.name);
+            b.uint(REF, e.n);
+            put_diag(b, &mut sum.diagnostics, &e.diag());
+        }
+    }
+    b.end_row();
 }
 
 /// Which of a frame's fields fills each column of its kind table, by layout of fields: the
@@ -676,19 +753,65 @@ impl Layouts {
     }
 }
 
+/// The fields of the APT frame being written, in a vector whose allocation is kept from frame
+/// to frame (a vector allocated and freed per frame, and grown by doubling before it was sized,
+/// was a tenth of building a kind row). The fields borrow each frame's bytes: the vector is
+/// emptied and given back under another lifetime, collected in place (same layout, same
+/// allocation).
+struct Scratch(Vec<(&'static AptField, AptValue<'static>)>);
+
+impl Default for Scratch {
+    fn default() -> Self {
+        Scratch(Vec::with_capacity(32))
+    }
+}
+
+// `filter_map(|_| None)`, not `filter`: the element type changes (its lifetime), which a
+// filter cannot do; the vector is empty, so nothing is dropped or made.
+#[allow(clippy::unnecessary_filter_map)]
+impl Scratch {
+    fn take<'a>(&mut self) -> Vec<(&'static AptField, AptValue<'a>)> {
+        let mut v = std::mem::take(&mut self.0);
+        v.clear();
+        v.into_iter().filter_map(|_| None).collect()
+    }
+
+    fn put(&mut self, mut v: Vec<(&'static AptField, AptValue<'_>)>) {
+        v.clear();
+        self.0 = v.into_iter().filter_map(|_| None).collect();
+    }
+}
+
 /// The first column of a kind table's fields (after [`schema::KEYS`]).
 const FIELDS: usize = schema::KEYS.len();
 
 /// The field columns of an APT frame's kind row.
-fn apt_values<'a>(lay: &mut Layouts, k: &KindSchema, a: &'a AptRec<'a>, b: &mut TableBuf) {
-    use aptscope_dissector::apt::Value;
+fn apt_values<'a>(
+    lay: &mut Layouts,
+    scratch: &mut Scratch,
+    k: &KindSchema,
+    a: &'a AptRec<'a>,
+    b: &mut TableBuf,
+) {
     let f = a.frame;
     let t = f.table();
-    // Sized once: the iterator does not know its length, and growing by doubling was a
-    // reallocation or two per frame.
-    let mut fields = Vec::with_capacity(32);
+    let mut fields = scratch.take();
     fields.extend(f.fields());
-    let idx = lay.get(k, &fields, |fd| fd.name);
+    apt_columns(lay, k, a, t, &fields, b);
+    scratch.put(fields);
+}
+
+/// The kind row's columns from the fields of [`apt_values`].
+fn apt_columns<'a>(
+    lay: &mut Layouts,
+    k: &KindSchema,
+    a: &'a AptRec<'a>,
+    t: &Table,
+    fields: &[(&'static AptField, AptValue<'a>)],
+    b: &mut TableBuf,
+) {
+    use aptscope_dissector::apt::Value;
+    let idx = lay.get(k, fields, |fd| fd.name);
     let mut last_phys = None;
     for (j, (c, i)) in k.cols.iter().zip(idx).enumerate() {
         let Some((i, (fd, v))) = i.and_then(|i| Some((i, fields.get(i)?))) else {
@@ -787,5 +910,53 @@ fn ell_values<'a>(lay: &mut Layouts, k: &KindSchema, e: &'a EllRec<'a>, b: &mut 
             }
             _ => {}
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Text columns are dictionary-encoded also inside lists (the diagnostics' messages, flag
+    /// names), raw bytes have no statistics, numbers neither dictionary nor lost statistics.
+    #[test]
+    fn dictionaries_for_text_also_in_lists() {
+        let path = |p: &[&str]| ColumnPath::new(p.iter().map(|s| s.to_string()).collect());
+        let rec = schema::records_schema();
+        let p = writer_properties(100, &rec);
+        for c in [
+            &["name"][..],
+            &["diagnostics", "list", "item", "msg"],
+            &["diagnostics", "list", "item", "kind"],
+        ] {
+            assert!(p.dictionary_enabled(&path(c)), "{c:?}");
+        }
+        assert!(!p.dictionary_enabled(&path(&["n"])));
+        assert!(!p.dictionary_enabled(&path(&["diagnostics", "list", "item", "offset"])));
+        assert_eq!(
+            p.statistics_enabled(&path(&["raw"])),
+            EnabledStatistics::None
+        );
+        assert_ne!(p.statistics_enabled(&path(&["n"])), EnabledStatistics::None);
+        let k = Kinds::global().get("MOT_GET_DCSTATUSUPDATE").expect("kind");
+        let flags = k
+            .schema
+            .fields()
+            .iter()
+            .find(|f| f.metadata().contains_key("flags"))
+            .expect("a flags column");
+        let p = writer_properties(100, &k.schema);
+        assert!(p.dictionary_enabled(&path(&[flags.name(), "list", "item"])));
+    }
+
+    /// Kinds are numbered by name.
+    #[test]
+    fn kinds_are_numbered_in_name_order() {
+        let all = Kinds::global().all();
+        assert_eq!(all.len(), Kinds::global().len());
+        for (i, k) in all.iter().enumerate() {
+            assert_eq!(k.index, i, "{}", k.name);
+        }
+        assert!(all.windows(2).all(|w| w[0].name < w[1].name));
     }
 }

@@ -120,6 +120,9 @@ pub struct KindSchema {
     pub schema: SchemaRef,
     /// Field columns, in schema order after [`KEYS`].
     pub cols: Vec<Col>,
+    /// Its place in [`Kinds::all`] (kinds sorted by name): writers keep their tables in a
+    /// vector by this number rather than in a map by name.
+    pub index: usize,
 }
 
 /// The key columns every kind table starts with (joins `records` on `file`, `n`).
@@ -321,6 +324,7 @@ impl Builder {
             name,
             schema: Arc::new(Schema::new(fields)),
             cols: self.cols,
+            index: 0,
         }
     }
 }
@@ -328,6 +332,8 @@ impl Builder {
 /// Every kind table's schema, by name, built once from the tables.
 pub struct Kinds {
     by_name: HashMap<String, Arc<KindSchema>>,
+    /// Sorted by name ([`KindSchema::index`]).
+    sorted: Vec<Arc<KindSchema>>,
 }
 
 impl Kinds {
@@ -341,19 +347,40 @@ impl Kinds {
         let mut by_name = HashMap::new();
         for m in t.msgs() {
             let ks = apt_kind(t, m, None);
-            by_name.insert(ks.name.clone(), Arc::new(ks));
+            by_name.insert(ks.name.clone(), ks);
             if let Some(g) = m.subs {
                 for s in t.subs().iter().filter(|s| s.group == g) {
                     let ks = apt_kind(t, m, Some(s));
-                    by_name.insert(ks.name.clone(), Arc::new(ks));
+                    by_name.insert(ks.name.clone(), ks);
                 }
             }
         }
         for c in COMMANDS {
             let ks = ell_kind(c);
-            by_name.insert(ks.name.clone(), Arc::new(ks));
+            by_name.insert(ks.name.clone(), ks);
         }
-        Kinds { by_name }
+        let mut sorted: Vec<KindSchema> = by_name.into_values().collect();
+        sorted.sort_by(|a, b| a.name.cmp(&b.name));
+        let sorted: Vec<Arc<KindSchema>> = sorted
+            .into_iter()
+            .enumerate()
+            .map(|(i, mut k)| {
+                k.index = i;
+                Arc::new(k)
+            })
+            .collect();
+        let by_name = sorted.iter().map(|k| (k.name.clone(), k.clone())).collect();
+        Kinds { by_name, sorted }
+    }
+
+    /// How many kinds there are (one more than the largest [`KindSchema::index`]).
+    pub fn len(&self) -> usize {
+        self.sorted.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.sorted.is_empty()
     }
 
     /// A kind's schema.
@@ -363,9 +390,7 @@ impl Kinds {
 
     /// Every kind, sorted by name.
     pub fn all(&self) -> Vec<&Arc<KindSchema>> {
-        let mut v: Vec<_> = self.by_name.values().collect();
-        v.sort_by(|a, b| a.name.cmp(&b.name));
-        v
+        self.sorted.iter().collect()
     }
 }
 

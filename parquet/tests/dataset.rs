@@ -273,3 +273,43 @@ fn many_kinds_do_not_make_a_row_group_per_few_rows() {
     assert!(count.0.values().all(|&n| n == 1), "{:?}", count.0);
     assert_eq!(sum.row_groups, kinds as u64);
 }
+
+/// The tables kept with `only_tables` are those of the whole dataset, byte for byte; the
+/// others are not written.
+#[test]
+fn only_the_tables_asked_for() {
+    let bytes = synth::stream(Table::global(), 11, 400, true);
+    let opts = Options::default();
+    let run = |keep: Option<&'static [&'static str]>| {
+        let mut w = CaptureWriter::new(MemSink::new(opts), "cap.bin", opts);
+        if let Some(k) = keep {
+            w.only_tables(move |n| k.contains(&n));
+        }
+        let mut d = Decoder::new(Some(Proto::Apt));
+        d.push(Ctx::default(), &bytes, &mut |r| w.record(r))
+            .expect("push");
+        d.finish(&mut |r| w.record(r)).expect("finish");
+        let (sink, sum) = w.finish().expect("finish writer");
+        (sink.finish().expect("bytes"), sum.records)
+    };
+    let (all, n) = run(None);
+    let all: std::collections::BTreeMap<String, Vec<u8>> = all.into_iter().collect();
+    let kind = all
+        .keys()
+        .find(|k| *k != "records")
+        .expect("a kind table")
+        .clone();
+    let kind: &'static str = Box::leak(kind.into_boxed_str());
+    for keep in [&["records"][..], &[kind], &["records", kind]] {
+        let keep: &'static [&'static str] = Box::leak(keep.to_vec().into_boxed_slice());
+        let (some, m) = run(Some(keep));
+        assert_eq!(m, n, "records counted whichever tables are kept");
+        let names: Vec<&str> = some.iter().map(|(t, _)| t.as_str()).collect();
+        let mut want = keep.to_vec();
+        want.sort();
+        assert_eq!(names, want);
+        for (t, b) in &some {
+            assert_eq!(read(b.clone()), read(all[t].clone()), "{t}");
+        }
+    }
+}

@@ -25,7 +25,7 @@ diagnostic; damaged input is not an error: its problems are in each record's dia
 from __future__ import annotations
 
 import os
-from typing import Any, Dict, Iterator, Optional, Tuple, Union
+from typing import Any, Dict, Iterable, Iterator, Optional, Tuple, Union
 
 from . import _aptscope
 from ._aptscope import AptscopeError, EncodeError
@@ -68,7 +68,12 @@ def decode(source: Source, proto: str = "auto") -> Iterator[Dict[str, Any]]:
     yield from _aptscope.Records(_src(source), proto)
 
 
-def to_arrow(source: Source, proto: str = "auto", name: Optional[str] = None) -> Dict[str, Any]:
+def to_arrow(
+    source: Source,
+    proto: str = "auto",
+    name: Optional[str] = None,
+    tables: Optional[Iterable[str]] = None,
+) -> Dict[str, Any]:
     """Decode a capture into pyarrow tables: ``{"records": …, "MOT_MOVE_ABSOLUTE": …}``.
 
     The tables have exactly the schemas of ``aptscope decode --to parquet``: ``records``
@@ -76,22 +81,31 @@ def to_arrow(source: Source, proto: str = "auto", name: Optional[str] = None) ->
     fields (integers as integers, enums as the label with ``<field>_code`` beside, flags as
     lists of names with ``<field>_bits``, units in the field metadata). ``name`` is the value of
     the ``file`` column (default: the path, or ``"<bytes>"``).
+
+    ``tables`` names the tables wanted (``["records"]``, ``["MOT_GET_DCSTATUSUPDATE"]`` …;
+    default: all): the others are not built at all, which makes decoding faster (about twice
+    for ``records`` alone on a stream of status updates). A name that is neither ``records``
+    nor a message kind raises :class:`AptscopeError`; a kind absent from the capture is absent
+    from the result.
     """
     import pyarrow as pa
 
     parts: Dict[str, list] = {"records": []}
-    for table, batch in batches(source, proto, name):
+    for table, batch in batches(source, proto, name, tables):
         parts.setdefault(table, []).append(batch)
     return {t: pa.Table.from_batches(b) for t, b in parts.items() if b}
 
 
 def batches(
-    source: Source, proto: str = "auto", name: Optional[str] = None
+    source: Source,
+    proto: str = "auto",
+    name: Optional[str] = None,
+    tables: Optional[Iterable[str]] = None,
 ) -> Iterator[Tuple[str, Any]]:
     """Yield ``(table, pyarrow.RecordBatch)`` pairs as the capture is decoded.
 
     The tables and schemas are those of :func:`to_arrow` (and of ``aptscope decode --to
-    parquet``); each batch is one row group (up to 65,536 rows) of one table, yielded when the
+    parquet``; ``tables`` as there: only those are built); each batch is one row group (up to 65,536 rows) of one table, yielded when the
     decoder has that many rows of it or at the end, so memory stays bounded whatever the
     capture's size. The columns cross from Rust through the Arrow C data interface (the
     PyCapsule protocol): no copy, no Parquet or JSON in between.
@@ -105,7 +119,8 @@ def batches(
     """
     import pyarrow as pa
 
-    for table, batch in _aptscope.Batches(_src(source), proto, name):
+    wanted = None if tables is None else list(tables)
+    for table, batch in _aptscope.Batches(_src(source), proto, name, wanted):
         yield table, pa.record_batch(batch)
 
 

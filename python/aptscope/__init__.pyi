@@ -1,7 +1,7 @@
 """Type stubs of the aptscope package (see ``__init__.py`` for the documentation)."""
 
 import os
-from typing import Any, Dict, Iterator, Optional, Tuple, Union
+from typing import Any, Dict, Iterable, Iterator, Optional, Tuple, Union
 
 import pyarrow
 
@@ -18,12 +18,18 @@ def decode(source: Source, proto: str = "auto") -> Iterator[Dict[str, Any]]:
     """Yield the records of a capture (a path, or the bytes of one serial stream), one dict each."""
 
 def to_arrow(
-    source: Source, proto: str = "auto", name: Optional[str] = None
+    source: Source,
+    proto: str = "auto",
+    name: Optional[str] = None,
+    tables: Optional[Iterable[str]] = None,
 ) -> Dict[str, pyarrow.Table]:
     """Decode a capture into pyarrow tables with the schemas of ``aptscope decode --to parquet``."""
 
 def batches(
-    source: Source, proto: str = "auto", name: Optional[str] = None
+    source: Source,
+    proto: str = "auto",
+    name: Optional[str] = None,
+    tables: Optional[Iterable[str]] = None,
 ) -> Iterator[Tuple[str, pyarrow.RecordBatch]]:
     """Yield ``(table, record batch)`` pairs of :func:`to_arrow`'s tables as the capture is decoded."""
 

@@ -15,6 +15,7 @@ use aptscope_dissector::json;
 use aptscope_dissector::record::{Ctx, Decoder, Record};
 use aptscope_dissector::table::Dir;
 use aptscope_dissector::Table;
+use aptscope_parquet::schema::{Kinds, RECORDS};
 use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, DirSink, Options, Sink};
 use arrow_array::{Array, RecordBatch, StructArray};
 use arrow_data::ffi::FFI_ArrowArray;
@@ -363,13 +364,34 @@ struct Batches {
 #[pymethods]
 impl Batches {
     #[new]
-    #[pyo3(signature = (source_obj, proto = "auto", name = None))]
-    fn new(source_obj: &Bound<'_, PyAny>, proto: &str, name: Option<String>) -> PyResult<Self> {
+    #[pyo3(signature = (source_obj, proto = "auto", name = None, tables = None))]
+    fn new(
+        source_obj: &Bound<'_, PyAny>,
+        proto: &str,
+        name: Option<String>,
+        tables: Option<Vec<String>>,
+    ) -> PyResult<Self> {
+        // Checked before the source is opened: a misspelt table is an error, not no rows.
+        if let Some(t) = &tables {
+            if let Some(bad) = t
+                .iter()
+                .find(|t| *t != RECORDS && Kinds::global().get(t).is_none())
+            {
+                return Err(AptscopeError::new_err(format!(
+                    "table {bad:?}: neither \"records\" nor a message kind"
+                )));
+            }
+        }
         let (input, label) = Input::open(source_obj, proto)?;
         let label = name.unwrap_or(label);
         let queue = BatchQueue::default();
         let opts = Options::default();
-        let w = CaptureWriter::new(QueueSink(queue.clone()), &label, opts);
+        let mut w = CaptureWriter::new(QueueSink(queue.clone()), &label, opts);
+        if let Some(t) = tables {
+            // Only these are built: the others cost nothing.
+            let keep: std::collections::HashSet<String> = t.into_iter().collect();
+            w.only_tables(move |n| keep.contains(n));
+        }
         Ok(Batches {
             input,
             w: Some(w),

@@ -148,6 +148,23 @@ def test_batches_are_the_tables_in_row_groups(samples):
         list(aptscope.batches(samples / "nope.bin"))
 
 
+def test_only_the_tables_asked_for(samples):
+    path = samples / "kdc101-session.pcapng"
+    tables = aptscope.to_arrow(path)
+    kind = "MOT_GET_DCSTATUSUPDATE"
+    for want in (["records"], [kind], ["records", kind]):
+        got = aptscope.to_arrow(path, tables=want)
+        assert sorted(got) == sorted(want)
+        for t in want:
+            assert got[t].equals(tables[t]), t
+            assert got[t].schema.equals(tables[t].schema, check_metadata=True), t
+    assert {t for t, _ in aptscope.batches(path, tables=(kind,))} == {kind}
+    # A kind not in the capture: no table; a name that is no table: an error.
+    assert aptscope.to_arrow(path, tables=["ELL_GET_STATUS"]) == {}
+    with pytest.raises(aptscope.AptscopeError, match="MOT_NO_SUCH"):
+        aptscope.to_arrow(path, tables=["MOT_NO_SUCH"])
+
+
 def test_batches_stream_into_duckdb(samples):
     duckdb = pytest.importorskip("duckdb")
     path = samples / "kdc101-session.pcapng"
