@@ -31,6 +31,21 @@ pub(super) const LAYOUT: u32 = 1;
 /// The aptscope version that wrote a file (a cache of another build's version is ignored).
 pub(super) const VERSION: &str = env!("CARGO_PKG_VERSION");
 
+/// The running program's build: its executable's size and modification time. A rebuilt
+/// aptscope whose version number has not changed (a developer's build) may index differently,
+/// so it does not read the indexes an earlier build wrote.
+fn build_id() -> &'static str {
+    static ID: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    ID.get_or_init(|| {
+        std::env::current_exe()
+            .and_then(std::fs::metadata)
+            .map_or_else(
+                |_| "unknown".into(),
+                |m| format!("{} {}.{:09}", m.len(), m.mtime(), m.mtime_nsec()),
+            )
+    })
+}
+
 /// Total size the cache directory is kept under by default ([`cache_max`]).
 pub const DEFAULT_CACHE_MAX: u64 = 4 << 30;
 
@@ -107,7 +122,8 @@ impl Key {
             return None;
         }
         let text = format!(
-            "aptscope {VERSION} layout {LAYOUT}\npath {}\nsize {}\nmtime {}.{:09}\nctime {}.{:09}\ndev {} ino {}\n{opts}",
+            "aptscope {VERSION} layout {LAYOUT} build {}\npath {}\nsize {}\nmtime {}.{:09}\nctime {}.{:09}\ndev {} ino {}\n{opts}",
+            build_id(),
             canon.to_string_lossy(),
             m.len(),
             m.mtime(),
