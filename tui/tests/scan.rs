@@ -398,22 +398,7 @@ fn an_index_over_its_budget_changes_no_answer() {
     std::fs::write(&raw, synth::stream(Table::global(), 11, 150_000, true)).expect("write");
     let raw = raw.to_string_lossy().to_string();
     let pcapng = dir.0.join("big.pcapng").to_string_lossy().to_string();
-    {
-        let (mut r, _) = aptscope_capture::open::open(&raw, OpenOptions::default()).expect("open");
-        let mut w = aptscope_capture::open::create(
-            &pcapng,
-            aptscope_capture::open::Format::parse("pcapng").expect("pcapng"),
-            true,
-        )
-        .expect("create");
-        w.stream(&Default::default()).expect("stream");
-        while let Some(ev) = r.next_event() {
-            if let Event::Chunk(c) = ev {
-                w.chunk(&c).expect("chunk");
-            }
-        }
-        w.finish().expect("finish");
-    }
+    to_pcapng(&raw, OpenOptions::default(), &pcapng);
     let filters: Vec<Filter> = ["apt.position > 1000", "unpaired", "diag", "n > 70000"]
         .iter()
         .map(|t| Filter::parse(t).expect("filter"))
@@ -594,22 +579,8 @@ fn a_changed_capture_is_indexed_again() {
         if path.ends_with(".bin") {
             std::fs::write(&path, &bytes).expect("append");
         } else {
-            let (mut r, _) =
-                aptscope_capture::open::open(&raw.to_string_lossy(), opts).expect("open");
             let tmp = dir.0.join("grown.pcapng");
-            let mut w = aptscope_capture::open::create(
-                &tmp.to_string_lossy(),
-                aptscope_capture::open::Format::parse("pcapng").expect("pcapng"),
-                true,
-            )
-            .expect("create");
-            w.stream(&Default::default()).expect("stream");
-            while let Some(ev) = r.next_event() {
-                if let Event::Chunk(c) = ev {
-                    w.chunk(&c).expect("chunk");
-                }
-            }
-            w.finish().expect("finish");
+            to_pcapng(&raw.to_string_lossy(), opts, &tmp.to_string_lossy());
             std::fs::rename(&tmp, &path).expect("replace");
         }
         let grown = load_cached(&path, opts, None, &cache).expect("opens");
@@ -727,4 +698,22 @@ fn a_cache_that_cannot_be_written_is_skipped() {
     assert_eq!(cache_state(&got), (CACHE_NOT_SAVED, false));
     let fresh = load(&path, OpenOptions::default()).expect("opens");
     same_answers(&path, &fresh, &got, &[]);
+}
+
+/// Write the capture `src` again as pcapng at `out`.
+fn to_pcapng(src: &str, opts: OpenOptions, out: &str) {
+    let (mut r, _) = aptscope_capture::open::open(src, opts).expect("open");
+    let mut w = aptscope_capture::open::create(
+        out,
+        aptscope_capture::open::Format::parse("pcapng").expect("pcapng"),
+        true,
+    )
+    .expect("create");
+    w.stream(&Default::default()).expect("stream");
+    while let Some(ev) = r.next_event() {
+        if let Event::Chunk(c) = ev {
+            w.chunk(&c).expect("chunk");
+        }
+    }
+    w.finish().expect("finish");
 }
