@@ -209,6 +209,27 @@ impl HeldBack {
         Ok(())
     }
 
+    /// A [`Msg::Part`]: everything held back and the bytes that close its block written out,
+    /// the rest held back.
+    fn part(
+        &mut self,
+        out: &mut impl Write,
+        b: Vec<u8>,
+        commit: usize,
+        pool: &Pool,
+    ) -> io::Result<()> {
+        if commit > 0 {
+            self.write_out(out, pool)?;
+            out.write_all(&b[..commit])?;
+        }
+        if commit < b.len() {
+            self.0.push((b, commit));
+        } else {
+            pool.put(b);
+        }
+        Ok(())
+    }
+
     /// Drop everything held back (the file ended in error: `-j 1` dropped its last block).
     fn drop_all(&mut self, pool: &Pool) {
         for (b, _) in self.0.drain(..) {
@@ -571,19 +592,9 @@ fn collect(
                     }
                 }
                 Ok(Msg::Part(b, commit)) => {
-                    if commit > 0 {
-                        let w = back
-                            .write_out(&mut out, pool)
-                            .and_then(|_| out.write_all(&b[..commit]));
-                        if let Err(e) = w {
-                            stop.store(true, Ordering::Relaxed);
-                            return Err(e);
-                        }
-                    }
-                    if commit < b.len() {
-                        back.0.push((b, commit));
-                    } else {
-                        pool.put(b);
+                    if let Err(e) = back.part(&mut out, b, commit, pool) {
+                        stop.store(true, Ordering::Relaxed);
+                        return Err(e);
                     }
                 }
                 Ok(Msg::Spilled(f, start, end)) => {
@@ -883,13 +894,7 @@ mod tests {
                         self.out.extend_from_slice(&b);
                     }
                     Msg::Part(b, commit) => {
-                        if commit > 0 {
-                            self.back.write_out(&mut self.out, pool).unwrap();
-                            self.out.extend_from_slice(&b[..commit]);
-                        }
-                        if commit < b.len() {
-                            self.back.0.push((b, commit));
-                        }
+                        self.back.part(&mut self.out, b, commit, pool).unwrap();
                     }
                     Msg::Spilled(..) | Msg::Done(_) => panic!("not sent here"),
                 }
