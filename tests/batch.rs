@@ -4,7 +4,7 @@ mod common;
 
 use arrow_array::cast::AsArray;
 use arrow_array::{Array, ArrayRef, RecordBatch};
-use common::aptscope;
+use common::{aptscope, aptscope_env};
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -66,8 +66,9 @@ fn parallel_output_is_the_sequential_output() {
 }
 
 /// Random streams large enough that a file's rendering runs far ahead of the writer (megabytes
-/// of NDJSON each, beyond what its channel holds, so it spills), beside every sample: `-j 2`
-/// and `-j 4` write exactly what `-j 1` writes.
+/// of NDJSON each), beside every sample: `-j 2` and `-j 4` write exactly what `-j 1` writes,
+/// with files ahead held in memory (the default) and spilled to disk (no memory allowed for
+/// them: `APTSCOPE_QUEUED_MAX=0`).
 #[test]
 fn every_worker_renders_and_the_output_is_that_of_one() {
     let dir = common::Scratch::new("batch-random");
@@ -87,13 +88,17 @@ fn every_worker_renders_and_the_output_is_that_of_one() {
         let (one, err, ok) = aptscope(&a, None);
         assert!(ok, "{err}");
         assert!(one.len() > 4 << 20, "{} bytes", one.len());
-        for j in ["2", "4"] {
+        for (j, queued) in [("2", None), ("4", None), ("2", Some("0")), ("4", Some("0"))] {
             a[3] = j;
-            let (many, err, ok) = aptscope(&a, None);
+            let env: Vec<_> = queued
+                .map(|q| ("APTSCOPE_QUEUED_MAX", q))
+                .into_iter()
+                .collect();
+            let (many, err, ok) = aptscope_env(&a, None, &env);
             assert!(ok, "{err}");
             assert!(
                 one == many,
-                "{fmt} -j {j}: {} vs {} bytes",
+                "{fmt} -j {j} (queued at most {queued:?}): {} vs {} bytes",
                 one.len(),
                 many.len()
             );

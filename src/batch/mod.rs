@@ -171,6 +171,17 @@ const CHANNEL_BLOCKS: usize = 256;
 /// it back was the system time).
 const QUEUED_MAX: usize = 256;
 
+/// [`QUEUED_MAX`], or `APTSCOPE_QUEUED_MAX` (tests set 0: every file ahead spills).
+fn queued_max() -> usize {
+    static MAX: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    *MAX.get_or_init(|| {
+        std::env::var("APTSCOPE_QUEUED_MAX")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(QUEUED_MAX)
+    })
+}
+
 /// Spare buffers a [`Pool`] keeps at most (it keeps only what was in use at once).
 const POOL_MAX: usize = 320;
 
@@ -403,7 +414,7 @@ impl ChanWriter<'_> {
             }
             self.announce(true)?;
         }
-        if self.pool.queued().load(Ordering::Relaxed) < QUEUED_MAX {
+        if self.pool.queued().load(Ordering::Relaxed) < queued_max() {
             self.pool.queued().fetch_add(1, Ordering::Relaxed);
             match self.tx.try_send(Msg::Data(b, false)) {
                 Ok(()) => return Ok(()),

@@ -16,8 +16,18 @@ use std::process::{Command, Stdio};
 
 /// Run the binary in the repository with `stdin` (empty when `None`): stdout, stderr, success.
 pub fn aptscope(args: &[&str], stdin: Option<&[u8]>) -> (String, String, bool) {
+    aptscope_env(args, stdin, &[])
+}
+
+/// [`aptscope`] with these environment variables set.
+pub fn aptscope_env(
+    args: &[&str],
+    stdin: Option<&[u8]>,
+    env: &[(&str, &str)],
+) -> (String, String, bool) {
     let mut c = Command::new(env!("CARGO_BIN_EXE_aptscope"))
         .args(args)
+        .envs(env.iter().copied())
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
