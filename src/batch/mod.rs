@@ -3,14 +3,13 @@
 //!
 //! Text and NDJSON: each worker decodes and renders whole files into a bounded channel of its
 //! own (256 KiB blocks); the main thread copies file 0's channel to standard output, then file
-//! 1's, and so on. A worker ahead of the writer does not wait for it: when the channels hold
-//! [`QUEUED_MAX`] blocks (64 MiB) or its own is full, it appends its blocks to a spill file of
-//! its own (unlinked temporary file) and announces each spilled range through the channel, so
-//! the order stays that of `-j 1` while every core renders, and memory stays bounded whatever
-//! the files' sizes (disk holds what is ahead, at most [`SPILL_MAX`] per file, beyond which
-//! the worker waits). Parquet: each worker writes its
-//! file's row groups as part files of their own (named by the file's index), so nothing is
-//! ordered or merged.
+//! 1's, and so on. A worker ahead of the writer does not wait for it: when its channel is full
+//! it keeps its blocks in memory (up to [`QUEUED_MAX`], 64 MiB, for all files together) and
+//! beyond that appends them to a spill file of its own (unlinked temporary file), announcing
+//! what it kept through the channel when there is room, so the order stays that of `-j 1` while
+//! every core renders, and memory stays bounded whatever the files' sizes (disk holds what is
+//! ahead, at most [`SPILL_MAX`] per file, beyond which the worker waits). Parquet: each worker writes its file's row groups as part files of
+//! their own (named by the file's index), so nothing is ordered or merged.
 //!
 //! Cores the files leave spare (one file with `-j 2`, two with `-j 4`) render inside each file:
 //! its decode chain runs on its worker, which hands the records to render threads and writes
@@ -146,6 +145,8 @@ enum Msg {
     /// before it (0: none). Those are written out after everything held back; the rest is
     /// held back.
     Part(Vec<u8>, usize),
+    /// Blocks a worker ahead of the writer kept in memory, in order with the others.
+    Blocks(Vec<Vec<u8>>),
     /// Bytes `start..end` of the worker's spill file, in order with the blocks.
     Spilled(Arc<File>, u64, u64),
     Done(io::Result<Stats>),
@@ -158,17 +159,20 @@ struct Stats {
     row_groups: u64,
 }
 
-/// Blocks a file's channel holds at most (64 MiB); all channels together hold at most
-/// [`QUEUED_MAX`] blocks, beyond which a file ahead of the one being written out spills. (Rendered buffers are bigger, a batch each: 16 of them are at most
-/// a few MiB.)
-const CHANNEL_BLOCKS: usize = 256;
+/// Blocks a file's channel holds (4 MiB): enough to ride out the writer's pauses; a file
+/// further ahead keeps its blocks in memory (up to [`QUEUED_MAX`] for all files) or spills.
+const CHANNEL_BLOCKS: usize = 16;
 
-/// Blocks waiting in all the files' channels together (64 MiB) before a file ahead of the
-/// writer spills to disk. Rendering ahead in memory rather than on disk: 50 files of 4.2 MB to
-/// NDJSON at `-j 2` (quiet machine) took 6.6–7.3 s, 0.6–0.8 system CPU-s, peak 83 MiB,
-/// against 7.5–7.6 s, 1.8–2.1 system CPU-s, 19 MiB spilling beyond 4 MiB (the file ahead is
-/// rendered whole while the one before it is written: writing it to the spill file and reading
-/// it back was the system time).
+/// Rendered batches a file's channel holds when its records are rendered on several threads
+/// ([`split`]): a batch each, so 16 are a few MiB (a stalled reader peaked at 46 MiB).
+const CHANNEL_BATCHES: usize = 16;
+
+/// Blocks files ahead of the writer keep in memory, all together (64 MiB), beyond their
+/// channels, before they spill to disk. Rendering ahead in memory rather than on disk: 50 files
+/// of 4.2 MB to NDJSON at `-j 2` (quiet machine, 3 alternating runs) took 6.64 s against `-j
+/// 1`'s 12.34 s, 0.63 system CPU-s, peak 84 MiB; spilling beyond the channel, 7.40 s, 1.9
+/// system CPU-s, 19 MiB (the file ahead is rendered whole while the one before it is written:
+/// writing it to the spill file and reading it back was the system time).
 const QUEUED_MAX: usize = 256;
 
 /// [`QUEUED_MAX`], or `APTSCOPE_QUEUED_MAX` (tests set 0: every file ahead spills).
@@ -200,7 +204,7 @@ impl Pool {
             .unwrap_or_default()
     }
 
-    /// Blocks sent and not yet written out, in all channels ([`QUEUED_MAX`]).
+    /// Blocks kept in memory ahead of the writer, by all files ([`QUEUED_MAX`]).
     fn queued(&self) -> &AtomicUsize {
         &self.1
     }
@@ -302,8 +306,8 @@ impl Spill {
     }
 }
 
-/// A writer into a file's channel, in blocks of [`BLOCK`]. Held back until released: what a file
-/// that turns out not to be a capture wrote is dropped.
+/// A writer into a file's channel, in blocks of [`BLOCK`]. Held back until released: what a
+/// file that turns out not to be a capture wrote is dropped.
 struct ChanWriter<'a> {
     tx: &'a SyncSender<Msg>,
     buf: Vec<u8>,
@@ -318,6 +322,9 @@ struct ChanWriter<'a> {
     /// rather than spill.
     head: &'a AtomicUsize,
     spill: Option<Spill>,
+    /// Blocks kept in memory ahead of the writer, not yet announced (before the spill file's
+    /// unannounced bytes: a block goes here only when there are none).
+    mem: Vec<Vec<u8>>,
     /// No spill file could be made, or written: wait for the writer.
     no_spill: bool,
 }
@@ -339,6 +346,7 @@ impl ChanWriter<'_> {
             index,
             head,
             spill: None,
+            mem: Vec::new(),
             no_spill: false,
         }
     }
@@ -347,9 +355,24 @@ impl ChanWriter<'_> {
         io::Error::from(io::ErrorKind::BrokenPipe)
     }
 
-    /// Announce the spilled bytes not yet announced; `wait`: even if the channel is full.
-    /// Whether none is left unannounced.
+    /// Announce the blocks kept and the spilled bytes not yet announced; `wait`: even if the
+    /// channel is full. Whether none is left unannounced.
     fn announce(&mut self, wait: bool) -> io::Result<bool> {
+        if !self.mem.is_empty() {
+            let m = Msg::Blocks(std::mem::take(&mut self.mem));
+            if wait {
+                self.tx.send(m).map_err(|_| Self::gone())?;
+            } else {
+                match self.tx.try_send(m) {
+                    Ok(()) => {}
+                    Err(TrySendError::Full(Msg::Blocks(v))) => {
+                        self.mem = v;
+                        return Ok(false);
+                    }
+                    Err(_) => return Err(Self::gone()),
+                }
+            }
+        }
         let Some(sp) = self.spill.as_mut() else {
             return Ok(true);
         };
@@ -370,8 +393,25 @@ impl ChanWriter<'_> {
         Ok(true)
     }
 
+    /// Keep `b` ahead of the writer: in memory while all files together keep fewer than
+    /// [`QUEUED_MAX`] blocks and none of this file's bytes wait in the spill file, else appended
+    /// to the spill file (made now if need be). Gives `b` back when neither can take it.
+    fn spill(&mut self, b: Vec<u8>) -> Option<Vec<u8>> {
+        let on_disk = self.spill.as_ref().is_some_and(|sp| sp.announced < sp.len);
+        if !on_disk && self.pool.queued().load(Ordering::Relaxed) < queued_max() {
+            self.pool.queued().fetch_add(1, Ordering::Relaxed);
+            self.mem.push(b);
+            return None;
+        }
+        if self.spill_to_disk(&b) {
+            self.pool.put(b);
+            return None;
+        }
+        Some(b)
+    }
+
     /// Append `b` to the spill file (made now if need be); false: it cannot take it.
-    fn spill(&mut self, b: &[u8]) -> bool {
+    fn spill_to_disk(&mut self, b: &[u8]) -> bool {
         if self.spill.is_none() && !self.no_spill {
             self.spill = Spill::create(self.index);
             self.no_spill = self.spill.is_none();
@@ -405,45 +445,33 @@ impl ChanWriter<'_> {
         if now || self.open > 0 || self.head.load(Ordering::Relaxed) == self.index {
             self.announce(true)?;
             self.open = 0;
-            return self.queue(b, now);
+            return self.tx.send(Msg::Data(b, now)).map_err(|_| Self::gone());
         }
-        // Blocks after spilled bytes follow them into the spill until those are announced.
-        if !self.announce(now)? {
-            if self.spill(&b) {
-                return Ok(());
+        // Blocks after those kept or spilled follow them until those are announced.
+        let b = if self.announce(now)? {
+            b
+        } else {
+            match self.spill(b) {
+                None => return Ok(()),
+                Some(b) => {
+                    self.announce(true)?;
+                    b
+                }
             }
-            self.announce(true)?;
-        }
-        if self.pool.queued().load(Ordering::Relaxed) < queued_max() {
-            self.pool.queued().fetch_add(1, Ordering::Relaxed);
-            match self.tx.try_send(Msg::Data(b, false)) {
-                Ok(()) => return Ok(()),
-                Err(TrySendError::Disconnected(_)) => return Err(Self::gone()),
-                Err(TrySendError::Full(m)) => {
-                    self.pool.queued().fetch_sub(1, Ordering::Relaxed);
-                    let Msg::Data(b, _) = m else {
-                        return Ok(());
-                    };
-                    return self.spill_or_queue(b);
+        };
+        match self.tx.try_send(Msg::Data(b, false)) {
+            Ok(()) => Ok(()),
+            Err(TrySendError::Disconnected(_)) => Err(Self::gone()),
+            Err(TrySendError::Full(m)) => {
+                let Msg::Data(b, _) = m else {
+                    return Ok(());
+                };
+                match self.spill(b) {
+                    None => Ok(()),
+                    Some(b) => self.tx.send(Msg::Data(b, false)).map_err(|_| Self::gone()),
                 }
             }
         }
-        self.spill_or_queue(b)
-    }
-
-    /// Spill `b`, or when it cannot be, queue it (waiting for the writer).
-    fn spill_or_queue(&mut self, b: Vec<u8>) -> io::Result<()> {
-        if self.spill(&b) {
-            Ok(())
-        } else {
-            self.queue(b, false)
-        }
-    }
-
-    /// Send block `b` to the writer, waiting for room in the channel; counted as queued.
-    fn queue(&mut self, b: Vec<u8>, now: bool) -> io::Result<()> {
-        self.pool.queued().fetch_add(1, Ordering::Relaxed);
-        self.tx.send(Msg::Data(b, now)).map_err(|_| Self::gone())
     }
 }
 
@@ -574,15 +602,21 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
     let head = AtomicUsize::new(0);
     let mut txs = Vec::with_capacity(n);
     let mut rxs: Vec<Receiver<Msg>> = Vec::with_capacity(n);
-    for _ in 0..n {
-        let (tx, rx) = sync_channel(CHANNEL_BLOCKS);
-        txs.push(Mutex::new(Some(tx)));
-        rxs.push(rx);
-    }
     let jobs = job.jobs.clamp(1, n.max(1));
     // Cores the files leave spare render inside them (see `split`): one file with `-j 2` is
     // decoded on one thread and rendered on two.
     let helpers = if job.jobs > jobs { job.jobs / jobs } else { 0 };
+    // Rendered batches handed over whole (`split`) are bigger than blocks: fewer of them.
+    let cap = if helpers > 0 {
+        CHANNEL_BATCHES
+    } else {
+        CHANNEL_BLOCKS
+    };
+    for _ in 0..n {
+        let (tx, rx) = sync_channel(cap);
+        txs.push(Mutex::new(Some(tx)));
+        rxs.push(rx);
+    }
     let job = &job;
     let pool = Pool::default();
     let (bar, stop, next, txs, head, pool) = (&bar, &stop, &next, &txs, &head, &pool);
@@ -629,7 +663,6 @@ fn collect(
         loop {
             match rx.recv() {
                 Ok(Msg::Data(b, now)) => {
-                    pool.queued().fetch_sub(1, Ordering::Relaxed);
                     let w = back
                         .write_out(&mut out, pool)
                         .and_then(|_| out.write_all(&b))
@@ -642,6 +675,18 @@ fn collect(
                 }
                 Ok(Msg::Part(b, commit)) => {
                     if let Err(e) = back.part(&mut out, b, commit, pool) {
+                        stop.store(true, Ordering::Relaxed);
+                        return Err(e);
+                    }
+                }
+                Ok(Msg::Blocks(v)) => {
+                    pool.queued().fetch_sub(v.len(), Ordering::Relaxed);
+                    let mut w = back.write_out(&mut out, pool);
+                    for b in v {
+                        w = w.and_then(|_| out.write_all(&b));
+                        pool.put(b);
+                    }
+                    if let Err(e) = w {
                         stop.store(true, Ordering::Relaxed);
                         return Err(e);
                     }
@@ -945,7 +990,7 @@ mod tests {
                     Msg::Part(b, commit) => {
                         self.back.part(&mut self.out, b, commit, pool).unwrap();
                     }
-                    Msg::Spilled(..) | Msg::Done(_) => panic!("not sent here"),
+                    Msg::Blocks(..) | Msg::Spilled(..) | Msg::Done(_) => panic!("not sent here"),
                 }
             }
         }
