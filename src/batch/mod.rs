@@ -8,8 +8,9 @@
 //! beyond that appends them to a spill file of its own (unlinked temporary file), announcing
 //! what it kept through the channel when there is room, so the order stays that of `-j 1` while
 //! every core renders, and memory stays bounded whatever the files' sizes (disk holds what is
-//! ahead, at most [`SPILL_MAX`] per file, beyond which the worker waits). Parquet: each worker writes its file's row groups as part files of
-//! their own (named by the file's index), so nothing is ordered or merged.
+//! ahead, at most [`SPILL_MAX`] per file, beyond which the worker waits). Parquet: each
+//! worker writes its file's row groups as part files of their own (named by the file's
+//! index), so nothing is ordered or merged.
 //!
 //! Cores the files leave spare (one file with `-j 2`, two with `-j 4`) render inside each file:
 //! its decode chain runs on its worker, which hands the records to render threads and writes
@@ -161,11 +162,8 @@ struct Stats {
 
 /// Blocks a file's channel holds (4 MiB): enough to ride out the writer's pauses; a file
 /// further ahead keeps its blocks in memory (up to [`QUEUED_MAX`] for all files) or spills.
+/// (Rendered buffers are bigger, a batch each: 16 of them are at most a few MiB.)
 const CHANNEL_BLOCKS: usize = 16;
-
-/// Rendered batches a file's channel holds when its records are rendered on several threads
-/// ([`split`]): a batch each, so 16 are a few MiB (a stalled reader peaked at 46 MiB).
-const CHANNEL_BATCHES: usize = 16;
 
 /// Blocks files ahead of the writer keep in memory, all together (64 MiB), beyond their
 /// channels, before they spill to disk. Rendering ahead in memory rather than on disk: 50 files
@@ -606,14 +604,8 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
     // Cores the files leave spare render inside them (see `split`): one file with `-j 2` is
     // decoded on one thread and rendered on two.
     let helpers = if job.jobs > jobs { job.jobs / jobs } else { 0 };
-    // Rendered batches handed over whole (`split`) are bigger than blocks: fewer of them.
-    let cap = if helpers > 0 {
-        CHANNEL_BATCHES
-    } else {
-        CHANNEL_BLOCKS
-    };
     for _ in 0..n {
-        let (tx, rx) = sync_channel(cap);
+        let (tx, rx) = sync_channel(CHANNEL_BLOCKS);
         txs.push(Mutex::new(Some(tx)));
         rxs.push(rx);
     }
