@@ -233,3 +233,64 @@ fn bad_inputs_are_named_and_skipped() {
     let _ = std::fs::remove_dir_all(&out);
     let _ = std::fs::remove_file(&junk);
 }
+
+/// Every file of a dataset under `dir`, by path below it, with its bytes.
+fn dataset_files(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut out = vec![];
+    let mut todo = vec![dir.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        for e in std::fs::read_dir(&d).expect("dataset dir") {
+            let p = e.expect("entry").path();
+            if p.is_dir() {
+                todo.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).expect("below").to_path_buf();
+                out.push((rel, std::fs::read(&p).expect("part file")));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// One capture with cores to spare: its row groups are encoded on other threads (one with
+/// `-j 2`, two with `-j 3`), and the dataset is that of `-j 1`, part file for part file and byte
+/// for byte (a stream of every message form: dozens of kind tables cut into row groups early,
+/// the records table into several).
+#[test]
+fn one_capture_encoded_on_spare_cores_is_the_dataset_of_one() {
+    let dir = common::Scratch::new("batch-parquet-one");
+    let f = dir.join("random.bin");
+    let table = aptscope_dissector::Table::global();
+    std::fs::write(
+        &f,
+        aptscope_dissector::synth::stream(table, 7, 200_000, true),
+    )
+    .expect("write");
+    let f = f.to_str().expect("utf-8 path");
+    let mut sets = vec![];
+    for j in ["1", "2", "3"] {
+        let out = dir.join(&format!("ds{j}"));
+        let o = out.to_str().expect("utf-8 path");
+        let (_, err, ok) = aptscope(&["decode", "--to", "parquet", "-j", j, "-o", o, f], None);
+        assert!(ok, "{err}");
+        sets.push(dataset_files(&out));
+    }
+    let parts = sets[0].len();
+    assert!(parts > 100, "{parts} part files");
+    assert!(
+        sets[0]
+            .iter()
+            .filter(|(p, _)| p.starts_with("records"))
+            .count()
+            > 2
+    );
+    for (j, s) in [(2, &sets[1]), (3, &sets[2])] {
+        let names =
+            |s: &Vec<(PathBuf, Vec<u8>)>| s.iter().map(|(p, _)| p.clone()).collect::<Vec<_>>();
+        assert_eq!(names(s), names(&sets[0]), "-j {j}: part files");
+        for ((p, a), (_, b)) in sets[0].iter().zip(s) {
+            assert!(a == b, "-j {j}: {} differs", p.display());
+        }
+    }
+}

@@ -23,8 +23,10 @@
 mod buf;
 mod file;
 pub mod schema;
+mod threaded;
 
 pub use file::{decode_file, not_a_capture, not_a_capture_error, DecodeOpts};
+pub use threaded::Threaded;
 
 use aptscope_dissector::apt::{phys_or_scaled, Value as AptValue};
 use aptscope_dissector::diag::{Diag, DiagKind};
@@ -127,6 +129,12 @@ fn perr(e: impl std::fmt::Display) -> io::Error {
 pub trait Sink {
     /// Write one row group of `table`; `part` counts the table's row groups of this capture.
     fn write(&mut self, table: &str, part: u32, batch: &RecordBatch) -> io::Result<()>;
+
+    /// Complete what was written (a sink that writes later, [`Threaded`], waits for it here
+    /// and returns what failed).
+    fn finish(&mut self) -> io::Result<()> {
+        Ok(())
+    }
 }
 
 /// Writes each row group as its own file in a dataset directory.
@@ -562,6 +570,7 @@ impl<S: Sink> CaptureWriter<S> {
         for i in 0..self.kinds.len() {
             self.close_kind(i)?;
         }
+        self.sink.finish()?;
         Ok((self.sink, self.summary))
     }
 }

@@ -27,7 +27,7 @@ use aptscope_dissector::json;
 use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
 use aptscope_dissector::record::Decoder;
 use aptscope_dissector::units::UnitsOpts;
-use aptscope_parquet::{decode_file, CaptureWriter, DirSink};
+use aptscope_parquet::{decode_file, CaptureWriter, DirSink, Threaded};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use split::{Engine, Look, Split};
 use std::cell::{Cell, RefCell};
@@ -748,7 +748,7 @@ fn one(
     match &job.out {
         Output::Parquet(root) => {
             let opts = aptscope_parquet::Options::default();
-            let w = CaptureWriter::new(DirSink::new(root, i, opts), file, opts);
+            let sink = || DirSink::new(root, i, opts);
             let o = aptscope_parquet::DecodeOpts {
                 open: job.open,
                 proto: proto_of(job.proto),
@@ -758,7 +758,20 @@ fn one(
                 // it is skipped).
                 judge: true,
             };
-            let (_, s) = decode_file(file, &o, w, &mut |p| bar.tick(p, &mut seen))?;
+            let mut tick = |p: &Progress| bar.tick(p, &mut seen);
+            // Cores the files leave spare encode and compress the row groups, which is half
+            // of the work; the rows are built on this thread, in the order of `-j 1`, so the
+            // part files are the same.
+            let s = if helpers > 1 {
+                let w = CaptureWriter::new(
+                    Threaded::new(helpers - 1, 2 * opts.rows_per_group, sink),
+                    file,
+                    opts,
+                );
+                decode_file(file, &o, w, &mut tick)?.1
+            } else {
+                decode_file(file, &o, CaptureWriter::new(sink(), file, opts), &mut tick)?.1
+            };
             Ok(Stats {
                 records: s.records,
                 row_groups: s.row_groups,

@@ -1,0 +1,232 @@
+//! Row groups encoded on other threads: the thread that decodes and builds the rows hands each
+//! finished batch over and goes on, while Parquet encoding and compression (about half of a
+//! `--to parquet` run's CPU) happen beside it. Used where cores are spare: one capture with
+//! `-j 2`, whose rows are built on one thread.
+
+use crate::Sink;
+use arrow_array::RecordBatch;
+use std::io;
+use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::{Arc, Condvar, Mutex};
+use std::thread::JoinHandle;
+
+/// One row group to write: table, part number, rows.
+type Part = (String, u32, RecordBatch);
+
+/// A [`Sink`] that writes every row group on one of its threads, each thread into a sink of its
+/// own. Only for sinks that write each row group independently of the others ([`DirSink`]:
+/// a part file each), since the threads write them in any order.
+///
+/// Memory: the row groups handed over and not yet written hold at most `rows` rows together
+/// (one larger than that waits alone); a kind table's row groups are often small, so a budget
+/// in rows rather than in row groups lets many wait while the largest are encoded. A write that
+/// fails is returned by a later [`Sink::write`] (the decoding stops there) or by
+/// [`Sink::finish`], which waits for every thread.
+///
+/// [`DirSink`]: crate::DirSink
+pub struct Threaded {
+    tx: Option<Sender<Part>>,
+    /// Rows handed over and not yet written, and the budget.
+    gate: Arc<Gate>,
+    threads: Vec<JoinHandle<()>>,
+    /// The first write that failed.
+    failed: Arc<Mutex<Option<io::Error>>>,
+}
+
+impl Threaded {
+    /// `n` threads (at least one), each writing into the sink `make` gives it; at most `rows`
+    /// rows waiting.
+    pub fn new<S: Sink + Send + 'static>(n: usize, rows: usize, make: impl Fn() -> S) -> Self {
+        let (tx, rx) = channel::<Part>();
+        let rx = Arc::new(Mutex::new(rx));
+        let failed = Arc::new(Mutex::new(None));
+        let gate = Arc::new(Gate {
+            rows: Mutex::new(0),
+            freed: Condvar::new(),
+            max: rows,
+        });
+        let threads = (0..n.max(1))
+            .map(|_| {
+                let (rx, failed, gate, mut sink) =
+                    (rx.clone(), failed.clone(), gate.clone(), make());
+                std::thread::spawn(move || run(&rx, &failed, &gate, &mut sink))
+            })
+            .collect();
+        Threaded {
+            tx: Some(tx),
+            gate,
+            threads,
+            failed,
+        }
+    }
+
+    /// The first error a thread met, taken.
+    fn error(&self) -> Option<io::Error> {
+        self.failed.lock().ok().and_then(|mut e| e.take())
+    }
+
+    /// Waits for every thread to write what it was given.
+    fn join(&mut self) {
+        self.tx = None;
+        for t in self.threads.drain(..) {
+            // A thread that panicked wrote nothing more; its parts stay `.partial`.
+            if t.join().is_err() {
+                if let Ok(mut e) = self.failed.lock() {
+                    e.get_or_insert_with(|| io::Error::other("a Parquet writing thread panicked"));
+                }
+            }
+        }
+    }
+}
+
+/// Rows in flight, under a budget.
+struct Gate {
+    rows: Mutex<usize>,
+    freed: Condvar,
+    max: usize,
+}
+
+impl Gate {
+    /// Wait until `n` more rows fit (or none are in flight), then count them.
+    fn take(&self, n: usize) {
+        let Ok(mut r) = self.rows.lock() else {
+            return;
+        };
+        while *r > 0 && *r + n > self.max {
+            r = match self.freed.wait(r) {
+                Ok(r) => r,
+                Err(_) => return,
+            };
+        }
+        *r += n;
+    }
+
+    fn give(&self, n: usize) {
+        if let Ok(mut r) = self.rows.lock() {
+            *r = r.saturating_sub(n);
+            self.freed.notify_all();
+        }
+    }
+}
+
+/// A writing thread: row groups until the channel closes; after a failure (its own or
+/// another's) the rest are dropped unwritten.
+fn run<S: Sink>(
+    rx: &Mutex<Receiver<Part>>,
+    failed: &Mutex<Option<io::Error>>,
+    gate: &Gate,
+    sink: &mut S,
+) {
+    loop {
+        // The lock is held only while taking one part, not while writing it.
+        let part = match rx.lock() {
+            Ok(r) => r.recv(),
+            Err(_) => return,
+        };
+        let Ok((table, n, batch)) = part else {
+            return;
+        };
+        let stopped = failed.lock().map_or(true, |e| e.is_some());
+        if !stopped {
+            if let Err(e) = sink.write(&table, n, &batch) {
+                if let Ok(mut f) = failed.lock() {
+                    f.get_or_insert(e);
+                }
+            }
+        }
+        gate.give(batch.num_rows());
+    }
+}
+
+impl Sink for Threaded {
+    fn write(&mut self, table: &str, part: u32, batch: &RecordBatch) -> io::Result<()> {
+        if let Some(e) = self.error() {
+            return Err(e);
+        }
+        let tx = self
+            .tx
+            .as_ref()
+            .ok_or_else(|| io::Error::other("sink finished"))?;
+        self.gate.take(batch.num_rows());
+        // Arrays are shared, not copied.
+        tx.send((table.to_string(), part, batch.clone()))
+            .map_err(|_| io::Error::other("Parquet writing threads stopped"))
+    }
+
+    fn finish(&mut self) -> io::Result<()> {
+        self.join();
+        match self.error() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Drop for Threaded {
+    /// Not finished (the decoding failed): the parts handed over are still written whole, so
+    /// that no thread outlives the run.
+    fn drop(&mut self) {
+        self.join();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arrow_array::{ArrayRef, UInt32Array};
+    use std::collections::BTreeMap;
+
+    /// Keeps what it is given in a map shared by the test; fails on table "bad".
+    struct Keep(Arc<Mutex<BTreeMap<(String, u32), usize>>>);
+
+    impl Sink for Keep {
+        fn write(&mut self, table: &str, part: u32, batch: &RecordBatch) -> io::Result<()> {
+            if table == "bad" {
+                return Err(io::Error::other("bad table"));
+            }
+            let mut m = self.0.lock().map_err(|_| io::Error::other("poisoned"))?;
+            m.insert((table.to_string(), part), batch.num_rows());
+            Ok(())
+        }
+    }
+
+    fn batch(rows: u32) -> RecordBatch {
+        let a: ArrayRef = Arc::new(UInt32Array::from_iter_values(0..rows));
+        RecordBatch::try_from_iter([("x", a)]).expect("batch")
+    }
+
+    /// Every part handed over is written once, whatever thread takes it.
+    #[test]
+    fn every_part_is_written_once() {
+        let seen = Arc::new(Mutex::new(BTreeMap::new()));
+        let mut t = Threaded::new(3, 10, || Keep(seen.clone()));
+        for p in 0..50u32 {
+            t.write(if p % 2 == 0 { "a" } else { "b" }, p, &batch(p + 1))
+                .expect("write");
+        }
+        t.finish().expect("finish");
+        let seen = seen.lock().expect("lock");
+        assert_eq!(seen.len(), 50);
+        for ((table, p), rows) in seen.iter() {
+            assert_eq!(table, if p % 2 == 0 { "a" } else { "b" });
+            assert_eq!(*rows, *p as usize + 1);
+        }
+    }
+
+    /// A failed write comes back: from a later write or from finish.
+    #[test]
+    fn a_failed_write_is_returned() {
+        let seen = Arc::new(Mutex::new(BTreeMap::new()));
+        let mut t = Threaded::new(2, 10, || Keep(seen.clone()));
+        t.write("bad", 0, &batch(1)).expect("handed over");
+        let mut err = None;
+        for p in 0..1000 {
+            if let Err(e) = t.write("a", p, &batch(1)) {
+                err = Some(e);
+                break;
+            }
+        }
+        let err = err.or_else(|| t.finish().err()).expect("an error");
+        assert!(err.to_string().contains("bad table"), "{err}");
+    }
+}
