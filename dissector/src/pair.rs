@@ -526,12 +526,16 @@ impl AptPairer {
                 let mut name = [0u8; 8];
                 let end = b.iter().position(|&c| c == 0).unwrap_or(b.len()).min(8);
                 name[..end].copy_from_slice(&b[..end]);
-                let text = String::from_utf8_lossy(&name[..end]).into_owned();
-                let profile = table.device_profile(&text);
                 if self.models.is_empty() {
                     self.models.resize(256, None);
                 }
-                self.models[usize::from(device)] = Some((name, profile));
+                let slot = &mut self.models[usize::from(device)];
+                // A device answers HW_REQ_INFO with the same model each time: its profile (a
+                // walk over the whole table) is worked out once, not for every answer.
+                if !matches!(slot, Some((n, _)) if *n == name) {
+                    let text = String::from_utf8_lossy(&name[..end]).into_owned();
+                    *slot = Some((name, table.device_profile(&text)));
+                }
             }
             return;
         }
