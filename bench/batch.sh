@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # `aptscope decode` over many files on 1 and 2 threads: throughput, CPU time and peak RSS, for
 # text, NDJSON and Parquet output, each -j 2 figure beside its -j 1 and Parquet beside NDJSON;
-# then ONE large capture (raw, and the same as pcapng) on 1 and 2 threads, text and NDJSON (one
-# file: the decode chain on one thread, rendering on the others).
+# then ONE large capture (raw, and the same as pcapng) on 1 and 2 threads, text, NDJSON and
+# Parquet (one file: the decode chain on one thread, rendering, or Parquet encoding, on the
+# others).
 # Usage: bench/batch.sh   (env: FILES=50 files of MB=4.2 MB each, ≥ 200 MB; BIG=100 MB)
 #
 # The files are device→host streams of 27 common message forms with random field values
@@ -67,6 +68,11 @@ for kind in bin pcapng; do
   for j in 1 2; do
     run "text" "$j" target/release/aptscope decode -j "$j" "$tmp/big.$kind"
     run "ndjson" "$j" target/release/aptscope decode --json -j "$j" "$tmp/big.$kind"
+    run "parquet" "$j" target/release/aptscope decode --to parquet --force -o "$tmp/out" -j "$j" "$tmp/big.$kind"
+  done
+  for j in 1 2; do
+    printf 'parquet/ndjson -j %s: %.2f\n' "$j" "$(echo "${rate[parquet.$j]} / ${rate[ndjson.$j]}" | bc -l)"
   done
 done
+rm -rf "$tmp/out"
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"

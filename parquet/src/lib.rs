@@ -8,7 +8,8 @@
 //! Memory is bounded: each table buffers at most [`Options::rows_per_group`] rows, at most
 //! [`Options::max_open_kinds`] kind tables buffer at once (the least recently used is flushed
 //! when another opens; the default is more than there are kinds), and all kind buffers
-//! together hold at most one row group's worth (the biggest is written when they reach it).
+//! together hold at most [`Options::kind_rows`] rows (the biggest is written when they reach
+//! it).
 //! A [`DirSink`] writes every flushed buffer as one Parquet file of one row group
 //! (`TABLE/part-FFFFF-SSSSS.parquet`, F the capture's index in the run, S a sequence number),
 //! first under a `.partial` name then renamed: a killed run leaves every complete row group
@@ -57,6 +58,9 @@ pub struct Options {
     pub rows_per_group: usize,
     /// Kind tables buffering rows at once.
     pub max_open_kinds: usize,
+    /// Rows the kind tables buffer together at most (the biggest is written when they reach
+    /// it).
+    pub kind_rows: usize,
 }
 
 impl Default for Options {
@@ -68,6 +72,14 @@ impl Default for Options {
             // another opens (which wrote a part file of a few rows each time a stream of many
             // kinds brought a new one).
             max_open_kinds: 1024,
+            // Two row groups' worth: a capture of hundreds of kinds (random frames of every
+            // form) writes a part file whenever the kinds together reach this, each of about
+            // twice this over the kinds' count rows, and every part file costs its own
+            // opening, schema and footer. 10 MB of such frames: 2792 part files and 1.75 s at
+            // one row group's worth, 1556 and 1.54 s at two (peak 54 → 59 MiB), 960 and 1.37 s
+            // at four but 67 MiB, over the 64 MiB a worker may use; a capture of a few kinds
+            // (status logs) cuts at `rows_per_group` either way.
+            kind_rows: 2 * 65_536,
         }
     }
 }
@@ -508,9 +520,7 @@ impl<S: Sink> CaptureWriter<S> {
 
     /// After a row of kind table `k`: write what is due.
     fn kind_row_done(&mut self, k: &KindSchema) -> io::Result<()> {
-        // One row group's worth across kinds (with the records table's own, the writer stays
-        // under 64 MiB; four row groups' worth peaked at 100 MiB).
-        let budget = self.opts.rows_per_group;
+        let budget = self.opts.kind_rows;
         let Some(Some(o)) = self.kinds.get_mut(k.index) else {
             return Ok(());
         };

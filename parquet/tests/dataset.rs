@@ -192,6 +192,7 @@ fn bounded_buffers_keep_every_row() -> io::Result<()> {
     let opts = Options {
         rows_per_group: 100,
         max_open_kinds: 4,
+        kind_rows: 100,
     };
     let tmp = std::env::temp_dir().join(format!("aptscope-pq-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&tmp);
