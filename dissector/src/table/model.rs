@@ -770,13 +770,19 @@ pub enum DeviceSource {
 impl DeviceGroup {
     /// Whether a model string (as HW_GET_INFO reports it) is one of this group's models.
     pub fn matches(&self, model: &str) -> bool {
-        self.models.iter().any(|m| model_matches(m, model))
+        let model = model.trim();
+        self.models.iter().any(|m| fits(m, model))
     }
 }
 
 /// Whether `model` (from a device) fits the spec's model `pattern` (`x` = any character).
 pub fn model_matches(pattern: &str, model: &str) -> bool {
-    let model = model.trim();
+    fits(pattern, model.trim())
+}
+
+/// [`model_matches`] of a model already trimmed (trimmed once, not once per pattern: a
+/// device's HW_GET_INFO is checked against every pattern of the table).
+fn fits(pattern: &str, model: &str) -> bool {
     pattern.len() == model.len()
         && pattern
             .bytes()
