@@ -4,7 +4,9 @@
 # then ONE large capture (raw, and the same as pcapng) on 1 and 2 threads, text, NDJSON and
 # Parquet (one file: the decode chain on one thread, rendering, or Parquet encoding, on the
 # others).
-# Usage: bench/batch.sh   (env: FILES=50 files of MB=4.2 MB each, ≥ 200 MB; BIG=100 MB)
+# Usage: bench/batch.sh   (env: FILES=50 files of MB=4.2 MB each, ≥ 200 MB; BIG=100 MB; the
+# inputs and datasets go under $TMPDIR, default /tmp: a large capture of many kinds writes
+# thousands of part files, so the file system's speed at creating files shows)
 #
 # The files are device→host streams of 27 common message forms with random field values
 # (dissector/examples/gen_d2h.rs, one seed per file): what a controller's status logs look
