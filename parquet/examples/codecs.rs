@@ -5,6 +5,8 @@
 //! CPU time of the writing (this thread's, from /proc: the machine is shared) and the bytes
 //! written. Used to choose the codec (docs/parquet.md "Compression").
 
+mod common;
+
 use aptscope_parquet::{decode_file, writer_properties, CaptureWriter, DecodeOpts, Options, Sink};
 use arrow_array::RecordBatch;
 use parquet::arrow::ArrowWriter;
@@ -22,23 +24,15 @@ impl Sink for Keep {
     }
 }
 
-/// This thread's CPU time in seconds (Linux: the first field of schedstat, in ns).
-fn cpu_s() -> f64 {
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()
-        .and_then(|s| s.split_whitespace().next()?.parse::<f64>().ok())
-        .map_or(f64::NAN, |ns| ns / 1e9)
-}
-
 fn main() -> io::Result<()> {
     let path = std::env::args()
         .nth(1)
         .ok_or_else(|| io::Error::other("usage: codecs CAPTURE"))?;
     let opts = Options::default();
     let w = CaptureWriter::new(Keep(vec![]), &path, opts);
-    let t0 = cpu_s();
+    let t0 = common::cpu_s();
     let (keep, sum) = decode_file(&path, &DecodeOpts::default(), w, &mut |_| {})?;
-    let decode = cpu_s() - t0;
+    let decode = common::cpu_s() - t0;
     let batches = keep.0;
     let input = std::fs::metadata(&path)?.len() as f64 / 1e6;
     println!(
@@ -66,7 +60,7 @@ fn main() -> io::Result<()> {
         let mut best = f64::INFINITY;
         let mut bytes = 0;
         for _ in 0..3 {
-            let t0 = cpu_s();
+            let t0 = common::cpu_s();
             bytes = 0;
             for (_, b) in &batches {
                 let mut pb = writer_properties(opts.rows_per_group, &b.schema())
@@ -89,7 +83,7 @@ fn main() -> io::Result<()> {
                 w.write(b).map_err(io::Error::other)?;
                 bytes += w.into_inner().map_err(io::Error::other)?.len();
             }
-            best = best.min(cpu_s() - t0);
+            best = best.min(common::cpu_s() - t0);
         }
         let mb = bytes as f64 / 1e6;
         println!("| {name} | {best:.3} | {mb:.2} | {:.2} |", mb / input);

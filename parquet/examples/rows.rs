@@ -3,6 +3,8 @@
 //! records per CPU-second of this thread — the part of both that is not Parquet encoding nor
 //! Python (docs/performance.md). With TABLE names, only those tables are built.
 
+mod common;
+
 use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, Options, Sink};
 use arrow_array::RecordBatch;
 use std::io;
@@ -17,14 +19,6 @@ impl Sink for Drop {
     }
 }
 
-/// This thread's CPU time in seconds (Linux: the first field of schedstat, in ns).
-fn cpu_s() -> f64 {
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()
-        .and_then(|s| s.split_whitespace().next()?.parse::<f64>().ok())
-        .map_or(f64::NAN, |ns| ns / 1e9)
-}
-
 fn main() -> io::Result<()> {
     let mut args = std::env::args().skip(1);
     let path = args
@@ -36,9 +30,9 @@ fn main() -> io::Result<()> {
     if !tables.is_empty() {
         w.only_tables(move |t| tables.iter().any(|x| x == t));
     }
-    let t0 = cpu_s();
+    let t0 = common::cpu_s();
     let (rows, sum) = decode_file(&path, &DecodeOpts::default(), w, &mut |_| {})?;
-    let cpu = cpu_s() - t0;
+    let cpu = common::cpu_s() - t0;
     println!(
         "{path}: {} records, {} rows in all, {cpu:.3} CPU-s: {:.2} M records per CPU-s",
         sum.records,

@@ -35,8 +35,12 @@ pub struct Threaded {
 
 impl Threaded {
     /// `n` threads (at least one), each writing into the sink `make` gives it; at most `rows`
-    /// rows waiting.
-    pub fn new<S: Sink + Send + 'static>(n: usize, rows: usize, make: impl Fn() -> S) -> Self {
+    /// rows waiting. Fails when a thread cannot be started.
+    pub fn new<S: Sink + Send + 'static>(
+        n: usize,
+        rows: usize,
+        make: impl Fn() -> S,
+    ) -> io::Result<Self> {
         let (tx, rx) = channel::<Part>();
         let rx = Arc::new(Mutex::new(rx));
         let failed = Arc::new(Mutex::new(None));
@@ -45,19 +49,22 @@ impl Threaded {
             freed: Condvar::new(),
             max: rows,
         });
-        let threads = (0..n.max(1))
-            .map(|_| {
-                let (rx, failed, gate, mut sink) =
-                    (rx.clone(), failed.clone(), gate.clone(), make());
-                std::thread::spawn(move || run(&rx, &failed, &gate, &mut sink))
-            })
-            .collect();
-        Threaded {
+        let mut t = Threaded {
             tx: Some(tx),
             gate,
-            threads,
+            threads: Vec::new(),
             failed,
+        };
+        for _ in 0..n.max(1) {
+            let (rx, failed, gate, mut sink) =
+                (rx.clone(), t.failed.clone(), t.gate.clone(), make());
+            // On failure, the threads started are joined when `t` drops.
+            let h = std::thread::Builder::new()
+                .name("parquet-write".into())
+                .spawn(move || run(&rx, &failed, &gate, &mut sink))?;
+            t.threads.push(h);
         }
+        Ok(t)
     }
 
     /// The first error a thread met, taken.
@@ -199,7 +206,7 @@ mod tests {
     #[test]
     fn every_part_is_written_once() {
         let seen = Arc::new(Mutex::new(BTreeMap::new()));
-        let mut t = Threaded::new(3, 10, || Keep(seen.clone()));
+        let mut t = Threaded::new(3, 10, || Keep(seen.clone())).expect("threads");
         for p in 0..50u32 {
             t.write(if p % 2 == 0 { "a" } else { "b" }, p, &batch(p + 1))
                 .expect("write");
@@ -217,7 +224,7 @@ mod tests {
     #[test]
     fn a_failed_write_is_returned() {
         let seen = Arc::new(Mutex::new(BTreeMap::new()));
-        let mut t = Threaded::new(2, 10, || Keep(seen.clone()));
+        let mut t = Threaded::new(2, 10, || Keep(seen.clone())).expect("threads");
         t.write("bad", 0, &batch(1)).expect("handed over");
         let mut err = None;
         for p in 0..1000 {

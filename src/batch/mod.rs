@@ -15,7 +15,8 @@
 //! Cores the files leave spare (one file with `-j 2`, two with `-j 4`) render inside each file:
 //! its decode chain runs on its worker, which hands the records to render threads and writes
 //! what they rendered in order ([`split`], which says why this rather than cutting the capture
-//! into parts). Either way the output is byte for byte that of `-j 1`.
+//! into parts); Parquet builds the rows on the worker and encodes the row groups on the spare
+//! cores ([`Threaded`]). Either way the output is byte for byte that of `-j 1`.
 
 use crate::common::{compile_filter, fatal, proto_of, ProtoArg};
 use aptscope_capture::judge::{not_a_capture, not_a_capture_error, refuse};
@@ -764,7 +765,7 @@ fn one(
             // part files are the same.
             let s = if helpers > 1 {
                 let w = CaptureWriter::new(
-                    Threaded::new(helpers - 1, 2 * opts.rows_per_group, sink),
+                    Threaded::new(helpers - 1, 2 * opts.rows_per_group, sink)?,
                     file,
                     opts,
                 );
