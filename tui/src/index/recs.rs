@@ -170,6 +170,40 @@ pub(super) struct Spill {
     pub(super) base: u64,
 }
 
+impl Spill {
+    /// Where record `i` starts in the file.
+    fn at(&self, i: usize) -> u64 {
+        self.base + (i * std::mem::size_of::<Packed>()) as u64
+    }
+
+    /// Record `i`, read alone.
+    fn read_one(&self, i: usize) -> std::io::Result<Packed> {
+        use std::os::unix::fs::FileExt;
+        let mut b = [0u8; 24];
+        self.file.read_exact_at(&mut b, self.at(i))?;
+        Ok(Packed::from_bytes(&b))
+    }
+
+    /// Record `i` written alone.
+    fn write_one(&self, i: usize, p: &Packed) -> std::io::Result<()> {
+        use std::os::unix::fs::FileExt;
+        self.file.write_all_at(&p.to_bytes(), self.at(i))
+    }
+
+    /// The bytes of chunk `c`'s first `n` records into `buf` (resized to them).
+    fn read_chunk(&self, c: usize, n: usize, buf: &mut Vec<u8>) -> std::io::Result<()> {
+        use std::os::unix::fs::FileExt;
+        buf.resize(n * std::mem::size_of::<Packed>(), 0);
+        self.file.read_exact_at(buf, self.at(c * CHUNK))
+    }
+
+    /// Chunk `c`'s records (`bytes`, packed) written.
+    fn write_chunk(&self, c: usize, bytes: &[u8]) -> std::io::Result<()> {
+        use std::os::unix::fs::FileExt;
+        self.file.write_all_at(bytes, self.at(c * CHUNK))
+    }
+}
+
 /// A [`Spill::id`] no other spill of this process has.
 pub(super) fn next_spill_id() -> u64 {
     static NEXT: AtomicU64 = AtomicU64::new(1);
@@ -323,12 +357,7 @@ impl Recs {
         if let Some(p) = self.kept_chunk(c, false) {
             return p.get(i % CHUNK).copied();
         }
-        use std::os::unix::fs::FileExt;
-        let spill = self.spill.as_ref()?;
-        let mut b = [0u8; 24];
-        let at = spill.base + (i * std::mem::size_of::<Packed>()) as u64;
-        spill.file.read_exact_at(&mut b, at).ok()?;
-        Some(Packed::from_bytes(&b))
+        self.spill.as_ref()?.read_one(i).ok()
     }
     /// Spilled chunk `c` as this thread keeps it; read (and kept) when `read` and it is not.
     pub(super) fn kept_chunk(&self, c: usize, read: bool) -> Option<Arc<Vec<Packed>>> {
@@ -341,14 +370,9 @@ impl Recs {
             if !read {
                 return None;
             }
-            use std::os::unix::fs::FileExt;
-            // The last chunk of a cached index may be partly filled.
-            let n = CHUNK.min(self.len.checked_sub(c * CHUNK)?);
-            let mut buf = vec![0u8; n * std::mem::size_of::<Packed>()];
-            spill
-                .file
-                .read_exact_at(&mut buf, spill.base + (c * CHUNK_BYTES) as u64)
-                .ok()?;
+            self.len.checked_sub(c * CHUNK)?;
+            let mut buf = Vec::new();
+            spill.read_chunk(c, self.chunk_len(c), &mut buf).ok()?;
             let recs: Arc<Vec<Packed>> = Arc::new(
                 buf.chunks_exact(24)
                     .filter_map(|b| b.try_into().ok().map(Packed::from_bytes))
@@ -390,12 +414,7 @@ impl Recs {
             for p in &self.packed[c] {
                 buf.extend_from_slice(&p.to_bytes());
             }
-            use std::os::unix::fs::FileExt;
-            if spill
-                .file
-                .write_all_at(&buf, spill.base + (c * CHUNK_BYTES) as u64)
-                .is_err()
-            {
+            if spill.write_chunk(c, &buf).is_err() {
                 self.budget = Some(usize::MAX);
                 return;
             }
@@ -631,29 +650,19 @@ impl Recs {
         if i / CHUNK < self.spilled {
             // Rare (a request's timeout passing long after it): patched in the file, read
             // alone (not through its chunk: the next patch would read that again).
-            use std::os::unix::fs::FileExt;
             let spill = self.spill.as_ref()?;
-            let at = spill.base + (i * std::mem::size_of::<Packed>()) as u64;
-            let file = &spill.file;
-            let mut b = [0u8; 24];
-            file.read_exact_at(&mut b, at).ok()?;
-            let mut p = Packed::from_bytes(&b);
-            if p.pair == 0 {
-                p.pair = pair;
-            }
-            let was = p.flags & ((1 << DIR_SHIFT) - 1);
-            p.flags |= flags;
-            file.write_all_at(&p.to_bytes(), at).ok()?;
+            let mut p = spill.read_one(i).ok()?;
+            let was = link(&mut p, pair, flags);
+            spill.write_one(i, &p).ok()?;
             self.spill_gen += 1;
             return Some(was);
         }
         let p = self.packed.get_mut(i / CHUNK)?.get_mut(i % CHUNK)?;
-        if p.pair == 0 {
-            p.pair = pair;
-        }
-        let was = p.flags & ((1 << DIR_SHIFT) - 1);
-        p.flags |= flags;
-        Some(was)
+        Some(link(p, pair, flags))
+    }
+    /// Records in chunk `c` (the last may be partly filled).
+    fn chunk_len(&self, c: usize) -> usize {
+        CHUNK.min(self.len.saturating_sub(c * CHUNK))
     }
     /// Bytes the records take in memory (their capacity; spilled chunks not counted).
     pub fn memory(&self) -> usize {
@@ -673,7 +682,6 @@ impl Recs {
     /// Write every record as a [`Spill`] holds them (24 bytes each, in order) to `out`, a chunk
     /// at a time: those in memory packed, the spilled ones copied from their file.
     pub(super) fn write_packed(&self, out: &mut impl std::io::Write) -> std::io::Result<()> {
-        use std::os::unix::fs::FileExt;
         let mut buf = Vec::with_capacity(CHUNK_BYTES);
         for (c, chunk) in self.packed.iter().enumerate() {
             buf.clear();
@@ -682,11 +690,7 @@ impl Recs {
                     .spill
                     .as_ref()
                     .ok_or_else(|| std::io::Error::other("spilled records without their file"))?;
-                let n = CHUNK.min(self.len.saturating_sub(c * CHUNK));
-                buf.resize(n * std::mem::size_of::<Packed>(), 0);
-                spill
-                    .file
-                    .read_exact_at(&mut buf, spill.base + (c * CHUNK_BYTES) as u64)?;
+                spill.read_chunk(c, self.chunk_len(c), &mut buf)?;
             } else {
                 for p in chunk {
                     buf.extend_from_slice(&p.to_bytes());
@@ -712,4 +716,14 @@ impl FromIterator<Rec> for Recs {
         recs.extend(it);
         recs
     }
+}
+
+/// Give record `p` the pair link `pair` (when it has none) and add `flags`; the flags it had.
+fn link(p: &mut Packed, pair: u32, flags: u16) -> u16 {
+    if p.pair == 0 {
+        p.pair = pair;
+    }
+    let was = p.flags & ((1 << DIR_SHIFT) - 1);
+    p.flags |= flags;
+    was
 }
