@@ -507,24 +507,44 @@ pub struct Scale {
     revision: u64,
 }
 
-/// Equal conversions (the revision, which only says when a value was made, is left out).
-impl PartialEq for Scale {
-    fn eq(&self, o: &Self) -> bool {
+/// What tells conversions apart: everything but the revision, which only says when a value
+/// was made; numbers by their bits, so that equality and hashing agree.
+type ScaleIdentity<'a> = (
+    &'static str,
+    Option<Family>,
+    u64,
+    &'a str,
+    [(Option<u64>, &'a str); 5],
+    [Option<u64>; 2],
+);
+
+impl Scale {
+    fn identity(&self) -> ScaleIdentity<'_> {
+        let bits = |x: Option<f64>| x.map(f64::to_bits);
         (
             self.stage,
             self.family,
-            self.counts_per_unit,
+            self.counts_per_unit.to_bits(),
             &self.unit,
-            &self.per,
-            self.maxima,
-        ) == (
-            o.stage,
-            o.family,
-            o.counts_per_unit,
-            &o.unit,
-            &o.per,
-            o.maxima,
+            self.per.each_ref().map(|(x, u)| (bits(*x), u.as_str())),
+            self.maxima.map(bits),
         )
+    }
+}
+
+/// Equal conversions ([`Scale::identity`]).
+impl PartialEq for Scale {
+    fn eq(&self, o: &Self) -> bool {
+        self.identity() == o.identity()
+    }
+}
+
+impl Eq for Scale {}
+
+/// Hashed as compared: a viewer's index keeps one entry per different conversion.
+impl std::hash::Hash for Scale {
+    fn hash<H: std::hash::Hasher>(&self, h: &mut H) {
+        self.identity().hash(h)
     }
 }
 
@@ -888,6 +908,31 @@ impl Tracker {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Conversions made alike are equal and hash alike whatever their revisions (a viewer's
+    /// index keeps one entry for them); a maximum, a unit or a factor tells them apart.
+    #[test]
+    fn equal_conversions_hash_alike() {
+        use std::hash::BuildHasher;
+        let h = std::collections::hash_map::RandomState::new();
+        let a = Scale::new("MTS25-Z8", Some(DC), 34554.96, "mm");
+        let b = Scale::new("MTS25-Z8", Some(DC), 34554.96, "mm");
+        assert_ne!(a.revision(), b.revision());
+        assert_eq!(a, b);
+        assert_eq!(h.hash_one(&a), h.hash_one(&b));
+        let mut c = b.clone();
+        c.set_maximum(Maximum::Travel, 20.0);
+        let others = [
+            c,
+            Scale::new("MTS25-Z8", Some(DC), 34554.96, "deg"),
+            Scale::new("MTS25-Z8", Some(BL), 34554.96, "mm"),
+            Scale::new("MTS25-Z8", Some(DC), 34555.0, "mm"),
+        ];
+        for o in &others {
+            assert_ne!(&a, o);
+            assert_ne!(h.hash_one(&a), h.hash_one(o), "{o:?}");
+        }
+    }
 
     /// `got` is `want` within `rel`, or to the third decimal for small values.
     fn near(got: f64, want: f64, rel: f64) -> bool {

@@ -57,9 +57,9 @@ pub(super) struct Sink {
     pub(super) scales_published: usize,
     /// The entry given for each revision of a conversion ([`Scale::revision`]).
     pub(super) scale_at: NumMap<u64, u32>,
-    /// The entry given for each different conversion ([`scale_key`]): a device whose stage
+    /// The entry given for each different conversion (equal [`Scale`]s): a device whose stage
     /// changes back gets its earlier entry, not a new copy.
-    pub(super) scale_of: HashMap<ScaleKey, u32>,
+    pub(super) scale_of: HashMap<Scale, u32>,
     pub(super) units_notes: Vec<String>,
     /// Pair links and flags for already-published records: (record number, pair, flags to set).
     pub(super) patches: Vec<(u64, u32, u16)>,
@@ -230,8 +230,7 @@ impl Sink {
         if let Some(&id) = self.scale_at.get(&key) {
             return id;
         }
-        let value = scale_key(sc);
-        let id = match self.scale_of.get(&value) {
+        let id = match self.scale_of.get(sc) {
             Some(&id) => id,
             None => {
                 self.scales.push(sc.clone());
@@ -239,7 +238,7 @@ impl Sink {
                 if self.scale_of.len() >= MAX_SCALE_AT {
                     self.scale_of.clear();
                 }
-                self.scale_of.insert(value, id);
+                self.scale_of.insert(sc.clone(), id);
                 id
             }
         };
@@ -488,28 +487,6 @@ impl Sink {
             fallback_proto: None,
         }
     }
-}
-
-/// What tells conversions apart ([`Scale`]'s equality: the rest of it follows from these).
-pub(super) type ScaleKey = (
-    &'static str,
-    Option<aptscope_dissector::units::Family>,
-    u64,
-    String,
-    [Option<u64>; 2],
-);
-
-/// The [`ScaleKey`] of a conversion.
-fn scale_key(sc: &Scale) -> ScaleKey {
-    use aptscope_dissector::table::Maximum;
-    let max = |m| sc.maximum(m).map(f64::to_bits);
-    (
-        sc.stage,
-        sc.family,
-        sc.counts_per_unit.to_bits(),
-        sc.unit.clone(),
-        [max(Maximum::Volts), max(Maximum::Travel)],
-    )
 }
 
 /// A record's fields that its [`Meta`] gives (`start` and `len` are set when it is added);
