@@ -133,6 +133,9 @@ fn run<S: Sink>(
         let Ok((table, n, batch)) = part else {
             return;
         };
+        // Its rows are given back however the write ends, a panic included: otherwise the
+        // decoding thread would wait on the gate for ever instead of meeting the error.
+        let _given = Given(gate, batch.num_rows());
         let stopped = failed.lock().map_or(true, |e| e.is_some());
         if !stopped {
             if let Err(e) = sink.write(&table, n, &batch) {
@@ -141,7 +144,15 @@ fn run<S: Sink>(
                 }
             }
         }
-        gate.give(batch.num_rows());
+    }
+}
+
+/// Gives `rows` back to the gate when dropped.
+struct Given<'a>(&'a Gate, usize);
+
+impl Drop for Given<'_> {
+    fn drop(&mut self) {
+        self.0.give(self.1);
     }
 }
 
@@ -218,6 +229,34 @@ mod tests {
             assert_eq!(table, if p % 2 == 0 { "a" } else { "b" });
             assert_eq!(*rows, *p as usize + 1);
         }
+    }
+
+    /// Panics on every write.
+    struct Boom;
+
+    impl Sink for Boom {
+        fn write(&mut self, _: &str, _: u32, _: &RecordBatch) -> io::Result<()> {
+            panic!("a writer that panics");
+        }
+    }
+
+    /// A writing thread that panics gives its rows back: the next write over the budget fails
+    /// instead of waiting for ever (run on a thread of its own, so a hang fails the test).
+    #[test]
+    fn a_panicking_writer_is_an_error_not_a_hang() {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let mut t = Threaded::new(1, 1, || Boom).expect("threads");
+            let r = (0..100)
+                .map(|p| t.write("a", p, &batch(1)))
+                .find(Result::is_err)
+                .unwrap_or_else(|| t.finish());
+            let _ = tx.send(r.is_err());
+        });
+        let failed = rx
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .expect("the writes ended");
+        assert!(failed, "the panic came back as an error");
     }
 
     /// A failed write comes back: from a later write or from finish.
