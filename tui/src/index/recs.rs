@@ -370,7 +370,9 @@ impl Recs {
             if !read {
                 return None;
             }
-            self.len.checked_sub(c * CHUNK)?;
+            if c * CHUNK > self.len {
+                return None;
+            }
             let mut buf = Vec::new();
             spill.read_chunk(c, self.chunk_len(c), &mut buf).ok()?;
             let recs: Arc<Vec<Packed>> = Arc::new(
