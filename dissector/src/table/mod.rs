@@ -140,11 +140,12 @@ impl Table {
     /// KinesisPiezoController polls). `None` when no list names the model: nothing can be said
     /// of it then.
     pub fn device_profile(&self, model: &str) -> Option<DeviceProfile> {
+        let model = model.trim();
         let groups: Vec<&DeviceGroup> = self
             .data
             .devices
             .iter()
-            .filter(|g| g.matches(model))
+            .filter(|g| g.matches_trimmed(model))
             .collect();
         if !groups.iter().any(|g| g.source == DeviceSource::List) {
             return None;
@@ -171,7 +172,7 @@ impl Table {
             }
         }
         Some(DeviceProfile {
-            model: model.trim().to_string(),
+            model: model.to_string(),
             msgs: msgs.into_boxed_slice(),
             silent: silent.into_boxed_slice(),
         })

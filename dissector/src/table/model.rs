@@ -770,7 +770,12 @@ pub enum DeviceSource {
 impl DeviceGroup {
     /// Whether a model string (as HW_GET_INFO reports it) is one of this group's models.
     pub fn matches(&self, model: &str) -> bool {
-        let model = model.trim();
+        self.matches_trimmed(model.trim())
+    }
+
+    /// [`Self::matches`] of a model already trimmed (a device's model is checked against every
+    /// group: trimmed once, not once per group).
+    pub fn matches_trimmed(&self, model: &str) -> bool {
         self.models.iter().any(|m| fits(m, model))
     }
 }
