@@ -4,12 +4,12 @@
 
 use arrow_array::builder::{
     BinaryBuilder, Float32Builder, Float64Builder, Int16Builder, Int32Builder, Int64Builder,
-    Int8Builder, ListBuilder, StringBuilder, StructBuilder, TimestampNanosecondBuilder,
-    UInt16Builder, UInt32Builder, UInt64Builder, UInt8Builder,
+    Int8Builder, ListBuilder, StringBuilder, TimestampNanosecondBuilder, UInt16Builder,
+    UInt32Builder, UInt64Builder, UInt8Builder,
 };
 use arrow_array::{ArrayRef, RecordBatch};
 use arrow_schema::{ArrowError, DataType, Field, SchemaRef};
-use std::fmt::{self, Write as _};
+use std::fmt::Write as _;
 use std::sync::Arc;
 
 /// A column being built, in its own Arrow type (values stored at their width, no conversion
@@ -31,7 +31,6 @@ enum Buf {
     ListS(ListBuilder<StringBuilder>),
     ListI(ListBuilder<Int64Builder>),
     ListF(ListBuilder<Float64Builder>),
-    Diags(ListBuilder<StructBuilder>),
 }
 
 fn item(dt: DataType) -> Arc<Field> {
@@ -76,17 +75,13 @@ impl Buf {
                 DataType::Float64 => Buf::ListF(
                     ListBuilder::new(Float64Builder::new()).with_field(item(DataType::Float64)),
                 ),
-                DataType::Struct(fs) => Buf::Diags(
-                    ListBuilder::new(StructBuilder::from_fields(fs.clone(), 0))
-                        .with_field(item(DataType::Struct(fs.clone()))),
-                ),
                 _ => Buf::Str(StringBuilder::with_capacity(cap, cap * 8)),
             },
             _ => Buf::Str(StringBuilder::with_capacity(cap, cap * 8)),
         }
     }
 
-    /// `n` rows without a value: nulls (empty lists for the diagnostics, which are never null).
+    /// `n` rows without a value: nulls.
     fn nulls(&mut self, n: usize) {
         match self {
             Buf::I8(b) => b.append_nulls(n),
@@ -105,12 +100,6 @@ impl Buf {
             Buf::ListS(b) => b.append_nulls(n),
             Buf::ListI(b) => b.append_nulls(n),
             Buf::ListF(b) => b.append_nulls(n),
-            // The first closes the list of the elements put so far ([`TableBuf::diag`]).
-            Buf::Diags(b) => {
-                for _ in 0..n {
-                    b.append(true);
-                }
-            }
         }
     }
 
@@ -185,17 +174,6 @@ impl Buf {
         }
     }
 
-    /// Text written by `Display`, straight into the column.
-    fn text_fmt(&mut self, v: fmt::Arguments<'_>) {
-        match self {
-            Buf::Str(b) => {
-                let _ = b.write_fmt(v);
-                b.append_value("");
-            }
-            _ => self.null(),
-        }
-    }
-
     fn bytes(&mut self, v: &[u8]) {
         match self {
             Buf::Bin(b) => b.append_value(v),
@@ -221,7 +199,6 @@ impl Buf {
             Buf::ListS(b) => Arc::new(b.finish()),
             Buf::ListI(b) => Arc::new(b.finish()),
             Buf::ListF(b) => Arc::new(b.finish()),
-            Buf::Diags(b) => Arc::new(b.finish()),
         }
     }
 }
@@ -237,8 +214,7 @@ impl Buf {
 pub struct TableBuf {
     schema: SchemaRef,
     bufs: Vec<Buf>,
-    /// Rows each column holds (the row being made counts once it is put; for the diagnostics,
-    /// rows whose list is closed).
+    /// Rows each column holds (the row being made counts once it is put).
     filled: Vec<usize>,
     /// Columns of the same text in every row (the `file` key): filled when the batch is taken.
     constant: Vec<(usize, Arc<str>)>,
@@ -323,13 +299,6 @@ impl TableBuf {
         }
     }
 
-    /// Text made by formatting (`format_args!`), without a `String` in between.
-    pub fn text_fmt(&mut self, i: usize, v: fmt::Arguments<'_>) {
-        if let Some(b) = self.col(i) {
-            b.text_fmt(v);
-        }
-    }
-
     /// Bytes.
     pub fn bytes(&mut self, i: usize, v: &[u8]) {
         if let Some(b) = self.col(i) {
@@ -376,35 +345,6 @@ impl TableBuf {
                 b => b.null(),
             }
         }
-    }
-
-    /// One element of the diagnostics column `i` (the row's list is closed when a later row's
-    /// element comes or the batch is taken).
-    pub fn diag(&mut self, i: usize, kind: &str, offset: u64, msg: &dyn fmt::Display) {
-        let row = self.rows;
-        let (Some(f), Some(b)) = (self.filled.get_mut(i), self.bufs.get_mut(i)) else {
-            return;
-        };
-        let Buf::Diags(l) = b else {
-            return;
-        };
-        // Close the lists of the rows before this one (the first holds what was put in it).
-        while *f < row {
-            l.append(true);
-            *f += 1;
-        }
-        let s = l.values();
-        if let Some(k) = s.field_builder::<StringBuilder>(0) {
-            k.append_value(kind);
-        }
-        if let Some(o) = s.field_builder::<UInt64Builder>(1) {
-            o.append_value(offset);
-        }
-        if let Some(m) = s.field_builder::<StringBuilder>(2) {
-            let _ = write!(m, "{msg}");
-            m.append_value("");
-        }
-        s.append(true);
     }
 
     /// End the row: the columns not put are null.
@@ -456,32 +396,28 @@ mod tests {
             Field::new("file", DataType::Utf8, false),
             Field::new("n", DataType::UInt64, true),
             Field::new("name", DataType::Utf8, true),
-            Field::new(
-                "diagnostics",
-                DataType::List(item(DataType::Struct(crate::schema::diag_struct()))),
-                false,
-            ),
+            Field::new("flags", DataType::List(item(DataType::Utf8)), true),
         ]))
     }
 
-    /// Rows with columns missing here and there, a column put twice, diagnostics in rows apart:
-    /// the batch has the nulls (and empty lists) of the rows a column missed, wherever they are.
+    /// Rows with columns missing here and there, a column put twice, lists in rows apart: the
+    /// batch has the nulls of the rows a column missed, wherever they are.
     #[test]
     fn columns_not_put_are_null_in_their_rows() {
         let mut t = TableBuf::new(schema());
         t.constant_text(0, Arc::from("cap.bin"));
-        // Row 0: n and a diagnostic.
+        // Row 0: n and a list.
         t.uint(1, 10);
-        t.diag(3, "a", 1, &"first");
+        t.list_text(3, ["a"].into_iter());
         t.end_row();
         // Row 1: nothing.
         t.end_row();
-        // Row 2: name twice (the first kept), two diagnostics; a put into the constant column.
+        // Row 2: name twice (the first kept), a list twice; a put into the constant column.
         t.text(2, "x");
         t.text(2, "y");
         t.text(0, "other");
-        t.diag(3, "b", 2, &"second");
-        t.diag(3, "c", 3, &"third");
+        t.list_text(3, ["b", "c"].into_iter());
+        t.list_text(3, ["d"].into_iter());
         t.end_row();
         // Row 3: n only.
         t.uint(1, 13);
@@ -495,20 +431,18 @@ mod tests {
         assert_eq!(n, [Some(10), None, None, Some(13)]);
         let name: Vec<Option<&str>> = b.column(2).as_string::<i32>().iter().collect();
         assert_eq!(name, [None, None, Some("x"), None]);
-        let d = b.column(3).as_list::<i32>();
-        assert_eq!(d.null_count(), 0);
-        let lens: Vec<usize> = (0..4).map(|i| d.value(i).len()).collect();
-        assert_eq!(lens, [1, 0, 2, 0]);
-        let msgs = d.value(2);
-        let msgs = msgs.as_struct().column(2).as_string::<i32>();
-        assert_eq!(msgs.value(0), "second");
-        assert_eq!(msgs.value(1), "third");
+        let l = b.column(3).as_list::<i32>();
+        let valid: Vec<bool> = (0..4).map(|i| l.is_valid(i)).collect();
+        assert_eq!(valid, [true, false, true, false]);
+        let two = l.value(2);
+        let two: Vec<Option<&str>> = two.as_string::<i32>().iter().collect();
+        assert_eq!(two, [Some("b"), Some("c")]);
         // Taken, the buffer starts again: the constant column too.
         t.uint(1, 20);
         t.end_row();
         let b = t.take().expect("batch");
         assert_eq!(b.num_rows(), 1);
         assert_eq!(b.column(0).as_string::<i32>().value(0), "cap.bin");
-        assert_eq!(b.column(3).as_list::<i32>().value(0).len(), 0);
+        assert!(b.column(3).is_null(0));
     }
 }

@@ -23,6 +23,7 @@
 
 mod buf;
 mod file;
+mod records;
 pub mod schema;
 mod threaded;
 
@@ -45,8 +46,10 @@ use parquet::arrow::ArrowWriter;
 use parquet::basic::Compression;
 use parquet::file::properties::{EnabledStatistics, WriterProperties};
 use parquet::schema::types::ColumnPath;
+use records::{RecordsBuf, Row};
 use schema::{Fill, KindSchema, Kinds, RECORDS};
 use std::collections::{BTreeMap, HashMap};
+use std::fmt::Write as _;
 use std::io;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -286,7 +289,7 @@ struct Open {
     buf: TableBuf,
     part: u32,
     used: u64,
-    /// The kind table's name (`records` for the records table).
+    /// The kind table's name.
     name: &'static str,
 }
 
@@ -298,7 +301,11 @@ pub struct CaptureWriter<S: Sink> {
     sink: S,
     file: Arc<str>,
     opts: Options,
-    records: Open,
+    records: RecordsBuf,
+    /// Row groups of `records` written.
+    records_part: u32,
+    /// Text formatted for a `records` row (kept for its allocation).
+    text: String,
     /// Kind tables buffering rows, by [`KindSchema::index`] (a vector, not a map by name: three
     /// lookups by name a frame were a tenth of building its rows). Scanned in that order (by
     /// name) when the least used or the biggest is picked, so the part files are cut at the
@@ -326,40 +333,11 @@ pub struct CaptureWriter<S: Sink> {
     keep_kinds: Option<Keep>,
 }
 
-/// Columns of `records`, in schema order.
-mod col {
-    pub const FILE: usize = 0;
-    pub const STREAM: usize = 1;
-    pub const N: usize = 2;
-    pub const TS: usize = 3;
-    pub const TIME: usize = 4;
-    pub const REL: usize = 5;
-    pub const DIR: usize = 6;
-    pub const PROTO: usize = 7;
-    pub const TYPE: usize = 8;
-    pub const OFFSET: usize = 9;
-    pub const MSGID: usize = 10;
-    pub const NAME: usize = 11;
-    pub const SUB: usize = 12;
-    pub const CODE: usize = 13;
-    pub const KIND: usize = 14;
-    pub const SRC: usize = 15;
-    pub const DST: usize = 16;
-    pub const CHANNEL: usize = 17;
-    pub const LEN: usize = 18;
-    pub const RAW: usize = 19;
-    pub const DIAGS: usize = 20;
-    pub const PAIR: usize = 21;
-    pub const LATENCY: usize = 22;
-    pub const REF: usize = 23;
-    pub const DETAIL: usize = 24;
-}
-
 /// The `dir` column: null for both directions or none.
-fn put_dir(b: &mut TableBuf, d: Option<Dir>) {
+fn dir_text(d: Option<Dir>) -> Option<&'static str> {
     match d {
-        Some(Dir::Both) | None => {}
-        Some(d) => b.text(col::DIR, d.as_str()),
+        Some(Dir::Both) | None => None,
+        Some(d) => Some(d.as_str()),
     }
 }
 
@@ -369,29 +347,18 @@ fn put_opt_u(b: &mut TableBuf, i: usize, x: Option<u64>) {
     }
 }
 
-/// One diagnostic into the `diagnostics` column; counts it.
-fn put_diag(b: &mut TableBuf, n: &mut u64, d: &Diag) {
-    b.diag(col::DIAGS, d.kind.name(), d.offset, &d.kind);
-    *n += 1;
-}
-
 impl<S: Sink> CaptureWriter<S> {
     /// A writer of the records of capture `file` (its name in the `file` column) into `sink`.
     pub fn new(sink: S, file: &str, opts: Options) -> Self {
         let file: Arc<str> = Arc::from(file);
-        let mut buf = TableBuf::new(schema::records_schema());
-        buf.constant_text(col::FILE, file.clone());
         let n = Kinds::global().len();
         CaptureWriter {
             sink,
+            records: RecordsBuf::new(file.clone(), 64),
+            records_part: 0,
+            text: String::new(),
             file,
             opts,
-            records: Open {
-                buf,
-                part: 0,
-                used: 0,
-                name: RECORDS,
-            },
             kinds: (0..n).map(|_| None).collect(),
             open: 0,
             parts: vec![0; n],
@@ -424,8 +391,14 @@ impl<S: Sink> CaptureWriter<S> {
             None => (None, None),
         };
         if self.keep_records {
-            records_row(&mut self.records.buf, &mut self.summary, rec, kname);
-            if self.records.buf.rows() >= self.opts.rows_per_group {
+            records_row(
+                &mut self.records,
+                &mut self.summary,
+                rec,
+                kname,
+                &mut self.text,
+            );
+            if self.records.rows() >= self.opts.rows_per_group {
                 self.flush_records()?;
             }
         }
@@ -559,7 +532,12 @@ impl<S: Sink> CaptureWriter<S> {
     }
 
     fn flush_records(&mut self) -> io::Result<()> {
-        Self::flush(&mut self.sink, &mut self.records, &mut self.summary)
+        if self.records.rows() == 0 {
+            return Ok(());
+        }
+        let batch = self.records.take().map_err(perr)?;
+        let part = &mut self.records_part;
+        Self::write(&mut self.sink, RECORDS, part, &batch, &mut self.summary)
     }
 
     fn flush(sink: &mut S, o: &mut Open, summary: &mut Summary) -> io::Result<()> {
@@ -567,8 +545,19 @@ impl<S: Sink> CaptureWriter<S> {
             return Ok(());
         }
         let batch = o.buf.take().map_err(perr)?;
-        sink.write(o.name, o.part, &batch)?;
-        o.part += 1;
+        Self::write(sink, o.name, &mut o.part, &batch, summary)
+    }
+
+    /// Row group `part` of `table` to the sink; counts it.
+    fn write(
+        sink: &mut S,
+        table: &str,
+        part: &mut u32,
+        batch: &RecordBatch,
+        summary: &mut Summary,
+    ) -> io::Result<()> {
+        sink.write(table, *part, batch)?;
+        *part += 1;
         summary.row_groups += 1;
         Ok(())
     }
@@ -586,133 +575,134 @@ impl<S: Sink> CaptureWriter<S> {
 }
 
 /// The `records` row of `rec` (`kname`: its kind table), counting its frames and diagnostics.
-fn records_row(b: &mut TableBuf, sum: &mut Summary, rec: &Record<'_>, kname: Option<&str>) {
-    use col::*;
+/// `text`: room for the rare text made by formatting (the detail of detect, stream, units).
+fn records_row(
+    b: &mut RecordsBuf,
+    sum: &mut Summary,
+    rec: &Record<'_>,
+    kname: Option<&str>,
+    text: &mut String,
+) {
+    let mut r = Row::default();
     if let Some(m) = rec.meta() {
-        b.uint(STREAM, m.stream as u64);
-        b.uint(N, m.n);
-        put_opt_u(b, TS, m.ts_ns);
-        put_opt_u(b, TIME, m.ts_ns);
-        if let Some(r) = m.rel_s {
-            b.float(REL, r);
-        }
+        r.stream = Some(m.stream);
+        r.n = Some(m.n);
+        r.ts_ns = m.ts_ns;
+        r.rel_s = m.rel_s;
     }
+    let mut diag = |b: &mut RecordsBuf, d: &Diag| {
+        b.diag(d.kind.name(), d.offset, &d.kind);
+        sum.diagnostics += 1;
+    };
     match rec {
         Record::Detect {
             proto, detection, ..
         } => {
-            b.text(TYPE, "detect");
-            b.text(PROTO, proto.code());
-            b.text_fmt(
-                DETAIL,
-                format_args!(
-                    "{} apt={:.3} ell={:.3}",
-                    if detection.proto.is_some() {
-                        "certain"
-                    } else {
-                        "best guess"
-                    },
-                    detection.apt,
-                    detection.elliptec
-                ),
+            r.ty = "detect";
+            r.proto = Some(proto.code());
+            text.clear();
+            let _ = write!(
+                text,
+                "{} apt={:.3} ell={:.3}",
+                if detection.proto.is_some() {
+                    "certain"
+                } else {
+                    "best guess"
+                },
+                detection.apt,
+                detection.elliptec
             );
+            r.detail = Some(text);
         }
         Record::Stream { id, name, settings } => {
-            b.text(TYPE, "stream");
+            r.ty = "stream";
             // A stream record has no meta: its id is the stream column.
-            b.uint(STREAM, *id as u64);
-            match settings {
-                Some(x) => b.text_fmt(DETAIL, format_args!("{name} ({x})")),
-                None => b.text(DETAIL, name),
+            r.stream = Some(*id);
+            r.detail = Some(name);
+            if let Some(x) = settings {
+                text.clear();
+                let _ = write!(text, "{name} ({x})");
+                r.detail = Some(text);
             }
         }
         Record::Input(d) => {
-            b.text(TYPE, "input");
-            b.uint(OFFSET, d.offset);
-            put_diag(b, &mut sum.diagnostics, d);
+            r.ty = "input";
+            r.offset = Some(d.offset);
+            diag(b, d);
         }
         Record::FileDiag { offset, kind, msg } => {
-            b.text(TYPE, "input");
-            b.uint(OFFSET, *offset);
-            b.diag(DIAGS, kind, *offset, msg);
+            r.ty = "input";
+            r.offset = Some(*offset);
+            b.diag(kind, *offset, msg);
             sum.diagnostics += 1;
         }
         Record::Units(nt) => {
-            b.text(TYPE, "units");
-            b.text(PROTO, "apt");
-            b.uint(STREAM, nt.stream as u64);
-            let mut d = String::new();
-            json::units_notice(&mut d, nt);
-            b.text(DETAIL, &d);
+            r.ty = "units";
+            r.proto = Some("apt");
+            r.stream = Some(nt.stream);
+            text.clear();
+            json::units_notice(text, nt);
+            r.detail = Some(text);
         }
         Record::Apt(a) => {
             let f = a.frame;
             let h = f.header();
-            b.text(TYPE, "frame");
-            b.text(PROTO, "apt");
-            put_dir(b, a.dir());
-            b.uint(OFFSET, f.offset);
-            b.uint(MSGID, h.msg_id() as u64);
+            r.ty = "frame";
+            r.proto = Some("apt");
+            r.dir = dir_text(a.dir());
+            r.offset = Some(f.offset);
+            r.msgid = Some(h.msg_id());
             if let Some(m) = f.msg {
-                b.text(NAME, m.name);
-                if let Some(k) = kname {
-                    b.text(KIND, k);
-                }
+                r.name = Some(m.name);
+                r.kind = kname;
             }
-            if let Some(x) = f.sub {
-                b.text(SUB, x.name);
-            }
-            b.uint(SRC, h.src().byte() as u64);
-            b.uint(DST, h.dst().byte() as u64);
-            if let Some(c) = f.channel() {
-                b.int(CHANNEL, c);
-            }
-            b.uint(LEN, f.bytes.len() as u64);
-            b.bytes(RAW, f.bytes);
+            r.sub = f.sub.map(|x| x.name);
+            r.src = Some(h.src().byte());
+            r.dst = Some(h.dst().byte());
+            r.channel = f.channel();
+            r.len = Some(f.bytes.len() as u32);
+            r.raw = Some(f.bytes);
             for d in f.diags().chain(a.pair.diags(f.offset)) {
-                put_diag(b, &mut sum.diagnostics, &d);
+                diag(b, &d);
             }
-            put_opt_u(b, PAIR, a.pair.pair);
-            if let Some(l) = a.pair.latency_ns {
-                b.float(LATENCY, l as f64 / 1e6);
-            }
+            r.pair = a.pair.pair;
+            r.latency_ms = a.pair.latency_ns.map(|l| l as f64 / 1e6);
             sum.frames += 1;
         }
         Record::Ell(e) => {
             let f = e.frame;
-            b.text(TYPE, "frame");
-            b.text(PROTO, "ell");
+            r.ty = "frame";
+            r.proto = Some("ell");
             let d = f.dir();
-            put_dir(b, Some(d));
-            b.uint(OFFSET, f.offset);
-            b.text(CODE, f.code_str());
+            r.dir = dir_text(Some(d));
+            r.offset = Some(f.offset);
+            r.code = Some(f.code_str());
             if let Some(c) = f.cmd {
-                b.text(NAME, c.name);
-                if let Some(k) = kname {
-                    b.text(KIND, k);
-                }
+                r.name = Some(c.name);
+                r.kind = kname;
             }
             // The module's address is the destination of a command, the source of a reply.
-            let at = if d == Dir::HostToDevice { DST } else { SRC };
-            b.uint(at, f.addr as u64);
-            b.uint(LEN, f.bytes.len() as u64);
-            b.bytes(RAW, f.bytes);
+            if d == Dir::HostToDevice {
+                r.dst = Some(f.addr);
+            } else {
+                r.src = Some(f.addr);
+            }
+            r.len = Some(f.bytes.len() as u32);
+            r.raw = Some(f.bytes);
             for d in f.diags() {
-                put_diag(b, &mut sum.diagnostics, d);
+                diag(b, d);
             }
-            put_opt_u(b, PAIR, e.obs.pair);
-            if let Some(l) = e.obs.latency_ns {
-                b.float(LATENCY, l as f64 / 1e6);
-            }
+            r.pair = e.obs.pair;
+            r.latency_ms = e.obs.latency_ns.map(|l| l as f64 / 1e6);
             sum.frames += 1;
         }
         Record::Garbage(g) => {
-            b.text(TYPE, "garbage");
-            b.text(PROTO, g.proto.code());
-            put_dir(b, g.meta.cap_dir);
-            b.uint(OFFSET, g.offset);
-            b.uint(LEN, g.bytes.len() as u64);
-            b.bytes(RAW, g.bytes);
+            r.ty = "garbage";
+            r.proto = Some(g.proto.code());
+            r.dir = dir_text(g.meta.cap_dir);
+            r.offset = Some(g.offset);
+            r.len = Some(g.bytes.len() as u32);
+            r.raw = Some(g.bytes);
             let d = match g.kind {
                 Some(k) => json::garbage_diag(g.offset, g.bytes.len(), k),
                 None => Diag {
@@ -722,24 +712,23 @@ fn records_row(b: &mut TableBuf, sum: &mut Summary, rec: &Record<'_>, kname: Opt
                     },
                 },
             };
-            put_diag(b, &mut sum.diagnostics, &d);
+            diag(b, &d);
         }
         Record::NoReply(e) => {
-            b.text(TYPE, "no_reply");
-            b.text(PROTO, e.proto.code());
-            b.uint(STREAM, e.stream as u64);
-            b.uint(OFFSET, e.offset);
-            let at = if e.proto == aptscope_dissector::detect::Proto::Apt {
-                NAME
+            r.ty = "no_reply";
+            r.proto = Some(e.proto.code());
+            r.stream = Some(e.stream);
+            r.offset = Some(e.offset);
+            if e.proto == aptscope_dissector::detect::Proto::Apt {
+                r.name = Some(e.name);
             } else {
-                CODE
-            };
-            b.text(at, e.name);
-            b.uint(REF, e.n);
-            put_diag(b, &mut sum.diagnostics, &e.diag());
+                r.code = Some(e.name);
+            }
+            r.refn = Some(e.n);
+            diag(b, &e.diag());
         }
     }
-    b.end_row();
+    b.push(&r);
 }
 
 /// Which of a frame's fields fills each column of its kind table, by layout of fields: the
