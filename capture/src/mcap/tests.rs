@@ -1132,54 +1132,6 @@ fn lying_string_lengths_are_caught_before_parsing() {
     assert!(lengths_ok(op::METADATA, &[1, 0, 0, 0, b'a', 0, 0, 0, 0]));
 }
 
-/// Reads a large file and reports the peak memory (run by hand with --ignored).
-#[test]
-#[ignore]
-fn large_file_reads_in_bounded_memory() {
-    let path = std::env::temp_dir().join("aptscope-mcap-large.mcap");
-    {
-        let f = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
-        let mut w =
-            mcap::Writer::with_options(f, ::mcap::WriteOptions::new().compression(None)).unwrap();
-        let mut m = BTreeMap::new();
-        m.insert("stream".to_string(), "0".to_string());
-        let ch = w.add_channel(0, "/serial/0/d2h", RAW_ENCODING, &m).unwrap();
-        let data: Vec<u8> = (0..4096u32)
-            .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
-            .collect();
-        for i in 0..100_000u32 {
-            w.write_to_known_channel(
-                &MessageHeader {
-                    channel_id: ch,
-                    sequence: i,
-                    log_time: i as u64,
-                    publish_time: i as u64,
-                },
-                &data,
-            )
-            .unwrap();
-        }
-        w.finish().unwrap();
-    }
-    let size = std::fs::metadata(&path).unwrap().len();
-    let mut r = McapReader::open(&path).unwrap();
-    let (mut n, mut bytes) = (0u64, 0u64);
-    while let Some(e) = r.next_event() {
-        if let Event::Chunk(c) = e {
-            n += 1;
-            bytes += c.bytes.len() as u64;
-        }
-    }
-    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
-    let hwm = status
-        .lines()
-        .find(|l| l.starts_with("VmHWM"))
-        .unwrap_or("");
-    eprintln!("file {size} bytes, {n} chunks, {bytes} bytes; {hwm}");
-    let _ = std::fs::remove_file(&path);
-    assert_eq!(n, 100_000);
-}
-
 #[test]
 fn streams_without_chunks_and_untimed_chunks_survive() {
     let streams = stream_infos(3);
