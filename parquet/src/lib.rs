@@ -5,7 +5,8 @@
 //! decoded message also into its kind's table (`MOT_GET_DCSTATUSUPDATE`, `ELL_POSITION` …),
 //! whose columns are the message's fields typed from the message tables ([`schema`]).
 //!
-//! Memory is bounded: each table buffers at most [`Options::rows_per_group`] rows, at most
+//! Memory is bounded: each table buffers at most [`Options::rows_per_group`] rows (`records`
+//! also at most [`Options::bytes_per_group`] bytes of frames and text), at most
 //! [`Options::max_open_kinds`] kind tables buffer at once (the least recently used is flushed
 //! when another opens; the default is more than there are kinds), and all kind buffers
 //! together hold at most [`Options::kind_rows`] rows (the biggest is written when they reach
@@ -59,6 +60,9 @@ use std::sync::Arc;
 pub struct Options {
     /// Rows per row group (and per part file of a [`DirSink`]).
     pub rows_per_group: usize,
+    /// Bytes of frames, garbage and text per row group of `records` at most (it is written
+    /// when they reach this, whatever its rows): rows of garbage runs are up to 4 KiB each.
+    pub bytes_per_group: usize,
     /// Kind tables buffering rows at once.
     pub max_open_kinds: usize,
     /// Rows the kind tables buffer together at most (the biggest is written when they reach
@@ -70,6 +74,10 @@ impl Default for Options {
     fn default() -> Self {
         Options {
             rows_per_group: 65_536,
+            // A status log's 65,536 rows hold about 3 MiB of frames and messages, and its
+            // arrays 19 MiB: such logs are cut by rows. 300 MB of 0xFF bytes (a line held
+            // high: 4 KiB garbage runs) held 65,536 rows, 268 MiB, in one row group.
+            bytes_per_group: 16 << 20,
             // More than there are kinds (544): a kind's rows are written when it has a row
             // group's worth or is the biggest when all together reach the budget, not when
             // another opens (which wrote a part file of a few rows each time a stream of many
@@ -398,7 +406,9 @@ impl<S: Sink> CaptureWriter<S> {
                 kname,
                 &mut self.text,
             );
-            if self.records.rows() >= self.opts.rows_per_group {
+            if self.records.rows() >= self.opts.rows_per_group
+                || self.records.bytes() >= self.opts.bytes_per_group
+            {
                 self.flush_records()?;
             }
         }

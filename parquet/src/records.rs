@@ -249,6 +249,12 @@ impl RecordsBuf {
         self.rows
     }
 
+    /// Bytes of the columns of unbounded length buffered: raw bytes, diagnostics' messages,
+    /// details (the others are a few names of at most a few dozen bytes a row).
+    pub fn bytes(&self) -> usize {
+        self.raw.data.len() + self.diag_msg.data.len() + self.detail.data.len()
+    }
+
     /// One diagnostic of the row being made (before its [`Self::push`]).
     pub fn diag(&mut self, kind: &str, offset: u64, msg: &dyn fmt::Display) {
         self.diag_kind.text(Some(kind));

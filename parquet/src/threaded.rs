@@ -17,16 +17,17 @@ type Part = (String, u32, RecordBatch);
 /// own. Only for sinks that write each row group independently of the others ([`DirSink`]:
 /// a part file each), since the threads write them in any order.
 ///
-/// Memory: the row groups handed over and not yet written hold at most `rows` rows together
-/// (one larger than that waits alone); a kind table's row groups are often small, so a budget
-/// in rows rather than in row groups lets many wait while the largest are encoded. A write that
+/// Memory: the row groups handed over and not yet written hold at most `rows` rows and `bytes`
+/// bytes of arrays together (one larger than that waits alone); a kind table's row groups are
+/// often small, so a budget in rows rather than in row groups lets many wait while the largest
+/// are encoded, and the bytes bound row groups of long rows (garbage runs of 4 KiB each). A write that
 /// fails is returned by a later [`Sink::write`] (the decoding stops there) or by
 /// [`Sink::finish`], which waits for every thread.
 ///
 /// [`DirSink`]: crate::DirSink
 pub struct Threaded {
     tx: Option<Sender<Part>>,
-    /// Rows handed over and not yet written, and the budget.
+    /// Rows and bytes handed over and not yet written, and the budget.
     gate: Arc<Gate>,
     threads: Vec<JoinHandle<()>>,
     /// The first write that failed.
@@ -35,19 +36,20 @@ pub struct Threaded {
 
 impl Threaded {
     /// `n` threads (at least one), each writing into the sink `make` gives it; at most `rows`
-    /// rows waiting. Fails when a thread cannot be started.
+    /// rows and `bytes` bytes of arrays waiting. Fails when a thread cannot be started.
     pub fn new<S: Sink + Send + 'static>(
         n: usize,
         rows: usize,
+        bytes: usize,
         make: impl Fn() -> S,
     ) -> io::Result<Self> {
         let (tx, rx) = channel::<Part>();
         let rx = Arc::new(Mutex::new(rx));
         let failed = Arc::new(Mutex::new(None));
         let gate = Arc::new(Gate {
-            rows: Mutex::new(0),
+            held: Mutex::new(Load::default()),
             freed: Condvar::new(),
-            max: rows,
+            max: Load { rows, bytes },
         });
         let mut t = Threaded {
             tx: Some(tx),
@@ -86,31 +88,56 @@ impl Threaded {
     }
 }
 
-/// Rows in flight, under a budget.
+/// What row groups hold: rows, and bytes of arrays.
+#[derive(Debug, Clone, Copy, Default)]
+struct Load {
+    rows: usize,
+    bytes: usize,
+}
+
+impl Load {
+    fn of(batch: &RecordBatch) -> Load {
+        Load {
+            rows: batch.num_rows(),
+            bytes: batch.get_array_memory_size(),
+        }
+    }
+
+    /// Whether `more` may join this load under `max`: both its rows and its bytes fit, or
+    /// nothing is held (one row group larger than the budget goes alone).
+    fn fits(self, more: Load, max: Load) -> bool {
+        self.rows == 0
+            || (self.rows + more.rows <= max.rows && self.bytes + more.bytes <= max.bytes)
+    }
+}
+
+/// Rows and bytes in flight, under a budget.
 struct Gate {
-    rows: Mutex<usize>,
+    held: Mutex<Load>,
     freed: Condvar,
-    max: usize,
+    max: Load,
 }
 
 impl Gate {
-    /// Wait until `n` more rows fit (or none are in flight), then count them.
-    fn take(&self, n: usize) {
-        let Ok(mut r) = self.rows.lock() else {
+    /// Wait until `l` more fits (or nothing is in flight), then count it.
+    fn take(&self, l: Load) {
+        let Ok(mut h) = self.held.lock() else {
             return;
         };
-        while *r > 0 && *r + n > self.max {
-            r = match self.freed.wait(r) {
-                Ok(r) => r,
+        while !h.fits(l, self.max) {
+            h = match self.freed.wait(h) {
+                Ok(h) => h,
                 Err(_) => return,
             };
         }
-        *r += n;
+        h.rows += l.rows;
+        h.bytes += l.bytes;
     }
 
-    fn give(&self, n: usize) {
-        if let Ok(mut r) = self.rows.lock() {
-            *r = r.saturating_sub(n);
+    fn give(&self, l: Load) {
+        if let Ok(mut h) = self.held.lock() {
+            h.rows = h.rows.saturating_sub(l.rows);
+            h.bytes = h.bytes.saturating_sub(l.bytes);
             self.freed.notify_all();
         }
     }
@@ -133,9 +160,9 @@ fn run<S: Sink>(
         let Ok((table, n, batch)) = part else {
             return;
         };
-        // Its rows are given back however the write ends, a panic included: otherwise the
+        // Its load is given back however the write ends, a panic included: otherwise the
         // decoding thread would wait on the gate for ever instead of meeting the error.
-        let _given = Given(gate, batch.num_rows());
+        let _given = Given(gate, Load::of(&batch));
         let stopped = failed.lock().map_or(true, |e| e.is_some());
         if !stopped {
             if let Err(e) = sink.write(&table, n, &batch) {
@@ -147,8 +174,8 @@ fn run<S: Sink>(
     }
 }
 
-/// Gives `rows` back to the gate when dropped.
-struct Given<'a>(&'a Gate, usize);
+/// Gives a load back to the gate when dropped.
+struct Given<'a>(&'a Gate, Load);
 
 impl Drop for Given<'_> {
     fn drop(&mut self) {
@@ -165,7 +192,7 @@ impl Sink for Threaded {
             .tx
             .as_ref()
             .ok_or_else(|| io::Error::other("sink finished"))?;
-        self.gate.take(batch.num_rows());
+        self.gate.take(Load::of(batch));
         // Arrays are shared, not copied.
         tx.send((table.to_string(), part, batch.clone()))
             .map_err(|_| io::Error::other("Parquet writing threads stopped"))
@@ -191,6 +218,18 @@ impl Drop for Threaded {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A row group joins those waiting when its rows and its bytes both fit; one larger than
+    /// the budget goes alone.
+    #[test]
+    fn the_budget_bounds_rows_and_bytes() {
+        let l = |rows, bytes| Load { rows, bytes };
+        let max = l(100, 1000);
+        assert!(l(0, 0).fits(l(500, 5000), max));
+        assert!(l(50, 500).fits(l(50, 500), max));
+        assert!(!l(50, 500).fits(l(51, 10), max), "rows over");
+        assert!(!l(5, 900).fits(l(5, 101), max), "bytes over");
+    }
     use arrow_array::{ArrayRef, UInt32Array};
     use std::collections::BTreeMap;
 
@@ -217,7 +256,7 @@ mod tests {
     #[test]
     fn every_part_is_written_once() {
         let seen = Arc::new(Mutex::new(BTreeMap::new()));
-        let mut t = Threaded::new(3, 10, || Keep(seen.clone())).expect("threads");
+        let mut t = Threaded::new(3, 10, usize::MAX, || Keep(seen.clone())).expect("threads");
         for p in 0..50u32 {
             t.write(if p % 2 == 0 { "a" } else { "b" }, p, &batch(p + 1))
                 .expect("write");
@@ -246,7 +285,7 @@ mod tests {
     fn a_panicking_writer_is_an_error_not_a_hang() {
         let (tx, rx) = std::sync::mpsc::channel();
         std::thread::spawn(move || {
-            let mut t = Threaded::new(1, 1, || Boom).expect("threads");
+            let mut t = Threaded::new(1, 1, usize::MAX, || Boom).expect("threads");
             let r = (0..100)
                 .map(|p| t.write("a", p, &batch(1)))
                 .find(Result::is_err)
@@ -263,7 +302,7 @@ mod tests {
     #[test]
     fn a_failed_write_is_returned() {
         let seen = Arc::new(Mutex::new(BTreeMap::new()));
-        let mut t = Threaded::new(2, 10, || Keep(seen.clone())).expect("threads");
+        let mut t = Threaded::new(2, 10, usize::MAX, || Keep(seen.clone())).expect("threads");
         t.write("bad", 0, &batch(1)).expect("handed over");
         let mut err = None;
         for p in 0..1000 {

@@ -193,6 +193,7 @@ fn bounded_buffers_keep_every_row() -> io::Result<()> {
         rows_per_group: 100,
         max_open_kinds: 4,
         kind_rows: 100,
+        ..Options::default()
     };
     let tmp = std::env::temp_dir().join(format!("aptscope-pq-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&tmp);
@@ -253,6 +254,46 @@ impl aptscope_parquet::Sink for Count {
         *self.0.entry(table.to_string()).or_default() += 1;
         Ok(())
     }
+}
+
+/// The raw bytes of each `records` row group written.
+#[derive(Default)]
+struct RawBytes(Vec<usize>);
+
+impl aptscope_parquet::Sink for RawBytes {
+    fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
+        if table == "records" {
+            let raw = batch.column_by_name("raw").expect("raw");
+            let raw = raw.as_binary::<i32>();
+            self.0.push(raw.iter().flatten().map(<[u8]>::len).sum());
+        }
+        Ok(())
+    }
+}
+
+/// A line held high (0xFF bytes) is garbage runs of 4 KiB each: `records` is written when its
+/// bytes reach the budget, not only when its rows do, so memory stays bounded (300 MB of 0xFF
+/// held 268 MiB in one row group), and no row is lost.
+#[test]
+fn records_of_long_rows_are_cut_by_bytes() {
+    let budget = 20_000;
+    let opts = Options {
+        bytes_per_group: budget,
+        ..Options::default()
+    };
+    let mut w = CaptureWriter::new(RawBytes::default(), "ff.bin", opts);
+    let mut d = Decoder::new(Some(Proto::Apt));
+    let line = vec![0xFF; 200_000];
+    d.push(Ctx::default(), &line, &mut |r| w.record(r))
+        .expect("push");
+    d.finish(&mut |r| w.record(r)).expect("finish");
+    let (sink, sum) = w.finish().expect("finish writer");
+    let groups = sink.0;
+    assert!(groups.len() >= 200_000 / budget, "{groups:?}");
+    // Each over the budget by one row at most (a garbage run: 4 KiB), and every byte kept.
+    assert!(groups.iter().all(|b| *b < budget + 4096), "{groups:?}");
+    assert_eq!(groups.iter().sum::<usize>(), line.len());
+    assert!(sum.records > 40, "{sum:?}");
 }
 
 /// A stream of every form brings hundreds of kinds in random order: each kind's rows are

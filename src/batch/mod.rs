@@ -765,7 +765,12 @@ fn one(
             // part files are the same.
             let s = if helpers > 1 {
                 let w = CaptureWriter::new(
-                    Threaded::new(helpers - 1, 2 * opts.rows_per_group, sink)?,
+                    Threaded::new(
+                        helpers - 1,
+                        2 * opts.rows_per_group,
+                        4 * opts.bytes_per_group,
+                        sink,
+                    )?,
                     file,
                     opts,
                 );
