@@ -219,6 +219,8 @@ pub struct TableBuf {
     /// Columns of the same text in every row (the `file` key): filled when the batch is taken.
     constant: Vec<(usize, Arc<str>)>,
     rows: usize,
+    /// Bytes of text and bytes put.
+    bytes: usize,
 }
 
 impl TableBuf {
@@ -237,6 +239,7 @@ impl TableBuf {
             bufs,
             constant: Vec::new(),
             rows: 0,
+            bytes: 0,
         }
     }
 
@@ -253,6 +256,11 @@ impl TableBuf {
     /// Rows buffered.
     pub fn rows(&self) -> usize {
         self.rows
+    }
+
+    /// Bytes of text and bytes buffered (list elements included).
+    pub fn bytes(&self) -> usize {
+        self.bytes
     }
 
     /// Column `i` if it has no value in this row yet (given the nulls of the rows it missed).
@@ -296,29 +304,34 @@ impl TableBuf {
     pub fn text(&mut self, i: usize, v: &str) {
         if let Some(b) = self.col(i) {
             b.text(v);
+            self.bytes += v.len();
         }
     }
 
     /// Bytes.
-    pub fn bytes(&mut self, i: usize, v: &[u8]) {
+    pub fn put_bytes(&mut self, i: usize, v: &[u8]) {
         if let Some(b) = self.col(i) {
             b.bytes(v);
+            self.bytes += v.len();
         }
     }
 
     /// A list of names (null in a column of another type).
     pub fn list_text<'a>(&mut self, i: usize, v: impl Iterator<Item = &'a str>) {
+        let mut n = 0;
         if let Some(b) = self.col(i) {
             match b {
                 Buf::ListS(l) => {
                     for s in v {
                         l.values().append_value(s);
+                        n += s.len();
                     }
                     l.append(true);
                 }
                 b => b.null(),
             }
         }
+        self.bytes += n;
     }
 
     /// A list of integers.
@@ -379,6 +392,7 @@ impl TableBuf {
             *b = Buf::new(f.data_type(), rows.min(8192));
         }
         self.rows = 0;
+        self.bytes = 0;
         RecordBatch::try_new(self.schema.clone(), cols)
     }
 }

@@ -5,12 +5,12 @@
 //! decoded message also into its kind's table (`MOT_GET_DCSTATUSUPDATE`, `ELL_POSITION` …),
 //! whose columns are the message's fields typed from the message tables ([`schema`]).
 //!
-//! Memory is bounded: each table buffers at most [`Options::rows_per_group`] rows (`records`
-//! also at most [`Options::bytes_per_group`] bytes of frames and text), at most
+//! Memory is bounded: each table buffers at most [`Options::rows_per_group`] rows and
+//! [`Options::bytes_per_group`] bytes of frames and text, at most
 //! [`Options::max_open_kinds`] kind tables buffer at once (the least recently used is flushed
 //! when another opens; the default is more than there are kinds), and all kind buffers
-//! together hold at most [`Options::kind_rows`] rows (the biggest is written when they reach
-//! it).
+//! together hold at most [`Options::kind_rows`] rows and `bytes_per_group` bytes (the biggest
+//! is written when they reach either).
 //! A [`DirSink`] writes every flushed buffer as one Parquet file of one row group
 //! (`TABLE/part-FFFFF-SSSSS.parquet`, F the capture's index in the run, S a sequence number),
 //! first under a `.partial` name then renamed: a killed run leaves every complete row group
@@ -60,8 +60,10 @@ use std::sync::Arc;
 pub struct Options {
     /// Rows per row group (and per part file of a [`DirSink`]).
     pub rows_per_group: usize,
-    /// Bytes of frames, garbage and text per row group of `records` at most (it is written
-    /// when they reach this, whatever its rows): rows of garbage runs are up to 4 KiB each.
+    /// Bytes of frames, garbage and text per row group at most (a table is written when its
+    /// buffer reaches this, whatever its rows; the kind tables' buffers together hold at most
+    /// this much too): rows of garbage runs are up to 4 KiB each, rows of status flags a list
+    /// of up to 32 names.
     pub bytes_per_group: usize,
     /// Kind tables buffering rows at once.
     pub max_open_kinds: usize,
@@ -77,7 +79,7 @@ impl Default for Options {
             // A status log's 65,536 rows hold about 3 MiB of frames and messages, and its
             // arrays 19 MiB: such logs are cut by rows. 300 MB of 0xFF bytes (a line held
             // high: 4 KiB garbage runs) held 65,536 rows, 268 MiB, in one row group.
-            bytes_per_group: 16 << 20,
+            bytes_per_group: 8 << 20,
             // More than there are kinds (544): a kind's rows are written when it has a row
             // group's worth or is the biggest when all together reach the budget, not when
             // another opens (which wrote a part file of a few rows each time a stream of many
@@ -335,6 +337,8 @@ pub struct CaptureWriter<S: Sink> {
     scratch: Scratch,
     /// Rows the kind tables buffer, together.
     kind_rows: usize,
+    /// Bytes of text and bytes the kind tables buffer, together.
+    kind_bytes: usize,
     /// Whether the `records` table is written ([`CaptureWriter::only_tables`]).
     keep_records: bool,
     /// Which kind tables are written; `None`: all.
@@ -377,6 +381,7 @@ impl<S: Sink> CaptureWriter<S> {
             layouts: Layouts::default(),
             scratch: Scratch::default(),
             kind_rows: 0,
+            kind_bytes: 0,
             keep_records: true,
             keep_kinds: None,
         }
@@ -420,6 +425,7 @@ impl<S: Sink> CaptureWriter<S> {
             };
             o.used = self.clock;
             let b = &mut o.buf;
+            let before = b.bytes();
             b.uint(1, m.n);
             b.uint(2, m.stream as u64);
             put_opt_u(b, 3, m.ts_ns);
@@ -430,6 +436,7 @@ impl<S: Sink> CaptureWriter<S> {
             }
             b.end_row();
             self.kind_rows += 1;
+            self.kind_bytes += b.bytes() - before;
             self.kind_row_done(k)?;
         }
         Ok(())
@@ -507,18 +514,26 @@ impl<S: Sink> CaptureWriter<S> {
         let Some(Some(o)) = self.kinds.get_mut(k.index) else {
             return Ok(());
         };
-        if o.buf.rows() >= self.opts.rows_per_group {
+        if o.buf.rows() >= self.opts.rows_per_group || o.buf.bytes() >= self.opts.bytes_per_group {
             self.kind_rows -= o.buf.rows();
+            self.kind_bytes -= o.buf.bytes();
             Self::flush(&mut self.sink, o, &mut self.summary)?;
         }
-        if self.kind_rows > budget {
-            // Many kinds each short of a row group: the biggest is written early (the first
-            // by name of equally big ones).
+        // Many kinds each short of a row group: the biggest is written early (the first by
+        // name of equally big ones), by rows or by bytes, whichever is over.
+        let measure: Option<fn(&TableBuf) -> usize> = if self.kind_rows > budget {
+            Some(TableBuf::rows)
+        } else if self.kind_bytes > self.opts.bytes_per_group {
+            Some(TableBuf::bytes)
+        } else {
+            None
+        };
+        if let Some(size) = measure {
             let mut big: Option<(usize, usize)> = None;
             for (i, o) in self.kinds.iter().enumerate() {
                 if let Some(o) = o {
-                    if big.is_none_or(|(_, r)| o.buf.rows() > r) {
-                        big = Some((i, o.buf.rows()));
+                    if big.is_none_or(|(_, r)| size(&o.buf) > r) {
+                        big = Some((i, size(&o.buf)));
                     }
                 }
             }
@@ -533,6 +548,7 @@ impl<S: Sink> CaptureWriter<S> {
         if let Some(mut o) = self.kinds.get_mut(i).and_then(Option::take) {
             self.open -= 1;
             self.kind_rows -= o.buf.rows();
+            self.kind_bytes -= o.buf.bytes();
             Self::flush(&mut self.sink, &mut o, &mut self.summary)?;
             if let Some(p) = self.parts.get_mut(i) {
                 *p = o.part;
@@ -869,7 +885,7 @@ fn apt_columns<'a>(
             }
             Fill::Bytes => {
                 if let Value::Bytes(x) = *v {
-                    b.bytes(at, x);
+                    b.put_bytes(at, x);
                 }
             }
             Fill::List => {
@@ -916,7 +932,7 @@ fn ell_values<'a>(lay: &mut Layouts, k: &KindSchema, e: &'a EllRec<'a>, b: &mut 
             (Fill::Int, EllValue::I(x)) => b.int(at, x),
             (Fill::Text, EllValue::Char(ch)) => b.text(at, ch.encode_utf8(&mut [0; 4])),
             (Fill::Text, EllValue::Digits(d)) => b.text(at, d),
-            (Fill::Bytes, EllValue::Raw(x)) => b.bytes(at, x),
+            (Fill::Bytes, EllValue::Raw(x)) => b.put_bytes(at, x),
             (Fill::Phys | Fill::PhysUnit, EllValue::I(p)) if fd.kind == EllKind::Position => {
                 match scale.filter(|(ppu, _)| *ppu > 0.0) {
                     Some((ppu, _)) if c.fill == Fill::Phys => {

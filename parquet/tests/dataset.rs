@@ -296,6 +296,52 @@ fn records_of_long_rows_are_cut_by_bytes() {
     assert!(sum.records > 40, "{sum:?}");
 }
 
+/// The rows of each row group written, by table.
+#[derive(Default)]
+struct Groups(std::collections::BTreeMap<String, Vec<usize>>);
+
+impl aptscope_parquet::Sink for Groups {
+    fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
+        self.0
+            .entry(table.to_string())
+            .or_default()
+            .push(batch.num_rows());
+        Ok(())
+    }
+}
+
+/// Status messages with every flag set carry a list of a dozen names a row: the kind tables
+/// are written when their text reaches the budget (each on its own, and together), not only
+/// when their rows do, and no row is lost.
+#[test]
+fn kind_tables_of_long_rows_are_cut_by_bytes() {
+    let frames = [
+        "81 04 0e 00 81 2a 01 00 e8 03 00 00 d0 07 00 00 ff ff ff ff",
+        "91 04 0e 00 81 2a 01 00 e8 03 00 00 14 00 00 00 ff ff ff ff",
+        "2a 04 06 00 81 2a 01 00 ff ff ff ff",
+    ];
+    let one: Vec<u8> = frames.iter().flat_map(|f| hex(f)).collect();
+    let opts = Options {
+        bytes_per_group: 4096,
+        ..Options::default()
+    };
+    let mut w = CaptureWriter::new(Groups::default(), "flags.bin", opts);
+    let mut d = Decoder::new(Some(Proto::Apt));
+    d.push(Ctx::default(), &one.repeat(300), &mut |r| w.record(r))
+        .expect("push");
+    d.finish(&mut |r| w.record(r)).expect("finish");
+    let (groups, sum) = w.finish().expect("finish writer");
+    assert_eq!(sum.frames, 900);
+    let kinds: Vec<(&String, &Vec<usize>)> =
+        groups.0.iter().filter(|(t, _)| *t != "records").collect();
+    assert_eq!(kinds.len(), 3, "{:?}", groups.0);
+    for (t, g) in kinds {
+        // 300 rows, a dozen flag names each (about 120 bytes): cut into many row groups.
+        assert_eq!(g.iter().sum::<usize>(), 300, "{t}: {g:?}");
+        assert!(g.len() >= 8 && g.iter().all(|n| *n < 100), "{t}: {g:?}");
+    }
+}
+
 /// A stream of every form brings hundreds of kinds in random order: each kind's rows are
 /// written once they are many, not whenever another kind comes along (which wrote a row group
 /// of a few rows for nearly every frame).
