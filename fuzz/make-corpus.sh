@@ -10,7 +10,7 @@ B=tests/bad-input
 C=fuzz/corpus
 rm -f "$C"/*/seed-*
 mkdir -p "$C"/{apt_framer,ell_framer,pcap_reader,mcap_reader,textlog_reader,decode_pipeline,filter_parse,encode_roundtrip}
-mkdir -p "$C"/{ell_encode,units,usb_unwrap,follow_reader}
+mkdir -p "$C"/{ell_encode,units,usb_unwrap,follow_reader,dataset_rows}
 
 # seed TARGET NAME PREFIX_HEX FILE
 seed() { { printf '%s' "$3" | xxd -r -p; cat "$4"; } > "$C/$1/seed-$2"; }
@@ -162,6 +162,12 @@ for f in kdc101-session.pcap kdc101-session.mcap kdc101-session.socat.log ellipt
   { printf '\x01\x40'; pieces "$S/$f"; } > "$C/follow_reader/seed-$f"
 done
 { printf '\x02\x00'; pieces "$S/kdc101-session.bin"; } > "$C/follow_reader/seed-raw"
+# dataset_rows: the decode_pipeline seeds with a budget byte after the flags (5: row groups of
+# 6 rows and 144 bytes).
+for f in "$C"/decode_pipeline/seed-*; do
+  { head -c 1 "$f"; printf '\x05'; tail -c +2 "$f"; } > "$C/dataset_rows/$(basename "$f")"
+done
+
 # Inputs that once made a target fail (fuzz/artifacts-found/<target>/) are seeds of it too.
 for d in fuzz/artifacts-found/*/; do
   t=$(basename "$d")

@@ -18,7 +18,8 @@ use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
 use aptscope_dissector::table::Dir;
 use std::io::{BufReader, Cursor};
 
-fn reader(file: &[u8], format: Format) -> Box<dyn Reader> {
+/// The reader `aptscope decode` picks for `format`, over the bytes of `file`.
+pub(crate) fn reader(file: &[u8], format: Format) -> Box<dyn Reader> {
     let stream = Cursor::new(file.to_vec());
     match format {
         Format::Pcap | Format::PcapNg => Box::new(pcap::PcapReader::new(stream, None)),

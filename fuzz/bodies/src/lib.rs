@@ -6,6 +6,7 @@
 pub mod util;
 
 pub mod apt_framer;
+pub mod dataset_rows;
 pub mod decode_pipeline;
 pub mod ell_encode;
 pub mod ell_framer;
@@ -25,6 +26,7 @@ pub type Body = fn(&[u8]);
 /// and its body.
 pub const TARGETS: &[(&str, Body)] = &[
     ("apt_framer", apt_framer::fuzz),
+    ("dataset_rows", dataset_rows::fuzz),
     ("decode_pipeline", decode_pipeline::fuzz),
     ("ell_encode", ell_encode::fuzz),
     ("ell_framer", ell_framer::fuzz),

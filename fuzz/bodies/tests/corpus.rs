@@ -91,6 +91,7 @@ macro_rules! corpus_tests {
 
 corpus_tests!(
     apt_framer,
+    dataset_rows,
     decode_pipeline,
     ell_encode,
     ell_framer,

@@ -1,0 +1,129 @@
+//! The rows of `decode --to parquet` and Python's `to_arrow`: a capture of any format decoded
+//! into a [`CaptureWriter`] with small budgets, so that every table is cut into many row groups
+//! by rows, by bytes and by the kind tables' joint budgets.
+//!
+//! Input: `[flags, budget, file...]`: `flags % 3` is the protocol (auto, apt, elliptec), the
+//! format is sniffed from the file; `budget` sets the rows (1 + budget % 16) and bytes
+//! (64 + 16 × budget) per row group. Checks: no error and no panic; every array passes Arrow's
+//! full validation (offsets, UTF-8, nulls of non-nullable columns); each table's row groups are
+//! numbered 0, 1, 2 … and hold at most the rows per group; `records` has a row per record
+//! and its `raw` column holds exactly the captured bytes of frames and garbage; every row group
+//! written as Parquet and read back is the same batch.
+
+use crate::decode_pipeline::reader;
+use crate::util::{expansion_limit, split_ctl};
+use aptscope_capture::open::sniff;
+use aptscope_capture::Event;
+use aptscope_dissector::detect::Proto;
+use aptscope_dissector::record::Decoder;
+use aptscope_parquet::{writer_properties, CaptureWriter, Options, Sink};
+use arrow_array::cast::AsArray;
+use arrow_array::{Array, RecordBatch};
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use parquet::arrow::ArrowWriter;
+use std::collections::BTreeMap;
+use std::io;
+
+/// Checks each row group as it is written.
+struct Check {
+    rows_per_group: usize,
+    /// The next part number expected, by table.
+    parts: BTreeMap<String, u32>,
+    records: u64,
+    raw: u64,
+}
+
+impl Sink for Check {
+    fn write(&mut self, table: &str, part: u32, batch: &RecordBatch) -> io::Result<()> {
+        let next = self.parts.entry(table.to_string()).or_default();
+        assert_eq!(part, *next, "{table}: row groups numbered in order");
+        *next += 1;
+        assert!(batch.num_rows() > 0, "{table}: empty row group");
+        assert!(
+            batch.num_rows() <= self.rows_per_group,
+            "{table}: {} rows in a group of {}",
+            batch.num_rows(),
+            self.rows_per_group
+        );
+        for (f, c) in batch.schema().fields().iter().zip(batch.columns()) {
+            c.to_data()
+                .validate_full()
+                .unwrap_or_else(|e| panic!("{table}.{}: {e}", f.name()));
+            assert!(
+                f.is_nullable() || c.null_count() == 0,
+                "{table}.{}: nulls in a column that has none",
+                f.name()
+            );
+        }
+        if table == "records" {
+            self.records += batch.num_rows() as u64;
+            let raw = batch.column_by_name("raw").expect("raw").as_binary::<i32>();
+            let ty = batch.column_by_name("type").expect("type");
+            let ty = ty.as_string::<i32>();
+            for i in 0..batch.num_rows() {
+                if matches!(ty.value(i), "frame" | "garbage") {
+                    self.raw += raw.value(i).len() as u64;
+                }
+            }
+        }
+        // Parquet as the dataset writes it, read back: the same rows and schema.
+        let props = writer_properties(self.rows_per_group, &batch.schema());
+        let mut w = ArrowWriter::try_new(Vec::new(), batch.schema(), Some(props)).expect("writer");
+        w.write(batch).expect("write");
+        let bytes = w.into_inner().expect("close");
+        let r = ParquetRecordBatchReaderBuilder::try_new(bytes::Bytes::from(bytes))
+            .expect("parquet")
+            .build()
+            .expect("reader");
+        // At most 16 rows a group: one batch back.
+        let back: Vec<RecordBatch> = r.map(|b| b.expect("batch")).collect();
+        assert_eq!(
+            back.as_slice(),
+            std::slice::from_ref(batch),
+            "{table}: read back differs"
+        );
+        Ok(())
+    }
+}
+
+/// The target's body: panics when a check fails.
+pub fn fuzz(data: &[u8]) {
+    let ([flags, budget], file) = split_ctl::<2>(data);
+    let proto = match flags % 3 {
+        0 => None,
+        1 => Some(Proto::Apt),
+        _ => Some(Proto::Elliptec),
+    };
+    let opts = Options {
+        rows_per_group: 1 + usize::from(budget % 16),
+        bytes_per_group: 64 + 16 * usize::from(budget),
+        max_open_kinds: 3,
+        kind_rows: 2 + usize::from(budget % 16),
+    };
+    let check = Check {
+        rows_per_group: opts.rows_per_group,
+        parts: BTreeMap::new(),
+        records: 0,
+        raw: 0,
+    };
+    let mut w = CaptureWriter::new(check, "fuzz.bin", opts);
+    let format = sniff(&file[..file.len().min(aptscope_capture::open::SNIFF_LEN)]);
+    let mut r = reader(file, format);
+    let mut dec = Decoder::new(proto);
+    let mut bytes = 0u64;
+    let mut emit = |rec: &aptscope_dissector::record::Record<'_>| w.record(rec);
+    while let Some(ev) = r.next_event() {
+        if let Event::Chunk(c) = &ev {
+            bytes += c.bytes.len() as u64;
+        }
+        ev.feed(&mut dec, &mut emit).expect("rows");
+        // A hexdump `*` can expand a few bytes into gigabytes: stop there.
+        if bytes > expansion_limit(file.len()) as u64 {
+            return;
+        }
+    }
+    dec.finish(&mut emit).expect("rows");
+    let (check, sum) = w.finish().expect("finish");
+    assert_eq!(check.records, sum.records, "a records row per record");
+    assert_eq!(check.raw, bytes, "records hold exactly the captured bytes");
+}
