@@ -361,7 +361,12 @@ fn put_opt_u(b: &mut TableBuf, i: usize, x: Option<u64>) {
 
 impl<S: Sink> CaptureWriter<S> {
     /// A writer of the records of capture `file` (its name in the `file` column) into `sink`.
-    pub fn new(sink: S, file: &str, opts: Options) -> Self {
+    pub fn new(sink: S, file: &str, mut opts: Options) -> Self {
+        // A column's values are addressed by 32-bit offsets (under 2 GiB a row group): the
+        // frames and text by the byte budget, the short names by the rows (4 M rows of names
+        // of at most a few dozen bytes).
+        opts.bytes_per_group = opts.bytes_per_group.min(1 << 30);
+        opts.rows_per_group = opts.rows_per_group.min(1 << 22);
         let file: Arc<str> = Arc::from(file);
         let n = Kinds::global().len();
         CaptureWriter {

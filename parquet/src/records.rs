@@ -110,7 +110,7 @@ impl Bytes {
     /// End the value written into `data` since the last.
     #[inline(always)]
     fn end(&mut self) {
-        // A row group's text is far below 2 GiB (rows_per_group rows of short values).
+        // Under 2 GiB a row group: `CaptureWriter::new` bounds its bytes and rows.
         self.ends.push(self.data.len() as i32);
     }
 
