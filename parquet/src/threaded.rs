@@ -7,7 +7,7 @@ use crate::Sink;
 use arrow_array::RecordBatch;
 use std::io;
 use std::sync::mpsc::{channel, Receiver, Sender};
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::{Arc, Condvar, Mutex, Weak};
 use std::thread::JoinHandle;
 
 /// One row group to write: table, part number, rows.
@@ -27,6 +27,12 @@ type Part = (String, u32, RecordBatch);
 /// [`DirSink`]: crate::DirSink
 pub struct Threaded {
     tx: Option<Sender<Part>>,
+    /// The threads' queue, not kept alive by this: once every thread is gone (a panic), a write
+    /// fails instead of waiting for room.
+    rx: Weak<Mutex<Receiver<Part>>>,
+    /// The sink the caller's thread writes into at [`Sink::finish`], helping the threads with
+    /// the row groups still waiting.
+    own: Option<Box<dyn Sink + Send>>,
     /// Rows and bytes handed over and not yet written, and the budget.
     gate: Arc<Gate>,
     threads: Vec<JoinHandle<()>>,
@@ -53,6 +59,8 @@ impl Threaded {
         });
         let mut t = Threaded {
             tx: Some(tx),
+            rx: Arc::downgrade(&rx),
+            own: Some(Box::new(make())),
             gate,
             threads: Vec::new(),
             failed,
@@ -69,6 +77,13 @@ impl Threaded {
         Ok(t)
     }
 
+    /// Keep `e` unless an earlier error is kept.
+    fn fail(&self, e: io::Error) {
+        if let Ok(mut f) = self.failed.lock() {
+            f.get_or_insert(e);
+        }
+    }
+
     /// The first error a thread met, taken.
     fn error(&self) -> Option<io::Error> {
         self.failed.lock().ok().and_then(|mut e| e.take())
@@ -77,12 +92,10 @@ impl Threaded {
     /// Waits for every thread to write what it was given.
     fn join(&mut self) {
         self.tx = None;
-        for t in self.threads.drain(..) {
+        for t in std::mem::take(&mut self.threads) {
             // A thread that panicked wrote nothing more; its parts stay `.partial`.
             if t.join().is_err() {
-                if let Ok(mut e) = self.failed.lock() {
-                    e.get_or_insert_with(|| io::Error::other("a Parquet writing thread panicked"));
-                }
+                self.fail(io::Error::other("a Parquet writing thread panicked"));
             }
         }
     }
@@ -145,7 +158,7 @@ impl Gate {
 
 /// A writing thread: row groups until the channel closes; after a failure (its own or
 /// another's) the rest are dropped unwritten.
-fn run<S: Sink>(
+fn run<S: Sink + ?Sized>(
     rx: &Mutex<Receiver<Part>>,
     failed: &Mutex<Option<io::Error>>,
     gate: &Gate,
@@ -199,6 +212,18 @@ impl Sink for Threaded {
     }
 
     fn finish(&mut self) -> io::Result<()> {
+        // Every table's last row group comes at the end, all at once: the caller's thread,
+        // done decoding, writes them too instead of waiting for the threads alone.
+        self.tx = None;
+        if let (Some(mut own), Some(rx)) = (self.own.take(), self.rx.upgrade()) {
+            // A write that panics is an error here as on the threads, not a panic of the caller.
+            let helped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                run(&rx, &self.failed, &self.gate, &mut *own)
+            }));
+            if helped.is_err() {
+                self.fail(io::Error::other("a Parquet write panicked"));
+            }
+        }
         self.join();
         match self.error() {
             Some(e) => Err(e),
