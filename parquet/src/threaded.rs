@@ -20,9 +20,9 @@ type Part = (String, u32, RecordBatch);
 /// Memory: the row groups handed over and not yet written hold at most `rows` rows and `bytes`
 /// bytes of arrays together (one larger than that waits alone); a kind table's row groups are
 /// often small, so a budget in rows rather than in row groups lets many wait while the largest
-/// are encoded, and the bytes bound row groups of long rows (garbage runs of 4 KiB each). A write that
-/// fails is returned by a later [`Sink::write`] (the decoding stops there) or by
-/// [`Sink::finish`], which waits for every thread.
+/// are encoded, and the bytes bound row groups of long rows (garbage runs of 4 KiB each). A
+/// write that fails is returned by a later [`Sink::write`] (the decoding stops there) or by
+/// [`Sink::finish`], which writes what still waits beside the threads, then waits for them.
 ///
 /// [`DirSink`]: crate::DirSink
 pub struct Threaded {
