@@ -302,32 +302,33 @@ impl RecordsBuf {
         let mut b = RecordsBuf::new(self.file.clone(), rows.min(8192));
         std::mem::swap(self, &mut b);
         let s = b.schema.clone();
-        let dt = |i: usize| s.field(i).data_type();
+        // By name: the vector below is in schema order, the types are the schema's.
+        let dt = |name: &str| s.field_with_name(name).map(|f| f.data_type());
         let cols: Vec<ArrayRef> = vec![
             Arc::new(StringArray::new_repeated(&*self.file, rows)),
-            b.stream.take(dt(1)),
-            b.n.take(dt(2)),
-            b.ts_ns.take(dt(3)),
-            b.time.take(dt(4)),
-            b.rel_s.take(dt(5)),
+            b.stream.take(dt("stream")?),
+            b.n.take(dt("n")?),
+            b.ts_ns.take(dt("ts_ns")?),
+            b.time.take(dt("time")?),
+            b.rel_s.take(dt("rel_s")?),
             b.dir.take_text()?,
             b.proto.take_text()?,
             b.ty.take_text()?,
-            b.offset.take(dt(9)),
-            b.msgid.take(dt(10)),
+            b.offset.take(dt("offset")?),
+            b.msgid.take(dt("msgid")?),
             b.name.take_text()?,
             b.sub.take_text()?,
             b.code.take_text()?,
             b.kind.take_text()?,
-            b.src.take(dt(15)),
-            b.dst.take(dt(16)),
-            b.channel.take(dt(17)),
-            b.len.take(dt(18)),
+            b.src.take(dt("src")?),
+            b.dst.take(dt("dst")?),
+            b.channel.take(dt("channel")?),
+            b.len.take(dt("len")?),
             b.raw.take_bytes()?,
-            b.take_diags(dt(20))?,
-            b.pair.take(dt(21)),
-            b.latency_ms.take(dt(22)),
-            b.refn.take(dt(23)),
+            b.take_diags(dt("diagnostics")?)?,
+            b.pair.take(dt("pair")?),
+            b.latency_ms.take(dt("latency_ms")?),
+            b.refn.take(dt("ref")?),
             b.detail.take_text()?,
         ];
         RecordBatch::try_new(s, cols)
