@@ -56,10 +56,16 @@ fn main() -> io::Result<()> {
     let variant = std::env::var("VARIANT").unwrap_or_default();
     println!("| codec | write CPU-s (best of 3) | MB written | ratio to input |");
     println!("|---|---|---|---|");
+    // CODEC=NAME: that codec alone, written once (for callgrind's instruction counts).
+    let only = std::env::var("CODEC").ok();
+    let reps = if only.is_some() { 1 } else { 3 };
     for (name, c) in codecs {
+        if only.as_deref().is_some_and(|o| o != name) {
+            continue;
+        }
         let mut best = f64::INFINITY;
         let mut bytes = 0;
-        for _ in 0..3 {
+        for _ in 0..reps {
             let t0 = common::cpu_s();
             bytes = 0;
             for (_, b) in &batches {

@@ -115,7 +115,20 @@ pub fn writer_properties(rows: usize, schema: &Schema) -> WriterProperties {
     for (path, dt) in leaves {
         let col = || ColumnPath::new(path.clone());
         match dt {
-            DataType::Utf8 => b = b.set_column_dictionary_enabled(col(), true),
+            // The key `file`: a part file holds one capture, so its minimum and maximum
+            // prune every other capture's row groups.
+            DataType::Utf8 if path.len() == 1 && path[0] == "file" => {
+                b = b.set_column_dictionary_enabled(col(), true)
+            }
+            // Other text (names, directions, labels, units, flag names, diagnostics): a row
+            // group mixes many values, so its minimum and maximum prune almost nothing (a
+            // status log's span `HW_…`–`MOT_…`), and comparing every value for them was a
+            // twelfth of the writer's instructions (docs/performance.md, fifth pass).
+            DataType::Utf8 => {
+                b = b
+                    .set_column_dictionary_enabled(col(), true)
+                    .set_column_statistics_enabled(col(), EnabledStatistics::None)
+            }
             // Raw frames: a minimum and maximum of random bytes prune nothing, and comparing
             // every value for them cost a twentieth of the run.
             DataType::Binary => b = b.set_column_statistics_enabled(col(), EnabledStatistics::None),

@@ -401,3 +401,39 @@ fn only_the_tables_asked_for() {
         }
     }
 }
+
+/// Which columns carry minimum/maximum statistics: the key `file` and the numbers and times
+/// (they prune row groups), not the other text columns nor the raw bytes (a row group mixes
+/// their values, and comparing every value cost the writer a twelfth of its instructions).
+#[test]
+fn statistics_where_they_prune() {
+    let out = decode_mem(&apt_session(), Some(Proto::Apt), Options::default());
+    for table in ["records", "MOT_MOVE_COMPLETED"] {
+        let bytes = &out.iter().find(|(n, _)| n == table).expect("table").1;
+        let meta = ParquetRecordBatchReaderBuilder::try_new(bytes::Bytes::from(bytes.clone()))
+            .expect("parquet")
+            .metadata()
+            .clone();
+        let rg = meta.row_group(0);
+        let stats = |path: &str| {
+            let c = rg
+                .columns()
+                .iter()
+                .find(|c| c.column_path().string() == path)
+                .unwrap_or_else(|| panic!("{table}: no column {path}"));
+            c.statistics()
+                .is_some_and(|s| s.min_bytes_opt().is_some() && s.max_bytes_opt().is_some())
+        };
+        for with in ["file", "n", "ts_ns"] {
+            assert!(stats(with), "{table}: {with} has no minimum and maximum");
+        }
+        let without: &[&str] = if table == "records" {
+            &["name", "dir", "type", "raw", "diagnostics.list.item.msg"]
+        } else {
+            &["chan_ident", "status_bits.list.item"]
+        };
+        for w in without {
+            assert!(!stats(w), "{table}: {w} has a minimum and maximum");
+        }
+    }
+}
