@@ -24,6 +24,7 @@
 
 mod buf;
 mod file;
+pub mod pages;
 mod records;
 pub mod schema;
 mod threaded;
@@ -180,8 +181,47 @@ pub struct DirSink {
     root: PathBuf,
     index: usize,
     rows: usize,
-    /// Writer properties of each table written (a table's directory exists once it is here).
-    props: HashMap<String, WriterProperties>,
+    /// How each table is written (a table's directory exists once it is here).
+    props: HashMap<String, TableWriter>,
+}
+
+/// How a table's part files are written: page by page from the arrays ([`pages`]) when its
+/// schema allows, else by parquet-rs's Arrow writer.
+#[derive(Clone)]
+pub enum TableWriter {
+    /// Page by page ([`pages::supports`] the schema).
+    Pages(pages::TableProps),
+    /// By the Arrow writer.
+    Arrow(Box<WriterProperties>),
+}
+
+impl TableWriter {
+    /// The writer of a table of `schema` with row groups of at most `rows` rows.
+    pub fn new(rows: usize, schema: &Schema) -> io::Result<Self> {
+        let p = writer_properties(rows, schema);
+        Ok(if pages::supports(schema) {
+            TableWriter::Pages(pages::TableProps::new(schema, p).map_err(perr)?)
+        } else {
+            TableWriter::Arrow(Box::new(p))
+        })
+    }
+
+    /// `batch` as a Parquet file of one row group into `out`.
+    pub fn write<W: io::Write + Send>(&self, out: W, batch: &RecordBatch) -> io::Result<W> {
+        match self {
+            TableWriter::Pages(t) => {
+                let mut w = pages::PartWriter::new(out, t).map_err(perr)?;
+                w.write(batch).map_err(perr)?;
+                w.finish().map_err(perr)
+            }
+            TableWriter::Arrow(p) => {
+                let mut w =
+                    ArrowWriter::try_new(out, batch.schema(), Some((**p).clone())).map_err(perr)?;
+                w.write(batch).map_err(perr)?;
+                w.into_inner().map_err(perr)
+            }
+        }
+    }
 }
 
 impl DirSink {
@@ -203,20 +243,21 @@ impl Sink for DirSink {
         if !self.props.contains_key(table) {
             std::fs::create_dir_all(&dir)
                 .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", dir.display())))?;
-            let p = writer_properties(self.rows, &batch.schema());
-            self.props.insert(table.to_string(), p);
+            let w = TableWriter::new(self.rows, &batch.schema())?;
+            self.props.insert(table.to_string(), w);
         }
-        let props = self.props.get(table).cloned();
+        let writer = self
+            .props
+            .get(table)
+            .ok_or_else(|| io::Error::other("table vanished"))?;
         let name = format!("part-{:05}-{part:05}.parquet", self.index);
         let done = dir.join(&name);
         let tmp = dir.join(format!("{name}.partial"));
         let f = std::fs::File::create(&tmp)
             .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", tmp.display())))?;
-        let mut w = ArrowWriter::try_new(f, batch.schema(), props).map_err(perr)?;
-        w.write(batch).map_err(perr)?;
+        writer.write(f, batch)?;
         // Renamed once complete: a killed run leaves no torn `.parquet`. (No fsync: a killed
         // process loses nothing the kernel has; a power cut may, and costs a sync per part.)
-        w.close().map_err(perr)?;
         std::fs::rename(&tmp, &done)
     }
 }
@@ -224,7 +265,13 @@ impl Sink for DirSink {
 /// Keeps one in-memory Parquet file per table.
 pub struct MemSink {
     rows: usize,
-    tables: BTreeMap<String, ArrowWriter<Vec<u8>>>,
+    tables: BTreeMap<String, MemTable>,
+}
+
+/// A table's in-memory file, written as [`TableWriter`] writes part files.
+enum MemTable {
+    Pages(Box<pages::PartWriter<Vec<u8>>>),
+    Arrow(Box<ArrowWriter<Vec<u8>>>),
 }
 
 impl MemSink {
@@ -240,7 +287,13 @@ impl MemSink {
     pub fn finish(self) -> io::Result<Vec<(String, Vec<u8>)>> {
         self.tables
             .into_iter()
-            .map(|(k, w)| Ok((k, w.into_inner().map_err(perr)?)))
+            .map(|(k, w)| {
+                let bytes = match w {
+                    MemTable::Pages(w) => w.finish().map_err(perr)?,
+                    MemTable::Arrow(w) => w.into_inner().map_err(perr)?,
+                };
+                Ok((k, bytes))
+            })
             .collect()
     }
 }
@@ -248,16 +301,24 @@ impl MemSink {
 impl Sink for MemSink {
     fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
         if !self.tables.contains_key(table) {
-            let p = writer_properties(self.rows, &batch.schema());
-            let w = ArrowWriter::try_new(Vec::new(), batch.schema(), Some(p)).map_err(perr)?;
+            let w = match TableWriter::new(self.rows, &batch.schema())? {
+                TableWriter::Pages(t) => MemTable::Pages(Box::new(
+                    pages::PartWriter::new(Vec::new(), &t).map_err(perr)?,
+                )),
+                TableWriter::Arrow(p) => MemTable::Arrow(Box::new(
+                    ArrowWriter::try_new(Vec::new(), batch.schema(), Some(*p)).map_err(perr)?,
+                )),
+            };
             self.tables.insert(table.to_string(), w);
         }
-        let w = self
-            .tables
-            .get_mut(table)
-            .ok_or_else(|| io::Error::other("table vanished"))?;
-        w.write(batch).map_err(perr)?;
-        w.flush().map_err(perr)
+        match self.tables.get_mut(table) {
+            Some(MemTable::Pages(w)) => w.write(batch).map_err(perr),
+            Some(MemTable::Arrow(w)) => {
+                w.write(batch).map_err(perr)?;
+                w.flush().map_err(perr)
+            }
+            None => Err(io::Error::other("table vanished")),
+        }
     }
 }
 

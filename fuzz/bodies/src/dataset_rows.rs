@@ -16,11 +16,10 @@ use aptscope_capture::open::sniff;
 use aptscope_capture::Event;
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::record::Decoder;
-use aptscope_parquet::{writer_properties, CaptureWriter, Options, Sink};
+use aptscope_parquet::{CaptureWriter, Options, Sink, TableWriter};
 use arrow_array::cast::AsArray;
 use arrow_array::{Array, RecordBatch};
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-use parquet::arrow::ArrowWriter;
 use std::collections::BTreeMap;
 use std::io;
 
@@ -67,10 +66,10 @@ impl Sink for Check {
             }
         }
         // Parquet as the dataset writes it, read back: the same rows and schema.
-        let props = writer_properties(self.rows_per_group, &batch.schema());
-        let mut w = ArrowWriter::try_new(Vec::new(), batch.schema(), Some(props)).expect("writer");
-        w.write(batch).expect("write");
-        let bytes = w.into_inner().expect("close");
+        let bytes = TableWriter::new(self.rows_per_group, &batch.schema())
+            .expect("table writer")
+            .write(Vec::new(), batch)
+            .expect("write");
         let r = ParquetRecordBatchReaderBuilder::try_new(bytes::Bytes::from(bytes))
             .expect("parquet")
             .build()
