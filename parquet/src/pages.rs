@@ -617,106 +617,53 @@ fn as_bytes(a: &dyn Array) -> Option<ByteVals<'_>> {
 trait Phys: Copy + PartialOrd {
     /// Whether a chunk of these may be dictionary-encoded (integers).
     const DICT: bool;
+    /// Zero, and zero as a minimum in statistics (−0 for floats, as the format asks).
+    const ZERO: Self;
+    const MIN_ZERO: Self;
     fn put(self, out: &mut Vec<u8>);
     /// Its bits, for a dictionary of integers (and back, for its page).
     fn bits(self) -> u64;
     fn from_bits(b: u64) -> Self;
-    fn stats(min: Self, max: Self, nulls: u64) -> Statistics;
-    fn stats_none(nulls: u64) -> Statistics;
+    fn stats(min: Option<Self>, max: Option<Self>, nulls: u64) -> Statistics;
     /// A zero's sign as the format wants it in statistics: −0 as a minimum, +0 as a maximum.
-    fn zero_sign(self, _min: bool) -> Self {
-        self
-    }
-}
-
-impl Phys for i32 {
-    fn bits(self) -> u64 {
-        self as u32 as u64
-    }
-    fn from_bits(b: u64) -> Self {
-        b as u32 as i32
-    }
-    const DICT: bool = true;
-    fn put(self, out: &mut Vec<u8>) {
-        out.extend_from_slice(&self.to_le_bytes())
-    }
-    fn stats(min: Self, max: Self, nulls: u64) -> Statistics {
-        Statistics::int32(Some(min), Some(max), None, Some(nulls), false)
-    }
-    fn stats_none(nulls: u64) -> Statistics {
-        Statistics::int32(None, None, None, Some(nulls), false)
-    }
-}
-
-impl Phys for i64 {
-    fn bits(self) -> u64 {
-        self as u64
-    }
-    fn from_bits(b: u64) -> Self {
-        b as i64
-    }
-    const DICT: bool = true;
-    fn put(self, out: &mut Vec<u8>) {
-        out.extend_from_slice(&self.to_le_bytes())
-    }
-    fn stats(min: Self, max: Self, nulls: u64) -> Statistics {
-        Statistics::int64(Some(min), Some(max), None, Some(nulls), false)
-    }
-    fn stats_none(nulls: u64) -> Statistics {
-        Statistics::int64(None, None, None, Some(nulls), false)
-    }
-}
-
-impl Phys for f32 {
-    fn bits(self) -> u64 {
-        self.to_bits() as u64
-    }
-    fn from_bits(b: u64) -> Self {
-        f32::from_bits(b as u32)
-    }
-    const DICT: bool = false;
-    fn put(self, out: &mut Vec<u8>) {
-        out.extend_from_slice(&self.to_le_bytes())
-    }
-    fn stats(min: Self, max: Self, nulls: u64) -> Statistics {
-        Statistics::float(Some(min), Some(max), None, Some(nulls), false)
-    }
-    fn stats_none(nulls: u64) -> Statistics {
-        Statistics::float(None, None, None, Some(nulls), false)
-    }
     fn zero_sign(self, min: bool) -> Self {
-        match (self == 0.0, min) {
-            (true, true) => -0.0,
-            (true, false) => 0.0,
+        match (self == Self::ZERO, min) {
+            (true, true) => Self::MIN_ZERO,
+            (true, false) => Self::ZERO,
             _ => self,
         }
     }
 }
 
-impl Phys for f64 {
-    fn bits(self) -> u64 {
-        self.to_bits()
-    }
-    fn from_bits(b: u64) -> Self {
-        f64::from_bits(b)
-    }
-    const DICT: bool = false;
-    fn put(self, out: &mut Vec<u8>) {
-        out.extend_from_slice(&self.to_le_bytes())
-    }
-    fn stats(min: Self, max: Self, nulls: u64) -> Statistics {
-        Statistics::double(Some(min), Some(max), None, Some(nulls), false)
-    }
-    fn stats_none(nulls: u64) -> Statistics {
-        Statistics::double(None, None, None, Some(nulls), false)
-    }
-    fn zero_sign(self, min: bool) -> Self {
-        match (self == 0.0, min) {
-            (true, true) => -0.0,
-            (true, false) => 0.0,
-            _ => self,
+macro_rules! phys {
+    ($($t:ty: $stat:ident, dict $dict:expr, zero $zero:expr, $min_zero:expr,
+        bits |$s:ident| $bits:expr, from |$b:ident| $from:expr;)*) => {$(
+        impl Phys for $t {
+            const DICT: bool = $dict;
+            const ZERO: Self = $zero;
+            const MIN_ZERO: Self = $min_zero;
+            fn put(self, out: &mut Vec<u8>) {
+                out.extend_from_slice(&self.to_le_bytes())
+            }
+            fn bits(self) -> u64 {
+                let $s = self;
+                $bits
+            }
+            fn from_bits($b: u64) -> Self {
+                $from
+            }
+            fn stats(min: Option<Self>, max: Option<Self>, nulls: u64) -> Statistics {
+                Statistics::$stat(min, max, None, Some(nulls), false)
+            }
         }
-    }
+    )*};
+}
+
+phys! {
+    i32: int32, dict true, zero 0, 0, bits |v| v as u32 as u64, from |b| b as u32 as i32;
+    i64: int64, dict true, zero 0, 0, bits |v| v as u64, from |b| b as i64;
+    f32: float, dict false, zero 0.0, -0.0, bits |v| v.to_bits() as u64, from |b| f32::from_bits(b as u32);
+    f64: double, dict false, zero 0.0, -0.0, bits |v| v.to_bits(), from |b| f64::from_bits(b);
 }
 
 /// Native to physical: integers by `as` (an unsigned value keeps its bits), floats as they are.
@@ -854,8 +801,12 @@ where
         }
     }
     Ok(match (lo, hi) {
-        (Some(l), Some(h)) => P::stats(l.phys().zero_sign(true), h.phys().zero_sign(false), nulls),
-        _ => P::stats_none(nulls),
+        (Some(l), Some(h)) => P::stats(
+            Some(l.phys().zero_sign(true)),
+            Some(h.phys().zero_sign(false)),
+            nulls,
+        ),
+        _ => P::stats(None, None, nulls),
     })
 }
 /// `page` compressed (or as it is), and its length before.
@@ -1192,7 +1143,7 @@ mod tests {
                 cur = r.below(distinct);
             }
             run -= 1;
-            if shape % 2 == 0 {
+            if shape.is_multiple_of(2) {
                 cur
             } else {
                 r.below(distinct)
