@@ -103,7 +103,8 @@ impl Default for Options {
 /// inside lists (names, labels, units, flag names, diagnostics: few distinct values, so the
 /// pages Snappy compresses are indices, not the same words again); numbers, times and raw
 /// bytes are mostly distinct, and hashing each value for a dictionary that overflows was a
-/// sixth of the writer's time.
+/// sixth of parquet-rs's writer's time. (The page writer, [`pages`], which writes the tables
+/// it takes, also gives integer chunks of few distinct values a dictionary of its own.)
 pub fn writer_properties(rows: usize, schema: &Schema) -> WriterProperties {
     let mut b = WriterProperties::builder()
         .set_compression(Compression::SNAPPY)
@@ -182,7 +183,7 @@ pub struct DirSink {
     index: usize,
     rows: usize,
     /// How each table is written (a table's directory exists once it is here).
-    props: HashMap<String, TableWriter>,
+    writers: HashMap<String, TableWriter>,
 }
 
 /// How a table's part files are written: page by page from the arrays ([`pages`]) when its
@@ -232,7 +233,7 @@ impl DirSink {
             root: root.to_path_buf(),
             index,
             rows: opts.rows_per_group,
-            props: HashMap::new(),
+            writers: HashMap::new(),
         }
     }
 }
@@ -240,14 +241,14 @@ impl DirSink {
 impl Sink for DirSink {
     fn write(&mut self, table: &str, part: u32, batch: &RecordBatch) -> io::Result<()> {
         let dir = self.root.join(table);
-        if !self.props.contains_key(table) {
+        if !self.writers.contains_key(table) {
             std::fs::create_dir_all(&dir)
                 .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", dir.display())))?;
             let w = TableWriter::new(self.rows, &batch.schema())?;
-            self.props.insert(table.to_string(), w);
+            self.writers.insert(table.to_string(), w);
         }
         let writer = self
-            .props
+            .writers
             .get(table)
             .ok_or_else(|| io::Error::other("table vanished"))?;
         let name = format!("part-{:05}-{part:05}.parquet", self.index);
