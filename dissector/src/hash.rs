@@ -24,6 +24,7 @@ impl Hasher for NumHasher {
     fn finish(&self) -> u64 {
         self.0
     }
+    #[inline]
     fn write(&mut self, bytes: &[u8]) {
         let mut words = bytes.chunks_exact(8);
         for w in &mut words {
@@ -31,8 +32,12 @@ impl Hasher for NumHasher {
             b.copy_from_slice(w);
             self.add(u64::from_le_bytes(b));
         }
-        for b in words.remainder() {
-            self.add(u64::from(*b));
+        // The last bytes as one word (a short text is then two or three steps, not one a byte).
+        let rest = words.remainder();
+        if !rest.is_empty() {
+            let mut b = [0u8; 8];
+            b[..rest.len()].copy_from_slice(rest);
+            self.add(u64::from_le_bytes(b));
         }
     }
     #[inline]

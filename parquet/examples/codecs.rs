@@ -1,7 +1,9 @@
 //! Compare Parquet compression codecs on a capture's tables: `codecs CAPTURE`.
 //!
 //! Decodes the capture once into the record batches `decode --to parquet` would write, then
-//! writes them all with each codec (the dataset's writer properties otherwise) and prints the
+//! writes them all with each codec through parquet-rs's Arrow writer (the dataset's writer
+//! properties otherwise; the dataset itself is written by `pages`, which takes Snappy or no
+//! compression) and prints the
 //! CPU time of the writing (this thread's, from /proc: the machine is shared) and the bytes
 //! written. Used to choose the codec (docs/parquet.md "Compression").
 

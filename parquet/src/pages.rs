@@ -17,6 +17,7 @@
 //! (status codes, addresses, message ids: a few bits a value instead of 4 or 8 bytes for
 //! Snappy), chunk statistics where the properties enable them; no page indexes.
 
+use aptscope_dissector::hash::{NumHasher, NumMap};
 use arrow_array::cast::AsArray;
 use arrow_array::types::*;
 use arrow_array::{Array, ArrayRef, ArrowPrimitiveType, GenericByteArray, ListArray, RecordBatch};
@@ -33,6 +34,7 @@ use parquet::file::properties::{EnabledStatistics, WriterProperties, WriterPrope
 use parquet::file::statistics::Statistics;
 use parquet::file::writer::{SerializedFileWriter, SerializedPageWriter, TrackedWrite};
 use parquet::schema::types::{ColumnDescPtr, SchemaDescPtr};
+use std::hash::Hasher;
 use std::io::Write;
 use std::sync::Arc;
 
@@ -435,22 +437,12 @@ impl Scratch {
                 Some(Statistics::byte_array(None, None, None, Some(nulls), false))
             }
             Some(b) => {
-                let (mut lo, mut hi): (&[u8], &[u8]);
-                if dict {
-                    (lo, hi) = (self.dict.value(0), self.dict.value(0));
-                    for i in 1..self.dict.len() {
-                        let v = self.dict.value(i);
-                        lo = lo.min(v);
-                        hi = hi.max(v);
-                    }
+                // Over the dictionary's distinct values when there is one.
+                let (lo, hi) = if dict {
+                    min_max((0..self.dict.len()).map(|i| self.dict.value(i)))
                 } else {
-                    (lo, hi) = (b.value(sel.at(0)), b.value(sel.at(0)));
-                    for k in 1..sel.len() {
-                        let v = b.value(sel.at(k));
-                        lo = lo.min(v);
-                        hi = hi.max(v);
-                    }
-                }
+                    min_max((0..sel.len()).map(|k| b.value(sel.at(k))))
+                };
                 Some(Statistics::byte_array(
                     Some(ByteArray::from(lo.to_vec())),
                     Some(ByteArray::from(hi.to_vec())),
@@ -523,16 +515,13 @@ impl Scratch {
                 levels_block(&self.rep[e0..e1], 1, &mut self.page);
             }
             if l.max_def > 0 {
-                let at = self.page.len();
-                self.page.extend_from_slice(&[0; 4]);
                 let bwd = bit_width(l.max_def as u64);
-                match (flat, flat_nulls) {
-                    (true, None) => rle_run(&mut self.page, (e1 - e0) as u64, 1, bwd),
-                    (true, Some(n)) => bitmap_run(n, e0, e1, &mut self.page),
-                    (false, _) => hybrid(&self.def[e0..e1], bwd, &mut self.page),
-                }
-                let n = (self.page.len() - at - 4) as u32;
-                self.page[at..at + 4].copy_from_slice(&n.to_le_bytes());
+                let def = &self.def;
+                prefixed(&mut self.page, |out| match (flat, flat_nulls) {
+                    (true, None) => rle_run(out, (e1 - e0) as u64, 1, bwd),
+                    (true, Some(n)) => bitmap_run(n, e0, e1, out),
+                    (false, _) => hybrid(&def[e0..e1], bwd, out),
+                });
             }
             let encoding = if dict {
                 self.page.push(bw);
@@ -589,6 +578,13 @@ impl Scratch {
         };
         Ok((Bytes::from(buf), close))
     }
+}
+
+/// The least and greatest of byte strings, as Parquet orders them (unsigned bytes); empty
+/// when there are none (callers give at least one).
+fn min_max<'a>(mut vals: impl Iterator<Item = &'a [u8]>) -> (&'a [u8], &'a [u8]) {
+    let first = vals.next().unwrap_or_default();
+    vals.fold((first, first), |(lo, hi), v| (lo.min(v), hi.max(v)))
 }
 
 /// The values of a text or bytes array, by index.
@@ -841,9 +837,14 @@ fn bit_width(max: u64) -> u8 {
 /// Levels as a data page (version 1) holds them: their length in 4 bytes, then the RLE /
 /// bit-packed hybrid.
 fn levels_block(levels: &[u8], bw: u8, out: &mut Vec<u8>) {
+    prefixed(out, |out| hybrid(levels, bw, out));
+}
+
+/// What `write` appends to `out`, after its length in 4 bytes (levels in a version 1 page).
+fn prefixed(out: &mut Vec<u8>, write: impl FnOnce(&mut Vec<u8>)) {
     let at = out.len();
     out.extend_from_slice(&[0; 4]);
-    hybrid(levels, bw, out);
+    write(out);
     let len = (out.len() - at - 4) as u32;
     out[at..at + 4].copy_from_slice(&len.to_le_bytes());
 }
@@ -1025,17 +1026,16 @@ fn slot(h: u64, size: usize) -> usize {
 #[derive(Default)]
 struct IntDict {
     vals: Vec<u64>,
-    /// Slots: value number + 1, 0 when empty; a power of two long.
-    slots: Vec<u32>,
-    /// The last value interned and its number (runs of one value skip the table).
+    /// Each value's number.
+    nums: NumMap<u64, u32>,
+    /// The last value interned and its number (runs of one value skip the map).
     last: Option<(u64, u32)>,
 }
 
 impl IntDict {
     fn clear(&mut self) {
         self.vals.clear();
-        self.slots.clear();
-        self.slots.resize(1024, 0);
+        self.nums.clear();
         self.last = None;
     }
 
@@ -1046,60 +1046,22 @@ impl IntDict {
                 return k;
             }
         }
-        let mask = self.slots.len() - 1;
-        let mut at = slot(v, self.slots.len());
-        let k = loop {
-            let s = self.slots[at];
-            if s == 0 {
-                self.vals.push(v);
-                self.slots[at] = self.vals.len() as u32;
-                let k = self.vals.len() as u32 - 1;
-                if self.vals.len() * 2 > self.slots.len() {
-                    self.grow();
-                }
-                break k;
-            }
-            if self.vals[s as usize - 1] == v {
-                break s - 1;
-            }
-            at = (at + 1) & mask;
-        };
+        let vals = &mut self.vals;
+        let k = *self.nums.entry(v).or_insert_with(|| {
+            vals.push(v);
+            vals.len() as u32 - 1
+        });
         self.last = Some((v, k));
         k
     }
-
-    #[cold]
-    fn grow(&mut self) {
-        let size = self.slots.len() * 2;
-        self.slots.clear();
-        self.slots.resize(size, 0);
-        for (i, &v) in self.vals.iter().enumerate() {
-            let mut at = slot(v, size);
-            while self.slots[at] != 0 {
-                at = (at + 1) & (size - 1);
-            }
-            self.slots[at] = i as u32 + 1;
-        }
-    }
 }
 
-/// A fast hash of a short byte string (FxHash's step over 8-byte words).
+/// A hash of a short byte string: the project's number hasher over its words.
 #[inline]
 fn hash(v: &[u8]) -> u64 {
-    const K: u64 = 0x517c_c1b7_2722_0a95;
-    let mut h = v.len() as u64;
-    let mut chunks = v.chunks_exact(8);
-    for c in &mut chunks {
-        let w = u64::from_le_bytes(c.try_into().unwrap_or([0; 8]));
-        h = (h.rotate_left(5) ^ w).wrapping_mul(K);
-    }
-    let rest = chunks.remainder();
-    if !rest.is_empty() {
-        let mut b = [0u8; 8];
-        b[..rest.len()].copy_from_slice(rest);
-        h = (h.rotate_left(5) ^ u64::from_le_bytes(b)).wrapping_mul(K);
-    }
-    h
+    let mut h = NumHasher::default();
+    h.write(v);
+    h.finish()
 }
 
 #[cfg(test)]
