@@ -21,7 +21,9 @@ struct Keep(Vec<(String, RecordBatch)>);
 
 impl Sink for Keep {
     fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
-        self.0.push((table.to_string(), batch.clone()));
+        // The Arrow writer gets the table's declared types (text, not dictionaries of words).
+        let batch = aptscope_parquet::words::declared(batch).map_err(io::Error::other)?;
+        self.0.push((table.to_string(), batch));
         Ok(())
     }
 }

@@ -2,12 +2,15 @@
 //! Arrow arrays out. No cell per value in between (building, matching and dropping a row of
 //! cells was a third of the writer's instructions).
 
+use crate::records::Valid;
+use crate::words::{self, Words};
 use arrow_array::builder::{
     BinaryBuilder, Float32Builder, Float64Builder, Int16Builder, Int32Builder, Int64Builder,
     Int8Builder, ListBuilder, StringBuilder, TimestampNanosecondBuilder, UInt16Builder,
     UInt32Builder, UInt64Builder, UInt8Builder,
 };
-use arrow_array::{ArrayRef, RecordBatch};
+use arrow_array::{ArrayRef, ListArray, RecordBatch};
+use arrow_buffer::{OffsetBuffer, ScalarBuffer};
 use arrow_schema::{ArrowError, DataType, Field, SchemaRef};
 use std::fmt::Write as _;
 use std::sync::Arc;
@@ -31,6 +34,14 @@ enum Buf {
     ListS(ListBuilder<StringBuilder>),
     ListI(ListBuilder<Int64Builder>),
     ListF(ListBuilder<Float64Builder>),
+    /// Words ([`crate::words`]), and lists of words: where each row's list ends among them.
+    Words(Words),
+    ListW {
+        ends: Vec<i32>,
+        valid: Valid,
+        words: Words,
+        item: Arc<Field>,
+    },
 }
 
 fn item(dt: DataType) -> Arc<Field> {
@@ -65,6 +76,17 @@ impl Buf {
                 Buf::Ts(TimestampNanosecondBuilder::with_capacity(cap).with_data_type(dt.clone()))
             }
             DataType::Binary => Buf::Bin(BinaryBuilder::with_capacity(cap, cap * 16)),
+            DataType::Dictionary(..) => Buf::Words(Words::new(cap)),
+            DataType::List(f) if matches!(f.data_type(), DataType::Dictionary(..)) => {
+                let mut ends = Vec::with_capacity(cap + 1);
+                ends.push(0);
+                Buf::ListW {
+                    ends,
+                    valid: Valid::default(),
+                    words: Words::new(cap * 4),
+                    item: f.clone(),
+                }
+            }
             DataType::List(f) => match f.data_type() {
                 DataType::Utf8 => Buf::ListS(
                     ListBuilder::new(StringBuilder::new()).with_field(item(DataType::Utf8)),
@@ -100,6 +122,16 @@ impl Buf {
             Buf::ListS(b) => b.append_nulls(n),
             Buf::ListI(b) => b.append_nulls(n),
             Buf::ListF(b) => b.append_nulls(n),
+            Buf::Words(w) => (0..n).for_each(|_| w.push(None)),
+            Buf::ListW {
+                ends, valid, words, ..
+            } => {
+                let end = words.len() as i32;
+                for _ in 0..n {
+                    ends.push(end);
+                    valid.push(false);
+                }
+            }
         }
     }
 
@@ -170,6 +202,16 @@ impl Buf {
     fn text(&mut self, v: &str) {
         match self {
             Buf::Str(b) => b.append_value(v),
+            Buf::Words(w) => w.push_text(v),
+            _ => self.null(),
+        }
+    }
+
+    /// A word from the tables (null in a column of another type).
+    fn word(&mut self, v: &'static str) {
+        match self {
+            Buf::Words(w) => w.push(Some(v)),
+            Buf::Str(b) => b.append_value(v),
             _ => self.null(),
         }
     }
@@ -181,8 +223,8 @@ impl Buf {
         }
     }
 
-    fn finish(&mut self) -> ArrayRef {
-        match self {
+    fn finish(&mut self) -> Result<ArrayRef, ArrowError> {
+        Ok(match self {
             Buf::I8(b) => Arc::new(b.finish()),
             Buf::I16(b) => Arc::new(b.finish()),
             Buf::I32(b) => Arc::new(b.finish()),
@@ -199,7 +241,22 @@ impl Buf {
             Buf::ListS(b) => Arc::new(b.finish()),
             Buf::ListI(b) => Arc::new(b.finish()),
             Buf::ListF(b) => Arc::new(b.finish()),
-        }
+            Buf::Words(w) => w.take()?,
+            Buf::ListW {
+                ends,
+                valid,
+                words,
+                item,
+            } => {
+                let ends = std::mem::replace(ends, vec![0]);
+                Arc::new(ListArray::try_new(
+                    item.clone(),
+                    OffsetBuffer::new(ScalarBuffer::from(ends)),
+                    words.take()?,
+                    valid.take(),
+                )?)
+            }
+        })
     }
 }
 
@@ -316,11 +373,29 @@ impl TableBuf {
         }
     }
 
-    /// A list of names (null in a column of another type).
-    pub fn list_text<'a>(&mut self, i: usize, v: impl Iterator<Item = &'a str>) {
+    /// A word from the tables (an enum's label, a unit).
+    pub fn word(&mut self, i: usize, v: &'static str) {
+        if let Some(b) = self.col(i) {
+            b.word(v);
+            self.bytes += v.len();
+        }
+    }
+
+    /// A list of words from the tables (flag names; null in a column of another type).
+    pub fn list_words(&mut self, i: usize, v: impl Iterator<Item = &'static str>) {
         let mut n = 0;
         if let Some(b) = self.col(i) {
             match b {
+                Buf::ListW {
+                    ends, valid, words, ..
+                } => {
+                    for s in v {
+                        words.push(Some(s));
+                        n += s.len();
+                    }
+                    ends.push(words.len() as i32);
+                    valid.push(true);
+                }
                 Buf::ListS(l) => {
                     for s in v {
                         l.values().append_value(s);
@@ -375,15 +450,25 @@ impl TableBuf {
             }
             *f = 0;
         }
+        let mut cols = self
+            .bufs
+            .iter_mut()
+            .map(Buf::finish)
+            .collect::<Result<Vec<ArrayRef>, _>>()?;
         for (i, v) in &self.constant {
-            if let Some(Buf::Str(b)) = self.bufs.get_mut(*i) {
-                b.append_value_n(&**v, rows);
+            if let Some(c) = cols.get_mut(*i) {
+                *c = match self.bufs.get_mut(*i) {
+                    Some(Buf::Str(b)) => {
+                        b.append_value_n(&**v, rows);
+                        Arc::new(b.finish())
+                    }
+                    _ => words::repeated(v, rows),
+                };
             }
             if let Some(f) = self.filled.get_mut(*i) {
                 *f = usize::MAX;
             }
         }
-        let cols: Vec<ArrayRef> = self.bufs.iter_mut().map(Buf::finish).collect();
         // A table that filled a batch will likely fill the next: room for as many rows again
         // (a finished builder starts empty, and growing it by doubling was a tenth of the
         // run in reallocations), up to 8192: room for a whole row group in every column
@@ -415,14 +500,23 @@ mod tests {
     }
 
     /// Rows with columns missing here and there, a column put twice, lists in rows apart: the
-    /// batch has the nulls of the rows a column missed, wherever they are.
+    /// batch has the nulls of the rows a column missed, wherever they are; with the text
+    /// columns as text and as words (the batch read as text).
     #[test]
     fn columns_not_put_are_null_in_their_rows() {
-        let mut t = TableBuf::new(schema());
+        let words = Arc::new(words::words_schema(&schema(), &["file", "name", "flags"]));
+        for s in [schema(), words] {
+            rows_of(s);
+        }
+    }
+
+    fn rows_of(schema: SchemaRef) {
+        let declared = |b: RecordBatch| words::declared(&b).expect("declared");
+        let mut t = TableBuf::new(schema);
         t.constant_text(0, Arc::from("cap.bin"));
         // Row 0: n and a list.
         t.uint(1, 10);
-        t.list_text(3, ["a"].into_iter());
+        t.list_words(3, ["a"].into_iter());
         t.end_row();
         // Row 1: nothing.
         t.end_row();
@@ -430,13 +524,14 @@ mod tests {
         t.text(2, "x");
         t.text(2, "y");
         t.text(0, "other");
-        t.list_text(3, ["b", "c"].into_iter());
-        t.list_text(3, ["d"].into_iter());
+        t.list_words(3, ["b", "c"].into_iter());
+        t.list_words(3, ["d"].into_iter());
         t.end_row();
         // Row 3: n only.
         t.uint(1, 13);
         t.end_row();
-        let b = t.take().expect("batch");
+        let b = declared(t.take().expect("batch"));
+        assert_eq!(b.schema(), self::schema());
         assert_eq!(b.num_rows(), 4);
         let file = b.column(0).as_string::<i32>();
         assert!((0..4).all(|i| file.value(i) == "cap.bin"), "{file:?}");
@@ -454,7 +549,7 @@ mod tests {
         // Taken, the buffer starts again: the constant column too.
         t.uint(1, 20);
         t.end_row();
-        let b = t.take().expect("batch");
+        let b = declared(t.take().expect("batch"));
         assert_eq!(b.num_rows(), 1);
         assert_eq!(b.column(0).as_string::<i32>().value(0), "cap.bin");
         assert!(b.column(3).is_null(0));

@@ -28,6 +28,7 @@ pub mod pages;
 mod records;
 pub mod schema;
 mod threaded;
+pub mod words;
 
 pub use file::{decode_file, not_a_capture, not_a_capture_error, DecodeOpts};
 pub use threaded::Threaded;
@@ -216,9 +217,10 @@ impl TableWriter {
                 w.finish().map_err(perr)
             }
             TableWriter::Arrow(p) => {
+                let batch = words::declared(batch).map_err(perr)?;
                 let mut w =
                     ArrowWriter::try_new(out, batch.schema(), Some((**p).clone())).map_err(perr)?;
-                w.write(batch).map_err(perr)?;
+                w.write(&batch).map_err(perr)?;
                 w.into_inner().map_err(perr)
             }
         }
@@ -244,7 +246,8 @@ impl Sink for DirSink {
         if !self.writers.contains_key(table) {
             std::fs::create_dir_all(&dir)
                 .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", dir.display())))?;
-            let w = TableWriter::new(self.rows, &batch.schema())?;
+            let schema = words::declared_schema(&batch.schema());
+            let w = TableWriter::new(self.rows, &schema)?;
             self.writers.insert(table.to_string(), w);
         }
         let writer = self
@@ -302,12 +305,13 @@ impl MemSink {
 impl Sink for MemSink {
     fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
         if !self.tables.contains_key(table) {
-            let w = match TableWriter::new(self.rows, &batch.schema())? {
+            let schema = Arc::new(words::declared_schema(&batch.schema()));
+            let w = match TableWriter::new(self.rows, &schema)? {
                 TableWriter::Pages(t) => MemTable::Pages(Box::new(
                     pages::PartWriter::new(Vec::new(), &t).map_err(perr)?,
                 )),
                 TableWriter::Arrow(p) => MemTable::Arrow(Box::new(
-                    ArrowWriter::try_new(Vec::new(), batch.schema(), Some(*p)).map_err(perr)?,
+                    ArrowWriter::try_new(Vec::new(), schema, Some(*p)).map_err(perr)?,
                 )),
             };
             self.tables.insert(table.to_string(), w);
@@ -315,7 +319,8 @@ impl Sink for MemSink {
         match self.tables.get_mut(table) {
             Some(MemTable::Pages(w)) => w.write(batch).map_err(perr),
             Some(MemTable::Arrow(w)) => {
-                w.write(batch).map_err(perr)?;
+                w.write(&words::declared(batch).map_err(perr)?)
+                    .map_err(perr)?;
                 w.flush().map_err(perr)
             }
             None => Err(io::Error::other("table vanished")),
@@ -367,8 +372,10 @@ pub struct Summary {
     pub row_groups: u64,
 }
 
-/// A message's kind table: its name, and its schema when it has one and the table is kept.
-type KindOf = (Box<str>, Option<&'static KindSchema>);
+/// A message's kind table: its name (the global schema's, `'static` for the `records` table's
+/// column of words; every message and sub-message has one, [`Kinds`]), and its schema when
+/// the table is kept.
+type KindOf = (Option<&'static str>, Option<&'static KindSchema>);
 
 struct Open {
     buf: TableBuf,
@@ -480,7 +487,7 @@ impl<S: Sink> CaptureWriter<S> {
     pub fn record(&mut self, rec: &Record<'_>) -> io::Result<()> {
         let ki = self.kind_of(rec);
         let (kname, kind) = match ki.and_then(|i| self.kind_list.get(i)) {
-            Some((n, k)) => (Some(&**n), *k),
+            Some(&(n, k)) => (n, k),
             None => (None, None),
         };
         if self.keep_records {
@@ -548,8 +555,9 @@ impl<S: Sink> CaptureWriter<S> {
         let i = *self.kind_names.entry(key).or_insert_with(|| {
             let n = name();
             let k = Kinds::global().get(&n).map(|k| &**k);
+            let name = k.map(|k| k.name.as_str());
             let k = k.filter(|_| keep.as_ref().is_none_or(|f| f(&n)));
-            list.push((n.into_boxed_str(), k));
+            list.push((name, k));
             list.len() - 1
         });
         Some(i)
@@ -573,7 +581,7 @@ impl<S: Sink> CaptureWriter<S> {
                     self.close_kind(i)?;
                 }
             }
-            let mut buf = TableBuf::new(k.schema.clone());
+            let mut buf = TableBuf::new(k.batch.clone());
             buf.constant_text(0, self.file.clone());
             if let Some(slot) = self.kinds.get_mut(k.index) {
                 *slot = Some(Open {
@@ -686,7 +694,7 @@ fn records_row(
     b: &mut RecordsBuf,
     sum: &mut Summary,
     rec: &Record<'_>,
-    kname: Option<&str>,
+    kname: Option<&'static str>,
     text: &mut String,
 ) {
     let mut r = Row::default();
@@ -739,7 +747,7 @@ fn records_row(
         Record::FileDiag { offset, kind, msg } => {
             r.ty = "input";
             r.offset = Some(*offset);
-            b.diag(kind, *offset, msg);
+            b.diag_text(kind, *offset, msg);
             sum.diagnostics += 1;
         }
         Record::Units(nt) => {
@@ -949,13 +957,13 @@ fn apt_columns<'a>(
                     .zip(v.as_i64())
                     .and_then(|(e, x)| t.enum_def(e).label(x));
                 if let Some(l) = label {
-                    b.text(at, l);
+                    b.word(at, l);
                 }
             }
             Fill::FlagNames => {
                 if let (Some(fl), Value::U(x)) = (fd.flags, *v) {
                     let items = t.flags_def(fl).items.iter();
-                    b.list_text(at, items.filter(|(m, _)| x & m == *m).map(|(_, l)| *l));
+                    b.list_words(at, items.filter(|(m, _)| x & m == *m).map(|(_, l)| *l));
                 }
             }
             Fill::Text => {
@@ -1007,7 +1015,7 @@ fn ell_values<'a>(lay: &mut Layouts, k: &KindSchema, e: &'a EllRec<'a>, b: &mut 
         };
         let at = FIELDS + j;
         match (c.fill, *v) {
-            (Fill::StatusName, EllValue::U(x)) => b.text(at, status_name(x as u32)),
+            (Fill::StatusName, EllValue::U(x)) => b.word(at, status_name(x as u32)),
             (Fill::Int, EllValue::U(x)) => b.uint(at, x),
             (Fill::Int, EllValue::I(x)) => b.int(at, x),
             (Fill::Text, EllValue::Char(ch)) => b.text(at, ch.encode_utf8(&mut [0; 4])),
@@ -1018,7 +1026,7 @@ fn ell_values<'a>(lay: &mut Layouts, k: &KindSchema, e: &'a EllRec<'a>, b: &mut 
                     Some((ppu, _)) if c.fill == Fill::Phys => {
                         b.float(at, aptscope_dissector::apt::round_sig(p as f64 / ppu))
                     }
-                    Some((_, unit)) => b.text(at, unit),
+                    Some((_, unit)) => b.word(at, unit),
                     None => {}
                 }
             }

@@ -313,6 +313,10 @@ struct Scratch {
     chunk: Vec<u8>,
     dict: Dict,
     ints: IntDict,
+    /// A dictionary array's words in this chunk's order of first sight, and each word's
+    /// number here (`u32::MAX`: not seen yet).
+    order: Vec<u32>,
+    renum: Vec<u32>,
     snappy: Option<snap::raw::Encoder>,
 }
 
@@ -404,13 +408,30 @@ impl Scratch {
         // A dictionary for text and bytes where the properties give one and it stays small,
         // and for integers with few distinct values (their pages are then a few bits a value
         // for Snappy to compress instead of 4 or 8 bytes; every reader reads a dictionary).
-        let byte_vals = as_bytes(values);
+        // A dictionary array (of words, crate::words): its text is the dictionary, renumbered
+        // by first sight in this chunk as one made from the text would be.
+        let keyed = values.as_dictionary_opt::<Int32Type>();
+        let byte_vals = match keyed {
+            Some(d) => Some(as_bytes(d.values().as_ref()).ok_or_else(|| {
+                ParquetError::General(format!(
+                    "{path}: a dictionary of {}",
+                    d.values().data_type()
+                ))
+            })?),
+            None => as_bytes(values),
+        };
         self.dict.clear();
         self.keys.clear();
+        self.order.clear();
         // (No values, no dictionary: an empty dictionary page is one more thing for readers.)
         let dict = sel.len() > 0
-            && match &byte_vals {
-                Some(b) if props.dictionary_enabled(path) => {
+            && match (keyed, &byte_vals) {
+                (Some(d), _) => {
+                    let (renum, order) = (&mut self.renum, &mut self.order);
+                    renumber(d, &sel, renum, order, &mut self.keys, path)?;
+                    true
+                }
+                (None, Some(b)) if props.dictionary_enabled(path) => {
                     self.keys.reserve(sel.len());
                     for k in 0..sel.len() {
                         self.keys.push(self.dict.intern(b.value(sel.at(k))));
@@ -420,16 +441,23 @@ impl Scratch {
                     }
                     self.dict.data.len() <= DICT_BYTES
                 }
-                Some(_) => false,
-                None => {
+                (None, Some(_)) => false,
+                (None, None) => {
                     self.ints.clear();
                     let (d, k) = (&mut self.ints, &mut self.keys);
                     by_prim!(values, intern_prim(&sel, d, k))?
                 }
             };
-        let dict_len = match byte_vals {
-            Some(_) => self.dict.len(),
-            None => self.ints.vals.len(),
+        let dict_len = match (keyed, &byte_vals) {
+            (Some(_), _) => self.order.len(),
+            (None, Some(_)) => self.dict.len(),
+            (None, None) => self.ints.vals.len(),
+        };
+        // The text dictionary's value `i`.
+        let (order, own) = (&self.order, &self.dict);
+        let dict_value = |i: usize| match (keyed, &byte_vals) {
+            (Some(_), Some(b)) => b.value(order[i] as usize),
+            _ => own.value(i),
         };
         let stats = match &byte_vals {
             _ if !stats_on => None,
@@ -439,7 +467,7 @@ impl Scratch {
             Some(b) => {
                 // Over the dictionary's distinct values when there is one.
                 let (lo, hi) = if dict {
-                    min_max((0..self.dict.len()).map(|i| self.dict.value(i)))
+                    min_max((0..dict_len).map(dict_value))
                 } else {
                     min_max((0..sel.len()).map(|k| b.value(sel.at(k))))
                 };
@@ -461,8 +489,7 @@ impl Scratch {
         if dict {
             self.page.clear();
             if byte_vals.is_some() {
-                for i in 0..self.dict.len() {
-                    let v = self.dict.value(i);
+                for v in (0..dict_len).map(dict_value) {
                     self.page.extend_from_slice(&(v.len() as u32).to_le_bytes());
                     self.page.extend_from_slice(v);
                 }
@@ -578,6 +605,35 @@ impl Scratch {
         };
         Ok((Bytes::from(buf), close))
     }
+}
+
+/// The selected keys of dictionary array `d` numbered by first sight (into `keys`), and its
+/// words in that order (`order`; `renum`: each word's number, `u32::MAX` until seen).
+fn renumber(
+    d: &arrow_array::DictionaryArray<Int32Type>,
+    sel: &Sel<'_>,
+    renum: &mut Vec<u32>,
+    order: &mut Vec<u32>,
+    keys: &mut Vec<u32>,
+    path: &parquet::schema::types::ColumnPath,
+) -> Result<()> {
+    let ks = d.keys().values();
+    renum.clear();
+    renum.resize(d.values().len(), u32::MAX);
+    keys.reserve(sel.len());
+    for k in 0..sel.len() {
+        let w = ks[sel.at(k)];
+        let n = usize::try_from(w)
+            .ok()
+            .and_then(|w| renum.get_mut(w))
+            .ok_or_else(|| ParquetError::General(format!("{path}: key {w} out of range")))?;
+        if *n == u32::MAX {
+            *n = order.len() as u32;
+            order.push(w as u32);
+        }
+        keys.push(*n);
+    }
+    Ok(())
 }
 
 /// The least and greatest of byte strings, as Parquet orders them (unsigned bytes); empty
@@ -762,6 +818,10 @@ fn plain(
     range: std::ops::Range<usize>,
     out: &mut Vec<u8>,
 ) -> Result<()> {
+    // (A chunk of only nulls: no values, whatever their type.)
+    if range.is_empty() {
+        return Ok(());
+    }
     if let Some(b) = as_bytes(a) {
         for k in range {
             let v = b.value(sel.at(k));
@@ -1240,6 +1300,100 @@ mod tests {
                 let whole = concat_batches(&[b.clone(), part]);
                 let got = concat_batches(&back);
                 assert_eq!(got, whole, "{rows} rows, shape {shape}");
+            }
+        }
+    }
+
+    /// Text as a dictionary array of words, as `crate::words` makes them but in another order
+    /// (last seen first) and with a word no row uses: the writer renumbers by first sight.
+    fn to_words(a: &dyn Array) -> ArrayRef {
+        let t = a.as_string::<i32>();
+        let mut seen: Vec<&str> = Vec::new();
+        for v in t.iter().flatten() {
+            if !seen.contains(&v) {
+                seen.push(v);
+            }
+        }
+        seen.reverse();
+        seen.push("unused");
+        let keys: Vec<Option<i32>> = t
+            .iter()
+            .map(|v| v.map(|v| seen.iter().position(|w| *w == v).expect("word") as i32))
+            .collect();
+        let words: ArrayRef = Arc::new(arrow_array::StringArray::from(seen));
+        Arc::new(
+            arrow_array::DictionaryArray::try_new(arrow_array::Int32Array::from(keys), words)
+                .expect("dictionary"),
+        )
+    }
+
+    /// `b` with its text columns `text`, `flags` (list items) and `diags.kind` as words.
+    fn words_batch(b: &RecordBatch) -> RecordBatch {
+        let schema = b.schema();
+        let mut fields = Vec::new();
+        let mut cols = Vec::new();
+        for (f, c) in schema.fields().iter().zip(b.columns()) {
+            let c: ArrayRef = match f.name().as_str() {
+                "text" => to_words(c.as_ref()),
+                "flags" => {
+                    let l = c.as_list::<i32>();
+                    let values = to_words(l.values().as_ref());
+                    let item = Arc::new(Field::new("item", values.data_type().clone(), true));
+                    Arc::new(
+                        ListArray::try_new(item, l.offsets().clone(), values, l.nulls().cloned())
+                            .expect("list"),
+                    )
+                }
+                "diags" => {
+                    let l = c.as_list::<i32>();
+                    let st = l.values().as_struct();
+                    let mut kids = st.columns().to_vec();
+                    kids[0] = to_words(kids[0].as_ref());
+                    let sf: Fields = st
+                        .fields()
+                        .iter()
+                        .zip(&kids)
+                        .map(|(f, k)| {
+                            Arc::new(f.as_ref().clone().with_data_type(k.data_type().clone()))
+                        })
+                        .collect();
+                    let st =
+                        arrow_array::StructArray::try_new(sf.clone(), kids, None).expect("struct");
+                    let item = Arc::new(Field::new("item", DataType::Struct(sf), true));
+                    Arc::new(
+                        ListArray::try_new(item, l.offsets().clone(), Arc::new(st), None)
+                            .expect("list"),
+                    )
+                }
+                _ => c.clone(),
+            };
+            fields.push(f.as_ref().clone().with_data_type(c.data_type().clone()));
+            cols.push(c);
+        }
+        RecordBatch::try_new(Arc::new(Schema::new(fields)), cols).expect("words batch")
+    }
+
+    /// Text given as dictionaries of words is written byte for byte as the text itself: whole
+    /// batches and slices, every null and repetition pattern, words out of order and unused.
+    #[test]
+    fn words_are_written_as_their_text() {
+        for (case, rows) in [1usize, 9, 1000, 20_001].iter().enumerate() {
+            for shape in 0..25u64 {
+                if *rows > 1000 && shape % 4 != 0 {
+                    continue;
+                }
+                let b = batch(*rows, shape, (case as u64 + 3) * 104_729 + shape);
+                let w = words_batch(&b);
+                assert_ne!(w.schema(), b.schema());
+                let t = TableProps::new(&b.schema(), writer_properties(65_536, &b.schema()))
+                    .expect("props");
+                let write = |b: &RecordBatch| {
+                    let mut w = PartWriter::new(Vec::new(), &t).expect("writer");
+                    w.write(b).expect("write");
+                    w.write(&b.slice(rows / 3, rows / 2)).expect("slice");
+                    w.finish().expect("finish")
+                };
+                assert!(write(&w) == write(&b), "{rows} rows, shape {shape}");
             }
         }
     }

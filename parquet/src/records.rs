@@ -8,6 +8,7 @@
 //! costs as much as a value.
 
 use crate::schema::records_schema;
+use crate::words::{self, Words};
 use arrow_array::types::{
     Float64Type, Int64Type, TimestampNanosecondType, UInt16Type, UInt32Type, UInt64Type, UInt8Type,
 };
@@ -22,7 +23,7 @@ use std::sync::Arc;
 
 /// Validity of a column's rows: kept from the first null on.
 #[derive(Default)]
-struct Valid {
+pub(crate) struct Valid {
     /// `None` while every row has a value.
     bits: Option<Vec<bool>>,
     rows: usize,
@@ -30,7 +31,7 @@ struct Valid {
 
 impl Valid {
     #[inline(always)]
-    fn push(&mut self, valid: bool) {
+    pub(crate) fn push(&mut self, valid: bool) {
         match &mut self.bits {
             Some(b) => b.push(valid),
             None if valid => {}
@@ -48,7 +49,7 @@ impl Valid {
         self.bits = Some(b);
     }
 
-    fn take(&mut self) -> Option<NullBuffer> {
+    pub(crate) fn take(&mut self) -> Option<NullBuffer> {
         self.rows = 0;
         self.bits.take().map(NullBuffer::from)
     }
@@ -141,6 +142,25 @@ impl Bytes {
     }
 }
 
+/// The `records` table's columns of words (message, kind and diagnostic names, directions…).
+const WORDS: [&str; 8] = [
+    "file",
+    "dir",
+    "proto",
+    "type",
+    "name",
+    "sub",
+    "kind",
+    "diagnostics.kind",
+];
+
+/// The schema of the batches: the table's, with its columns of words as dictionaries.
+fn batch_schema() -> SchemaRef {
+    static S: std::sync::OnceLock<SchemaRef> = std::sync::OnceLock::new();
+    S.get_or_init(|| Arc::new(words::words_schema(&records_schema(), &WORDS)))
+        .clone()
+}
+
 /// One `records` row: each column's value, `None` for null (`file` is the writer's, `time`
 /// is `ts_ns`).
 #[derive(Default)]
@@ -157,7 +177,7 @@ pub struct Row<'a> {
     pub name: Option<&'static str>,
     pub sub: Option<&'static str>,
     pub code: Option<&'a str>,
-    pub kind: Option<&'a str>,
+    pub kind: Option<&'static str>,
     pub src: Option<u8>,
     pub dst: Option<u8>,
     pub channel: Option<i64>,
@@ -179,15 +199,15 @@ pub struct RecordsBuf {
     ts_ns: Num<UInt64Type>,
     time: Num<TimestampNanosecondType>,
     rel_s: Num<Float64Type>,
-    dir: Bytes,
-    proto: Bytes,
-    ty: Bytes,
+    dir: Words,
+    proto: Words,
+    ty: Words,
     offset: Num<UInt64Type>,
     msgid: Num<UInt16Type>,
-    name: Bytes,
-    sub: Bytes,
+    name: Words,
+    sub: Words,
     code: Bytes,
-    kind: Bytes,
+    kind: Words,
     src: Num<UInt8Type>,
     dst: Num<UInt8Type>,
     channel: Num<Int64Type>,
@@ -195,7 +215,7 @@ pub struct RecordsBuf {
     raw: Bytes,
     /// Where each row's diagnostics end among the elements below.
     diag_ends: Vec<i32>,
-    diag_kind: Bytes,
+    diag_kind: Words,
     diag_offset: Num<UInt64Type>,
     diag_msg: Bytes,
     pair: Num<UInt64Type>,
@@ -211,7 +231,7 @@ impl RecordsBuf {
         let mut diag_ends = Vec::with_capacity(cap + 1);
         diag_ends.push(0);
         RecordsBuf {
-            schema: records_schema(),
+            schema: batch_schema(),
             file,
             rows: 0,
             stream: Num::new(cap),
@@ -219,22 +239,22 @@ impl RecordsBuf {
             ts_ns: Num::new(cap),
             time: Num::new(cap),
             rel_s: Num::new(cap),
-            dir: text(),
-            proto: text(),
-            ty: text(),
+            dir: Words::new(cap),
+            proto: Words::new(cap),
+            ty: Words::new(cap),
             offset: Num::new(cap),
             msgid: Num::new(cap),
-            name: Bytes::new(cap, 24),
-            sub: text(),
+            name: Words::new(cap),
+            sub: Words::new(cap),
             code: text(),
-            kind: Bytes::new(cap, 24),
+            kind: Words::new(cap),
             src: Num::new(cap),
             dst: Num::new(cap),
             channel: Num::new(cap),
             len: Num::new(cap),
             raw: Bytes::new(cap, 16),
             diag_ends,
-            diag_kind: Bytes::new(cap, 12),
+            diag_kind: Words::new(cap),
             diag_offset: Num::new(cap),
             diag_msg: Bytes::new(cap, 32),
             pair: Num::new(cap),
@@ -256,8 +276,18 @@ impl RecordsBuf {
     }
 
     /// One diagnostic of the row being made (before its [`Self::push`]).
-    pub fn diag(&mut self, kind: &str, offset: u64, msg: &dyn fmt::Display) {
-        self.diag_kind.text(Some(kind));
+    pub fn diag(&mut self, kind: &'static str, offset: u64, msg: &dyn fmt::Display) {
+        self.diag_kind.push(Some(kind));
+        self.diag_rest(offset, msg);
+    }
+
+    /// A diagnostic whose kind is not `'static` (a capture file's, held back).
+    pub fn diag_text(&mut self, kind: &str, offset: u64, msg: &dyn fmt::Display) {
+        self.diag_kind.push_text(kind);
+        self.diag_rest(offset, msg);
+    }
+
+    fn diag_rest(&mut self, offset: u64, msg: &dyn fmt::Display) {
         self.diag_offset.push(Some(offset));
         let m = &mut self.diag_msg;
         let _ = write!(Text(&mut m.data), "{msg}");
@@ -273,15 +303,15 @@ impl RecordsBuf {
         self.ts_ns.push(r.ts_ns);
         self.time.push(r.ts_ns.and_then(|t| i64::try_from(t).ok()));
         self.rel_s.push(r.rel_s);
-        self.dir.text(r.dir);
-        self.proto.text(r.proto);
-        self.ty.text(Some(r.ty));
+        self.dir.push(r.dir);
+        self.proto.push(r.proto);
+        self.ty.push(Some(r.ty));
         self.offset.push(r.offset);
         self.msgid.push(r.msgid);
-        self.name.text(r.name);
-        self.sub.text(r.sub);
+        self.name.push(r.name);
+        self.sub.push(r.sub);
         self.code.text(r.code);
-        self.kind.text(r.kind);
+        self.kind.push(r.kind);
         self.src.push(r.src);
         self.dst.push(r.dst);
         self.channel.push(r.channel);
@@ -305,21 +335,21 @@ impl RecordsBuf {
         // By name: the vector below is in schema order, the types are the schema's.
         let dt = |name: &str| s.field_with_name(name).map(|f| f.data_type());
         let cols: Vec<ArrayRef> = vec![
-            Arc::new(StringArray::new_repeated(&*self.file, rows)),
+            words::repeated(&self.file, rows),
             b.stream.take(dt("stream")?),
             b.n.take(dt("n")?),
             b.ts_ns.take(dt("ts_ns")?),
             b.time.take(dt("time")?),
             b.rel_s.take(dt("rel_s")?),
-            b.dir.take_text()?,
-            b.proto.take_text()?,
-            b.ty.take_text()?,
+            b.dir.take()?,
+            b.proto.take()?,
+            b.ty.take()?,
             b.offset.take(dt("offset")?),
             b.msgid.take(dt("msgid")?),
-            b.name.take_text()?,
-            b.sub.take_text()?,
+            b.name.take()?,
+            b.sub.take()?,
             b.code.take_text()?,
-            b.kind.take_text()?,
+            b.kind.take()?,
             b.src.take(dt("src")?),
             b.dst.take(dt("dst")?),
             b.channel.take(dt("channel")?),
@@ -344,7 +374,7 @@ impl RecordsBuf {
         };
         let u64_type = DataType::UInt64;
         let parts = vec![
-            self.diag_kind.take_text()?,
+            self.diag_kind.take()?,
             self.diag_offset.take(&u64_type),
             self.diag_msg.take_text()?,
         ];
@@ -405,6 +435,10 @@ mod tests {
             ..Row::default()
         });
         let t = b.take().expect("batch");
+        assert_eq!(t.schema(), batch_schema());
+        assert_eq!(words::declared_schema(&t.schema()), *records_schema());
+        // Read as the table's text (its columns of words are dictionaries).
+        let t = words::declared(&t).expect("declared");
         assert_eq!(t.schema(), records_schema());
         assert_eq!(t.num_rows(), 3);
         let col = |n: &str| t.column_by_name(n).expect(n).clone();
@@ -439,7 +473,7 @@ mod tests {
             ty: "units",
             ..Row::default()
         });
-        let t = b.take().expect("batch");
+        let t = words::declared(&b.take().expect("batch")).expect("declared");
         assert_eq!(t.num_rows(), 1);
         assert_eq!(t.column(0).as_string::<i32>().value(0), "cap.bin");
         assert_eq!(

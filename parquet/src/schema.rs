@@ -118,6 +118,10 @@ pub struct KindSchema {
     pub name: String,
     /// The Arrow schema (keys first).
     pub schema: SchemaRef,
+    /// The schema of the batches the writer makes: [`Self::schema`] with its columns of words
+    /// (the key `file`, enum labels, flag names, units, status names: text from the tables) as
+    /// dictionaries ([`crate::words`]).
+    pub batch: SchemaRef,
     /// Field columns, in schema order after [`KEYS`].
     pub cols: Vec<Col>,
     /// Its place in [`Kinds::all`] (kinds sorted by name): writers keep their tables in a
@@ -311,6 +315,7 @@ impl Builder {
     fn finish(self, name: String) -> KindSchema {
         let mut fields = key_fields();
         let mut taken: Vec<String> = KEYS.iter().map(|s| s.to_string()).collect();
+        let mut words = vec!["file".to_string()];
         for (c, m) in self.cols.iter().zip(self.meta) {
             let mut n = format!("{}{}", c.field, c.suffix);
             // A field named like a key column (or a derived column) keeps its data apart.
@@ -318,11 +323,20 @@ impl Builder {
                 n.push_str("_field");
             }
             taken.push(n.clone());
+            if matches!(
+                c.fill,
+                Fill::EnumLabel | Fill::FlagNames | Fill::PhysUnit | Fill::StatusName
+            ) {
+                words.push(n.clone());
+            }
             fields.push(AField::new(n, c.dt.clone(), true).with_metadata(m));
         }
+        let schema = Schema::new(fields);
+        let words: Vec<&str> = words.iter().map(String::as_str).collect();
         KindSchema {
             name,
-            schema: Arc::new(Schema::new(fields)),
+            batch: Arc::new(crate::words::words_schema(&schema, &words)),
+            schema: Arc::new(schema),
             cols: self.cols,
             index: 0,
         }

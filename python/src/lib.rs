@@ -344,9 +344,9 @@ struct QueueSink(BatchQueue);
 
 impl Sink for QueueSink {
     fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
-        self.0
-            .borrow_mut()
-            .push_back((table.to_string(), batch.clone()));
+        // The table's own types: its columns of words as text.
+        let batch = aptscope_parquet::words::declared(batch).map_err(io::Error::other)?;
+        self.0.borrow_mut().push_back((table.to_string(), batch));
         Ok(())
     }
 }

@@ -8,7 +8,7 @@
 //! full validation (offsets, UTF-8, nulls of non-nullable columns); each table's row groups are
 //! numbered 0, 1, 2 … and hold at most the rows per group; `records` has a row per record
 //! and its `raw` column holds exactly the captured bytes of frames and garbage; every row group
-//! written as Parquet and read back is the same batch.
+//! written as Parquet and read back is the same batch (its columns of words as text).
 
 use crate::decode_pipeline::reader;
 use crate::util::{expansion_limit, split_ctl};
@@ -34,6 +34,7 @@ struct Check {
 
 impl Sink for Check {
     fn write(&mut self, table: &str, part: u32, batch: &RecordBatch) -> io::Result<()> {
+        let words = batch;
         let next = self.parts.entry(table.to_string()).or_default();
         assert_eq!(part, *next, "{table}: row groups numbered in order");
         *next += 1;
@@ -54,6 +55,9 @@ impl Sink for Check {
                 f.name()
             );
         }
+        // The table's declared types (its columns of words as text), as readers get them.
+        let plain = aptscope_parquet::words::declared(batch).expect("declared");
+        let batch = &plain;
         if table == "records" {
             self.records += batch.num_rows() as u64;
             let raw = batch.column_by_name("raw").expect("raw").as_binary::<i32>();
@@ -65,10 +69,11 @@ impl Sink for Check {
                 }
             }
         }
-        // Parquet as the dataset writes it, read back: the same rows and schema.
+        // Parquet as the dataset writes it (from the words), read back: the same rows and
+        // schema as the declared batch.
         let bytes = TableWriter::new(self.rows_per_group, &batch.schema())
             .expect("table writer")
-            .write(Vec::new(), batch)
+            .write(Vec::new(), words)
             .expect("write");
         let r = ParquetRecordBatchReaderBuilder::try_new(bytes::Bytes::from(bytes))
             .expect("parquet")
