@@ -141,6 +141,7 @@ impl<W: Write + Send> PartWriter<W> {
     /// Write `batch` as one row group.
     pub fn write(&mut self, batch: &RecordBatch) -> Result<()> {
         let mut rg = self.file.next_row_group()?;
+        self.scratch.levels_of = None;
         let mut leaf = 0;
         let schema = batch.schema();
         for (field, col) in schema.fields().iter().zip(batch.columns()) {
@@ -306,6 +307,9 @@ struct Scratch {
     rep: Vec<u8>,
     /// The values written (when not a plain range), and their dictionary numbers.
     sel: Vec<u32>,
+    /// The list whose levels (of a struct field without nulls) `def`, `rep` and `sel` hold,
+    /// by address: valid within one batch ([`PartWriter::write`] forgets it).
+    levels_of: Option<usize>,
     keys: Vec<u32>,
     /// A page being made, compressed, and the chunk's pages.
     page: Vec<u8>,
@@ -324,6 +328,16 @@ impl Scratch {
     /// Levels and the selection of values of `l` (`rows` rows). A top-level column keeps no
     /// levels here: its definition levels are its validity bitmap ([`Scratch::chunk`]).
     fn levels(&mut self, l: &Leaf<'_>, rows: usize) {
+        // The fields of a list of structs have the same levels unless their own values may be
+        // null (the diagnostics' kind, offset and message): worked out once for them all.
+        let same = l
+            .list
+            .filter(|_| l.child.is_none())
+            .map(|a| a as *const ListArray as usize);
+        if same.is_some() && same == self.levels_of {
+            return;
+        }
+        self.levels_of = same;
         self.def.clear();
         self.rep.clear();
         self.sel.clear();
