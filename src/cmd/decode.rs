@@ -107,6 +107,7 @@ pub(crate) fn run(a: DecodeArgs) -> Result<()> {
     let out = match (to, json, output) {
         (Some(ToArg::Parquet), _, Some(dir)) => {
             aptscope_parquet::prepare_dir(&dir, force)?;
+            aptscope_parquet::settle_allocator();
             batch::Output::Parquet(dir)
         }
         (Some(ToArg::Parquet), _, None) => {
