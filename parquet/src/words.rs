@@ -25,19 +25,34 @@ pub fn dict_type() -> DataType {
     DataType::Dictionary(Box::new(DataType::Int32), Box::new(DataType::Utf8))
 }
 
+/// Slots of [`WordSet`]'s cache of addresses.
+const SLOTS: usize = 64;
+
 /// The set of words of a row group, numbered in order of first sight.
-#[derive(Default)]
 pub struct WordSet {
     words: Vec<Box<str>>,
     /// `'static` words by address and length (such a string stays where it is, so an address
-    /// is never another word's), then any by text (the same word at two addresses, or a word
-    /// that is not `'static`, is one number).
+    /// is never another word's): a direct-mapped cache first (a row's flag names are a dozen
+    /// different words in turn, each a probe of one slot), then a map; then any word by its
+    /// text (the same word at two addresses, or a word that is not `'static`, is one number).
+    cache: [(usize, usize, i32); SLOTS],
     by_addr: NumMap<(usize, usize), i32>,
     by_text: NumMap<Box<str>, i32>,
-    /// The last `'static` word's address, length and number: runs of one word skip the maps.
-    last: (usize, usize, i32),
     /// The last word found by its text.
     last_text: Option<i32>,
+}
+
+impl Default for WordSet {
+    fn default() -> Self {
+        WordSet {
+            words: Vec::new(),
+            // Address 0 is no string's.
+            cache: [(0, 0, 0); SLOTS],
+            by_addr: NumMap::default(),
+            by_text: NumMap::default(),
+            last_text: None,
+        }
+    }
 }
 
 impl WordSet {
@@ -45,9 +60,15 @@ impl WordSet {
     #[inline(always)]
     pub fn key(&mut self, w: &'static str) -> i32 {
         let a = (w.as_ptr() as usize, w.len());
-        if a == (self.last.0, self.last.1) {
-            return self.last.2;
+        // The table's strings lie a few to a few dozen bytes apart.
+        let slot = &mut self.cache[(a.0 ^ (a.0 >> 6)) % SLOTS];
+        if (slot.0, slot.1) == a {
+            return slot.2;
         }
+        self.key_miss(w, a)
+    }
+
+    fn key_miss(&mut self, w: &'static str, a: (usize, usize)) -> i32 {
         let k = match self.by_addr.get(&a) {
             Some(&k) => k,
             None => {
@@ -56,7 +77,7 @@ impl WordSet {
                 k
             }
         };
-        self.last = (a.0, a.1, k);
+        self.cache[(a.0 ^ (a.0 >> 6)) % SLOTS] = (a.0, a.1, k);
         k
     }
 
@@ -88,7 +109,7 @@ impl WordSet {
     pub fn take(&mut self) -> StringArray {
         self.by_addr.clear();
         self.by_text.clear();
-        self.last = (0, 0, 0);
+        self.cache = [(0, 0, 0); SLOTS];
         self.last_text = None;
         StringArray::from_iter_values(std::mem::take(&mut self.words).iter())
     }
