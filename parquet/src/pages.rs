@@ -423,7 +423,9 @@ impl Scratch {
         // and for integers with few distinct values (their pages are then a few bits a value
         // for Snappy to compress instead of 4 or 8 bytes; every reader reads a dictionary).
         // A dictionary array (of words, crate::words): its text is the dictionary, renumbered
-        // by first sight in this chunk as one made from the text would be.
+        // by first sight in this chunk as one made from the text would be (whatever the
+        // properties say: words are few distinct values, and the dataset's text columns all
+        // have dictionaries).
         let keyed = values.as_dictionary_opt::<Int32Type>();
         let byte_vals = match keyed {
             Some(d) => Some(as_bytes(d.values().as_ref()).ok_or_else(|| {

@@ -21,7 +21,7 @@ use arrow_schema::{ArrowError, DataType, FieldRef, Fields, Schema, SchemaRef};
 use std::sync::Arc;
 
 /// The dictionary type of a column of words.
-pub fn dict_type() -> DataType {
+pub(crate) fn dict_type() -> DataType {
     DataType::Dictionary(Box::new(DataType::Int32), Box::new(DataType::Utf8))
 }
 
@@ -29,7 +29,7 @@ pub fn dict_type() -> DataType {
 const SLOTS: usize = 64;
 
 /// The set of words of a row group, numbered in order of first sight.
-pub struct WordSet {
+pub(crate) struct WordSet {
     words: Vec<Box<str>>,
     /// `'static` words by address and length (such a string stays where it is, so an address
     /// is never another word's): a direct-mapped cache first (a row's flag names are a dozen
@@ -58,7 +58,7 @@ impl Default for WordSet {
 impl WordSet {
     /// The number of `w`, added if new.
     #[inline(always)]
-    pub fn key(&mut self, w: &'static str) -> i32 {
+    pub(crate) fn key(&mut self, w: &'static str) -> i32 {
         let a = (w.as_ptr() as usize, w.len());
         // The table's strings lie a few to a few dozen bytes apart.
         let slot = &mut self.cache[(a.0 ^ (a.0 >> 6)) % SLOTS];
@@ -82,7 +82,7 @@ impl WordSet {
     }
 
     /// The number of `w` found by its text (a word that is not `'static`).
-    pub fn key_text(&mut self, w: &str) -> i32 {
+    pub(crate) fn key_text(&mut self, w: &str) -> i32 {
         // Runs of one word (a stage's unit) skip the hashing.
         if let Some(k) = self.last_text {
             if self.words.get(k as usize).is_some_and(|x| **x == *w) {
@@ -106,7 +106,7 @@ impl WordSet {
 
     /// The words as a text array; the set is empty afterwards (the next row group numbers
     /// its own from 0).
-    pub fn take(&mut self) -> StringArray {
+    pub(crate) fn take(&mut self) -> StringArray {
         self.by_addr.clear();
         self.by_text.clear();
         self.cache = [(0, 0, 0); SLOTS];
@@ -117,7 +117,7 @@ impl WordSet {
 
 /// A column of words: each row's number in its [`WordSet`].
 #[derive(Default)]
-pub struct Words {
+pub(crate) struct Words {
     keys: Vec<i32>,
     valid: Valid,
     set: WordSet,
@@ -125,7 +125,7 @@ pub struct Words {
 
 impl Words {
     /// With room for `cap` rows.
-    pub fn new(cap: usize) -> Self {
+    pub(crate) fn new(cap: usize) -> Self {
         Words {
             keys: Vec::with_capacity(cap),
             ..Words::default()
@@ -134,7 +134,7 @@ impl Words {
 
     /// A row's word, or null.
     #[inline(always)]
-    pub fn push(&mut self, w: Option<&'static str>) {
+    pub(crate) fn push(&mut self, w: Option<&'static str>) {
         self.valid.push(w.is_some());
         let k = match w {
             Some(w) => self.set.key(w),
@@ -144,24 +144,19 @@ impl Words {
     }
 
     /// A row's word that is not `'static` (found by its text).
-    pub fn push_text(&mut self, w: &str) {
+    pub(crate) fn push_text(&mut self, w: &str) {
         self.valid.push(true);
         let k = self.set.key_text(w);
         self.keys.push(k);
     }
 
     /// Rows held.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.keys.len()
     }
 
-    /// Whether it holds no rows.
-    pub fn is_empty(&self) -> bool {
-        self.keys.is_empty()
-    }
-
     /// The rows as a dictionary array; empty afterwards, with room for as many rows.
-    pub fn take(&mut self) -> Result<ArrayRef, ArrowError> {
+    pub(crate) fn take(&mut self) -> Result<ArrayRef, ArrowError> {
         let n = self.keys.len();
         let keys = std::mem::replace(&mut self.keys, Vec::with_capacity(n));
         let keys = Int32Array::new(ScalarBuffer::from(keys), self.valid.take());
@@ -173,7 +168,7 @@ impl Words {
 }
 
 /// `rows` rows of one text: a dictionary array of one word (the `file` column).
-pub fn repeated(text: &str, rows: usize) -> ArrayRef {
+pub(crate) fn repeated(text: &str, rows: usize) -> ArrayRef {
     let keys = Int32Array::new(ScalarBuffer::from(vec![0; rows]), None);
     let words: ArrayRef = Arc::new(StringArray::from(vec![text]));
     Arc::new(DictionaryArray::<Int32Type>::new(keys, words))
@@ -181,7 +176,7 @@ pub fn repeated(text: &str, rows: usize) -> ArrayRef {
 
 /// `s` with the text columns named in `paths` (`a`, or `a.b` for field `b` of the structs in
 /// list `a`) as dictionaries of words: the schema of the batches a buffer of words makes.
-pub fn words_schema(s: &Schema, paths: &[&str]) -> Schema {
+pub(crate) fn words_schema(s: &Schema, paths: &[&str]) -> Schema {
     let field = |f: &FieldRef, prefix: &str| -> FieldRef {
         let path = format!("{prefix}{}", f.name());
         let dt = match f.data_type() {
