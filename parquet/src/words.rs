@@ -177,12 +177,12 @@ pub(crate) fn repeated(text: &str, rows: usize) -> ArrayRef {
 /// `s` with the text columns named in `paths` (`a`, or `a.b` for field `b` of the structs in
 /// list `a`) as dictionaries of words: the schema of the batches a buffer of words makes.
 pub(crate) fn words_schema(s: &Schema, paths: &[&str]) -> Schema {
-    let field = |f: &FieldRef, prefix: &str| -> FieldRef {
-        let path = format!("{prefix}{}", f.name());
+    let field = |f: &FieldRef| -> FieldRef {
+        let path = f.name().as_str();
         let dt = match f.data_type() {
-            DataType::Utf8 if paths.contains(&path.as_str()) => dict_type(),
+            DataType::Utf8 if paths.contains(&path) => dict_type(),
             DataType::List(item) => match item.data_type() {
-                DataType::Utf8 if paths.contains(&path.as_str()) => {
+                DataType::Utf8 if paths.contains(&path) => {
                     DataType::List(Arc::new(item.as_ref().clone().with_data_type(dict_type())))
                 }
                 DataType::Struct(fs) => {
@@ -206,7 +206,7 @@ pub(crate) fn words_schema(s: &Schema, paths: &[&str]) -> Schema {
         };
         Arc::new(f.as_ref().clone().with_data_type(dt))
     };
-    let fields: Fields = s.fields().iter().map(|f| field(f, "")).collect();
+    let fields: Fields = s.fields().iter().map(field).collect();
     Schema::new_with_metadata(fields, s.metadata().clone())
 }
 
