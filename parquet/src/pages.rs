@@ -141,10 +141,13 @@ impl<W: Write + Send> PartWriter<W> {
     /// Write `batch` as one row group.
     pub fn write(&mut self, batch: &RecordBatch) -> Result<()> {
         let mut rg = self.file.next_row_group()?;
-        self.scratch.levels_of = None;
         let mut leaf = 0;
         let schema = batch.schema();
         for (field, col) in schema.fields().iter().zip(batch.columns()) {
+            // The fields of a list of structs have the list's levels unless their own values
+            // may be null (the diagnostics' kind, offset and message): worked out once for
+            // them all.
+            let mut list_levels = false;
             for l in leaves(field, col)? {
                 let descr = self
                     .leaves
@@ -162,6 +165,10 @@ impl<W: Write + Send> PartWriter<W> {
                         descr.max_rep_level()
                     )));
                 }
+                if !(list_levels && l.child.is_none()) {
+                    self.scratch.levels(&l, batch.num_rows());
+                }
+                list_levels = l.list.is_some() && l.child.is_none();
                 let (chunk, close) =
                     self.scratch
                         .chunk(&l, batch.num_rows(), descr, &self.props)?;
@@ -307,9 +314,6 @@ struct Scratch {
     rep: Vec<u8>,
     /// The values written (when not a plain range), and their dictionary numbers.
     sel: Vec<u32>,
-    /// The list whose levels (of a struct field without nulls) `def`, `rep` and `sel` hold,
-    /// by address: valid within one batch ([`PartWriter::write`] forgets it).
-    levels_of: Option<usize>,
     keys: Vec<u32>,
     /// A page being made, compressed, and the chunk's pages.
     page: Vec<u8>,
@@ -328,16 +332,6 @@ impl Scratch {
     /// Levels and the selection of values of `l` (`rows` rows). A top-level column keeps no
     /// levels here: its definition levels are its validity bitmap ([`Scratch::chunk`]).
     fn levels(&mut self, l: &Leaf<'_>, rows: usize) {
-        // The fields of a list of structs have the same levels unless their own values may be
-        // null (the diagnostics' kind, offset and message): worked out once for them all.
-        let same = l
-            .list
-            .filter(|_| l.child.is_none())
-            .map(|a| a as *const ListArray as usize);
-        if same.is_some() && same == self.levels_of {
-            return;
-        }
-        self.levels_of = same;
         self.def.clear();
         self.rep.clear();
         self.sel.clear();
@@ -386,7 +380,8 @@ impl Scratch {
         }
     }
 
-    /// The column chunk of leaf `l` of a `rows`-row batch, and what its footer entry says.
+    /// The column chunk of leaf `l` of a `rows`-row batch (its [`Scratch::levels`] worked
+    /// out), and what its footer entry says.
     fn chunk(
         &mut self,
         l: &Leaf<'_>,
@@ -394,7 +389,6 @@ impl Scratch {
         descr: ColumnDescPtr,
         props: &WriterProperties,
     ) -> Result<(Bytes, ColumnCloseResult)> {
-        self.levels(l, rows);
         let flat = l.list.is_none();
         let flat_nulls = flat_nulls(l);
         let entries = if flat { rows } else { self.def.len() };
