@@ -43,7 +43,7 @@ use aptscope_dissector::record::{AptRec, EllRec, Record};
 use aptscope_dissector::table::{Dir, Field as AptField};
 use aptscope_dissector::Table;
 use arrow_array::RecordBatch;
-use arrow_schema::{DataType, Schema};
+use arrow_schema::{DataType, Schema, SchemaRef};
 use buf::TableBuf;
 use parquet::arrow::ArrowWriter;
 use parquet::basic::Compression;
@@ -193,8 +193,16 @@ pub struct DirSink {
 pub enum TableWriter {
     /// Page by page ([`pages::supports`] the schema).
     Pages(pages::TableProps),
+    /// By the Arrow writer, with the table's schema.
+    Arrow(Box<WriterProperties>, SchemaRef),
+}
+
+/// A table's Parquet file being written: row groups one by one, then the footer.
+pub enum TableFile<W: io::Write + Send> {
+    /// Page by page.
+    Pages(Box<pages::PartWriter<W>>),
     /// By the Arrow writer.
-    Arrow(Box<WriterProperties>),
+    Arrow(Box<ArrowWriter<W>>),
 }
 
 impl TableWriter {
@@ -204,25 +212,49 @@ impl TableWriter {
         Ok(if pages::supports(schema) {
             TableWriter::Pages(pages::TableProps::new(schema, p).map_err(perr)?)
         } else {
-            TableWriter::Arrow(Box::new(p))
+            TableWriter::Arrow(Box::new(p), Arc::new(schema.clone()))
+        })
+    }
+
+    /// A file of the table into `out`.
+    pub fn open<W: io::Write + Send>(&self, out: W) -> io::Result<TableFile<W>> {
+        Ok(match self {
+            TableWriter::Pages(t) => {
+                TableFile::Pages(Box::new(pages::PartWriter::new(out, t).map_err(perr)?))
+            }
+            TableWriter::Arrow(p, schema) => TableFile::Arrow(Box::new(
+                ArrowWriter::try_new(out, schema.clone(), Some((**p).clone())).map_err(perr)?,
+            )),
         })
     }
 
     /// `batch` as a Parquet file of one row group into `out`.
     pub fn write<W: io::Write + Send>(&self, out: W, batch: &RecordBatch) -> io::Result<W> {
+        let mut f = self.open(out)?;
+        f.write(batch)?;
+        f.finish()
+    }
+}
+
+impl<W: io::Write + Send> TableFile<W> {
+    /// `batch` as one row group.
+    pub fn write(&mut self, batch: &RecordBatch) -> io::Result<()> {
         match self {
-            TableWriter::Pages(t) => {
-                let mut w = pages::PartWriter::new(out, t).map_err(perr)?;
-                w.write(batch).map_err(perr)?;
-                w.finish().map_err(perr)
+            TableFile::Pages(w) => w.write(batch).map_err(perr),
+            TableFile::Arrow(w) => {
+                // The Arrow writer takes the table's own types (text, not words).
+                w.write(&words::declared(batch).map_err(perr)?)
+                    .map_err(perr)?;
+                w.flush().map_err(perr)
             }
-            TableWriter::Arrow(p) => {
-                let batch = words::declared(batch).map_err(perr)?;
-                let mut w =
-                    ArrowWriter::try_new(out, batch.schema(), Some((**p).clone())).map_err(perr)?;
-                w.write(&batch).map_err(perr)?;
-                w.into_inner().map_err(perr)
-            }
+        }
+    }
+
+    /// Write the footer; the output back.
+    pub fn finish(self) -> io::Result<W> {
+        match self {
+            TableFile::Pages(w) => w.finish().map_err(perr),
+            TableFile::Arrow(w) => w.into_inner().map_err(perr),
         }
     }
 }
@@ -269,13 +301,7 @@ impl Sink for DirSink {
 /// Keeps one in-memory Parquet file per table.
 pub struct MemSink {
     rows: usize,
-    tables: BTreeMap<String, MemTable>,
-}
-
-/// A table's in-memory file, written as [`TableWriter`] writes part files.
-enum MemTable {
-    Pages(Box<pages::PartWriter<Vec<u8>>>),
-    Arrow(Box<ArrowWriter<Vec<u8>>>),
+    tables: BTreeMap<String, TableFile<Vec<u8>>>,
 }
 
 impl MemSink {
@@ -291,13 +317,7 @@ impl MemSink {
     pub fn finish(self) -> io::Result<Vec<(String, Vec<u8>)>> {
         self.tables
             .into_iter()
-            .map(|(k, w)| {
-                let bytes = match w {
-                    MemTable::Pages(w) => w.finish().map_err(perr)?,
-                    MemTable::Arrow(w) => w.into_inner().map_err(perr)?,
-                };
-                Ok((k, bytes))
-            })
+            .map(|(k, f)| Ok((k, f.finish()?)))
             .collect()
     }
 }
@@ -305,26 +325,14 @@ impl MemSink {
 impl Sink for MemSink {
     fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
         if !self.tables.contains_key(table) {
-            let schema = Arc::new(words::declared_schema(&batch.schema()));
-            let w = match TableWriter::new(self.rows, &schema)? {
-                TableWriter::Pages(t) => MemTable::Pages(Box::new(
-                    pages::PartWriter::new(Vec::new(), &t).map_err(perr)?,
-                )),
-                TableWriter::Arrow(p) => MemTable::Arrow(Box::new(
-                    ArrowWriter::try_new(Vec::new(), schema, Some(*p)).map_err(perr)?,
-                )),
-            };
-            self.tables.insert(table.to_string(), w);
+            let schema = words::declared_schema(&batch.schema());
+            let f = TableWriter::new(self.rows, &schema)?.open(Vec::new())?;
+            self.tables.insert(table.to_string(), f);
         }
-        match self.tables.get_mut(table) {
-            Some(MemTable::Pages(w)) => w.write(batch).map_err(perr),
-            Some(MemTable::Arrow(w)) => {
-                w.write(&words::declared(batch).map_err(perr)?)
-                    .map_err(perr)?;
-                w.flush().map_err(perr)
-            }
-            None => Err(io::Error::other("table vanished")),
-        }
+        self.tables
+            .get_mut(table)
+            .ok_or_else(|| io::Error::other("table vanished"))?
+            .write(batch)
     }
 }
 
