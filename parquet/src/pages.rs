@@ -1004,9 +1004,10 @@ fn uleb(out: &mut Vec<u8>, mut v: u64) {
 }
 
 /// A dictionary of byte strings: the distinct values in order of first sight, found again
-/// through an open-addressing table of their hashes.
+/// through an open-addressing table of their hashes (also the text of a [`crate::words`]
+/// set). [`Dict::clear_with`] it before its first use.
 #[derive(Default)]
-struct Dict {
+pub(crate) struct Dict {
     /// The values, one after the other, and where each starts (and the last ends).
     data: Vec<u8>,
     starts: Vec<u32>,
@@ -1019,26 +1020,31 @@ struct Dict {
 
 impl Dict {
     fn clear(&mut self) {
+        self.clear_with(1024);
+    }
+
+    /// Empty, with a table of `slots` (a power of two) to start with.
+    pub(crate) fn clear_with(&mut self, slots: usize) {
         self.data.clear();
         self.starts.clear();
         self.starts.push(0);
         self.slots.clear();
-        self.slots.resize(1024, (0, 0));
+        self.slots.resize(slots, (0, 0));
         self.last = None;
     }
 
-    fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.starts.len() - 1
     }
 
     #[inline(always)]
-    fn value(&self, i: usize) -> &[u8] {
+    pub(crate) fn value(&self, i: usize) -> &[u8] {
         &self.data[self.starts[i] as usize..self.starts[i + 1] as usize]
     }
 
     /// The number of `v`, added if new.
     #[inline(always)]
-    fn intern(&mut self, v: &[u8]) -> u32 {
+    pub(crate) fn intern(&mut self, v: &[u8]) -> u32 {
         if let Some(k) = self.last {
             if self.value(k as usize) == v {
                 return k;

@@ -9,6 +9,7 @@
 //! schema for a reader of batches (Python). Measured (docs/performance.md, "Parquet, sixth
 //! pass"): interning each value's text again was a third of the page writer's time.
 
+use crate::pages::Dict;
 use crate::records::Valid;
 use aptscope_dissector::hash::NumMap;
 use arrow_array::cast::AsArray;
@@ -27,30 +28,32 @@ pub(crate) fn dict_type() -> DataType {
 
 /// Slots of [`WordSet`]'s cache of addresses.
 const SLOTS: usize = 64;
+/// Slots a [`WordSet`]'s table of text starts with: a column holds a few to a few dozen
+/// words, and a kind table of a few rows takes its batch hundreds of times in a capture of
+/// every kind (the page writer's 1,024 a chunk there were 3 % of the run's instructions).
+const WORDS_START: usize = 32;
 
 /// The set of words of a row group, numbered in order of first sight.
 pub(crate) struct WordSet {
-    words: Vec<Box<str>>,
+    /// Every word's text and number: the page writer's dictionary of byte strings (the same
+    /// word at two addresses, or a word that is not `'static`, is one number).
+    text: Dict,
     /// `'static` words by address and length (such a string stays where it is, so an address
     /// is never another word's): a direct-mapped cache first (a row's flag names are a dozen
-    /// different words in turn, each a probe of one slot), then a map; then any word by its
-    /// text (the same word at two addresses, or a word that is not `'static`, is one number).
+    /// different words in turn, each a probe of one slot), then a map, before their text.
     cache: [(usize, usize, i32); SLOTS],
     by_addr: NumMap<(usize, usize), i32>,
-    by_text: NumMap<Box<str>, i32>,
-    /// The last word found by its text.
-    last_text: Option<i32>,
 }
 
 impl Default for WordSet {
     fn default() -> Self {
+        let mut text = Dict::default();
+        text.clear_with(WORDS_START);
         WordSet {
-            words: Vec::new(),
+            text,
             // Address 0 is no string's.
             cache: [(0, 0, 0); SLOTS],
             by_addr: NumMap::default(),
-            by_text: NumMap::default(),
-            last_text: None,
         }
     }
 }
@@ -83,35 +86,21 @@ impl WordSet {
 
     /// The number of `w` found by its text (a word that is not `'static`).
     pub(crate) fn key_text(&mut self, w: &str) -> i32 {
-        // Runs of one word (a stage's unit) skip the hashing.
-        if let Some(k) = self.last_text {
-            if self.words.get(k as usize).is_some_and(|x| **x == *w) {
-                return k;
-            }
-        }
-        let k = self.key_by_text(w);
-        self.last_text = Some(k);
-        k
-    }
-
-    fn key_by_text(&mut self, w: &str) -> i32 {
-        if let Some(&k) = self.by_text.get(w) {
-            return k;
-        }
-        let k = self.words.len() as i32;
-        self.words.push(w.into());
-        self.by_text.insert(w.into(), k);
-        k
+        self.text.intern(w.as_bytes()) as i32
     }
 
     /// The words as a text array; the set is empty afterwards (the next row group numbers
     /// its own from 0).
-    pub(crate) fn take(&mut self) -> StringArray {
+    pub(crate) fn take(&mut self) -> Result<StringArray, ArrowError> {
+        let words = (0..self.text.len())
+            .map(|i| std::str::from_utf8(self.text.value(i)))
+            .collect::<Result<Vec<&str>, _>>()
+            .map_err(|e| ArrowError::ComputeError(format!("a word: {e}")))?;
+        let array = StringArray::from(words);
+        self.text.clear_with(WORDS_START);
         self.by_addr.clear();
-        self.by_text.clear();
         self.cache = [(0, 0, 0); SLOTS];
-        self.last_text = None;
-        StringArray::from_iter_values(std::mem::take(&mut self.words).iter())
+        Ok(array)
     }
 }
 
@@ -162,7 +151,7 @@ impl Words {
         let keys = Int32Array::new(ScalarBuffer::from(keys), self.valid.take());
         Ok(Arc::new(DictionaryArray::try_new(
             keys,
-            Arc::new(self.set.take()),
+            Arc::new(self.set.take()?),
         )?))
     }
 }
