@@ -130,13 +130,19 @@ impl Batch {
             },
             Record::Units(n) => Owned::Units(Box::new((*n).clone())),
             Record::Apt(a) => {
-                // The conversion of a device changes rarely: frames in a row share one copy
-                // (equal revisions are equal scales).
-                let scale = a.scale.map(|s| match self.scales.last() {
-                    Some(l) if l.revision() == s.revision() => self.scales.len() - 1,
-                    _ => {
-                        self.scales.push(s.clone());
-                        self.scales.len() - 1
+                // The conversion of a device changes rarely: frames share one copy (equal
+                // revisions are equal scales), looked for among the last few kept, as the
+                // devices of a bus take turns (not all: a stream changing scales at every frame
+                // would make that quadratic).
+                let n = self.scales.len();
+                let scale = a.scale.map(|s| {
+                    let mut seen = self.scales.iter().rev().take(8);
+                    match seen.position(|l| l.revision() == s.revision()) {
+                        Some(back) => n - 1 - back,
+                        None => {
+                            self.scales.push(s.clone());
+                            n
+                        }
                     }
                 });
                 let truncated = a.frame.has_diags()

@@ -25,6 +25,7 @@ use crate::apt::{text_of, AptFrame, Value};
 use crate::msg;
 use crate::table::{Maximum, Quantity};
 use std::fmt::Write;
+use std::sync::Arc;
 
 /// Sampling interval of brushed DC servo controllers (TDC001, KDC101, KVS30), in seconds.
 pub const DC_SERVO_T: f64 = 2048.0 / 6e6;
@@ -497,9 +498,11 @@ pub struct Scale {
     /// Counts (or microsteps) per unit.
     pub counts_per_unit: f64,
     /// `mm`, `deg`, or the unit of a custom scale.
-    pub unit: String,
+    pub unit: Arc<str>,
     /// Per quantity (in [`Quantity::ALL`] order): raw units per physical unit, and the unit.
-    per: [(Option<f64>, String); 5],
+    /// (Units shared, not owned: a scale is copied with the frames that keep it, `owned::Batch`,
+    /// and a piezo's status reports make a new one often.)
+    per: [(Option<f64>, Arc<str>); 5],
     /// The device's maxima that percentages refer to (piezo: output voltage limit in V, travel
     /// in µm), once it has reported them.
     maxima: [Option<f64>; 2],
@@ -526,7 +529,7 @@ impl Scale {
             self.family,
             self.counts_per_unit.to_bits(),
             &self.unit,
-            self.per.each_ref().map(|(x, u)| (bits(*x), u.as_str())),
+            self.per.each_ref().map(|(x, u)| (bits(*x), &**u)),
             self.maxima.map(bits),
         )
     }
@@ -585,11 +588,11 @@ impl Scale {
                 (_, Some(fam)) => fam.factor(q, counts_per_unit),
                 (_, None) => None,
             };
-            let u = match q {
-                Quantity::Pos => unit.to_string(),
-                Quantity::PosPerSec | Quantity::Vel => format!("{unit}/s"),
-                Quantity::Acc => format!("{unit}/s2"),
-                Quantity::Jerk => format!("{unit}/s3"),
+            let u: Arc<str> = match q {
+                Quantity::Pos => unit.into(),
+                Quantity::PosPerSec | Quantity::Vel => format!("{unit}/s").into(),
+                Quantity::Acc => format!("{unit}/s2").into(),
+                Quantity::Jerk => format!("{unit}/s3").into(),
             };
             (f.filter(|f| f.is_finite() && *f > 0.0), u)
         });
@@ -597,7 +600,7 @@ impl Scale {
             stage,
             family,
             counts_per_unit,
-            unit: unit.to_string(),
+            unit: unit.into(),
             per,
             maxima: [None; 2],
             revision: next_revision(),
@@ -657,7 +660,7 @@ impl Scale {
     /// A raw value of quantity `q` in physical units, with the unit.
     pub fn convert(&self, q: Quantity, raw: f64) -> Option<(f64, &str)> {
         let (f, u) = &self.per[Self::slot(q)];
-        f.map(|f| (raw / f, u.as_str()))
+        f.map(|f| (raw / f, &**u))
     }
 
     /// One line saying what applies: `MTS25-Z8: 34554.96 counts/mm, brushed DC servo rules`.
