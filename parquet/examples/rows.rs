@@ -3,10 +3,15 @@
 //! prints records per CPU-second of this thread — the part of both that is not Parquet encoding
 //! nor Python (docs/performance.md). `--text`: the columns of words turned into text, as
 //! Python gets them; `--keep`: every batch kept to the end, as `to_arrow()` keeps its tables.
-//! With TABLE names, only those tables are built.
+//! With TABLE names, only those tables are built. `--threads N` (N ≥ 2): the rows built on
+//! N threads (this one among them) from runs of 65,536 records decoded on this one ([`RowPool`], as `to_arrow()`
+//! with threads), a raw stream only; prints wall time (CPU time: run it under `time`).
 
 mod common;
 
+use aptscope_dissector::owned::Batch;
+use aptscope_dissector::record::{Ctx, Decoder};
+use aptscope_parquet::pool::RowPool;
 use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, Options, Sink};
 use arrow_array::RecordBatch;
 use std::io;
@@ -39,11 +44,19 @@ fn main() -> io::Result<()> {
         .next()
         .ok_or_else(|| io::Error::other("usage: rows CAPTURE [TABLE…]"))?;
     let mut tables: Vec<String> = args.collect();
+    let threads = tables.iter().position(|t| t == "--threads").map(|i| {
+        let n = tables.get(i + 1).and_then(|n| n.parse().ok()).unwrap_or(2);
+        tables.drain(i..(i + 2).min(tables.len()));
+        n
+    });
     let mut flag = |f: &str| {
         let had = tables.iter().any(|t| t == f);
         tables.retain(|t| t != f);
         had
     };
+    if let Some(n) = threads {
+        return pooled(&path, n, flag("--text"));
+    }
     let sink = Drop {
         rows: 0,
         text: flag("--text"),
@@ -62,6 +75,43 @@ fn main() -> io::Result<()> {
         sum.records,
         rows.rows,
         sum.records as f64 / cpu / 1e6
+    );
+    Ok(())
+}
+
+/// `--threads N`: the rows of a raw stream built on `n` threads.
+fn pooled(path: &str, n: usize, text: bool) -> io::Result<()> {
+    let bytes = std::fs::read(path)?;
+    let t0 = std::time::Instant::now();
+    let finish = if text {
+        |b: RecordBatch| aptscope_parquet::words::declared(&b).map_err(io::Error::other)
+    } else {
+        Ok
+    };
+    let opts = Options::default();
+    let mut pool = RowPool::new(n, path, opts, None, finish)?;
+    let (mut rows, mut records) = (0usize, 0u64);
+    let mut count = |g: Vec<(String, RecordBatch)>| {
+        rows += g.iter().map(|(_, b)| b.num_rows()).sum::<usize>();
+    };
+    let mut run = Batch::new();
+    let mut dec = Decoder::new(None);
+    let mut each = |r: &aptscope_dissector::record::Record<'_>| -> io::Result<()> {
+        records += 1;
+        run.push(r);
+        if run.len() >= opts.rows_per_group {
+            pool.hand_over(&mut run, &mut count)?;
+        }
+        Ok(())
+    };
+    dec.push(Ctx::default(), &bytes, &mut each)?;
+    dec.finish(&mut each)?;
+    pool.hand_over(&mut run, &mut count)?;
+    pool.ready(true, &mut count)?;
+    let wall = t0.elapsed().as_secs_f64();
+    println!(
+        "{path}: {records} records, {rows} rows in all on {n} threads, {wall:.3} s wall: {:.2} M records per second",
+        records as f64 / wall / 1e6
     );
     Ok(())
 }

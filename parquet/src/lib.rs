@@ -25,6 +25,7 @@
 mod buf;
 mod file;
 pub mod pages;
+pub mod pool;
 mod records;
 pub mod schema;
 mod threaded;

@@ -73,6 +73,7 @@ def to_arrow(
     proto: str = "auto",
     name: Optional[str] = None,
     tables: Optional[Iterable[str]] = None,
+    threads: Optional[int] = None,
 ) -> Dict[str, Any]:
     """Decode a capture into pyarrow tables: ``{"records": …, "MOT_MOVE_ABSOLUTE": …}``.
 
@@ -87,11 +88,14 @@ def to_arrow(
     for ``records`` alone on a stream of status updates). A name that is neither ``records``
     nor a message kind raises :class:`AptscopeError`; a kind absent from the capture is absent
     from the result.
+
+    ``threads``: the threads that build the rows (default: one per core; ``1``: all on the
+    calling thread). The tables are the same whatever it is.
     """
     import pyarrow as pa
 
     parts: Dict[str, list] = {"records": []}
-    for table, batch in batches(source, proto, name, tables):
+    for table, batch in batches(source, proto, name, tables, threads):
         parts.setdefault(table, []).append(batch)
     return {t: pa.Table.from_batches(b) for t, b in parts.items() if b}
 
@@ -101,13 +105,17 @@ def batches(
     proto: str = "auto",
     name: Optional[str] = None,
     tables: Optional[Iterable[str]] = None,
+    threads: Optional[int] = None,
 ) -> Iterator[Tuple[str, Any]]:
     """Yield ``(table, pyarrow.RecordBatch)`` pairs as the capture is decoded.
 
     The tables and schemas are those of :func:`to_arrow` (and of ``aptscope decode --to
-    parquet``; ``tables`` as there: only those are built); each batch is one row group (up to 65,536 rows) of one table, yielded when the
-    decoder has that many rows of it or at the end, so memory stays bounded whatever the
-    capture's size. The columns cross from Rust through the Arrow C data interface (the
+    parquet``; ``tables`` and ``threads`` as there); a table's batches, one after the other,
+    are its rows in order, each batch at most a row group (65,536 rows). The capture is decoded
+    on the calling thread and its records handed, 65,536 at a time, to the threads that build
+    the rows (``threads=1``: on the calling thread, each batch then one row group of the
+    Parquet output); batches are yielded as they are built, so memory stays bounded whatever
+    the capture's size. The columns cross from Rust through the Arrow C data interface (the
     PyCapsule protocol): no copy, no Parquet or JSON in between.
 
     >>> import aptscope, duckdb                                      # doctest: +SKIP
@@ -120,7 +128,7 @@ def batches(
     import pyarrow as pa
 
     wanted = None if tables is None else list(tables)
-    for table, batch in _aptscope.Batches(_src(source), proto, name, wanted):
+    for table, batch in _aptscope.Batches(_src(source), proto, name, wanted, threads):
         yield table, pa.record_batch(batch)
 
 

@@ -22,6 +22,7 @@ def to_arrow(
     proto: str = "auto",
     name: Optional[str] = None,
     tables: Optional[Iterable[str]] = None,
+    threads: Optional[int] = None,
 ) -> Dict[str, pyarrow.Table]:
     """Decode a capture into pyarrow tables with the schemas of ``aptscope decode --to parquet``."""
 
@@ -30,6 +31,7 @@ def batches(
     proto: str = "auto",
     name: Optional[str] = None,
     tables: Optional[Iterable[str]] = None,
+    threads: Optional[int] = None,
 ) -> Iterator[Tuple[str, pyarrow.RecordBatch]]:
     """Yield ``(table, record batch)`` pairs of :func:`to_arrow`'s tables as the capture is decoded."""
 

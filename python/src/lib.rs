@@ -12,9 +12,11 @@ use aptscope_capture::Reader;
 use aptscope_dissector::apt::{encode_named, Addr, Named};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::json;
+use aptscope_dissector::owned::Batch;
 use aptscope_dissector::record::{Ctx, Decoder, Record};
 use aptscope_dissector::table::Dir;
 use aptscope_dissector::Table;
+use aptscope_parquet::pool::{RowPool, Wanted};
 use aptscope_parquet::schema::{Kinds, RECORDS};
 use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, DirSink, Options, Sink};
 use arrow_array::{Array, RecordBatch, StructArray};
@@ -25,11 +27,12 @@ use pyo3::exceptions::{PyFileNotFoundError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyBytes, PyCapsule, PyDict, PyFloat, PyInt, PyList, PyString};
 use std::cell::RefCell;
-use std::collections::{HashMap, VecDeque};
+use std::collections::{HashMap, HashSet, VecDeque};
 use std::convert::Infallible;
 use std::io;
 use std::path::Path;
 use std::rc::Rc;
+use std::sync::Arc;
 
 create_exception!(
     _aptscope,
@@ -339,16 +342,47 @@ impl json::Sink for PySink<'_, '_> {
 /// Row groups as the writer flushes them, by table, for [`Batches`] to hand out.
 type BatchQueue = Rc<RefCell<VecDeque<(String, RecordBatch)>>>;
 
+/// A row group's columns of words as text: the table's own types.
+fn declared(batch: RecordBatch) -> io::Result<RecordBatch> {
+    aptscope_parquet::words::declared(&batch).map_err(io::Error::other)
+}
+
 /// A [`Sink`] that queues each row group as an Arrow record batch (no Parquet encoding).
 struct QueueSink(BatchQueue);
 
 impl Sink for QueueSink {
     fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
-        // The table's own types: its columns of words as text.
-        let batch = aptscope_parquet::words::declared(batch).map_err(io::Error::other)?;
-        self.0.borrow_mut().push_back((table.to_string(), batch));
+        self.0
+            .borrow_mut()
+            .push_back((table.to_string(), declared(batch.clone())?));
         Ok(())
     }
+}
+
+/// Records per run handed to a thread that builds rows: a `records` row group, so that table's
+/// batches are whole row groups as with one thread. `APTSCOPE_BATCH_RECORDS` sets it (as for
+/// `aptscope decode -j`): the tests cut small samples into many runs.
+fn run_records() -> usize {
+    std::env::var("APTSCOPE_BATCH_RECORDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .filter(|n| *n > 0)
+        .unwrap_or(Options::default().rows_per_group)
+}
+
+/// Where the rows are built: on this thread, or on a pool's threads from runs of records.
+enum Rows {
+    One(Box<CaptureWriter<QueueSink>>),
+    Pool {
+        pool: Box<RowPool>,
+        /// The run being gathered.
+        run: Batch,
+        /// Records and bytes a run holds at most.
+        records: usize,
+        bytes: usize,
+        /// Whether the source is decoded to its end (the pool may still be building).
+        decoded: bool,
+    },
 }
 
 /// The tables of one source as `(table, batch)` pairs, each batch a row group of the Parquet
@@ -357,19 +391,20 @@ impl Sink for QueueSink {
 #[pyclass(unsendable)]
 struct Batches {
     input: Input,
-    w: Option<CaptureWriter<QueueSink>>,
+    rows: Option<Rows>,
     queue: BatchQueue,
 }
 
 #[pymethods]
 impl Batches {
     #[new]
-    #[pyo3(signature = (source_obj, proto = "auto", name = None, tables = None))]
+    #[pyo3(signature = (source_obj, proto = "auto", name = None, tables = None, threads = None))]
     fn new(
         source_obj: &Bound<'_, PyAny>,
         proto: &str,
         name: Option<String>,
         tables: Option<Vec<String>>,
+        threads: Option<usize>,
     ) -> PyResult<Self> {
         // Checked before the source is opened: a misspelt table is an error, not no rows.
         if let Some(t) = &tables {
@@ -386,15 +421,32 @@ impl Batches {
         let label = name.unwrap_or(label);
         let queue = BatchQueue::default();
         let opts = Options::default();
-        let mut w = CaptureWriter::new(QueueSink(queue.clone()), &label, opts);
-        if let Some(t) = tables {
-            // Only these are built: the others cost nothing.
-            let keep: std::collections::HashSet<String> = t.into_iter().collect();
-            w.only_tables(move |n| keep.contains(n));
-        }
+        // Only these are built: the others cost nothing.
+        let wanted: Option<Wanted> = tables.map(|t| {
+            let keep: HashSet<String> = t.into_iter().collect();
+            Arc::new(move |n: &str| keep.contains(n)) as Wanted
+        });
+        let threads = threads
+            .or_else(|| std::thread::available_parallelism().ok().map(usize::from))
+            .unwrap_or(1);
+        let rows = if threads > 1 {
+            Rows::Pool {
+                pool: Box::new(RowPool::new(threads, &label, opts, wanted, declared).map_err(err)?),
+                run: Batch::new(),
+                records: run_records(),
+                bytes: opts.bytes_per_group,
+                decoded: false,
+            }
+        } else {
+            let mut w = CaptureWriter::new(QueueSink(queue.clone()), &label, opts);
+            if let Some(f) = wanted {
+                w.only_tables(move |n| f(n));
+            }
+            Rows::One(Box::new(w))
+        };
         Ok(Batches {
             input,
-            w: Some(w),
+            rows: Some(rows),
             queue,
         })
     }
@@ -403,15 +455,26 @@ impl Batches {
         slf
     }
 
-    fn __next__(&mut self) -> PyResult<Option<(String, ArrowBatch)>> {
+    fn __next__(&mut self, py: Python<'_>) -> PyResult<Option<(String, ArrowBatch)>> {
         loop {
             if let Some((t, b)) = self.queue.borrow_mut().pop_front() {
                 return Ok(Some((t, ArrowBatch(b))));
             }
-            if self.w.is_none() {
-                return Ok(None);
+            match &mut self.rows {
+                None => return Ok(None),
+                Some(Rows::Pool {
+                    pool,
+                    decoded: true,
+                    ..
+                }) => {
+                    // Decoded: wait for the threads, without holding up Python's.
+                    match py.detach(|| pool.next(true)) {
+                        Some(g) => self.queue.borrow_mut().extend(g.map_err(err)?),
+                        None => self.rows = None,
+                    }
+                }
+                Some(_) => self.step().map_err(err)?,
             }
-            self.step().map_err(err)?;
         }
     }
 }
@@ -419,10 +482,26 @@ impl Batches {
 impl Batches {
     /// Decode the next event (or all the bytes); at the end, flush what the writer holds.
     fn step(&mut self) -> io::Result<()> {
-        let Some(w) = self.w.as_mut() else {
+        let Some(rows) = self.rows.as_mut() else {
             return Ok(());
         };
-        let mut emit = |r: &Record<'_>| w.record(r);
+        let queue = &self.queue;
+        let mut emit = |r: &Record<'_>| match rows {
+            Rows::One(w) => w.record(r),
+            Rows::Pool {
+                pool,
+                run,
+                records,
+                bytes,
+                ..
+            } => {
+                run.push(r);
+                if run.len() >= *records || run.byte_len() >= *bytes {
+                    pool.hand_over(run, &mut |g| queue.borrow_mut().extend(g))?;
+                }
+                Ok(())
+            }
+        };
         let i = &mut self.input;
         let more = if let Some(b) = i.bytes.take() {
             i.dec.push(Ctx::default(), &b, &mut emit)?;
@@ -441,8 +520,29 @@ impl Batches {
         };
         if !more {
             i.dec.finish(&mut emit)?;
-            if let Some(w) = self.w.take() {
-                w.finish()?;
+            match self.rows.take() {
+                Some(Rows::One(w)) => {
+                    w.finish()?;
+                }
+                Some(Rows::Pool {
+                    mut pool,
+                    mut run,
+                    records,
+                    bytes,
+                    ..
+                }) => {
+                    if !run.is_empty() {
+                        pool.hand_over(&mut run, &mut |g| queue.borrow_mut().extend(g))?;
+                    }
+                    self.rows = Some(Rows::Pool {
+                        pool,
+                        run,
+                        records,
+                        bytes,
+                        decoded: true,
+                    });
+                }
+                None => {}
             }
         }
         Ok(())

@@ -1,6 +1,7 @@
 """The Python package against the command line: same records, same Parquet schema."""
 
 import json
+import random
 import subprocess
 
 import pyarrow as pa
@@ -146,6 +147,40 @@ def test_batches_are_the_tables_in_row_groups(samples):
     assert got["MOT_MOVE_ABSOLUTE"].column("absolute_position").to_pylist() == [4096]
     with pytest.raises(FileNotFoundError):
         list(aptscope.batches(samples / "nope.bin"))
+
+
+def _spliced(samples, seed):
+    """A session's frames repeated with random bytes between, cut at random places."""
+    rng = random.Random(seed)
+    frames = (samples / "kdc101-session.bin").read_bytes()
+    out = bytearray()
+    for _ in range(40):
+        cut = rng.randrange(len(frames))
+        out += frames[cut:] + bytes(rng.randrange(256) for _ in range(rng.randrange(20)))
+        out += frames[:cut]
+    return bytes(out)
+
+
+@pytest.mark.parametrize(
+    "source", ["kdc101-session.mcap", "elliptec-bus.txt", "damaged.bin", "spliced"]
+)
+def test_rows_built_on_threads_are_those_of_one(samples, monkeypatch, source):
+    # Runs of 7 records: every sample is cut into many, handed to the threads in turn.
+    monkeypatch.setenv("APTSCOPE_BATCH_RECORDS", "7")
+    src = _spliced(samples, 11) if source == "spliced" else samples / source
+    proto = "apt" if source == "spliced" else "auto"
+    one = aptscope.to_arrow(src, proto, threads=1)
+    n = one["records"].num_rows
+    assert n > 7
+    for threads in (2, 3):
+        many = aptscope.to_arrow(src, proto, threads=threads)
+        assert sorted(many) == sorted(one)
+        for t in one:
+            assert many[t].schema.equals(one[t].schema, check_metadata=True), t
+            assert many[t].equals(one[t]), t
+    # A batch of each table per run it has rows in: the records table one per run.
+    records = [b.num_rows for t, b in aptscope.batches(src, proto, threads=2) if t == "records"]
+    assert records == [7] * (n // 7) + ([n % 7] if n % 7 else [])
 
 
 def test_only_the_tables_asked_for(samples):

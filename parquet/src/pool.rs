@@ -1,0 +1,310 @@
+//! Rows built on several threads: the decode chain runs on the caller's thread (it is one
+//! sequential state: framing, pairing, numbering, units) and hands runs of records, owned
+//! ([`Batch`]), to threads that each build a run's rows into its own [`CaptureWriter`]; the row
+//! groups come back in the order the runs were handed over. Building the rows is most of
+//! `to_arrow()`'s time (about four fifths, docs/performance.md), and each record's rows depend
+//! only on the record, so this is the part that spreads over the cores.
+//!
+//! A run's tables are cut at its end: a table's rows come as one batch per run it has rows in
+//! (and more where a run holds over a row group of them), in order, so the batches of a table
+//! one after the other are the table `-j 1` builds.
+
+use crate::{CaptureWriter, Options, Sink};
+use aptscope_dissector::owned::Batch;
+use arrow_array::RecordBatch;
+use std::collections::BTreeMap;
+use std::io;
+use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+
+/// The row groups of one run, in the order its writer gave them: `(table, rows)`.
+pub type Groups = Vec<(String, RecordBatch)>;
+
+/// What a thread does to each row group before handing it back (the Python package turns the
+/// columns of words into text there, on the thread, not on the caller's).
+pub type Finish = fn(RecordBatch) -> io::Result<RecordBatch>;
+
+/// Which tables are built, by name (as [`CaptureWriter::only_tables`]).
+pub type Wanted = Arc<dyn Fn(&str) -> bool + Send + Sync>;
+
+/// A run's rows, or why they could not be built; and the run, emptied, to be filled again.
+type Done = (u64, io::Result<Groups>, Batch);
+
+/// A [`Sink`] that keeps every row group.
+struct Keep {
+    groups: Groups,
+    finish: Finish,
+}
+
+impl Sink for Keep {
+    fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
+        self.groups
+            .push((table.to_string(), (self.finish)(batch.clone())?));
+        Ok(())
+    }
+}
+
+/// Threads building the rows of runs of records, in order (see the module documentation).
+pub struct RowPool {
+    work: Option<Sender<(u64, Batch)>>,
+    done: Receiver<Done>,
+    threads: Vec<JoinHandle<()>>,
+    /// Runs handed over (or built here), and runs handed back.
+    sent: u64,
+    taken: u64,
+    /// Runs built before an earlier one, by number.
+    early: BTreeMap<u64, io::Result<Groups>>,
+    /// Runs out on the threads at most.
+    limit: usize,
+    /// The last run built on the caller's thread, by number.
+    here: Option<u64>,
+    /// Runs handed back, emptied: their buffers are filled again rather than grown anew.
+    spare: Vec<Batch>,
+    /// How a run's rows are built, for those built on the caller's thread.
+    file: Arc<str>,
+    opts: Options,
+    wanted: Option<Wanted>,
+    finish: Finish,
+}
+
+impl RowPool {
+    /// Rows built on `n` threads in all (at least two: the caller's, which decodes, and others
+    /// it hands runs to) of capture `file` (its `file` column) cut as `opts` says, only of the
+    /// tables `wanted` names (all without it), each row group passed through `finish`. Fails
+    /// when a thread cannot be started.
+    pub fn new(
+        n: usize,
+        file: &str,
+        opts: Options,
+        wanted: Option<Wanted>,
+        finish: Finish,
+    ) -> io::Result<Self> {
+        let others = n.max(2) - 1;
+        let (work, rx) = channel::<(u64, Batch)>();
+        let rx = Arc::new(Mutex::new(rx));
+        let (tx, done) = channel::<Done>();
+        let file: Arc<str> = Arc::from(file);
+        let mut threads = Vec::with_capacity(others);
+        for _ in 0..others {
+            let (rx, tx, file, wanted) = (rx.clone(), tx.clone(), file.clone(), wanted.clone());
+            let h = std::thread::Builder::new()
+                .name("rows".into())
+                .spawn(move || loop {
+                    // The lock is held only to take a run; a closed queue ends the thread.
+                    let Ok((seq, mut batch)) =
+                        rx.lock().map_err(drop).and_then(|r| r.recv().map_err(drop))
+                    else {
+                        return;
+                    };
+                    let rows = build(&batch, &file, opts, wanted.as_ref(), finish);
+                    batch.clear();
+                    if tx.send((seq, rows, batch)).is_err() {
+                        return;
+                    }
+                })?;
+            threads.push(h);
+        }
+        Ok(RowPool {
+            work: Some(work),
+            done,
+            threads,
+            sent: 0,
+            taken: 0,
+            early: BTreeMap::new(),
+            // One being built on each thread and one waiting: a thread that finishes need not
+            // wait for the caller to decode the next run. (Memory grows with the threads: a
+            // run of a status log is about 30 MiB of rows.)
+            limit: others + 1,
+            here: None,
+            spare: Vec::new(),
+            file,
+            opts,
+            wanted,
+            finish,
+        })
+    }
+
+    /// Runs handed over (or built here) and not yet handed back.
+    fn out(&self) -> usize {
+        (self.sent - self.taken) as usize
+    }
+
+    /// Whether a run built on the caller's thread waits for an earlier one.
+    fn here_waits(&self) -> bool {
+        self.here.is_some_and(|h| h >= self.taken)
+    }
+
+    /// Hand the run gathered over (`run` is then empty, with the room of one handed back), and
+    /// pass the row groups of the runs built by now, in order, to `out`. When the threads have
+    /// as many runs as they may, the caller's thread builds this one itself, rather than
+    /// waiting idle (once; then it waits for theirs).
+    pub fn hand_over(&mut self, run: &mut Batch, out: &mut dyn FnMut(Groups)) -> io::Result<()> {
+        self.ready(false, out)?;
+        loop {
+            let on_threads = self.out() - usize::from(self.here_waits());
+            if on_threads < self.limit {
+                let next = self.spare.pop().unwrap_or_default();
+                let gone = || io::Error::other("the threads building rows stopped");
+                self.work
+                    .as_ref()
+                    .ok_or_else(gone)?
+                    .send((self.sent, std::mem::replace(run, next)))
+                    .map_err(|_| gone())?;
+                self.sent += 1;
+                return Ok(());
+            }
+            if !self.here_waits() {
+                let (f, o, w) = (&self.file, self.opts, self.wanted.as_ref());
+                let rows = build(run, f, o, w, self.finish);
+                run.clear();
+                self.early.insert(self.sent, rows);
+                self.here = Some(self.sent);
+                self.sent += 1;
+                return Ok(());
+            }
+            match self.next(true) {
+                Some(g) => out(g?),
+                None => return Err(io::Error::other("the threads building rows stopped")),
+            }
+        }
+    }
+
+    /// Pass the row groups of the runs built by now (`wait`: of every run handed over, waiting
+    /// for them), in order, to `out`.
+    pub fn ready(&mut self, wait: bool, out: &mut dyn FnMut(Groups)) -> io::Result<()> {
+        while let Some(g) = self.next(wait) {
+            out(g?);
+        }
+        Ok(())
+    }
+
+    /// The row groups of the next run in order: `None` when every run handed over was handed
+    /// back, or (`wait` false) when the next one is not built yet.
+    pub fn next(&mut self, wait: bool) -> Option<io::Result<Groups>> {
+        while self.out() > 0 {
+            if let Some(g) = self.early.remove(&self.taken) {
+                self.taken += 1;
+                return Some(g);
+            }
+            let got = if wait {
+                self.done.recv().ok()
+            } else {
+                self.done.try_recv().ok()
+            };
+            match got {
+                Some((seq, g, spare)) => {
+                    self.early.insert(seq, g);
+                    self.spare.push(spare);
+                }
+                // Not built yet; or every thread is gone (a panic): say so once.
+                None if wait => {
+                    self.taken = self.sent;
+                    return Some(Err(io::Error::other("the threads building rows stopped")));
+                }
+                None => return None,
+            }
+        }
+        None
+    }
+}
+
+impl Drop for RowPool {
+    fn drop(&mut self) {
+        // Closing the queue ends the threads once they finish what they hold.
+        self.work = None;
+        for h in self.threads.drain(..) {
+            let _ = h.join();
+        }
+    }
+}
+
+/// The rows of one run: a writer of its own, cut at the run's end.
+fn build(
+    batch: &Batch,
+    file: &str,
+    opts: Options,
+    wanted: Option<&Wanted>,
+    finish: Finish,
+) -> io::Result<Groups> {
+    let keep = Keep {
+        groups: Vec::new(),
+        finish,
+    };
+    let mut w = CaptureWriter::new(keep, file, opts);
+    if let Some(f) = wanted {
+        let f = f.clone();
+        w.only_tables(move |t| f(t));
+    }
+    batch.for_each(&mut |r| w.record(r))?;
+    Ok(w.finish()?.0.groups)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use aptscope_dissector::record::{Ctx, Decoder};
+    use std::collections::HashMap;
+
+    /// Every table's rows, in order, as one batch each.
+    fn tables(groups: Groups) -> Vec<(String, RecordBatch)> {
+        let mut by: BTreeMap<String, Vec<RecordBatch>> = BTreeMap::new();
+        for (t, b) in groups {
+            by.entry(t).or_default().push(b);
+        }
+        by.into_iter()
+            .map(|(t, bs)| {
+                let b = arrow_select::concat::concat_batches(&bs[0].schema(), &bs).unwrap();
+                (t, b)
+            })
+            .collect()
+    }
+
+    fn ok(b: RecordBatch) -> io::Result<RecordBatch> {
+        crate::words::declared(&b).map_err(io::Error::other)
+    }
+
+    #[test]
+    fn runs_on_threads_give_the_tables_of_one_writer() {
+        let bytes =
+            aptscope_dissector::synth::stream(aptscope_dissector::Table::global(), 7, 40_000, true);
+        // One writer on this thread.
+        let mut w = CaptureWriter::new(
+            Keep {
+                groups: Vec::new(),
+                finish: ok,
+            },
+            "x",
+            Options::default(),
+        );
+        let mut dec = Decoder::new(None);
+        dec.push(Ctx::default(), &bytes, &mut |r| w.record(r))
+            .unwrap();
+        dec.finish(&mut |r| w.record(r)).unwrap();
+        let one = tables(w.finish().unwrap().0.groups);
+        // Runs of 97 records on three threads (two and the caller's), taken back as they come.
+        let mut pool = RowPool::new(3, "x", Options::default(), None, ok).unwrap();
+        let mut got = Vec::new();
+        let mut run = Batch::new();
+        let mut dec = Decoder::new(None);
+        let mut each = |r: &aptscope_dissector::record::Record<'_>| -> io::Result<()> {
+            run.push(r);
+            if run.len() >= 97 {
+                pool.hand_over(&mut run, &mut |g| got.extend(g))?;
+            }
+            Ok(())
+        };
+        dec.push(Ctx::default(), &bytes, &mut each).unwrap();
+        dec.finish(&mut each).unwrap();
+        pool.hand_over(&mut run, &mut |g| got.extend(g)).unwrap();
+        pool.ready(true, &mut |g| got.extend(g)).unwrap();
+        let many = tables(got);
+        let names = |t: &[(String, RecordBatch)]| t.iter().map(|x| x.0.clone()).collect::<Vec<_>>();
+        assert_eq!(names(&one), names(&many));
+        assert!(one.len() > 20, "{} tables", one.len());
+        let many: HashMap<_, _> = many.into_iter().collect();
+        for (t, b) in &one {
+            assert_eq!(b, &many[t], "{t}");
+        }
+    }
+}
