@@ -506,6 +506,15 @@ impl<S: Sink> CaptureWriter<S> {
         self.keep_kinds = Some(Box::new(keep));
     }
 
+    /// Make room for `rows` rows of the `records` table at once (up to a row group), when
+    /// their count is known before the first: the columns are not grown row group by row group.
+    pub fn reserve_records(&mut self, rows: usize) {
+        if self.records.rows() == 0 {
+            let rows = rows.min(self.opts.rows_per_group);
+            self.records = RecordsBuf::new(self.file.clone(), rows);
+        }
+    }
+
     /// Add one record.
     pub fn record(&mut self, rec: &Record<'_>) -> io::Result<()> {
         let ki = self.kind_of(rec);

@@ -232,6 +232,8 @@ fn build(
         finish,
     };
     let mut w = CaptureWriter::new(keep, file, opts);
+    // A row of the `records` table for each record.
+    w.reserve_records(batch.len());
     if let Some(f) = wanted {
         let f = f.clone();
         w.only_tables(move |t| f(t));
