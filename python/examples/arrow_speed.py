@@ -1,6 +1,9 @@
-"""Speed of to_arrow() and of batches() into DuckDB: `python arrow_speed.py CAPTURE [to_arrow|duckdb]`.
+"""Speed of to_arrow() and of batches() into DuckDB:
+`python arrow_speed.py CAPTURE [to_arrow|duckdb] [THREADS]`.
 
-Prints records, CPU seconds (this process), wall seconds, records per CPU-second and peak RSS.
+Prints records, CPU seconds (this process), wall seconds, records per CPU-second and per
+second of wall time, and peak RSS. THREADS is to_arrow()'s and batches()' (default: one per
+core).
 The DuckDB mode streams every table's batches into a DuckDB table of its name, as a notebook
 streaming a capture larger than memory would.
 """
@@ -8,9 +11,10 @@ import sys, time, resource
 import aptscope, pyarrow as pa
 path = sys.argv[1]
 what = sys.argv[2] if len(sys.argv) > 2 else "to_arrow"
+threads = int(sys.argv[3]) if len(sys.argv) > 3 else None
 t0, w0 = time.process_time(), time.perf_counter()
 if what == "to_arrow":
-    tables = aptscope.to_arrow(path)
+    tables = aptscope.to_arrow(path, threads=threads)
     n = tables["records"].num_rows
     extra = f"{len(tables)} tables"
 else:
@@ -18,7 +22,7 @@ else:
     con = duckdb.connect()
     made = set()
     n = 0
-    for table, batch in aptscope.batches(path):
+    for table, batch in aptscope.batches(path, threads=threads):
         if table == "records":
             n += batch.num_rows
         con.register("b", batch)
@@ -32,4 +36,4 @@ else:
     extra = f"{con.execute('SELECT count(*) FROM records').fetchone()[0]} rows in duckdb records"
 cpu, wall = time.process_time() - t0, time.perf_counter() - w0
 rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-print(f"{what}: {n} records, {extra}: {cpu:.3f} CPU-s, {wall:.3f} s wall, {n/cpu/1e6:.2f} M records per CPU-s, peak {rss:.0f} MiB")
+print(f"{what}: {n} records, {extra}: {cpu:.3f} CPU-s, {wall:.3f} s wall, {n/cpu/1e6:.2f} M records per CPU-s, {n/wall/1e6:.2f} M per second, peak {rss:.0f} MiB")
