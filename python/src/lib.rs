@@ -385,9 +385,10 @@ enum Rows {
     },
 }
 
-/// The tables of one source as `(table, batch)` pairs, each batch a row group of the Parquet
-/// output's schema, produced as the source is decoded (memory stays that of one row group per
-/// table, whatever the source's size).
+/// The tables of one source as `(table, batch)` pairs, each batch at most a row group of the
+/// Parquet output's schema (exactly one with one thread), produced as the source is decoded
+/// (memory stays that of a row group per table, or of a few runs per thread, whatever the
+/// source's size).
 #[pyclass(unsendable)]
 struct Batches {
     input: Input,
@@ -520,29 +521,21 @@ impl Batches {
         };
         if !more {
             i.dec.finish(&mut emit)?;
-            match self.rows.take() {
-                Some(Rows::One(w)) => {
-                    w.finish()?;
-                }
+            match self.rows.as_mut() {
                 Some(Rows::Pool {
-                    mut pool,
-                    mut run,
-                    records,
-                    bytes,
-                    ..
+                    pool, run, decoded, ..
                 }) => {
                     if !run.is_empty() {
-                        pool.hand_over(&mut run, &mut |g| queue.borrow_mut().extend(g))?;
+                        pool.hand_over(run, &mut |g| queue.borrow_mut().extend(g))?;
                     }
-                    self.rows = Some(Rows::Pool {
-                        pool,
-                        run,
-                        records,
-                        bytes,
-                        decoded: true,
-                    });
+                    // The threads' last runs are taken back by `__next__`.
+                    *decoded = true;
                 }
-                None => {}
+                _ => {
+                    if let Some(Rows::One(w)) = self.rows.take() {
+                        w.finish()?;
+                    }
+                }
             }
         }
         Ok(())
