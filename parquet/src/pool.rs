@@ -14,6 +14,7 @@ use aptscope_dissector::owned::Batch;
 use arrow_array::RecordBatch;
 use std::collections::BTreeMap;
 use std::io;
+use std::panic::AssertUnwindSafe;
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -97,7 +98,12 @@ impl RowPool {
                     else {
                         return;
                     };
-                    let rows = build(&batch, &file, opts, wanted.as_ref(), finish);
+                    // A panic is this run's error, not a run that never comes back (the caller
+                    // would wait for it for ever while the other threads live).
+                    let rows = std::panic::catch_unwind(AssertUnwindSafe(|| {
+                        build(&batch, &file, opts, wanted.as_ref(), finish)
+                    }))
+                    .unwrap_or_else(|_| Err(io::Error::other("building rows panicked")));
                     batch.clear();
                     if tx.send((seq, rows, batch)).is_err() {
                         return;
@@ -308,5 +314,26 @@ mod tests {
         for (t, b) in &one {
             assert_eq!(b, &many[t], "{t}");
         }
+    }
+
+    #[test]
+    fn a_panic_on_a_thread_is_an_error_not_a_wait() {
+        let bytes =
+            aptscope_dissector::synth::stream(aptscope_dissector::Table::global(), 3, 50, false);
+        let mut run = Batch::new();
+        let mut dec = Decoder::new(None);
+        let mut keep = |r: &aptscope_dissector::record::Record<'_>| -> io::Result<()> {
+            run.push(r);
+            Ok(())
+        };
+        dec.push(Ctx::default(), &bytes, &mut keep).unwrap();
+        dec.finish(&mut keep).unwrap();
+        assert!(run.len() >= 50);
+        let boom: Finish = |_| panic!("a row group that cannot be finished");
+        let mut pool = RowPool::new(2, "x", Options::default(), None, boom).unwrap();
+        pool.hand_over(&mut run, &mut |_| {}).unwrap();
+        let err = pool.ready(true, &mut |_| {}).unwrap_err();
+        assert!(err.to_string().contains("panicked"), "{err}");
+        assert!(pool.next(true).is_none());
     }
 }
