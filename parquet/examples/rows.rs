@@ -4,8 +4,9 @@
 //! nor Python (docs/performance.md). `--text`: the columns of words turned into text, as
 //! Python gets them; `--keep`: every batch kept to the end, as `to_arrow()` keeps its tables.
 //! With TABLE names, only those tables are built. `--threads N` (N ≥ 2): the rows built on
-//! N threads (this one among them) from runs of 65,536 records decoded on this one ([`RowPool`], as `to_arrow()`
-//! with threads), a raw stream only; prints wall time (CPU time: run it under `time`).
+//! N threads (this one among them) from runs of 65,536 records decoded on this one
+//! ([`RowPool`], as `to_arrow()` with threads), a raw stream only; prints wall time (CPU time:
+//! run it under `time`).
 
 mod common;
 
@@ -106,7 +107,9 @@ fn pooled(path: &str, n: usize, text: bool) -> io::Result<()> {
     };
     dec.push(Ctx::default(), &bytes, &mut each)?;
     dec.finish(&mut each)?;
-    pool.hand_over(&mut run, &mut count)?;
+    if !run.is_empty() {
+        pool.hand_over(&mut run, &mut count)?;
+    }
     pool.ready(true, &mut count)?;
     let wall = t0.elapsed().as_secs_f64();
     println!(

@@ -7,7 +7,7 @@
 //!
 //! A run's tables are cut at its end: a table's rows come as one batch per run it has rows in
 //! (and more where a run holds over a row group of them), in order, so the batches of a table
-//! one after the other are the table `-j 1` builds.
+//! one after the other are the table one writer builds.
 
 use crate::{CaptureWriter, Options, Sink};
 use aptscope_dissector::owned::Batch;
