@@ -51,8 +51,25 @@ impl Valid {
 
     pub(crate) fn take(&mut self) -> Option<NullBuffer> {
         self.rows = 0;
-        self.bits.take().map(NullBuffer::from)
+        self.bits.take().map(|b| pack(&b))
     }
+}
+
+/// `bits` as a validity bitmap, 64 at a time (Arrow's `From<&[bool]>` sets them one by one).
+fn pack(bits: &[bool]) -> NullBuffer {
+    let words: Vec<u64> = bits
+        .chunks(64)
+        .map(|c| {
+            let w = c
+                .iter()
+                .enumerate()
+                .fold(0u64, |w, (i, &b)| w | (u64::from(b) << i));
+            // Arrow's bitmaps are bytes, least significant bit first.
+            w.to_le()
+        })
+        .collect();
+    let buf = arrow_buffer::Buffer::from_vec(words);
+    NullBuffer::new(arrow_buffer::BooleanBuffer::new(buf, 0, bits.len()))
 }
 
 /// A column of numbers.
@@ -407,6 +424,14 @@ mod tests {
     use arrow_array::cast::AsArray;
     use arrow_array::types::UInt64Type;
     use arrow_array::Array;
+
+    #[test]
+    fn validity_packed_as_arrow_packs_it() {
+        for n in [1, 63, 64, 65, 130, 1000] {
+            let bits: Vec<bool> = (0..n).map(|i| (i * 7 + i / 3) % 5 != 0).collect();
+            assert_eq!(pack(&bits), NullBuffer::from(bits.clone()), "{n}");
+        }
+    }
 
     /// Rows with values missing here and there and diagnostics in rows apart: each column has
     /// its rows' values and nulls, each row its own diagnostics, and a buffer taken starts
