@@ -6,6 +6,7 @@
 use crate::Sink;
 use arrow_array::RecordBatch;
 use std::io;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::{Arc, Condvar, Mutex, Weak};
 use std::thread::JoinHandle;
@@ -29,7 +30,7 @@ pub struct Threaded {
     tx: Option<Sender<Part>>,
     /// The threads' queue, not kept alive by this: once every thread is gone (a panic), a write
     /// fails instead of waiting for room.
-    rx: Weak<Mutex<Receiver<Part>>>,
+    rx: Weak<Queue>,
     /// The sink the caller's thread writes into at [`Sink::finish`], helping the threads with
     /// the row groups still waiting.
     own: Option<Box<dyn Sink + Send>>,
@@ -50,12 +51,16 @@ impl Threaded {
         make: impl Fn() -> S,
     ) -> io::Result<Self> {
         let (tx, rx) = channel::<Part>();
-        let rx = Arc::new(Mutex::new(rx));
         let failed = Arc::new(Mutex::new(None));
         let gate = Arc::new(Gate {
             held: Mutex::new(Load::default()),
             freed: Condvar::new(),
             max: Load { rows, bytes },
+            closed: AtomicBool::new(false),
+        });
+        let rx = Arc::new(Queue {
+            rx: Mutex::new(rx),
+            gate: gate.clone(),
         });
         let mut t = Threaded {
             tx: Some(tx),
@@ -71,7 +76,7 @@ impl Threaded {
             // On failure, the threads started are joined when `t` drops.
             let h = std::thread::Builder::new()
                 .name("parquet-write".into())
-                .spawn(move || run(&rx, &failed, &gate, &mut sink))?;
+                .spawn(move || run(&rx.rx, &failed, &gate, &mut sink))?;
             t.threads.push(h);
         }
         Ok(t)
@@ -124,20 +129,46 @@ impl Load {
     }
 }
 
+/// The threads' queue of row groups. When the last thread holding it is gone (every one
+/// panicked), the row groups still in it give their load back and the gate is closed: a write
+/// waiting for room then goes on to the closed queue's error instead of waiting for ever
+/// (which it did when a thread died with a row group queued behind the one it panicked on).
+struct Queue {
+    rx: Mutex<Receiver<Part>>,
+    gate: Arc<Gate>,
+}
+
+impl Drop for Queue {
+    fn drop(&mut self) {
+        if let Ok(rx) = self.rx.get_mut() {
+            for (_, _, batch) in rx.try_iter() {
+                self.gate.give(Load::of(&batch));
+            }
+        }
+        // Under the lock, so that a write about to wait sees it or is woken.
+        let _h = self.gate.held.lock();
+        self.gate.closed.store(true, Ordering::SeqCst);
+        self.gate.freed.notify_all();
+    }
+}
+
 /// Rows and bytes in flight, under a budget.
 struct Gate {
     held: Mutex<Load>,
     freed: Condvar,
     max: Load,
+    /// The queue is gone (every thread with it): nothing will be given back any more.
+    closed: AtomicBool,
 }
 
 impl Gate {
-    /// Wait until `l` more fits (or nothing is in flight), then count it.
+    /// Wait until `l` more fits (or nothing is in flight, or the queue is gone: the send that
+    /// follows then fails), then count it.
     fn take(&self, l: Load) {
         let Ok(mut h) = self.held.lock() else {
             return;
         };
-        while !h.fits(l, self.max) {
+        while !h.fits(l, self.max) && !self.closed.load(Ordering::SeqCst) {
             h = match self.freed.wait(h) {
                 Ok(h) => h,
                 Err(_) => return,
@@ -218,7 +249,7 @@ impl Sink for Threaded {
         if let (Some(mut own), Some(rx)) = (self.own.take(), self.rx.upgrade()) {
             // A write that panics is an error here as on the threads, not a panic of the caller.
             let helped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                run(&rx, &self.failed, &self.gate, &mut *own)
+                run(&rx.rx, &self.failed, &self.gate, &mut *own)
             }));
             if helped.is_err() {
                 self.fail(io::Error::other("a Parquet write panicked"));
