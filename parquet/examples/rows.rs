@@ -10,7 +10,6 @@
 
 mod common;
 
-use aptscope_dissector::owned::Batch;
 use aptscope_dissector::record::{Ctx, Decoder};
 use aptscope_parquet::pool::RowPool;
 use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, Options, Sink};
@@ -89,27 +88,19 @@ fn pooled(path: &str, n: usize, text: bool) -> io::Result<()> {
     } else {
         Ok
     };
-    let opts = Options::default();
-    let mut pool = RowPool::new(n, path, opts, None, finish)?;
+    let mut pool = RowPool::new(n, path, Options::default(), None, finish)?;
     let (mut rows, mut records) = (0usize, 0u64);
     let mut count = |g: Vec<(String, RecordBatch)>| {
         rows += g.iter().map(|(_, b)| b.num_rows()).sum::<usize>();
     };
-    let mut run = Batch::new();
     let mut dec = Decoder::new(None);
     let mut each = |r: &aptscope_dissector::record::Record<'_>| -> io::Result<()> {
         records += 1;
-        run.push(r);
-        if run.len() >= opts.rows_per_group {
-            pool.hand_over(&mut run, &mut count)?;
-        }
-        Ok(())
+        pool.push(r, &mut count)
     };
     dec.push(Ctx::default(), &bytes, &mut each)?;
     dec.finish(&mut each)?;
-    if !run.is_empty() {
-        pool.hand_over(&mut run, &mut count)?;
-    }
+    pool.flush(&mut count)?;
     pool.ready(true, &mut count)?;
     let wall = t0.elapsed().as_secs_f64();
     println!(

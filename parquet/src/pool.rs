@@ -11,6 +11,7 @@
 
 use crate::{CaptureWriter, Options, Sink};
 use aptscope_dissector::owned::Batch;
+use aptscope_dissector::record::Record;
 use arrow_array::RecordBatch;
 use std::collections::BTreeMap;
 use std::io;
@@ -62,6 +63,10 @@ pub struct RowPool {
     here: Option<u64>,
     /// Runs handed back, emptied: their buffers are filled again rather than grown anew.
     spare: Vec<Batch>,
+    /// The run being gathered, handed over when it holds `run_records` records or a row
+    /// group's bytes of frames.
+    run: Batch,
+    run_records: usize,
     /// How a run's rows are built, for those built on the caller's thread.
     file: Arc<str>,
     opts: Options,
@@ -124,6 +129,9 @@ impl RowPool {
             limit: others + 1,
             here: None,
             spare: Vec::new(),
+            run: Batch::new(),
+            // A `records` row group: that table's batches are whole row groups.
+            run_records: opts.rows_per_group,
             file,
             opts,
             wanted,
@@ -141,11 +149,35 @@ impl RowPool {
         self.here.is_some_and(|h| h >= self.taken)
     }
 
-    /// Hand the run gathered over (`run` is then empty, with the room of one handed back), and
+    /// Records per run instead of a row group's (tests cut small inputs into many runs).
+    pub fn set_run_records(&mut self, n: usize) {
+        self.run_records = n.max(1);
+    }
+
+    /// Add one record to the run being gathered; a full run is handed over, and the row groups
+    /// of the runs built by now are passed, in order, to `out`.
+    pub fn push(&mut self, rec: &Record<'_>, out: &mut dyn FnMut(Groups)) -> io::Result<()> {
+        self.run.push(rec);
+        if self.run.len() >= self.run_records || self.run.byte_len() >= self.opts.bytes_per_group {
+            self.hand_over(out)?;
+        }
+        Ok(())
+    }
+
+    /// The input has ended: hand the last run over. Its rows, and those of the runs still
+    /// being built, come from [`RowPool::next`] or [`RowPool::ready`].
+    pub fn flush(&mut self, out: &mut dyn FnMut(Groups)) -> io::Result<()> {
+        if self.run.is_empty() {
+            return Ok(());
+        }
+        self.hand_over(out)
+    }
+
+    /// Hand the run gathered over (it is then empty, with the room of one handed back), and
     /// pass the row groups of the runs built by now, in order, to `out`. When the threads have
     /// as many runs as they may, the caller's thread builds this one itself, rather than
     /// waiting idle (once; then it waits for theirs).
-    pub fn hand_over(&mut self, run: &mut Batch, out: &mut dyn FnMut(Groups)) -> io::Result<()> {
+    fn hand_over(&mut self, out: &mut dyn FnMut(Groups)) -> io::Result<()> {
         self.ready(false, out)?;
         loop {
             let on_threads = self.out() - usize::from(self.here_waits());
@@ -155,15 +187,15 @@ impl RowPool {
                 self.work
                     .as_ref()
                     .ok_or_else(gone)?
-                    .send((self.sent, std::mem::replace(run, next)))
+                    .send((self.sent, std::mem::replace(&mut self.run, next)))
                     .map_err(|_| gone())?;
                 self.sent += 1;
                 return Ok(());
             }
             if !self.here_waits() {
                 let (f, o, w) = (&self.file, self.opts, self.wanted.as_ref());
-                let rows = build(run, f, o, w, self.finish);
-                run.clear();
+                let rows = build(&self.run, f, o, w, self.finish);
+                self.run.clear();
                 self.early.insert(self.sent, rows);
                 self.here = Some(self.sent);
                 self.sent += 1;
@@ -292,19 +324,13 @@ mod tests {
         let one = tables(w.finish().unwrap().0.groups);
         // Runs of 97 records on three threads (two and the caller's), taken back as they come.
         let mut pool = RowPool::new(3, "x", Options::default(), None, ok).unwrap();
+        pool.set_run_records(97);
         let mut got = Vec::new();
-        let mut run = Batch::new();
         let mut dec = Decoder::new(None);
-        let mut each = |r: &aptscope_dissector::record::Record<'_>| -> io::Result<()> {
-            run.push(r);
-            if run.len() >= 97 {
-                pool.hand_over(&mut run, &mut |g| got.extend(g))?;
-            }
-            Ok(())
-        };
+        let mut each = |r: &Record<'_>| pool.push(r, &mut |g| got.extend(g));
         dec.push(Ctx::default(), &bytes, &mut each).unwrap();
         dec.finish(&mut each).unwrap();
-        pool.hand_over(&mut run, &mut |g| got.extend(g)).unwrap();
+        pool.flush(&mut |g| got.extend(g)).unwrap();
         pool.ready(true, &mut |g| got.extend(g)).unwrap();
         let many = tables(got);
         let names = |t: &[(String, RecordBatch)]| t.iter().map(|x| x.0.clone()).collect::<Vec<_>>();
@@ -320,18 +346,18 @@ mod tests {
     fn a_panic_on_a_thread_is_an_error_not_a_wait() {
         let bytes =
             aptscope_dissector::synth::stream(aptscope_dissector::Table::global(), 3, 50, false);
-        let mut run = Batch::new();
-        let mut dec = Decoder::new(None);
-        let mut keep = |r: &aptscope_dissector::record::Record<'_>| -> io::Result<()> {
-            run.push(r);
-            Ok(())
-        };
-        dec.push(Ctx::default(), &bytes, &mut keep).unwrap();
-        dec.finish(&mut keep).unwrap();
-        assert!(run.len() >= 50);
         let boom: Finish = |_| panic!("a row group that cannot be finished");
         let mut pool = RowPool::new(2, "x", Options::default(), None, boom).unwrap();
-        pool.hand_over(&mut run, &mut |_| {}).unwrap();
+        let mut dec = Decoder::new(None);
+        let mut n = 0;
+        let mut each = |r: &Record<'_>| {
+            n += 1;
+            pool.push(r, &mut |_| {})
+        };
+        dec.push(Ctx::default(), &bytes, &mut each).unwrap();
+        dec.finish(&mut each).unwrap();
+        assert!(n >= 50);
+        pool.flush(&mut |_| {}).unwrap();
         let err = pool.ready(true, &mut |_| {}).unwrap_err();
         assert!(err.to_string().contains("panicked"), "{err}");
         assert!(pool.next(true).is_none());

@@ -12,7 +12,6 @@ use aptscope_capture::Reader;
 use aptscope_dissector::apt::{encode_named, Addr, Named};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::json;
-use aptscope_dissector::owned::Batch;
 use aptscope_dissector::record::{Ctx, Decoder, Record};
 use aptscope_dissector::table::Dir;
 use aptscope_dissector::Table;
@@ -359,15 +358,13 @@ impl Sink for QueueSink {
     }
 }
 
-/// Records per run handed to a thread that builds rows: a `records` row group, so that table's
-/// batches are whole row groups as with one thread. `APTSCOPE_BATCH_RECORDS` sets it (as for
-/// `aptscope decode -j`): the tests cut small samples into many runs.
-fn run_records() -> usize {
+/// Records per run handed to a thread that builds rows, when `APTSCOPE_BATCH_RECORDS` says (as
+/// for `aptscope decode -j`): the tests cut small samples into many runs.
+fn run_records() -> Option<usize> {
     std::env::var("APTSCOPE_BATCH_RECORDS")
         .ok()
         .and_then(|v| v.parse().ok())
         .filter(|n| *n > 0)
-        .unwrap_or(Options::default().rows_per_group)
 }
 
 /// Where the rows are built: on this thread, or on a pool's threads from runs of records.
@@ -375,11 +372,6 @@ enum Rows {
     One(Box<CaptureWriter<QueueSink>>),
     Pool {
         pool: Box<RowPool>,
-        /// The run being gathered.
-        run: Batch,
-        /// Records and bytes a run holds at most.
-        records: usize,
-        bytes: usize,
         /// Whether the source is decoded to its end (the pool may still be building).
         decoded: bool,
     },
@@ -431,11 +423,12 @@ impl Batches {
             .or_else(|| std::thread::available_parallelism().ok().map(usize::from))
             .unwrap_or(1);
         let rows = if threads > 1 {
+            let mut pool = RowPool::new(threads, &label, opts, wanted, declared).map_err(err)?;
+            if let Some(n) = run_records() {
+                pool.set_run_records(n);
+            }
             Rows::Pool {
-                pool: Box::new(RowPool::new(threads, &label, opts, wanted, declared).map_err(err)?),
-                run: Batch::new(),
-                records: run_records(),
-                bytes: opts.bytes_per_group,
+                pool: Box::new(pool),
                 decoded: false,
             }
         } else {
@@ -489,19 +482,7 @@ impl Batches {
         let queue = &self.queue;
         let mut emit = |r: &Record<'_>| match rows {
             Rows::One(w) => w.record(r),
-            Rows::Pool {
-                pool,
-                run,
-                records,
-                bytes,
-                ..
-            } => {
-                run.push(r);
-                if run.len() >= *records || run.byte_len() >= *bytes {
-                    pool.hand_over(run, &mut |g| queue.borrow_mut().extend(g))?;
-                }
-                Ok(())
-            }
+            Rows::Pool { pool, .. } => pool.push(r, &mut |g| queue.borrow_mut().extend(g)),
         };
         let i = &mut self.input;
         let more = if let Some(b) = i.bytes.take() {
@@ -522,12 +503,8 @@ impl Batches {
         if !more {
             i.dec.finish(&mut emit)?;
             match self.rows.as_mut() {
-                Some(Rows::Pool {
-                    pool, run, decoded, ..
-                }) => {
-                    if !run.is_empty() {
-                        pool.hand_over(run, &mut |g| queue.borrow_mut().extend(g))?;
-                    }
+                Some(Rows::Pool { pool, decoded }) => {
+                    pool.flush(&mut |g| queue.borrow_mut().extend(g))?;
                     // The threads' last runs are taken back by `__next__`.
                     *decoded = true;
                 }
