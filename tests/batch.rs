@@ -256,7 +256,8 @@ fn dataset_files(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
 /// One capture with cores to spare: its row groups are encoded on other threads (one with
 /// `-j 2`, two with `-j 3`), and the dataset is that of `-j 1`, part file for part file and byte
 /// for byte (a stream of every message form: dozens of kind tables cut into row groups early,
-/// the records table into several).
+/// the records table into several, part files of several row groups written by one thread
+/// each).
 #[test]
 fn one_capture_encoded_on_spare_cores_is_the_dataset_of_one() {
     let dir = common::Scratch::new("batch-parquet-one");
@@ -278,13 +279,21 @@ fn one_capture_encoded_on_spare_cores_is_the_dataset_of_one() {
     }
     let parts = sets[0].len();
     assert!(parts > 100, "{parts} part files");
-    assert!(
-        sets[0]
-            .iter()
-            .filter(|(p, _)| p.starts_with("records"))
-            .count()
-            > 2
-    );
+    // Part files of several row groups: the records table's and many kind tables'.
+    let groups = |bytes: &Vec<u8>| {
+        ParquetRecordBatchReaderBuilder::try_new(bytes::Bytes::from(bytes.clone()))
+            .expect("parquet")
+            .metadata()
+            .num_row_groups()
+    };
+    let records: usize = sets[0]
+        .iter()
+        .filter(|(p, _)| p.starts_with("records"))
+        .map(|(_, b)| groups(b))
+        .sum();
+    assert!(records > 2, "{records} row groups of records");
+    let several = sets[0].iter().filter(|(_, b)| groups(b) > 1).count();
+    assert!(several > 50, "{several} part files of several row groups");
     for (j, s) in [(2, &sets[1]), (3, &sets[2])] {
         let names =
             |s: &Vec<(PathBuf, Vec<u8>)>| s.iter().map(|(p, _)| p.clone()).collect::<Vec<_>>();

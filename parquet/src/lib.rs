@@ -11,11 +11,13 @@
 //! when another opens; the default is more than there are kinds), and all kind buffers
 //! together hold at most [`Options::kind_rows`] rows and `bytes_per_group` bytes (the biggest
 //! is written when they reach either).
-//! A [`DirSink`] writes every flushed buffer as one Parquet file of one row group
-//! (`TABLE/part-FFFFF-SSSSS.parquet`, F the capture's index in the run, S a sequence number),
-//! first under a `.partial` name then renamed: a killed run leaves every complete row group
-//! readable and no torn file under a `.parquet` name. A [`MemSink`] keeps one in-memory Parquet
-//! file per table instead (the Python package's `to_arrow`).
+//! A [`DirSink`] writes each flushed buffer as a row group of its table's current part file
+//! (`TABLE/part-FFFFF-SSSSS.parquet`, F the capture's index in the run, S the table's part
+//! number), first under a `.partial` name then renamed once its footer is written: a file is
+//! complete after [`Options::groups_per_file`] row groups, when the open files' metadata reaches
+//! [`Options::open_chunks`] column chunks (the one holding most), or at the end. A killed run
+//! leaves the files it completed readable and no torn file under a `.parquet` name. A
+//! [`MemSink`] keeps one in-memory Parquet file per table instead.
 //!
 //! [`record::Decoder`]: aptscope_dissector::record::Decoder
 
@@ -61,7 +63,7 @@ use std::sync::Arc;
 /// How tables are cut into row groups.
 #[derive(Debug, Clone, Copy)]
 pub struct Options {
-    /// Rows per row group (and per part file of a [`DirSink`]).
+    /// Rows per row group.
     pub rows_per_group: usize,
     /// Bytes of frames, garbage and text per row group at most (a table is written when its
     /// buffer reaches this, whatever its rows; the kind tables' buffers together hold at most
@@ -73,6 +75,12 @@ pub struct Options {
     /// Rows the kind tables buffer together at most (the biggest is written when they reach
     /// it).
     pub kind_rows: usize,
+    /// Row groups per part file at most (the next start another file).
+    pub groups_per_file: usize,
+    /// Column chunks of the part files being written, together, at most: each chunk's
+    /// metadata stays in memory until its file's footer is written, so a capture of hundreds
+    /// of kinds closes the file of most chunks when they reach this.
+    pub open_chunks: usize,
 }
 
 impl Default for Options {
@@ -89,13 +97,19 @@ impl Default for Options {
             // kinds brought a new one).
             max_open_kinds: 1024,
             // Two row groups' worth: a capture of hundreds of kinds (random frames of every
-            // form) writes a part file whenever the kinds together reach this, each of about
-            // twice this over the kinds' count rows, and every part file costs its own
-            // opening, schema and footer. 10 MB of such frames: 2792 part files and 1.75 s at
-            // one row group's worth, 1556 and 1.54 s at two (peak 54 → 59 MiB), 960 and 1.37 s
-            // at four but 67 MiB, over the 64 MiB a worker may use; a capture of a few kinds
-            // (status logs) cuts at `rows_per_group` either way.
+            // form) writes a row group whenever the kinds together reach this, each of about
+            // twice this over the kinds' count rows. 10 MB of such frames (when each row group
+            // was a part file): 2792 row groups and 1.75 s at one row group's worth, 1556 and
+            // 1.54 s at two (peak 54 → 59 MiB), 960 and 1.37 s at four but 67 MiB, over the
+            // 64 MiB a worker may use; a capture of a few kinds (status logs) cuts at
+            // `rows_per_group` either way.
             kind_rows: 2 * 65_536,
+            // 4 M rows of a status log's `records` (about 200 MB of Parquet) a file at most.
+            groups_per_file: 64,
+            // A chunk's metadata is about 1.3 KiB (peak of 100 MB of every form: 67 MiB at
+            // 4,096, 83 MiB at 16,384): 5 MiB. That capture's 526 tables then write 5,244
+            // part files (one per row group, 13,304, before), 10 MB of it 754 (1,556).
+            open_chunks: 4096,
         }
     }
 }
@@ -169,23 +183,34 @@ fn perr(e: impl std::fmt::Display) -> io::Error {
 
 /// Where flushed row groups go.
 pub trait Sink {
-    /// Write one row group of `table`; `part` counts the table's row groups of this capture.
+    /// Write one row group of `table` into its part `part`: the row groups of one part are one
+    /// file, in the order written ([`DirSink`]); parts are numbered from 0 in each table.
     fn write(&mut self, table: &str, part: u32, batch: &RecordBatch) -> io::Result<()>;
 
-    /// Complete what was written (a sink that writes later, [`Threaded`], waits for it here
-    /// and returns what failed).
+    /// No more row groups go into part `part` of `table` (`u32::MAX`: whichever is open).
+    fn close(&mut self, _table: &str, _part: u32) -> io::Result<()> {
+        Ok(())
+    }
+
+    /// Complete what was written, every part still open too (a sink that writes later,
+    /// [`Threaded`], waits for it here and returns what failed).
     fn finish(&mut self) -> io::Result<()> {
         Ok(())
     }
 }
 
-/// Writes each row group as its own file in a dataset directory.
+/// Writes each table's row groups into part files of a dataset directory, a file for each
+/// part number the writer gives, completed when it closes that part (or at the end).
 pub struct DirSink {
     root: PathBuf,
     index: usize,
     rows: usize,
     /// How each table is written (a table's directory exists once it is here).
     writers: HashMap<String, TableWriter>,
+    /// Part files being written, by table.
+    files: BTreeMap<String, PartFile>,
+    /// The page writer's buffers, lent to each file in turn.
+    scratch: pages::Scratch,
 }
 
 /// How a table's part files are written: page by page from the arrays ([`pages`]) when its
@@ -241,7 +266,21 @@ impl<W: io::Write + Send> TableFile<W> {
     /// `batch` as one row group.
     pub fn write(&mut self, batch: &RecordBatch) -> io::Result<()> {
         match self {
+            // The file's own buffers.
             TableFile::Pages(w) => w.write(batch).map_err(perr),
+            TableFile::Arrow(_) => self.write_with(batch, &mut pages::Scratch::default()),
+        }
+    }
+
+    /// `batch` as one row group, with the page writer's buffers lent by the caller
+    /// ([`pages::PartWriter::write_with`]).
+    pub fn write_with(
+        &mut self,
+        batch: &RecordBatch,
+        scratch: &mut pages::Scratch,
+    ) -> io::Result<()> {
+        match self {
+            TableFile::Pages(w) => w.write_with(batch, scratch).map_err(perr),
             TableFile::Arrow(w) => {
                 // The Arrow writer takes the table's own types (text, not words).
                 w.write(&words::declared(batch).map_err(perr)?)
@@ -251,12 +290,70 @@ impl<W: io::Write + Send> TableFile<W> {
         }
     }
 
+    /// What was written so far handed to the output, and the output.
+    fn flushed(&mut self) -> io::Result<&mut W> {
+        Ok(match self {
+            TableFile::Pages(w) => w.flushed().map_err(perr)?,
+            TableFile::Arrow(w) => {
+                w.sync()?;
+                w.inner_mut()
+            }
+        })
+    }
+
     /// Write the footer; the output back.
     pub fn finish(self) -> io::Result<W> {
         match self {
             TableFile::Pages(w) => w.finish().map_err(perr),
             TableFile::Arrow(w) => w.into_inner().map_err(perr),
         }
+    }
+}
+
+/// A part file's output, open only while a row group is written to it: a capture of hundreds
+/// of kinds writes hundreds of part files at once, more than a process may hold open (and
+/// opening an existing file again costs microseconds, creating one about a millisecond).
+struct Parked {
+    path: PathBuf,
+    file: Option<std::fs::File>,
+}
+
+impl io::Write for Parked {
+    fn write(&mut self, b: &[u8]) -> io::Result<usize> {
+        let f = match &mut self.file {
+            Some(f) => f,
+            None => self.file.insert(
+                std::fs::OpenOptions::new()
+                    .append(true)
+                    .open(&self.path)
+                    .map_err(|e| at_path(e, &self.path))?,
+            ),
+        };
+        f.write(b).map_err(|e| at_path(e, &self.path))
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+fn at_path(e: io::Error, p: &Path) -> io::Error {
+    io::Error::new(e.kind(), format!("{}: {e}", p.display()))
+}
+
+/// A part file being written: its number, the file, and its name until complete.
+struct PartFile {
+    part: u32,
+    file: TableFile<Parked>,
+}
+
+impl PartFile {
+    /// Footer written, renamed from `.partial` to `.parquet`. (No fsync: a killed process
+    /// loses nothing the kernel has; a power cut may, and costs a sync per part.)
+    fn complete(self) -> io::Result<()> {
+        let tmp = self.file.finish()?.path;
+        let done = tmp.with_extension("");
+        std::fs::rename(&tmp, &done).map_err(|e| at_path(e, &done))
     }
 }
 
@@ -269,33 +366,87 @@ impl DirSink {
             index,
             rows: opts.rows_per_group,
             writers: HashMap::new(),
+            files: BTreeMap::new(),
+            scratch: pages::Scratch::default(),
         }
+    }
+
+    /// Part `part` of `table`, created (and the table's directory) unless it is being written.
+    fn part_file(
+        &mut self,
+        table: &str,
+        part: u32,
+        batch: &RecordBatch,
+    ) -> io::Result<&mut PartFile> {
+        if self.files.get(table).is_some_and(|f| f.part != part) {
+            self.close(table, u32::MAX)?;
+        }
+        if !self.files.contains_key(table) {
+            let dir = self.root.join(table);
+            if !self.writers.contains_key(table) {
+                std::fs::create_dir_all(&dir).map_err(|e| at_path(e, &dir))?;
+                let schema = words::declared_schema(&batch.schema());
+                let w = TableWriter::new(self.rows, &schema)?;
+                self.writers.insert(table.to_string(), w);
+            }
+            let writer = self
+                .writers
+                .get(table)
+                .ok_or_else(|| io::Error::other("table vanished"))?;
+            let path = dir.join(format!("part-{:05}-{part:05}.parquet.partial", self.index));
+            let f = std::fs::File::create(&path).map_err(|e| at_path(e, &path))?;
+            let file = writer.open(Parked {
+                path,
+                file: Some(f),
+            })?;
+            self.files
+                .insert(table.to_string(), PartFile { part, file });
+        }
+        self.files
+            .get_mut(table)
+            .ok_or_else(|| io::Error::other("part file vanished"))
     }
 }
 
 impl Sink for DirSink {
     fn write(&mut self, table: &str, part: u32, batch: &RecordBatch) -> io::Result<()> {
-        let dir = self.root.join(table);
-        if !self.writers.contains_key(table) {
-            std::fs::create_dir_all(&dir)
-                .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", dir.display())))?;
-            let schema = words::declared_schema(&batch.schema());
-            let w = TableWriter::new(self.rows, &schema)?;
-            self.writers.insert(table.to_string(), w);
+        let mut scratch = std::mem::take(&mut self.scratch);
+        let r = self.part_file(table, part, batch).and_then(|f| {
+            f.file.write_with(batch, &mut scratch)?;
+            // The descriptor closed until the table's next row group.
+            f.file.flushed()?.file = None;
+            Ok(())
+        });
+        self.scratch = scratch;
+        r
+    }
+
+    fn close(&mut self, table: &str, part: u32) -> io::Result<()> {
+        match self.files.remove(table) {
+            Some(f) if part == u32::MAX || f.part == part => f.complete(),
+            Some(f) => {
+                self.files.insert(table.to_string(), f);
+                Ok(())
+            }
+            None => Ok(()),
         }
-        let writer = self
-            .writers
-            .get(table)
-            .ok_or_else(|| io::Error::other("table vanished"))?;
-        let name = format!("part-{:05}-{part:05}.parquet", self.index);
-        let done = dir.join(&name);
-        let tmp = dir.join(format!("{name}.partial"));
-        let f = std::fs::File::create(&tmp)
-            .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", tmp.display())))?;
-        writer.write(f, batch)?;
-        // Renamed once complete: a killed run leaves no torn `.parquet`. (No fsync: a killed
-        // process loses nothing the kernel has; a power cut may, and costs a sync per part.)
-        std::fs::rename(&tmp, &done)
+    }
+
+    fn finish(&mut self) -> io::Result<()> {
+        while let Some((_, f)) = self.files.pop_first() {
+            f.complete()?;
+        }
+        Ok(())
+    }
+}
+
+impl Drop for DirSink {
+    /// Not finished (the capture failed part way): the part files are completed all the same,
+    /// so that the rows written stay readable (errors here have nowhere to go).
+    fn drop(&mut self) {
+        while let Some((_, f)) = self.files.pop_first() {
+            let _ = f.complete();
+        }
     }
 }
 
@@ -402,10 +553,41 @@ type KindOf = (Option<&'static str>, Option<&'static KindSchema>);
 
 struct Open {
     buf: TableBuf,
-    part: u32,
     used: u64,
     /// The kind table's name.
     name: &'static str,
+}
+
+/// A table's part file being written: its number, and the row groups and column chunks in it.
+#[derive(Debug, Clone, Copy)]
+struct PartState {
+    name: &'static str,
+    part: u32,
+    groups: usize,
+    chunks: usize,
+}
+
+impl Default for PartState {
+    fn default() -> Self {
+        PartState {
+            name: RECORDS,
+            part: 0,
+            groups: 0,
+            chunks: 0,
+        }
+    }
+}
+
+/// Leaf columns of `fields` (a list's items, a struct's fields): a row group's column chunks.
+fn leaves(fields: &arrow_schema::Fields) -> usize {
+    fn of(dt: &DataType) -> usize {
+        match dt {
+            DataType::Struct(f) => leaves(f),
+            DataType::List(f) | DataType::LargeList(f) => of(f.data_type()),
+            _ => 1,
+        }
+    }
+    fields.iter().map(|f| of(f.data_type())).sum()
 }
 
 /// Which tables to write, by name ([`CaptureWriter::only_tables`]).
@@ -417,8 +599,8 @@ pub struct CaptureWriter<S: Sink> {
     file: Arc<str>,
     opts: Options,
     records: RecordsBuf,
-    /// Row groups of `records` written.
-    records_part: u32,
+    /// The `records` table's part file.
+    records_file: PartState,
     /// Text formatted for a `records` row (kept for its allocation).
     text: String,
     /// Kind tables buffering rows, by [`KindSchema::index`] (a vector, not a map by name: three
@@ -428,9 +610,11 @@ pub struct CaptureWriter<S: Sink> {
     kinds: Vec<Option<Open>>,
     /// Kind tables buffering rows now.
     open: usize,
-    /// Part numbers of kind tables flushed and closed, to continue from when they reopen (by
-    /// index).
-    parts: Vec<u32>,
+    /// Each kind table's part file (by index).
+    files: Vec<PartState>,
+    /// Column chunks of the part files not closed, together: their metadata waits in memory
+    /// for the files' footers ([`Options::open_chunks`]).
+    open_chunks: usize,
     clock: u64,
     summary: Summary,
     /// The kind table of each message met (the address of its table entry, and of its
@@ -477,13 +661,14 @@ impl<S: Sink> CaptureWriter<S> {
         CaptureWriter {
             sink,
             records: RecordsBuf::new(file.clone(), 64),
-            records_part: 0,
+            records_file: PartState::default(),
             text: String::new(),
             file,
             opts,
             kinds: (0..n).map(|_| None).collect(),
             open: 0,
-            parts: vec![0; n],
+            files: vec![PartState::default(); n],
+            open_chunks: 0,
             clock: 0,
             summary: Summary::default(),
             kind_names: NumMap::default(),
@@ -618,7 +803,6 @@ impl<S: Sink> CaptureWriter<S> {
             if let Some(slot) = self.kinds.get_mut(k.index) {
                 *slot = Some(Open {
                     buf,
-                    part: self.parts.get(k.index).copied().unwrap_or(0),
                     used: 0,
                     name: &k.name,
                 });
@@ -637,7 +821,7 @@ impl<S: Sink> CaptureWriter<S> {
         if o.buf.rows() >= self.opts.rows_per_group || o.buf.bytes() >= self.opts.bytes_per_group {
             self.kind_rows -= o.buf.rows();
             self.kind_bytes -= o.buf.bytes();
-            Self::flush(&mut self.sink, o, &mut self.summary)?;
+            self.flush_kind(k.index)?;
         }
         // Many kinds each short of a row group: the biggest is written early (the first by
         // name of equally big ones), by rows or by bytes, whichever is over.
@@ -665,13 +849,13 @@ impl<S: Sink> CaptureWriter<S> {
     }
 
     fn close_kind(&mut self, i: usize) -> io::Result<()> {
-        if let Some(mut o) = self.kinds.get_mut(i).and_then(Option::take) {
-            self.open -= 1;
+        if let Some(Some(o)) = self.kinds.get(i) {
             self.kind_rows -= o.buf.rows();
             self.kind_bytes -= o.buf.bytes();
-            Self::flush(&mut self.sink, &mut o, &mut self.summary)?;
-            if let Some(p) = self.parts.get_mut(i) {
-                *p = o.part;
+            self.flush_kind(i)?;
+            if let Some(slot) = self.kinds.get_mut(i) {
+                *slot = None;
+                self.open -= 1;
             }
         }
         Ok(())
@@ -682,29 +866,85 @@ impl<S: Sink> CaptureWriter<S> {
             return Ok(());
         }
         let batch = self.records.take().map_err(perr)?;
-        let part = &mut self.records_part;
-        Self::write(&mut self.sink, RECORDS, part, &batch, &mut self.summary)
+        self.write(None, RECORDS, &batch)
     }
 
-    fn flush(sink: &mut S, o: &mut Open, summary: &mut Summary) -> io::Result<()> {
+    /// Kind table `i`'s rows as a row group (its buffer stays open).
+    fn flush_kind(&mut self, i: usize) -> io::Result<()> {
+        let Some(Some(o)) = self.kinds.get_mut(i) else {
+            return Ok(());
+        };
         if o.buf.rows() == 0 {
             return Ok(());
         }
         let batch = o.buf.take().map_err(perr)?;
-        Self::write(sink, o.name, &mut o.part, &batch, summary)
+        let name = o.name;
+        self.write(Some(i), name, &batch)
     }
 
-    /// Row group `part` of `table` to the sink; counts it.
+    /// A row group of kind table `kind` (`None`: of `records`) to the sink, into its part
+    /// file; counts it. A part file is closed when it holds [`Options::groups_per_file`] row
+    /// groups, and the one of most column chunks when the open files together hold more than
+    /// [`Options::open_chunks`] (decided here, from the rows alone, so every run of the same
+    /// capture cuts the same files whatever thread writes them).
     fn write(
-        sink: &mut S,
-        table: &str,
-        part: &mut u32,
+        &mut self,
+        kind: Option<usize>,
+        name: &'static str,
         batch: &RecordBatch,
-        summary: &mut Summary,
     ) -> io::Result<()> {
-        sink.write(table, *part, batch)?;
-        *part += 1;
-        summary.row_groups += 1;
+        let Some(st) = (match kind {
+            None => Some(&mut self.records_file),
+            Some(i) => self.files.get_mut(i),
+        }) else {
+            return Ok(());
+        };
+        st.name = name;
+        self.sink.write(name, st.part, batch)?;
+        self.summary.row_groups += 1;
+        let chunks = leaves(batch.schema().fields());
+        st.groups += 1;
+        st.chunks += chunks;
+        self.open_chunks += chunks;
+        if st.groups >= self.opts.groups_per_file {
+            self.close_file(kind)?;
+        }
+        while self.open_chunks > self.opts.open_chunks {
+            // The file holding the most: the first of equally big ones, `records` first.
+            let mut big = (None, self.records_file.chunks);
+            for (i, f) in self.files.iter().enumerate() {
+                if f.chunks > big.1 {
+                    big = (Some(i), f.chunks);
+                }
+            }
+            if big.1 == 0 {
+                break;
+            }
+            self.close_file(big.0)?;
+        }
+        Ok(())
+    }
+
+    /// Close kind table `kind`'s part file (`None`: `records`'s); the next row group starts
+    /// the next part.
+    fn close_file(&mut self, kind: Option<usize>) -> io::Result<()> {
+        let Some(st) = (match kind {
+            None => Some(&mut self.records_file),
+            Some(i) => self.files.get_mut(i),
+        }) else {
+            return Ok(());
+        };
+        if st.groups == 0 {
+            return Ok(());
+        }
+        self.sink.close(st.name, st.part)?;
+        self.open_chunks -= st.chunks;
+        *st = PartState {
+            name: st.name,
+            part: st.part + 1,
+            groups: 0,
+            chunks: 0,
+        };
         Ok(())
     }
 
@@ -714,6 +954,10 @@ impl<S: Sink> CaptureWriter<S> {
         // By name, as the kinds are numbered.
         for i in 0..self.kinds.len() {
             self.close_kind(i)?;
+        }
+        self.close_file(None)?;
+        for i in 0..self.files.len() {
+            self.close_file(Some(i))?;
         }
         self.sink.finish()?;
         Ok((self.sink, self.summary))

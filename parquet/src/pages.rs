@@ -102,6 +102,7 @@ pub struct PartWriter<W: Write + Send> {
     file: SerializedFileWriter<W>,
     leaves: Vec<ColumnDescPtr>,
     props: WriterPropertiesPtr,
+    /// For [`PartWriter::write`]; empty when the caller lends one ([`PartWriter::write_with`]).
     scratch: Scratch,
 }
 
@@ -140,6 +141,16 @@ impl<W: Write + Send> PartWriter<W> {
 
     /// Write `batch` as one row group.
     pub fn write(&mut self, batch: &RecordBatch) -> Result<()> {
+        let mut scratch = std::mem::take(&mut self.scratch);
+        let r = self.write_with(batch, &mut scratch);
+        self.scratch = scratch;
+        r
+    }
+
+    /// Write `batch` as one row group with buffers lent by the caller: a sink writing the
+    /// files of hundreds of tables at once keeps one set, not one a file (each grows to its
+    /// table's largest page and holds a compressor's table).
+    pub fn write_with(&mut self, batch: &RecordBatch, scratch: &mut Scratch) -> Result<()> {
         let mut rg = self.file.next_row_group()?;
         let mut leaf = 0;
         let schema = batch.schema();
@@ -166,23 +177,28 @@ impl<W: Write + Send> PartWriter<W> {
                     )));
                 }
                 if !(list_levels && l.child.is_none()) {
-                    self.scratch.levels(&l, batch.num_rows());
+                    scratch.levels(&l, batch.num_rows());
                 }
                 list_levels = l.list.is_some() && l.child.is_none();
-                let (chunk, close) =
-                    self.scratch
-                        .chunk(&l, batch.num_rows(), descr, &self.props)?;
+                let (chunk, close) = scratch.chunk(&l, batch.num_rows(), descr, &self.props)?;
                 rg.append_column(&chunk, close)?;
                 // The chunk's buffer back for the next (fresh pages for each were slower than
                 // the copies they saved).
                 if let Ok(m) = chunk.try_into_mut() {
-                    self.scratch.chunk = Vec::from(m);
-                    self.scratch.chunk.clear();
+                    scratch.chunk = Vec::from(m);
+                    scratch.chunk.clear();
                 }
             }
         }
         rg.close()?;
         Ok(())
+    }
+
+    /// What was written so far handed to the output, and the output (to close a file between
+    /// row groups, say).
+    pub fn flushed(&mut self) -> Result<&mut W> {
+        self.file.flush()?;
+        Ok(self.file.inner_mut())
     }
 
     /// Write the footer; the output back.
@@ -306,9 +322,9 @@ impl Sel<'_> {
     }
 }
 
-/// Buffers kept from column to column.
+/// Buffers kept from column to column (and lent from file to file: [`PartWriter::write_with`]).
 #[derive(Default)]
-struct Scratch {
+pub struct Scratch {
     /// Definition and repetition levels of the chunk's entries (empty: all at the maximum).
     def: Vec<u8>,
     rep: Vec<u8>,

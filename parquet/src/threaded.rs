@@ -5,35 +5,38 @@
 
 use crate::Sink;
 use arrow_array::RecordBatch;
+use std::collections::HashMap;
 use std::io;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{channel, Receiver, Sender};
-use std::sync::{Arc, Condvar, Mutex, Weak};
+use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 
-/// One row group to write: table, part number, rows.
-type Part = (String, u32, RecordBatch);
+/// What a writing thread is given: a row group of a table's part, or the end of a part.
+enum Msg {
+    Write(String, u32, RecordBatch),
+    Close(String, u32),
+}
 
-/// A [`Sink`] that writes every row group on one of its threads, each thread into a sink of its
-/// own. Only for sinks that write each row group independently of the others ([`DirSink`]:
-/// a part file each), since the threads write them in any order.
+/// A [`Sink`] that writes every table on one of its threads, each thread into a sink of its
+/// own: a table's row groups and the ends of its parts reach its thread in the order written,
+/// so a sink that writes a part file of several row groups ([`DirSink`]) writes the files of
+/// one thread. Which thread writes a table is decided when its first row group comes (the one
+/// given the fewest rows so far), so the files do not depend on the threads' timing.
 ///
 /// Memory: the row groups handed over and not yet written hold at most `rows` rows and `bytes`
 /// bytes of arrays together (one larger than that waits alone); a kind table's row groups are
 /// often small, so a budget in rows rather than in row groups lets many wait while the largest
 /// are encoded, and the bytes bound row groups of long rows (garbage runs of 4 KiB each). A
 /// write that fails is returned by a later [`Sink::write`] (the decoding stops there) or by
-/// [`Sink::finish`], which writes what still waits beside the threads, then waits for them.
+/// [`Sink::finish`], which waits for the threads.
 ///
 /// [`DirSink`]: crate::DirSink
 pub struct Threaded {
-    tx: Option<Sender<Part>>,
-    /// The threads' queue, not kept alive by this: once every thread is gone (a panic), a write
-    /// fails instead of waiting for room.
-    rx: Weak<Queue>,
-    /// The sink the caller's thread writes into at [`Sink::finish`], helping the threads with
-    /// the row groups still waiting.
-    own: Option<Box<dyn Sink + Send>>,
+    /// Each thread's queue, and the rows it was given.
+    txs: Vec<(Sender<Msg>, usize)>,
+    /// The thread of each table met.
+    route: HashMap<String, usize>,
     /// Rows and bytes handed over and not yet written, and the budget.
     gate: Arc<Gate>,
     threads: Vec<JoinHandle<()>>,
@@ -50,7 +53,6 @@ impl Threaded {
         bytes: usize,
         make: impl Fn() -> S,
     ) -> io::Result<Self> {
-        let (tx, rx) = channel::<Part>();
         let failed = Arc::new(Mutex::new(None));
         let gate = Arc::new(Gate {
             held: Mutex::new(Load::default()),
@@ -58,35 +60,41 @@ impl Threaded {
             max: Load { rows, bytes },
             closed: AtomicBool::new(false),
         });
-        let rx = Arc::new(Queue {
-            rx: Mutex::new(rx),
-            gate: gate.clone(),
-        });
         let mut t = Threaded {
-            tx: Some(tx),
-            rx: Arc::downgrade(&rx),
-            own: Some(Box::new(make())),
+            txs: Vec::new(),
+            route: HashMap::new(),
             gate,
             threads: Vec::new(),
             failed,
         };
         for _ in 0..n.max(1) {
-            let (rx, failed, gate, mut sink) =
-                (rx.clone(), t.failed.clone(), t.gate.clone(), make());
+            let (tx, rx) = channel::<Msg>();
+            let q = Queue {
+                rx,
+                gate: t.gate.clone(),
+            };
+            let (failed, gate, mut sink) = (t.failed.clone(), t.gate.clone(), make());
             // On failure, the threads started are joined when `t` drops.
             let h = std::thread::Builder::new()
                 .name("parquet-write".into())
-                .spawn(move || run(&rx.rx, &failed, &gate, &mut sink))?;
+                .spawn(move || {
+                    let done = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                        run(&q, &failed, &gate, &mut sink)
+                    }));
+                    if done.is_err() {
+                        fail(
+                            &failed,
+                            io::Error::other("a Parquet writing thread panicked"),
+                        );
+                    }
+                    // `q` drops here, after the error is kept: a write woken by the closed
+                    // gate finds it.
+                    drop(q);
+                })?;
+            t.txs.push((tx, 0));
             t.threads.push(h);
         }
         Ok(t)
-    }
-
-    /// Keep `e` unless an earlier error is kept.
-    fn fail(&self, e: io::Error) {
-        if let Ok(mut f) = self.failed.lock() {
-            f.get_or_insert(e);
-        }
     }
 
     /// The first error a thread met, taken.
@@ -96,13 +104,39 @@ impl Threaded {
 
     /// Waits for every thread to write what it was given.
     fn join(&mut self) {
-        self.tx = None;
+        self.txs.clear();
         for t in std::mem::take(&mut self.threads) {
-            // A thread that panicked wrote nothing more; its parts stay `.partial`.
             if t.join().is_err() {
-                self.fail(io::Error::other("a Parquet writing thread panicked"));
+                fail(
+                    &self.failed,
+                    io::Error::other("a Parquet writing thread panicked"),
+                );
             }
         }
+    }
+
+    /// The queue of `table`'s thread (chosen now if it is new).
+    fn queue(&mut self, table: &str) -> io::Result<&mut (Sender<Msg>, usize)> {
+        let i = match self.route.get(table) {
+            Some(&i) => i,
+            None => {
+                let i = (0..self.txs.len())
+                    .min_by_key(|&i| self.txs[i].1)
+                    .unwrap_or(0);
+                self.route.insert(table.to_string(), i);
+                i
+            }
+        };
+        self.txs
+            .get_mut(i)
+            .ok_or_else(|| io::Error::other("sink finished"))
+    }
+}
+
+/// Keep `e` unless an earlier error is kept.
+fn fail(failed: &Mutex<Option<io::Error>>, e: io::Error) {
+    if let Ok(mut f) = failed.lock() {
+        f.get_or_insert(e);
     }
 }
 
@@ -129,19 +163,18 @@ impl Load {
     }
 }
 
-/// The threads' queue of row groups. When the last thread holding it is gone (every one
-/// panicked), the row groups still in it give their load back and the gate is closed: a write
-/// waiting for room then goes on to the closed queue's error instead of waiting for ever
-/// (which it did when a thread died with a row group queued behind the one it panicked on).
+/// A thread's queue of row groups. When its thread is gone (it panicked), the row groups still
+/// in it give their load back and the gate is closed: a write waiting for room then goes on to
+/// the error instead of waiting for ever.
 struct Queue {
-    rx: Mutex<Receiver<Part>>,
+    rx: Receiver<Msg>,
     gate: Arc<Gate>,
 }
 
 impl Drop for Queue {
     fn drop(&mut self) {
-        if let Ok(rx) = self.rx.get_mut() {
-            for (_, _, batch) in rx.try_iter() {
+        for m in self.rx.try_iter() {
+            if let Msg::Write(_, _, batch) = m {
                 self.gate.give(Load::of(&batch));
             }
         }
@@ -187,33 +220,32 @@ impl Gate {
     }
 }
 
-/// A writing thread: row groups until the channel closes; after a failure (its own or
-/// another's) the rest are dropped unwritten.
-fn run<S: Sink + ?Sized>(
-    rx: &Mutex<Receiver<Part>>,
-    failed: &Mutex<Option<io::Error>>,
-    gate: &Gate,
-    sink: &mut S,
-) {
-    loop {
-        // The lock is held only while taking one part, not while writing it.
-        let part = match rx.lock() {
-            Ok(r) => r.recv(),
-            Err(_) => return,
-        };
-        let Ok((table, n, batch)) = part else {
-            return;
-        };
-        // Its load is given back however the write ends, a panic included: otherwise the
-        // decoding thread would wait on the gate for ever instead of meeting the error.
-        let _given = Given(gate, Load::of(&batch));
-        let stopped = failed.lock().map_or(true, |e| e.is_some());
-        if !stopped {
-            if let Err(e) = sink.write(&table, n, &batch) {
-                if let Ok(mut f) = failed.lock() {
-                    f.get_or_insert(e);
+/// A writing thread: row groups until the channel closes, then the sink finished; after a
+/// failure (its own or another's) the rest are dropped unwritten.
+fn run<S: Sink + ?Sized>(q: &Queue, failed: &Mutex<Option<io::Error>>, gate: &Gate, sink: &mut S) {
+    let stopped = || failed.lock().map_or(true, |e| e.is_some());
+    while let Ok(m) = q.rx.recv() {
+        let r = match m {
+            Msg::Write(table, n, batch) => {
+                // Its load is given back however the write ends, a panic included: otherwise
+                // the decoding thread would wait on the gate for ever instead of meeting the
+                // error.
+                let _given = Given(gate, Load::of(&batch));
+                if stopped() {
+                    continue;
                 }
+                sink.write(&table, n, &batch)
             }
+            Msg::Close(table, n) if !stopped() => sink.close(&table, n),
+            Msg::Close(..) => continue,
+        };
+        if let Err(e) = r {
+            fail(failed, e);
+        }
+    }
+    if !stopped() {
+        if let Err(e) = sink.finish() {
+            fail(failed, e);
         }
     }
 }
@@ -232,29 +264,27 @@ impl Sink for Threaded {
         if let Some(e) = self.error() {
             return Err(e);
         }
-        let tx = self
-            .tx
-            .as_ref()
-            .ok_or_else(|| io::Error::other("sink finished"))?;
-        self.gate.take(Load::of(batch));
+        let gate = self.gate.clone();
+        let q = self.queue(table)?;
+        q.1 += batch.num_rows();
+        gate.take(Load::of(batch));
         // Arrays are shared, not copied.
-        tx.send((table.to_string(), part, batch.clone()))
-            .map_err(|_| io::Error::other("Parquet writing threads stopped"))
+        let sent = q.0.send(Msg::Write(table.to_string(), part, batch.clone()));
+        if gate.closed.load(Ordering::SeqCst) || sent.is_err() {
+            return Err(self
+                .error()
+                .unwrap_or_else(|| io::Error::other("a Parquet writing thread stopped")));
+        }
+        Ok(())
+    }
+
+    fn close(&mut self, table: &str, part: u32) -> io::Result<()> {
+        let q = self.queue(table)?;
+        q.0.send(Msg::Close(table.to_string(), part))
+            .map_err(|_| io::Error::other("a Parquet writing thread stopped"))
     }
 
     fn finish(&mut self) -> io::Result<()> {
-        // Every table's last row group comes at the end, all at once: the caller's thread,
-        // done decoding, writes them too instead of waiting for the threads alone.
-        self.tx = None;
-        if let (Some(mut own), Some(rx)) = (self.own.take(), self.rx.upgrade()) {
-            // A write that panics is an error here as on the threads, not a panic of the caller.
-            let helped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                run(&rx.rx, &self.failed, &self.gate, &mut *own)
-            }));
-            if helped.is_err() {
-                self.fail(io::Error::other("a Parquet write panicked"));
-            }
-        }
         self.join();
         match self.error() {
             Some(e) => Err(e),
@@ -264,8 +294,8 @@ impl Sink for Threaded {
 }
 
 impl Drop for Threaded {
-    /// Not finished (the decoding failed): the parts handed over are still written whole, so
-    /// that no thread outlives the run.
+    /// Not finished (the decoding failed): the parts handed over are still written, so that
+    /// no thread outlives the run.
     fn drop(&mut self) {
         self.join();
     }
@@ -352,6 +382,64 @@ mod tests {
             .recv_timeout(std::time::Duration::from_secs(60))
             .expect("the writes ended");
         assert!(failed, "the panic came back as an error");
+    }
+
+    /// Sink number, table, part, whether it is the part's end.
+    type Event = (usize, String, u32, bool);
+
+    /// What each sink was given, by the sink's number: a table's row groups and part ends.
+    struct Log(usize, Arc<Mutex<Vec<Event>>>);
+
+    impl Sink for Log {
+        fn write(&mut self, table: &str, part: u32, _: &RecordBatch) -> io::Result<()> {
+            let mut l = self.1.lock().map_err(|_| io::Error::other("poisoned"))?;
+            l.push((self.0, table.to_string(), part, false));
+            Ok(())
+        }
+
+        fn close(&mut self, table: &str, part: u32) -> io::Result<()> {
+            let mut l = self.1.lock().map_err(|_| io::Error::other("poisoned"))?;
+            l.push((self.0, table.to_string(), part, true));
+            Ok(())
+        }
+    }
+
+    /// A table's row groups and the ends of its parts all reach one thread's sink, in the order
+    /// written (a part file is written by one sink), and the tables are spread over the threads.
+    #[test]
+    fn a_table_is_written_by_one_thread_in_order() {
+        let log = Arc::new(Mutex::new(Vec::new()));
+        let made = std::sync::atomic::AtomicUsize::new(0);
+        let mut t = Threaded::new(3, 10, usize::MAX, || {
+            Log(made.fetch_add(1, Ordering::SeqCst), log.clone())
+        })
+        .expect("threads");
+        let mut sent = vec![];
+        for i in 0..600u32 {
+            let table = format!("t{}", i % 7);
+            let part = i / 70;
+            t.write(&table, part, &batch(1)).expect("write");
+            sent.push((table.clone(), part, false));
+            if i % 70 >= 63 {
+                t.close(&table, part).expect("close");
+                sent.push((table, part, true));
+            }
+        }
+        t.finish().expect("finish");
+        let log = log.lock().expect("lock");
+        let mut sinks = std::collections::BTreeSet::new();
+        for k in 0..7 {
+            let table = format!("t{k}");
+            let got: Vec<_> = log.iter().filter(|e| e.1 == table).collect();
+            let want: Vec<_> = sent.iter().filter(|e| e.0 == table).collect();
+            assert_eq!(got.len(), want.len(), "{table}");
+            for (g, w) in got.iter().zip(&want) {
+                assert_eq!((&g.1, g.2, g.3), (&w.0, w.1, w.2), "{table}: in order");
+            }
+            assert!(got.iter().all(|g| g.0 == got[0].0), "{table}: one thread");
+            sinks.insert(got[0].0);
+        }
+        assert_eq!(sinks.len(), 3, "tables on every thread");
     }
 
     /// A failed write comes back: from a later write or from finish.

@@ -185,7 +185,8 @@ fn elliptec_kind_tables_carry_status_names_and_codes() {
 }
 
 /// Many kinds and small row groups: every row still lands, once, in row groups no bigger than
-/// asked; and a directory dataset has one finished file per row group.
+/// asked; a directory dataset's part files hold several row groups each, at most as many as
+/// asked, and files are closed early when the open ones hold too many column chunks.
 #[test]
 fn bounded_buffers_keep_every_row() -> io::Result<()> {
     let bytes = synth::stream(Table::global(), 7, 600, true);
@@ -193,6 +194,8 @@ fn bounded_buffers_keep_every_row() -> io::Result<()> {
         rows_per_group: 100,
         max_open_kinds: 4,
         kind_rows: 100,
+        groups_per_file: 3,
+        open_chunks: 1000,
         ..Options::default()
     };
     let tmp = std::env::temp_dir().join(format!("aptscope-pq-{}", std::process::id()));
@@ -209,9 +212,11 @@ fn bounded_buffers_keep_every_row() -> io::Result<()> {
     }
     d.finish(&mut |r| w.record(r))?;
     let (_, sum) = w.finish()?;
-    let (mut rows, mut frames_in_kinds, mut files) = (0usize, 0usize, 0usize);
+    let (mut rows, mut frames_in_kinds, mut files, mut groups) = (0usize, 0usize, 0usize, 0);
+    let (mut full, mut cut) = (0, 0);
     for e in std::fs::read_dir(&tmp)? {
         let e = e?;
+        let mut names = vec![];
         for p in std::fs::read_dir(e.path())? {
             let p = p?.path();
             let name = p
@@ -223,19 +228,41 @@ fn bounded_buffers_keep_every_row() -> io::Result<()> {
                 name.starts_with("part-00003-") && name.ends_with(".parquet"),
                 "{name}"
             );
+            names.push(name.clone());
             files += 1;
+            let r =
+                ParquetRecordBatchReaderBuilder::try_new(bytes::Bytes::from(std::fs::read(&p)?))
+                    .expect("parquet");
+            let n_groups = r.metadata().num_row_groups();
+            assert!((1..=3).contains(&n_groups), "{name}: {n_groups} row groups");
+            groups += n_groups;
+            if n_groups == 3 {
+                full += 1;
+            } else {
+                cut += 1;
+            }
+            for i in 0..n_groups {
+                let n = r.metadata().row_group(i).num_rows();
+                assert!(n <= 100 && n > 0, "{name}: row group {i}: {n}");
+            }
             let b = read(std::fs::read(&p)?);
             let n: usize = b.iter().map(|x| x.num_rows()).sum();
-            assert!(n <= 100 && n > 0, "{name}: {n}");
             if e.file_name() == "records" {
                 rows += n;
             } else {
                 frames_in_kinds += n;
             }
         }
+        // Parts numbered from 0 in each table, none missing.
+        names.sort();
+        for (i, n) in names.iter().enumerate() {
+            assert_eq!(n, &format!("part-00003-{i:05}.parquet"));
+        }
     }
     assert_eq!(rows as u64, sum.records);
-    assert_eq!(files as u64, sum.row_groups);
+    assert_eq!(groups as u64, sum.row_groups);
+    assert!(files < groups, "{files} files of {groups} row groups");
+    assert!(full > 0 && cut > 0, "{full} files full, {cut} cut early");
     assert!(
         frames_in_kinds as u64 <= sum.frames && frames_in_kinds > 400,
         "{frames_in_kinds}"

@@ -26,8 +26,9 @@ use std::io;
 /// Checks each row group as it is written.
 struct Check {
     rows_per_group: usize,
-    /// The next part number expected, by table.
-    parts: BTreeMap<String, u32>,
+    groups_per_file: usize,
+    /// Each table's part: its number, its row groups, whether it was closed.
+    parts: BTreeMap<String, (u32, usize, bool)>,
     records: u64,
     raw: u64,
 }
@@ -35,9 +36,22 @@ struct Check {
 impl Sink for Check {
     fn write(&mut self, table: &str, part: u32, batch: &RecordBatch) -> io::Result<()> {
         let words = batch;
-        let next = self.parts.entry(table.to_string()).or_default();
-        assert_eq!(part, *next, "{table}: row groups numbered in order");
-        *next += 1;
+        // Parts numbered from 0, each after the last is closed; a part's row groups at most
+        // as many as asked.
+        let p = self.parts.entry(table.to_string()).or_insert((0, 0, false));
+        if p.2 {
+            *p = (p.0 + 1, 0, false);
+        }
+        assert_eq!(
+            part, p.0,
+            "{table}: parts numbered in order, each closed before the next"
+        );
+        p.1 += 1;
+        assert!(
+            p.1 <= self.groups_per_file,
+            "{table}: part {part}: {} row groups",
+            p.1
+        );
         assert!(batch.num_rows() > 0, "{table}: empty row group");
         assert!(
             batch.num_rows() <= self.rows_per_group,
@@ -88,6 +102,21 @@ impl Sink for Check {
         );
         Ok(())
     }
+
+    fn close(&mut self, table: &str, part: u32) -> io::Result<()> {
+        let p = self
+            .parts
+            .get_mut(table)
+            .expect("a part written before it closes");
+        assert_eq!(
+            (part, p.2),
+            (p.0, false),
+            "{table}: the open part closed once"
+        );
+        assert!(p.1 > 0, "{table}: part {part} closed empty");
+        p.2 = true;
+        Ok(())
+    }
 }
 
 /// The target's body: panics when a check fails.
@@ -103,9 +132,12 @@ pub fn fuzz(data: &[u8]) {
         bytes_per_group: 64 + 16 * usize::from(budget),
         max_open_kinds: 3,
         kind_rows: 2 + usize::from(budget % 16),
+        groups_per_file: 1 + usize::from(flags / 3 % 4),
+        open_chunks: 8 * usize::from(budget),
     };
     let check = Check {
         rows_per_group: opts.rows_per_group,
+        groups_per_file: opts.groups_per_file,
         parts: BTreeMap::new(),
         records: 0,
         raw: 0,
@@ -129,5 +161,8 @@ pub fn fuzz(data: &[u8]) {
     dec.finish(&mut emit).expect("rows");
     let (check, sum) = w.finish().expect("finish");
     assert_eq!(check.records, sum.records, "a records row per record");
+    for (t, p) in &check.parts {
+        assert!(p.2, "{t}: part {} left open", p.0);
+    }
     assert_eq!(check.raw, bytes, "records hold exactly the captured bytes");
 }
