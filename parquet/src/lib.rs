@@ -106,10 +106,11 @@ impl Default for Options {
             kind_rows: 2 * 65_536,
             // 4 M rows of a status log's `records` (about 200 MB of Parquet) a file at most.
             groups_per_file: 64,
-            // A chunk's metadata is about 1.3 KiB (peak of 100 MB of every form: 67 MiB at
-            // 4,096, 83 MiB at 16,384): 5 MiB. That capture's 526 tables then write 5,244
-            // part files (one per row group, 13,304, before), 10 MB of it 754 (1,556).
-            open_chunks: 4096,
+            // A chunk's metadata is about 1.3 KiB: 2.6 MiB. 100 MB of every form (526 tables)
+            // then writes 7,580 part files (13,304 when each row group was one), peak
+            // 64.5 MiB (60.1 before); at 1,024 chunks 9,649 files and 63.7 MiB, at 4,096
+            // 5,244 files but 67.7 MiB, over the 64 MiB a worker may use.
+            open_chunks: 2048,
         }
     }
 }
