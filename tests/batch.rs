@@ -4,6 +4,7 @@ mod common;
 
 use arrow_array::cast::AsArray;
 use arrow_array::{Array, ArrayRef, RecordBatch};
+use common::proc::{wait_for, Proc};
 use common::{aptscope, aptscope_env};
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use serde_json::Value;
@@ -302,4 +303,71 @@ fn one_capture_encoded_on_spare_cores_is_the_dataset_of_one() {
             assert!(a == b, "-j {j}: {} differs", p.display());
         }
     }
+}
+
+/// Ctrl-C during `decode --to parquet`: the file being decoded stops and its part files are
+/// completed (none left `.partial`, every one readable, holding every record the message
+/// counts), the files not started are named as such, and the run fails.
+#[test]
+fn a_stopped_parquet_run_leaves_complete_files() {
+    let dir = common::Scratch::new("batch-parquet-stop");
+    let table = aptscope_dissector::Table::global();
+    // Large enough that the first file is still being decoded (a debug build: seconds) when
+    // its first `records` row group is out.
+    let big = dir.join("big.bin");
+    std::fs::write(
+        &big,
+        aptscope_dissector::synth::stream(table, 5, 400_000, true),
+    )
+    .expect("write");
+    let small = dir.join("small.bin");
+    std::fs::write(
+        &small,
+        aptscope_dissector::synth::stream(table, 6, 2_000, true),
+    )
+    .expect("write");
+    let out = dir.join("ds");
+    let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
+    let args = [
+        "decode",
+        "--to",
+        "parquet",
+        "-j",
+        "1",
+        "-o",
+        &s(&out),
+        &s(&big),
+        &s(&small),
+        &s(&small),
+    ];
+    let mut p = Proc::aptscope(&args);
+    let records = out.join("records");
+    wait_for(
+        "the first records row group",
+        || p.both(),
+        || std::fs::read_dir(&records).is_ok_and(|mut d| d.next().is_some()),
+    );
+    p.signal(nix::sys::signal::Signal::SIGINT);
+    let st = p.wait_exit();
+    let err = p.stderr();
+    assert!(!st.success(), "{err}");
+    assert!(err.contains("stopped by SIGINT"), "{err}");
+    assert!(err.contains("2 of 3 files not started"), "{err}");
+    let said: usize = err
+        .split("holds the ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .expect("a record count");
+    assert!(said >= 65_536, "{said}");
+    let files = dataset_files(&out);
+    assert!(
+        files
+            .iter()
+            .all(|(p, _)| p.extension().is_some_and(|e| e == "parquet")),
+        "{:?}",
+        files.iter().map(|f| &f.0).collect::<Vec<_>>()
+    );
+    let rows: usize = rows(&records).iter().map(|b| b.num_rows()).sum();
+    assert_eq!(rows, said);
 }

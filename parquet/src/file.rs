@@ -8,6 +8,8 @@ use aptscope_dissector::detect::Proto;
 use aptscope_dissector::record::{Decoder, Record};
 use aptscope_dissector::units::UnitsOpts;
 use std::io;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 /// How a capture is decoded.
 #[derive(Debug, Clone, Default)]
@@ -22,6 +24,9 @@ pub struct DecodeOpts {
     pub timeout_ns: Option<u64>,
     /// Skip a file that is [`not_a_capture`] (an error instead of rows).
     pub judge: bool,
+    /// Stop reading once this is set (looked at every 256 events, after `tick`): the records
+    /// decoded until then are written and the files completed, as at the end of the input.
+    pub stop: Option<Arc<AtomicBool>>,
 }
 
 pub use aptscope_capture::judge::{not_a_capture, not_a_capture_error};
@@ -62,6 +67,9 @@ pub fn decode_file<S: Sink>(
         k = k.wrapping_add(1);
         if k.is_multiple_of(256) {
             tick(&progress);
+            if o.stop.as_ref().is_some_and(|s| s.load(Ordering::Relaxed)) {
+                break;
+            }
         }
     }
     dec.finish(&mut emit)?;

@@ -20,6 +20,7 @@
 
 use crate::common::{compile_filter, fatal, proto_of, ProtoArg};
 use aptscope_capture::judge::{not_a_capture, not_a_capture_error, refuse};
+use aptscope_capture::live::signals::{Signals, STOP};
 use aptscope_capture::open::{open_with_progress, OpenOptions, Progress};
 use aptscope_capture::{Chunk, Direction};
 use aptscope_capture::{Event, Reader};
@@ -596,6 +597,14 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
     job.filter.map(compile_filter).transpose()?;
     let n = job.files.len();
     let bar = Bar::new(&job);
+    // Only over files: a pipe's read waits for its writer, so a stop would wait with it.
+    let halt = Halt::new(
+        matches!(job.out, Output::Parquet(_))
+            && job
+                .files
+                .iter()
+                .all(|f| f != "-" && std::fs::metadata(f).is_ok_and(|m| m.is_file())),
+    );
     let stop = AtomicBool::new(false);
     let next = AtomicUsize::new(0);
     let head = AtomicUsize::new(0);
@@ -613,6 +622,7 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
     let job = &job;
     let pool = Pool::default();
     let (bar, stop, next, txs, head, pool) = (&bar, &stop, &next, &txs, &head, &pool);
+    let halt = &halt;
     let result = std::thread::scope(|sc| {
         for _ in 0..jobs {
             sc.spawn(move || loop {
@@ -620,10 +630,20 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
                 if i >= n || stop.load(Ordering::Relaxed) {
                     break;
                 }
+                if halt.check() {
+                    // The files not started are not: their channels closed, so that the
+                    // writer goes past them.
+                    for t in txs.iter().skip(i) {
+                        if let Ok(mut t) = t.lock() {
+                            t.take();
+                        }
+                    }
+                    break;
+                }
                 let Some(tx) = txs[i].lock().ok().and_then(|mut t| t.take()) else {
                     break;
                 };
-                let r = one(job, i, &tx, bar, head, pool, helpers);
+                let r = one(job, i, &tx, bar, head, pool, helpers, halt);
                 bar.file_done();
                 // The receiver is gone only when the writer stopped: nothing left to do.
                 if tx.send(Msg::Done(r)).is_err() {
@@ -631,10 +651,45 @@ pub fn run(job: Job<'_>) -> io::Result<()> {
                 }
             });
         }
-        collect(job, rxs, bar, stop, head, pool)
+        collect(job, rxs, bar, stop, head, pool, halt)
     });
     bar.finish();
     result
+}
+
+/// A stop signal (SIGINT, SIGTERM, SIGHUP) during a Parquet run: the files being decoded stop
+/// reading and complete their part files as at their end (a part file gets its footer only
+/// when complete: killed, a run would leave its open files' row groups unreadable), the files
+/// not started are not, and the run fails saying so. Text and NDJSON are written as they
+/// come: a signal ends them as before; so it does a run reading a pipe or a device.
+struct Halt {
+    signals: Option<Signals>,
+    flag: Arc<AtomicBool>,
+    /// The signal, by name.
+    by: Mutex<Option<String>>,
+}
+
+impl Halt {
+    /// Watching the stop signals when `on` (blocked in this thread and those it starts, and
+    /// read from a descriptor), else never set.
+    fn new(on: bool) -> Halt {
+        Halt {
+            signals: on.then(|| Signals::install(STOP).ok()).flatten(),
+            flag: Arc::new(AtomicBool::new(false)),
+            by: Mutex::new(None),
+        }
+    }
+
+    /// Whether the run is to stop (a signal received is taken here).
+    fn check(&self) -> bool {
+        if let Some(sig) = self.signals.as_ref().and_then(Signals::take) {
+            if let Ok(mut by) = self.by.lock() {
+                by.get_or_insert(sig);
+            }
+            self.flag.store(true, Ordering::Relaxed);
+        }
+        self.flag.load(Ordering::Relaxed)
+    }
 }
 
 /// The writer side: every file's output in input order; errors reported by name.
@@ -645,10 +700,12 @@ fn collect(
     stop: &AtomicBool,
     head: &AtomicUsize,
     pool: &Pool,
+    halt: &Halt,
 ) -> io::Result<()> {
     let n = job.files.len();
     let mut out = io::stdout().lock();
     let (mut failed, mut records, mut groups) = (0usize, 0u64, 0u64);
+    let mut not_started = 0usize;
     for (i, rx) in rxs.into_iter().enumerate() {
         let file = &job.files[i];
         head.store(i, Ordering::Relaxed);
@@ -712,6 +769,11 @@ fn collect(
                     }
                     break;
                 }
+                // Not started: the run was stopped (`Halt`).
+                Err(_) if halt.check() => {
+                    not_started += 1;
+                    break;
+                }
                 Err(_) => {
                     return Err(io::Error::other(format!("{file}: its decoder stopped")));
                 }
@@ -723,7 +785,23 @@ fn collect(
         bar.note(&format!(
             "{}: {} of {n} files, {records} records, {groups} row groups",
             root.display(),
-            n - failed
+            n - failed - not_started
+        ));
+    }
+    if halt.check() {
+        let by = halt.by.lock().ok().and_then(|b| b.clone());
+        return Err(io::Error::new(
+            io::ErrorKind::Interrupted,
+            format!(
+                "stopped by {}: the dataset holds the {records} records decoded before, in \
+                 complete part files{}",
+                by.as_deref().unwrap_or("a signal"),
+                if not_started > 0 {
+                    format!("; {not_started} of {n} files not started")
+                } else {
+                    String::new()
+                }
+            ),
         ));
     }
     if failed > 0 {
@@ -735,6 +813,7 @@ fn collect(
 }
 
 /// Decode file `i` of the job into its channel (text, NDJSON) or dataset parts (Parquet).
+#[allow(clippy::too_many_arguments)]
 fn one(
     job: &Job<'_>,
     i: usize,
@@ -743,6 +822,7 @@ fn one(
     head: &AtomicUsize,
     pool: &Pool,
     helpers: usize,
+    halt: &Halt,
 ) -> io::Result<Stats> {
     let file = job.files[i].as_str();
     let mut seen = 0u64;
@@ -758,8 +838,12 @@ fn one(
                 // What is not a capture is refused (one input: the run fails; among several,
                 // it is skipped).
                 judge: true,
+                stop: Some(halt.flag.clone()),
             };
-            let mut tick = |p: &Progress| bar.tick(p, &mut seen);
+            let mut tick = |p: &Progress| {
+                bar.tick(p, &mut seen);
+                halt.check();
+            };
             // Cores the files leave spare encode and compress the row groups, which is half
             // of the work; the rows are built on this thread, in the order of `-j 1`, so the
             // part files are the same.
