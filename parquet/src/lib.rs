@@ -104,7 +104,7 @@ impl Default for Options {
             // 64 MiB a worker may use; a capture of a few kinds (status logs) cuts at
             // `rows_per_group` either way.
             kind_rows: 2 * 65_536,
-            // 4 M rows of a status log's `records` (about 200 MB of Parquet) a file at most.
+            // 4 M rows of a status log's `records` (about 140 MB of Parquet) a file at most.
             groups_per_file: 64,
             // A chunk's metadata is about 1.3 KiB: 2.6 MiB. 100 MB of every form (526 tables)
             // then writes 7,580 part files (13,304 when each row group was one), peak
