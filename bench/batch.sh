@@ -4,9 +4,14 @@
 # then ONE large capture (raw, and the same as pcapng) on 1 and 2 threads, text, NDJSON and
 # Parquet (one file: the decode chain on one thread, rendering, or Parquet encoding, on the
 # others).
-# Usage: bench/batch.sh   (env: FILES=50 files of MB=4.2 MB each, ≥ 200 MB; BIG=100 MB; the
-# inputs and datasets go under $TMPDIR, default /tmp: a large capture of many kinds writes
-# thousands of part files, so the file system's speed at creating files shows)
+# Last, the two targets of #27 that are not `decode` runs: typed decoding (framing + every
+# field, `dissector/examples/decode_file`, best of 10 runs in memory) and Python's `to_arrow()`
+# (`python/examples/arrow_speed.py`, the call alone, threads=1 beside one per core, release
+# module in target/bench-pyvenv, built here), then every target with its figure.
+# Usage: bench/batch.sh   (env: FILES=50 files of MB=4.2 MB each, ≥ 200 MB; BIG=100 MB;
+# ARROW_MB=10 MB for to_arrow(); the inputs and datasets go under $TMPDIR, default /tmp: a
+# large capture of many kinds writes thousands of part files, so the file system's speed at
+# creating files shows. Needs python3 with venv, and the network for PyPI the first time)
 #
 # The files are device→host streams of 27 common message forms with random field values
 # (dissector/examples/gen_d2h.rs, one seed per file): what a controller's status logs look
@@ -16,6 +21,7 @@ cd "$(dirname "$0")/.."
 FILES=${FILES:-50}
 MB=${MB:-4.2}
 BIG=${BIG:-100}
+ARROW_MB=${ARROW_MB:-10}
 cargo build -q --release --bin aptscope
 cargo build -q --release -p aptscope-dissector --example gen_d2h --example gen_stream
 tmp=$(mktemp -d)
@@ -27,7 +33,7 @@ done
 total=$(du -cb "$tmp"/in/*.bin | tail -n1 | cut -f1)
 printf 'input: %d files, %.1f MB; %s, %d cores\n' "$FILES" "$(echo "$total / 1000000" | bc -l)" \
   "$(lscpu | sed -n 's/^Model name: *//p' | head -n1)" "$(nproc)"
-declare -A rate cpus
+declare -A rate cpus big_json big_pq big_pqnd
 run() { # label, jobs, command...   (MB/s of $total bytes)
   local label=$1 jobs=$2
   shift 2
@@ -55,6 +61,9 @@ done
 for j in 1 2; do
   printf 'parquet/ndjson -j %s: %.2f\n' "$j" "$(echo "${rate[parquet.$j]} / ${rate[ndjson.$j]}" | bc -l)"
 done
+# Kept for the summary: the next section reuses the labels.
+files_json=$(echo "${rate[ndjson.2]} / ${rate[ndjson.1]}" | bc -l)
+files_pq=$(echo "${rate[parquet.1]} / ${rate[ndjson.1]}" | bc -l)
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
 printf 'dataset: %s in %d files\n' "$(du -sh "$tmp/out" | cut -f1)" "$(find "$tmp/out" -name '*.parquet' | wc -l)"
 
@@ -75,6 +84,45 @@ for kind in bin pcapng; do
   for j in 1 2; do
     printf 'parquet/ndjson -j %s: %.2f\n' "$j" "$(echo "${rate[parquet.$j]} / ${rate[ndjson.$j]}" | bc -l)"
   done
+  big_json[$kind]=$(echo "${rate[ndjson.2]} / ${rate[ndjson.1]}" | bc -l)
+  big_pq[$kind]=$(echo "${rate[parquet.2]} / ${rate[parquet.1]}" | bc -l)
+  big_pqnd[$kind]=$(echo "${rate[parquet.1]} / ${rate[ndjson.1]}" | bc -l)
 done
-rm -rf "$tmp/out"
+rm -rf "$tmp/out" "$tmp"/big.*
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
+
+# Typed decoding: frames and every field of a status log held in memory, best of 10 runs.
+cargo build -q --release -p aptscope-dissector --example decode_file
+target/release/examples/gen_d2h 20 > "$tmp/d2h.bin" 2>/dev/null
+typed=$(target/release/examples/decode_file "$tmp/d2h.bin" 10 \
+  | sed -n 's/.*"mb_per_s":\([0-9.]*\).*/\1/p')
+printf 'typed decode (20 MB status log, best of 10): %.0f MB/s\n' "$typed"
+
+# to_arrow(): the release module in a venv of its own (the tests' is a debug build).
+venv=target/bench-pyvenv
+[ -x "$venv/bin/python" ] || python3 -m venv "$venv"
+CARGO_TARGET_DIR="$PWD/target" "$venv/bin/pip" install -q --disable-pip-version-check ./python
+target/release/examples/gen_d2h "$ARROW_MB" > "$tmp/arrow.bin" 2>/dev/null
+echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
+declare -A arrow
+for t in 1 "$(nproc)"; do
+  out=$("$venv/bin/python" python/examples/arrow_speed.py "$tmp/arrow.bin" to_arrow "$t")
+  echo "to_arrow() threads=$t: $out"
+  arrow[$t]=$(sed -n 's/.*, \([0-9.]*\) M per second.*/\1/p' <<< "$out")
+done
+echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
+
+# Every target of #27 beside its figure from this run.
+met() { if [ "$(echo "$1 >= $2" | bc -l)" = 1 ]; then echo met; else echo "NOT met"; fi; }
+echo "== targets"
+printf '%-50s %8s  %-6s\n' "what" "figure" "target"
+row() { printf '%-50s %8.2f  %-8s %s\n' "$1" "$2" "$3" "$(met "$2" "${3#≥ }")"; }
+row "decode --json -j 2 / -j 1, $FILES files" "$files_json" "≥ 1.8"
+row "decode --json -j 2 / -j 1, one raw capture" "${big_json[bin]}" "≥ 1.7"
+row "the same, pcapng" "${big_json[pcapng]}" "≥ 1.7"
+row "decode --to parquet -j 2 / -j 1, one raw capture" "${big_pq[bin]}" "≥ 1.7"
+row "the same, pcapng" "${big_pq[pcapng]}" "≥ 1.7"
+row "Parquet / NDJSON throughput, -j 1, $FILES files" "$files_pq" "≥ 1"
+row "the same, one raw capture of every form" "${big_pqnd[bin]}" "≥ 1"
+row "to_arrow(), M records/s, threads=$(nproc)" "${arrow[$(nproc)]}" "≥ 3"
+row "typed decode, MB/s" "$typed" "≥ 400"
