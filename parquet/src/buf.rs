@@ -16,7 +16,10 @@ use std::fmt::Write as _;
 use std::sync::Arc;
 
 /// A column being built, in its own Arrow type (values stored at their width, no conversion
-/// when the batch is taken).
+/// when the batch is taken). The variants larger than a number's builder (104 bytes) are
+/// boxed: a column of words holds its set's 1.5 KiB cache of addresses, and every column of
+/// the hundreds of kind tables a capture of every form opens was 1,768 bytes (8.8 MB of the
+/// 50 MB at its peak, and its columns that far apart in the cache).
 enum Buf {
     I8(Int8Builder),
     I16(Int16Builder),
@@ -31,17 +34,20 @@ enum Buf {
     Ts(TimestampNanosecondBuilder),
     Str(StringBuilder),
     Bin(BinaryBuilder),
-    ListS(ListBuilder<StringBuilder>),
-    ListI(ListBuilder<Int64Builder>),
-    ListF(ListBuilder<Float64Builder>),
-    /// Words ([`crate::words`]), and lists of words: where each row's list ends among them.
-    Words(Words),
-    ListW {
-        ends: Vec<i32>,
-        valid: Valid,
-        words: Words,
-        item: Arc<Field>,
-    },
+    ListS(Box<ListBuilder<StringBuilder>>),
+    ListI(Box<ListBuilder<Int64Builder>>),
+    ListF(Box<ListBuilder<Float64Builder>>),
+    /// Words ([`crate::words`]), and lists of words.
+    Words(Box<Words>),
+    ListW(Box<ListWords>),
+}
+
+/// A column of lists of words: the words, and where each row's list ends among them.
+struct ListWords {
+    ends: Vec<i32>,
+    valid: Valid,
+    words: Words,
+    item: Arc<Field>,
 }
 
 fn item(dt: DataType) -> Arc<Field> {
@@ -76,27 +82,27 @@ impl Buf {
                 Buf::Ts(TimestampNanosecondBuilder::with_capacity(cap).with_data_type(dt.clone()))
             }
             DataType::Binary => Buf::Bin(BinaryBuilder::with_capacity(cap, cap * 16)),
-            DataType::Dictionary(..) => Buf::Words(Words::new(cap)),
+            DataType::Dictionary(..) => Buf::Words(Box::new(Words::new(cap))),
             DataType::List(f) if matches!(f.data_type(), DataType::Dictionary(..)) => {
                 let mut ends = Vec::with_capacity(cap + 1);
                 ends.push(0);
-                Buf::ListW {
+                Buf::ListW(Box::new(ListWords {
                     ends,
                     valid: Valid::default(),
                     words: Words::new(cap * 4),
                     item: f.clone(),
-                }
+                }))
             }
             DataType::List(f) => match f.data_type() {
-                DataType::Utf8 => Buf::ListS(
+                DataType::Utf8 => Buf::ListS(Box::new(
                     ListBuilder::new(StringBuilder::new()).with_field(item(DataType::Utf8)),
-                ),
-                DataType::Int64 => Buf::ListI(
+                )),
+                DataType::Int64 => Buf::ListI(Box::new(
                     ListBuilder::new(Int64Builder::new()).with_field(item(DataType::Int64)),
-                ),
-                DataType::Float64 => Buf::ListF(
+                )),
+                DataType::Float64 => Buf::ListF(Box::new(
                     ListBuilder::new(Float64Builder::new()).with_field(item(DataType::Float64)),
-                ),
+                )),
                 _ => Buf::Str(StringBuilder::with_capacity(cap, cap * 8)),
             },
             _ => Buf::Str(StringBuilder::with_capacity(cap, cap * 8)),
@@ -123,9 +129,10 @@ impl Buf {
             Buf::ListI(b) => b.append_nulls(n),
             Buf::ListF(b) => b.append_nulls(n),
             Buf::Words(w) => (0..n).for_each(|_| w.push(None)),
-            Buf::ListW {
-                ends, valid, words, ..
-            } => {
+            Buf::ListW(l) => {
+                let ListWords {
+                    ends, valid, words, ..
+                } = &mut **l;
                 let end = words.len() as i32;
                 for _ in 0..n {
                     ends.push(end);
@@ -242,12 +249,13 @@ impl Buf {
             Buf::ListI(b) => Arc::new(b.finish()),
             Buf::ListF(b) => Arc::new(b.finish()),
             Buf::Words(w) => w.take()?,
-            Buf::ListW {
-                ends,
-                valid,
-                words,
-                item,
-            } => {
+            Buf::ListW(l) => {
+                let ListWords {
+                    ends,
+                    valid,
+                    words,
+                    item,
+                } = &mut **l;
                 let ends = std::mem::replace(ends, vec![0]);
                 Arc::new(ListArray::try_new(
                     item.clone(),
@@ -386,9 +394,10 @@ impl TableBuf {
         let mut n = 0;
         if let Some(b) = self.col(i) {
             match b {
-                Buf::ListW {
-                    ends, valid, words, ..
-                } => {
+                Buf::ListW(l) => {
+                    let ListWords {
+                        ends, valid, words, ..
+                    } = &mut **l;
                     for s in v {
                         words.push(Some(s));
                         n += s.len();
