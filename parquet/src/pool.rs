@@ -20,6 +20,16 @@ use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
+/// Records per batch or run when `APTSCOPE_BATCH_RECORDS` says (a positive number): the tests
+/// cut small samples into many, in `aptscope decode -j`'s batches and in the runs of
+/// `to_arrow()`'s threads alike.
+pub fn records_from_env() -> Option<usize> {
+    std::env::var("APTSCOPE_BATCH_RECORDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .filter(|n| *n > 0)
+}
+
 /// The row groups of one run, in the order its writer gave them: `(table, rows)`.
 pub type Groups = Vec<(String, RecordBatch)>;
 

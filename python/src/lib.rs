@@ -358,15 +358,6 @@ impl Sink for QueueSink {
     }
 }
 
-/// Records per run handed to a thread that builds rows, when `APTSCOPE_BATCH_RECORDS` says (as
-/// for `aptscope decode -j`): the tests cut small samples into many runs.
-fn run_records() -> Option<usize> {
-    std::env::var("APTSCOPE_BATCH_RECORDS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .filter(|n| *n > 0)
-}
-
 /// Where the rows are built: on this thread, or on a pool's threads from runs of records.
 enum Rows {
     One(Box<CaptureWriter<QueueSink>>),
@@ -424,7 +415,7 @@ impl Batches {
             .unwrap_or(1);
         let rows = if threads > 1 {
             let mut pool = RowPool::new(threads, &label, opts, wanted, declared).map_err(err)?;
-            if let Some(n) = run_records() {
+            if let Some(n) = aptscope_parquet::pool::records_from_env() {
                 pool.set_run_records(n);
             }
             Rows::Pool {

@@ -43,16 +43,6 @@ const BATCH_BYTES: usize = 1 << 18;
 /// waiting, some rendered waiting for an earlier one.
 const IN_FLIGHT: usize = 4;
 
-/// Records per batch: [`BATCH_RECORDS`], or `APTSCOPE_BATCH_RECORDS` (tests use small batches
-/// so that the samples, a few hundred records each, are cut into many).
-fn batch_records() -> usize {
-    std::env::var("APTSCOPE_BATCH_RECORDS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .filter(|n| *n > 0)
-        .unwrap_or(BATCH_RECORDS)
-}
-
 /// A batch to render: its place, its records, the streams seen before its first record, and
 /// a buffer to render into.
 pub(super) struct Work {
@@ -161,7 +151,8 @@ impl<'a> Split<'a> {
                 batch: Batch::new(),
                 streams: Renderer::new(Format::Text),
                 start: vec![],
-                records: batch_records(),
+                // Tests cut the samples, a few hundred records each, into many batches.
+                records: aptscope_parquet::pool::records_from_env().unwrap_or(BATCH_RECORDS),
                 work,
                 done,
                 in_flight: IN_FLIGHT * threads.max(1),
