@@ -1,8 +1,8 @@
 //! The rows alone: `rows CAPTURE [--text] [--keep] [TABLE…]` decodes a capture into the record
 //! batches `decode --to parquet` would write (and `to_arrow()` hands to Python), drops them, and
 //! prints records per CPU-second of this thread — the part of both that is not Parquet encoding
-//! nor Python (docs/performance.md). `--text`: the columns of words turned into text, as
-//! Python gets them; `--keep`: every batch kept to the end, as `to_arrow()` keeps its tables.
+//! nor Python (docs/performance.md). `--text`: the columns of words as text, as Python gets
+//! them ([`Options::words_as_text`]); `--keep`: every batch kept to the end, as `to_arrow()` keeps its tables.
 //! With TABLE names, only those tables are built. `--threads N` (N ≥ 2): the rows built on
 //! N threads (this one among them) from runs of 65,536 records decoded on this one
 //! ([`RowPool`], as `to_arrow()` with threads), a raw stream only; prints wall time (CPU time:
@@ -16,23 +16,17 @@ use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, Options, Sink};
 use arrow_array::RecordBatch;
 use std::io;
 
-/// Counts the rows it is given (turned into text, kept, as asked).
+/// Counts the rows it is given (and keeps them, if asked).
 struct Drop {
     rows: u64,
-    text: bool,
     keep: Option<Vec<RecordBatch>>,
 }
 
 impl Sink for Drop {
     fn write(&mut self, _table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
         self.rows += batch.num_rows() as u64;
-        let b = if self.text {
-            aptscope_parquet::words::declared(batch).map_err(io::Error::other)?
-        } else {
-            batch.clone()
-        };
         if let Some(k) = &mut self.keep {
-            k.push(b);
+            k.push(batch.clone());
         }
         Ok(())
     }
@@ -57,12 +51,14 @@ fn main() -> io::Result<()> {
     if let Some(n) = threads {
         return pooled(&path, n, flag("--text"));
     }
+    let opts = Options {
+        words_as_text: flag("--text"),
+        ..Options::default()
+    };
     let sink = Drop {
         rows: 0,
-        text: flag("--text"),
         keep: flag("--keep").then(Vec::new),
     };
-    let opts = Options::default();
     let mut w = CaptureWriter::new(sink, &path, opts);
     if !tables.is_empty() {
         w.only_tables(move |t| tables.iter().any(|x| x == t));
@@ -83,12 +79,11 @@ fn main() -> io::Result<()> {
 fn pooled(path: &str, n: usize, text: bool) -> io::Result<()> {
     let bytes = std::fs::read(path)?;
     let t0 = std::time::Instant::now();
-    let finish = if text {
-        |b: RecordBatch| aptscope_parquet::words::declared(&b).map_err(io::Error::other)
-    } else {
-        Ok
+    let opts = Options {
+        words_as_text: text,
+        ..Options::default()
     };
-    let mut pool = RowPool::new(n, path, Options::default(), None, finish)?;
+    let mut pool = RowPool::new(n, path, opts, None, Ok)?;
     let (mut rows, mut records) = (0usize, 0u64);
     let mut count = |g: Vec<(String, RecordBatch)>| {
         rows += g.iter().map(|(_, b)| b.num_rows()).sum::<usize>();

@@ -81,6 +81,10 @@ pub struct Options {
     /// metadata stays in memory until its file's footer is written, so a capture of hundreds
     /// of kinds closes the file of most chunks when they reach this.
     pub open_chunks: usize,
+    /// Columns of words (names, labels, units…) as text, the tables' declared types, rather
+    /// than as dictionaries of words: for a [`Sink`] that hands batches to readers (Python)
+    /// instead of writing Parquet, whose page writer takes the dictionaries as they are.
+    pub words_as_text: bool,
 }
 
 impl Default for Options {
@@ -112,6 +116,7 @@ impl Default for Options {
             // 5,244 files but 67.7 MiB, over the 64 MiB a worker may use. (Since a column's
             // buffer is 104 bytes, not 1,768: 58.3 MiB at 2,048.)
             open_chunks: 2048,
+            words_as_text: false,
         }
     }
 }
@@ -662,7 +667,7 @@ impl<S: Sink> CaptureWriter<S> {
         let n = Kinds::global().len();
         CaptureWriter {
             sink,
-            records: RecordsBuf::new(file.clone(), 64),
+            records: RecordsBuf::new(file.clone(), 64, opts.words_as_text),
             records_file: PartState::default(),
             text: String::new(),
             file,
@@ -698,7 +703,7 @@ impl<S: Sink> CaptureWriter<S> {
     pub fn reserve_records(&mut self, rows: usize) {
         if self.records.rows() == 0 {
             let rows = rows.min(self.opts.rows_per_group);
-            self.records = RecordsBuf::new(self.file.clone(), rows);
+            self.records = RecordsBuf::new(self.file.clone(), rows, self.opts.words_as_text);
         }
     }
 
@@ -800,7 +805,11 @@ impl<S: Sink> CaptureWriter<S> {
                     self.close_kind(i)?;
                 }
             }
-            let mut buf = TableBuf::new(k.batch.clone());
+            let mut buf = TableBuf::new(if self.opts.words_as_text {
+                k.schema.clone()
+            } else {
+                k.batch.clone()
+            });
             buf.constant_text(0, self.file.clone());
             if let Some(slot) = self.kinds.get_mut(k.index) {
                 *slot = Some(Open {

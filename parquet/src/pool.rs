@@ -314,24 +314,48 @@ mod tests {
         crate::words::declared(&b).map_err(io::Error::other)
     }
 
-    #[test]
-    fn runs_on_threads_give_the_tables_of_one_writer() {
-        let bytes =
-            aptscope_dissector::synth::stream(aptscope_dissector::Table::global(), 7, 40_000, true);
-        // One writer on this thread.
-        let mut w = CaptureWriter::new(
-            Keep {
-                groups: Vec::new(),
-                finish: ok,
-            },
-            "x",
-            Options::default(),
-        );
+    /// Every table of `bytes` from one writer on this thread.
+    fn one_writer(bytes: &[u8], opts: Options, finish: Finish) -> Vec<(String, RecordBatch)> {
+        let keep = Keep {
+            groups: Vec::new(),
+            finish,
+        };
+        let mut w = CaptureWriter::new(keep, "x", opts);
         let mut dec = Decoder::new(None);
-        dec.push(Ctx::default(), &bytes, &mut |r| w.record(r))
+        dec.push(Ctx::default(), bytes, &mut |r| w.record(r))
             .unwrap();
         dec.finish(&mut |r| w.record(r)).unwrap();
-        let one = tables(w.finish().unwrap().0.groups);
+        tables(w.finish().unwrap().0.groups)
+    }
+
+    /// A random stream of every form and its damage (a garbage run, truncated frames).
+    fn every_form() -> Vec<u8> {
+        aptscope_dissector::synth::stream(aptscope_dissector::Table::global(), 7, 40_000, true)
+    }
+
+    /// Words built straight into text columns give the tables of words turned into text
+    /// afterwards: the same schemas (with their metadata), rows, nulls and lists.
+    #[test]
+    fn words_built_as_text_equal_words_turned_into_text() {
+        let bytes = every_form();
+        let keys = one_writer(&bytes, Options::default(), ok);
+        let text = Options {
+            words_as_text: true,
+            ..Options::default()
+        };
+        let text = one_writer(&bytes, text, Ok);
+        assert!(keys.len() > 20, "{} tables", keys.len());
+        assert_eq!(keys.len(), text.len());
+        for ((tk, bk), (tt, bt)) in keys.iter().zip(&text) {
+            assert_eq!(tk, tt);
+            assert_eq!(bk, bt, "{tk}");
+        }
+    }
+
+    #[test]
+    fn runs_on_threads_give_the_tables_of_one_writer() {
+        let bytes = every_form();
+        let one = one_writer(&bytes, Options::default(), ok);
         // Runs of 97 records on three threads (two and the caller's), taken back as they come.
         let mut pool = RowPool::new(3, "x", Options::default(), None, ok).unwrap();
         pool.set_run_records(97);

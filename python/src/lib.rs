@@ -341,11 +341,6 @@ impl json::Sink for PySink<'_, '_> {
 /// Row groups as the writer flushes them, by table, for [`Batches`] to hand out.
 type BatchQueue = Rc<RefCell<VecDeque<(String, RecordBatch)>>>;
 
-/// A row group's columns of words as text: the table's own types.
-fn declared(batch: RecordBatch) -> io::Result<RecordBatch> {
-    aptscope_parquet::words::declared(&batch).map_err(io::Error::other)
-}
-
 /// A [`Sink`] that queues each row group as an Arrow record batch (no Parquet encoding).
 struct QueueSink(BatchQueue);
 
@@ -353,7 +348,7 @@ impl Sink for QueueSink {
     fn write(&mut self, table: &str, _part: u32, batch: &RecordBatch) -> io::Result<()> {
         self.0
             .borrow_mut()
-            .push_back((table.to_string(), declared(batch.clone())?));
+            .push_back((table.to_string(), batch.clone()));
         Ok(())
     }
 }
@@ -404,7 +399,11 @@ impl Batches {
         let (input, label) = Input::open(source_obj, proto)?;
         let label = name.unwrap_or(label);
         let queue = BatchQueue::default();
-        let opts = Options::default();
+        // Text columns built as text: Python gets the tables' declared types.
+        let opts = Options {
+            words_as_text: true,
+            ..Options::default()
+        };
         // Only these are built: the others cost nothing.
         let wanted: Option<Wanted> = tables.map(|t| {
             let keep: HashSet<String> = t.into_iter().collect();
@@ -414,7 +413,7 @@ impl Batches {
             .or_else(|| std::thread::available_parallelism().ok().map(usize::from))
             .unwrap_or(1);
         let rows = if threads > 1 {
-            let mut pool = RowPool::new(threads, &label, opts, wanted, declared).map_err(err)?;
+            let mut pool = RowPool::new(threads, &label, opts, wanted, Ok).map_err(err)?;
             if let Some(n) = aptscope_parquet::pool::records_from_env() {
                 pool.set_run_records(n);
             }

@@ -134,6 +134,8 @@ pub fn fuzz(data: &[u8]) {
         kind_rows: 2 + usize::from(budget % 16),
         groups_per_file: 1 + usize::from(flags / 3 % 4),
         open_chunks: 8 * usize::from(budget),
+        // Python's batches: the words built as text.
+        words_as_text: flags >= 128,
     };
     let check = Check {
         rows_per_group: opts.rows_per_group,
