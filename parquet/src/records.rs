@@ -406,7 +406,7 @@ impl RecordsBuf {
         let dt = |name: &str| s.field_with_name(name).map(|f| f.data_type());
         let cols: Vec<ArrayRef> = vec![
             if self.text {
-                let mut f = StringBuilder::with_capacity(1, self.file.len() * rows);
+                let mut f = StringBuilder::with_capacity(rows, self.file.len() * rows);
                 f.append_value_n(&*self.file, rows);
                 Arc::new(f.finish())
             } else {

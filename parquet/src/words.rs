@@ -6,7 +6,8 @@
 //! chunk's dictionary page and its keys as the indices, the numbers in order of first sight
 //! as its own dictionary would have made them, so the files are byte for byte those written
 //! from text; [`declared`] turns such a batch back into the text columns of the table's
-//! schema for a reader of batches (Python). Measured (docs/performance.md, "Parquet, sixth
+//! schema (a writer for readers of batches, Python, builds text columns to begin with:
+//! [`crate::Options::words_as_text`]). Measured (docs/performance.md, "Parquet, sixth
 //! pass"): interning each value's text again was a third of the page writer's time.
 
 use crate::pages::Dict;
