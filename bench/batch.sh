@@ -9,7 +9,8 @@
 # (`python/examples/arrow_speed.py`, the call alone, threads=1 beside one per core, release
 # module in target/bench-pyvenv, built here), then every target with its figure.
 # Usage: bench/batch.sh   (env: FILES=50 files of MB=4.2 MB each, ≥ 200 MB; BIG=100 MB;
-# ARROW_MB=10 MB for to_arrow(); the inputs and datasets go under $TMPDIR, default /tmp: a
+# ARROW_MB=10 MB for to_arrow(); RUNS=1 runs of each command, the median's figures (single
+# runs on a busy machine move by a third); the inputs and datasets go under $TMPDIR, default /tmp: a
 # large capture of many kinds writes thousands of part files, so the file system's speed at
 # creating files shows. Needs python3 with venv, and the network for PyPI the first time)
 #
@@ -22,6 +23,7 @@ FILES=${FILES:-50}
 MB=${MB:-4.2}
 BIG=${BIG:-100}
 ARROW_MB=${ARROW_MB:-10}
+RUNS=${RUNS:-1}
 cargo build -q --release --bin aptscope
 cargo build -q --release -p aptscope-dissector --example gen_d2h --example gen_stream
 tmp=$(mktemp -d)
@@ -37,9 +39,14 @@ declare -A rate cpus big_json big_pq big_pqnd
 run() { # label, jobs, command...   (MB/s of $total bytes)
   local label=$1 jobs=$2
   shift 2
-  local out wall cpu rss
-  # Whole process: wall and CPU seconds (user + system), peak RSS.
-  out=$( { /usr/bin/time -f '%e %U %S %M' "$@" > /dev/null; } 2>&1 | tail -n1 )
+  local out wall cpu rss runs=()
+  # Whole process: wall and CPU seconds (user + system), peak RSS; the run of median wall
+  # time of $RUNS.
+  for _ in $(seq 1 "$RUNS"); do
+    out=$( { /usr/bin/time -f '%e %U %S %M' "$@" > /dev/null; } 2>&1 | tail -n1 )
+    runs+=("$out")
+  done
+  out=$(printf '%s\n' "${runs[@]}" | sort -n | sed -n "$(( (RUNS + 1) / 2 ))p")
   read -r wall user sys rss <<< "$out"
   cpu=$(echo "$user + $sys" | bc -l)
   rate[$label.$jobs]=$(echo "$total / 1000000 / $wall" | bc -l)
@@ -94,9 +101,9 @@ echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
 # Typed decoding: frames and every field of a status log held in memory, best of 10 runs.
 cargo build -q --release -p aptscope-dissector --example decode_file
 target/release/examples/gen_d2h 20 > "$tmp/d2h.bin" 2>/dev/null
-typed=$(target/release/examples/decode_file "$tmp/d2h.bin" 10 \
+typed=$(target/release/examples/decode_file "$tmp/d2h.bin" $((10 * RUNS)) \
   | sed -n 's/.*"mb_per_s":\([0-9.]*\).*/\1/p')
-printf 'typed decode (20 MB status log, best of 10): %.0f MB/s\n' "$typed"
+printf 'typed decode (20 MB status log, best of %d): %.0f MB/s\n' $((10 * RUNS)) "$typed"
 
 # to_arrow(): the release module in a venv of its own (the tests' is a debug build).
 venv=target/bench-pyvenv
@@ -106,9 +113,13 @@ target/release/examples/gen_d2h "$ARROW_MB" > "$tmp/arrow.bin" 2>/dev/null
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
 declare -A arrow
 for t in 1 "$(nproc)"; do
-  out=$("$venv/bin/python" python/examples/arrow_speed.py "$tmp/arrow.bin" to_arrow "$t")
-  echo "to_arrow() threads=$t: $out"
-  arrow[$t]=$(sed -n 's/.*, \([0-9.]*\) M per second.*/\1/p' <<< "$out")
+  rates=()
+  for _ in $(seq 1 "$RUNS"); do
+    out=$("$venv/bin/python" python/examples/arrow_speed.py "$tmp/arrow.bin" to_arrow "$t")
+    echo "to_arrow() threads=$t: $out"
+    rates+=("$(sed -n 's/.*, \([0-9.]*\) M per second.*/\1/p' <<< "$out")")
+  done
+  arrow[$t]=$(printf '%s\n' "${rates[@]}" | sort -n | sed -n "$(( (RUNS + 1) / 2 ))p")
 done
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
 

@@ -4,7 +4,7 @@
 //! nor Python (docs/performance.md). `--text`: the columns of words as text, as Python gets
 //! them ([`Options::words_as_text`]); `--keep`: every batch kept to the end, as `to_arrow()` keeps its tables.
 //! With TABLE names, only those tables are built. `--threads N` (N ≥ 2): the rows built on
-//! N threads (this one among them) from runs of 65,536 records decoded on this one
+//! N threads (this one among them) from runs of up to 65,536 records decoded on this one
 //! ([`RowPool`], as `to_arrow()` with threads), a raw stream only; prints wall time (CPU time:
 //! run it under `time`).
 

@@ -112,8 +112,8 @@ def batches(
     The tables and schemas are those of :func:`to_arrow` (and of ``aptscope decode --to
     parquet``; ``tables`` and ``threads`` as there); a table's batches, one after the other,
     are its rows in order, each batch at most a row group (65,536 rows). The capture is decoded
-    on the calling thread and its records handed, 65,536 at a time, to the threads that build
-    the rows (``threads=1``: on the calling thread, each batch then one row group of the
+    on the calling thread and its records handed, in runs growing from 8,192 to 65,536, to the
+    threads that build the rows (``threads=1``: on the calling thread, each batch then one row group of the
     Parquet output); batches are yielded as they are built, so memory stays bounded whatever
     the capture's size. The columns cross from Rust through the Arrow C data interface (the
     PyCapsule protocol): no copy, no Parquet or JSON in between.
