@@ -10,9 +10,10 @@
 # module in target/bench-pyvenv, built here), then every target with its figure.
 # Usage: bench/batch.sh   (env: FILES=50 files of MB=4.2 MB each, ≥ 200 MB; BIG=100 MB;
 # ARROW_MB=10 MB for to_arrow(); RUNS=1 runs of each command, the median's figures (single
-# runs on a busy machine move by a third); the inputs and datasets go under $TMPDIR, default /tmp: a
-# large capture of many kinds writes thousands of part files, so the file system's speed at
-# creating files shows. Needs python3 with venv, and the network for PyPI the first time)
+# runs on a busy machine move by a third); the inputs and datasets go under $TMPDIR, default
+# /tmp: a large capture of many kinds writes thousands of part files, so the file system's
+# speed at creating files shows. Needs python3 with venv, and the network for PyPI the first
+# time)
 #
 # The files are device→host streams of 27 common message forms with random field values
 # (dissector/examples/gen_d2h.rs, one seed per file): what a controller's status logs look
@@ -36,6 +37,8 @@ total=$(du -cb "$tmp"/in/*.bin | tail -n1 | cut -f1)
 printf 'input: %d files, %.1f MB; %s, %d cores\n' "$FILES" "$(echo "$total / 1000000" | bc -l)" \
   "$(lscpu | sed -n 's/^Model name: *//p' | head -n1)" "$(nproc)"
 declare -A rate cpus big_json big_pq big_pqnd
+# The median of lines read (RUNS of them), by their first number.
+median() { sort -n | sed -n "$(( (RUNS + 1) / 2 ))p"; }
 run() { # label, jobs, command...   (MB/s of $total bytes)
   local label=$1 jobs=$2
   shift 2
@@ -46,7 +49,7 @@ run() { # label, jobs, command...   (MB/s of $total bytes)
     out=$( { /usr/bin/time -f '%e %U %S %M' "$@" > /dev/null; } 2>&1 | tail -n1 )
     runs+=("$out")
   done
-  out=$(printf '%s\n' "${runs[@]}" | sort -n | sed -n "$(( (RUNS + 1) / 2 ))p")
+  out=$(printf '%s\n' "${runs[@]}" | median)
   read -r wall user sys rss <<< "$out"
   cpu=$(echo "$user + $sys" | bc -l)
   rate[$label.$jobs]=$(echo "$total / 1000000 / $wall" | bc -l)
@@ -119,7 +122,7 @@ for t in 1 "$(nproc)"; do
     echo "to_arrow() threads=$t: $out"
     rates+=("$(sed -n 's/.*, \([0-9.]*\) M per second.*/\1/p' <<< "$out")")
   done
-  arrow[$t]=$(printf '%s\n' "${rates[@]}" | sort -n | sed -n "$(( (RUNS + 1) / 2 ))p")
+  arrow[$t]=$(printf '%s\n' "${rates[@]}" | median)
 done
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
 

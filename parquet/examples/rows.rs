@@ -2,7 +2,8 @@
 //! batches `decode --to parquet` would write (and `to_arrow()` hands to Python), drops them, and
 //! prints records per CPU-second of this thread — the part of both that is not Parquet encoding
 //! nor Python (docs/performance.md). `--text`: the columns of words as text, as Python gets
-//! them ([`Options::words_as_text`]); `--keep`: every batch kept to the end, as `to_arrow()` keeps its tables.
+//! them ([`Options::words_as_text`]); `--keep`: every batch kept to the end, as `to_arrow()`
+//! keeps its tables.
 //! With TABLE names, only those tables are built. `--threads N` (N ≥ 2): the rows built on
 //! N threads (this one among them) from runs of up to 65,536 records decoded on this one
 //! ([`RowPool`], as `to_arrow()` with threads), a raw stream only; prints wall time (CPU time:
@@ -48,13 +49,13 @@ fn main() -> io::Result<()> {
         tables.retain(|t| t != f);
         had
     };
-    if let Some(n) = threads {
-        return pooled(&path, n, flag("--text"));
-    }
     let opts = Options {
         words_as_text: flag("--text"),
         ..Options::default()
     };
+    if let Some(n) = threads {
+        return pooled(&path, n, opts);
+    }
     let sink = Drop {
         rows: 0,
         keep: flag("--keep").then(Vec::new),
@@ -76,13 +77,9 @@ fn main() -> io::Result<()> {
 }
 
 /// `--threads N`: the rows of a raw stream built on `n` threads.
-fn pooled(path: &str, n: usize, text: bool) -> io::Result<()> {
+fn pooled(path: &str, n: usize, opts: Options) -> io::Result<()> {
     let bytes = std::fs::read(path)?;
     let t0 = std::time::Instant::now();
-    let opts = Options {
-        words_as_text: text,
-        ..Options::default()
-    };
     let mut pool = RowPool::new(n, path, opts, None, Ok)?;
     let (mut rows, mut records) = (0usize, 0u64);
     let mut count = |g: Vec<(String, RecordBatch)>| {
