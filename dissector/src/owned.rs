@@ -26,7 +26,23 @@ pub struct Batch {
     recs: Vec<Owned>,
     /// The distinct conversions the frames refer to (by index).
     scales: Vec<Scale>,
+    /// What pairing found about APT frames, those it found anything about (by index), and
+    /// what the bus made of Elliptec frames: apart, so a record is 104 bytes, not 216 (a run
+    /// of a row group's records and the runs in flight were 14 MiB each, in pages touched).
+    pairs: Vec<PairInfo>,
+    obs: Vec<Observation>,
 }
+
+/// What pairing found about most frames: nothing.
+static UNPAIRED: PairInfo = PairInfo {
+    pair: None,
+    latency_ns: None,
+    other_address: false,
+    unsolicited: false,
+    duplicate: false,
+    expired: Vec::new(),
+    not_for_model: None,
+};
 
 /// Where a frame's or garbage run's bytes are in [`Batch::bytes`].
 #[derive(Clone, Copy)]
@@ -58,15 +74,17 @@ enum Owned {
         offset: u64,
         span: Span,
         truncated: bool,
-        pair: PairInfo,
-        scale: Option<usize>,
+        /// In [`Batch::pairs`]; `None`: [`UNPAIRED`].
+        pair: Option<u32>,
+        scale: Option<u32>,
     },
     Ell {
         meta: Meta,
         offset: u64,
         span: Span,
         truncated: bool,
-        obs: Observation,
+        /// In [`Batch::obs`].
+        obs: u32,
     },
     Garbage {
         meta: Meta,
@@ -138,12 +156,16 @@ impl Batch {
                 let scale = a.scale.map(|s| {
                     let mut seen = self.scales.iter().rev().take(8);
                     match seen.position(|l| l.revision() == s.revision()) {
-                        Some(back) => n - 1 - back,
+                        Some(back) => index(n - 1 - back),
                         None => {
                             self.scales.push(s.clone());
-                            n
+                            index(n)
                         }
                     }
+                });
+                let pair = (*a.pair != UNPAIRED).then(|| {
+                    self.pairs.push(a.pair.clone());
+                    index(self.pairs.len() - 1)
                 });
                 let truncated = a.frame.has_diags()
                     && a.frame
@@ -154,7 +176,7 @@ impl Batch {
                     offset: a.frame.offset,
                     span: self.keep_bytes(a.frame.bytes),
                     truncated,
-                    pair: a.pair.clone(),
+                    pair,
                     scale,
                 }
             }
@@ -167,7 +189,10 @@ impl Batch {
                     .diags()
                     .iter()
                     .any(|d| matches!(d.kind, DiagKind::Truncated { .. })),
-                obs: e.obs.clone(),
+                obs: {
+                    self.obs.push(e.obs.clone());
+                    index(self.obs.len() - 1)
+                },
             },
             Record::Garbage(g) => Owned::Garbage {
                 meta: g.meta,
@@ -221,11 +246,12 @@ impl Batch {
                     else {
                         continue;
                     };
+                    let pair = pair.and_then(|i| self.pairs.get(i as usize));
                     f(&Record::Apt(AptRec {
                         meta: *meta,
                         frame: &frame,
-                        pair,
-                        scale: scale.and_then(|i| self.scales.get(i)),
+                        pair: pair.unwrap_or(&UNPAIRED),
+                        scale: scale.and_then(|i| self.scales.get(i as usize)),
                     }))?
                 }
                 Owned::Ell {
@@ -235,7 +261,10 @@ impl Batch {
                     truncated,
                     obs,
                 } => {
-                    let Some(mut frame) = EllFrame::decode(*offset, bytes(span), *truncated) else {
+                    let (Some(mut frame), Some(obs)) = (
+                        EllFrame::decode(*offset, bytes(span), *truncated),
+                        self.obs.get(*obs as usize),
+                    ) else {
                         continue;
                     };
                     // As the decoder adds it (see record.rs, EllSide::frame).
@@ -275,5 +304,12 @@ impl Batch {
         self.bytes.clear();
         self.recs.clear();
         self.scales.clear();
+        self.pairs.clear();
+        self.obs.clear();
     }
+}
+
+/// A place in one of a batch's vectors (a batch holds far fewer than 2³² records).
+fn index(i: usize) -> u32 {
+    u32::try_from(i).unwrap_or(u32::MAX)
 }
