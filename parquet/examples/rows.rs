@@ -49,8 +49,10 @@ fn main() -> io::Result<()> {
         tables.retain(|t| t != f);
         had
     };
+    let keep = flag("--keep");
     let opts = Options {
         words_as_text: flag("--text"),
+        batches_kept: keep,
         ..Options::default()
     };
     if let Some(n) = threads {
@@ -58,7 +60,7 @@ fn main() -> io::Result<()> {
     }
     let sink = Drop {
         rows: 0,
-        keep: flag("--keep").then(Vec::new),
+        keep: keep.then(Vec::new),
     };
     let mut w = CaptureWriter::new(sink, &path, opts);
     if !tables.is_empty() {

@@ -2,12 +2,12 @@
 //! Arrow arrays out. No cell per value in between (building, matching and dropping a row of
 //! cells was a third of the writer's instructions).
 
-use crate::records::Valid;
+use crate::records::{scale, Valid};
 use crate::words::{self, Words};
 use arrow_array::builder::{
-    BinaryBuilder, Float32Builder, Float64Builder, Int16Builder, Int32Builder, Int64Builder,
-    Int8Builder, ListBuilder, StringBuilder, TimestampNanosecondBuilder, UInt16Builder,
-    UInt32Builder, UInt64Builder, UInt8Builder,
+    ArrayBuilder, BinaryBuilder, Float32Builder, Float64Builder, Int16Builder, Int32Builder,
+    Int64Builder, Int8Builder, ListBuilder, StringBuilder, TimestampNanosecondBuilder,
+    UInt16Builder, UInt32Builder, UInt64Builder, UInt8Builder,
 };
 use arrow_array::{ArrayRef, ListArray, RecordBatch};
 use arrow_buffer::{OffsetBuffer, ScalarBuffer};
@@ -106,6 +106,32 @@ impl Buf {
                 _ => Buf::Str(StringBuilder::with_capacity(cap, cap * 8)),
             },
             _ => Buf::Str(StringBuilder::with_capacity(cap, cap * 8)),
+        }
+    }
+
+    /// An empty buffer of type `dt` with room for `cap` rows, and for text and list items in
+    /// the measure this one held them over its `rows` rows (a name or a list of flags is
+    /// longer than the defaults, and growing by doubling copies the column each time).
+    fn again(&self, dt: &DataType, cap: usize, rows: usize) -> Buf {
+        let scale = |n: usize| scale(n, cap, rows);
+        match self {
+            Buf::Str(b) => Buf::Str(StringBuilder::with_capacity(
+                cap,
+                scale(b.values_slice().len()),
+            )),
+            Buf::Bin(b) => Buf::Bin(BinaryBuilder::with_capacity(
+                cap,
+                scale(b.values_slice().len()),
+            )),
+            Buf::ListS(l) => {
+                let v = l.values_ref();
+                let items =
+                    StringBuilder::with_capacity(scale(v.len()), scale(v.values_slice().len()));
+                Buf::ListS(Box::new(
+                    ListBuilder::with_capacity(items, cap).with_field(item(DataType::Utf8)),
+                ))
+            }
+            _ => Buf::new(dt, cap),
         }
     }
 
@@ -450,8 +476,10 @@ impl TableBuf {
         self.rows += 1;
     }
 
-    /// The buffered rows as a batch; the buffer is empty afterwards.
-    pub fn take(&mut self) -> Result<RecordBatch, ArrowError> {
+    /// The buffered rows as a batch; the buffer is empty afterwards, with room for `room` rows
+    /// and their text and list items in the measure of these ([`crate::Options::batches_kept`]
+    /// says how many and why).
+    pub fn take(&mut self, room: usize) -> Result<RecordBatch, ArrowError> {
         let rows = self.rows;
         for (b, f) in self.bufs.iter_mut().zip(&mut self.filled) {
             if *f < rows {
@@ -459,6 +487,12 @@ impl TableBuf {
             }
             *f = 0;
         }
+        let next: Vec<Buf> = self
+            .bufs
+            .iter()
+            .zip(self.schema.fields())
+            .map(|(b, f)| b.again(f.data_type(), room, rows))
+            .collect();
         let mut cols = self
             .bufs
             .iter_mut()
@@ -478,13 +512,7 @@ impl TableBuf {
                 *f = usize::MAX;
             }
         }
-        // A table that filled a batch will likely fill the next: room for as many rows again
-        // (a finished builder starts empty, and growing it by doubling was a tenth of the
-        // run in reallocations), up to 8192: room for a whole row group in every column
-        // raised the peak from 56 to 66 MiB.
-        for (b, f) in self.bufs.iter_mut().zip(self.schema.fields()) {
-            *b = Buf::new(f.data_type(), rows.min(8192));
-        }
+        self.bufs = next;
         self.rows = 0;
         self.bytes = 0;
         RecordBatch::try_new(self.schema.clone(), cols)
@@ -539,7 +567,7 @@ mod tests {
         // Row 3: n only.
         t.uint(1, 13);
         t.end_row();
-        let b = declared(t.take().expect("batch"));
+        let b = declared(t.take(0).expect("batch"));
         assert_eq!(b.schema(), self::schema());
         assert_eq!(b.num_rows(), 4);
         let file = b.column(0).as_string::<i32>();
@@ -558,7 +586,7 @@ mod tests {
         // Taken, the buffer starts again: the constant column too.
         t.uint(1, 20);
         t.end_row();
-        let b = declared(t.take().expect("batch"));
+        let b = declared(t.take(1).expect("batch"));
         assert_eq!(b.num_rows(), 1);
         assert_eq!(b.column(0).as_string::<i32>().value(0), "cap.bin");
         assert!(b.column(3).is_null(0));

@@ -67,6 +67,9 @@ const FIRST_RUN: usize = 8;
 /// Threads building the rows of runs of records, in order (see the module documentation).
 pub struct RowPool {
     work: Option<Sender<(u64, Batch)>>,
+    /// The runs handed over and not yet taken by a thread: the caller's thread takes them too
+    /// when it would otherwise wait.
+    queue: Arc<Mutex<Receiver<(u64, Batch)>>>,
     done: Receiver<Done>,
     threads: Vec<JoinHandle<()>>,
     /// Runs handed over (or built here), and runs handed back.
@@ -86,7 +89,8 @@ pub struct RowPool {
     run_records: usize,
     /// Records of a run once the first runs have grown to it (see [`FIRST_RUN`]).
     full_run: usize,
-    /// How a run's rows are built, for those built on the caller's thread.
+    /// How a run's rows are built, for those built on the caller's thread, and in what.
+    writer: Option<CaptureWriter<Keep>>,
     file: Arc<str>,
     opts: Options,
     wanted: Option<Wanted>,
@@ -115,28 +119,27 @@ impl RowPool {
             let (rx, tx, file, wanted) = (rx.clone(), tx.clone(), file.clone(), wanted.clone());
             let h = std::thread::Builder::new()
                 .name("rows".into())
-                .spawn(move || loop {
-                    // The lock is held only to take a run; a closed queue ends the thread.
-                    let Ok((seq, mut batch)) =
-                        rx.lock().map_err(drop).and_then(|r| r.recv().map_err(drop))
-                    else {
-                        return;
-                    };
-                    // A panic is this run's error, not a run that never comes back (the caller
-                    // would wait for it for ever while the other threads live).
-                    let rows = std::panic::catch_unwind(AssertUnwindSafe(|| {
-                        build(&batch, &file, opts, wanted.as_ref(), finish)
-                    }))
-                    .unwrap_or_else(|_| Err(io::Error::other("building rows panicked")));
-                    batch.clear();
-                    if tx.send((seq, rows, batch)).is_err() {
-                        return;
+                .spawn(move || {
+                    let mut w = None;
+                    loop {
+                        // The lock is held only to take a run; a closed queue ends the thread.
+                        let Ok((seq, mut batch)) =
+                            rx.lock().map_err(drop).and_then(|r| r.recv().map_err(drop))
+                        else {
+                            return;
+                        };
+                        let rows = build(&batch, &mut w, &file, opts, wanted.as_ref(), finish);
+                        batch.clear();
+                        if tx.send((seq, rows, batch)).is_err() {
+                            return;
+                        }
                     }
                 })?;
             threads.push(h);
         }
         Ok(RowPool {
             work: Some(work),
+            queue: rx,
             done,
             threads,
             sent: 0,
@@ -153,6 +156,7 @@ impl RowPool {
             // after a few smaller runs.
             run_records: opts.rows_per_group.div_ceil(FIRST_RUN).max(1),
             full_run: opts.rows_per_group,
+            writer: None,
             file,
             opts,
             wanted,
@@ -217,7 +221,7 @@ impl RowPool {
             }
             if !self.here_waits() {
                 let (f, o, w) = (&self.file, self.opts, self.wanted.as_ref());
-                let rows = build(&self.run, f, o, w, self.finish);
+                let rows = build(&self.run, &mut self.writer, f, o, w, self.finish);
                 self.run.clear();
                 self.early.insert(self.sent, rows);
                 self.here = Some(self.sent);
@@ -248,10 +252,14 @@ impl RowPool {
                 self.taken += 1;
                 return Some(g);
             }
-            let got = if wait {
-                self.done.recv().ok()
-            } else {
-                self.done.try_recv().ok()
+            let got = match self.done.try_recv() {
+                Ok(d) => Some(d),
+                // Rather than wait idle for a thread, build a run still waiting for one (the
+                // next in order, or one after it): at the end of the input, the last runs
+                // were built by one thread while this one waited, and so was every run
+                // after one built here.
+                Err(_) if wait => self.steal().or_else(|| self.done.recv().ok()),
+                Err(_) => None,
             };
             match got {
                 Some((seq, g, spare)) => {
@@ -270,6 +278,18 @@ impl RowPool {
     }
 }
 
+impl RowPool {
+    /// Build here a run handed over that no thread has taken yet, if there is one (and no
+    /// thread is taking one now).
+    fn steal(&mut self) -> Option<Done> {
+        let (seq, mut run) = self.queue.try_lock().ok()?.try_recv().ok()?;
+        let (f, o, w) = (&self.file, self.opts, self.wanted.as_ref());
+        let rows = build(&run, &mut self.writer, f, o, w, self.finish);
+        run.clear();
+        Some((seq, rows, run))
+    }
+}
+
 impl Drop for RowPool {
     fn drop(&mut self) {
         // Closing the queue ends the threads once they finish what they hold.
@@ -280,27 +300,58 @@ impl Drop for RowPool {
     }
 }
 
-/// The rows of one run: a writer of its own, cut at the run's end.
+/// The rows of one run, in the writer in `slot` (made on the first run), cut at the run's end:
+/// the tables one writer of the run alone would make, in the buffers the last run's grew to. A
+/// panic is this run's error, not a run that never comes back (the caller would wait for it
+/// for ever while the other threads live), nor a panic of the caller's thread.
 fn build(
     batch: &Batch,
+    slot: &mut Option<CaptureWriter<Keep>>,
     file: &str,
     opts: Options,
     wanted: Option<&Wanted>,
     finish: Finish,
 ) -> io::Result<Groups> {
-    let keep = Keep {
-        groups: Vec::new(),
-        finish,
-    };
-    let mut w = CaptureWriter::new(keep, file, opts);
+    std::panic::catch_unwind(AssertUnwindSafe(|| {
+        build_in(batch, slot, file, opts, wanted, finish)
+    }))
+    .unwrap_or_else(|_| {
+        // The writer may be half way through a row: a new one for the next.
+        *slot = None;
+        Err(io::Error::other("building rows panicked"))
+    })
+}
+
+/// [`build`], unguarded.
+fn build_in(
+    batch: &Batch,
+    slot: &mut Option<CaptureWriter<Keep>>,
+    file: &str,
+    opts: Options,
+    wanted: Option<&Wanted>,
+    finish: Finish,
+) -> io::Result<Groups> {
+    let w = slot.get_or_insert_with(|| {
+        let keep = Keep {
+            groups: Vec::new(),
+            finish,
+        };
+        let mut w = CaptureWriter::new(keep, file, opts);
+        if let Some(f) = wanted {
+            let f = f.clone();
+            w.only_tables(move |t| f(t));
+        }
+        w
+    });
     // A row of the `records` table for each record.
     w.reserve_records(batch.len());
-    if let Some(f) = wanted {
-        let f = f.clone();
-        w.only_tables(move |t| f(t));
+    let built = batch.for_each(&mut |r| w.record(r)).and_then(|()| w.cut());
+    let groups = std::mem::take(&mut w.sink_mut().groups);
+    if built.is_err() {
+        // Rows of the run may be left in it: a new writer for the next.
+        *slot = None;
     }
-    batch.for_each(&mut |r| w.record(r))?;
-    Ok(w.finish()?.0.groups)
+    built.map(|()| groups)
 }
 
 #[cfg(test)]
@@ -406,6 +457,68 @@ mod tests {
                 assert_eq!(b, &many[t], "{t}");
             }
         }
+    }
+
+    /// Budgets small enough that, within a run of a stream of every form, row groups are cut
+    /// by rows, the kind tables are written early (the biggest, when together over their
+    /// budget) and closed (the least recently used, when too many are open).
+    fn tight(batches_kept: bool) -> Options {
+        Options {
+            rows_per_group: 300,
+            kind_rows: 500,
+            max_open_kinds: 16,
+            words_as_text: true,
+            batches_kept,
+            ..Options::default()
+        }
+    }
+
+    /// The records of `bytes` in runs of `n`.
+    fn runs(bytes: &[u8], n: usize) -> Vec<Batch> {
+        let mut runs = vec![Batch::new()];
+        let mut dec = Decoder::new(None);
+        let mut each = |r: &Record<'_>| -> io::Result<()> {
+            if runs.last().is_some_and(|b| b.len() >= n) {
+                runs.push(Batch::new());
+            }
+            runs.last_mut().expect("a run").push(r);
+            Ok(())
+        };
+        dec.push(Ctx::default(), bytes, &mut each).unwrap();
+        dec.finish(&mut each).unwrap();
+        runs
+    }
+
+    /// One writer cut after each run gives, row group by row group, what a writer made for
+    /// each run gives; and keeping the batches (buffers taken back when a table opens again)
+    /// changes no row group.
+    #[test]
+    fn a_writer_cut_after_each_run_gives_the_row_groups_of_a_new_one() {
+        let runs = runs(&every_form(), 997);
+        assert!(runs.len() > 5, "{} runs", runs.len());
+        let mut each_new = Vec::new();
+        for opts in [tight(false), tight(true), Options::default()] {
+            let fresh: Vec<Groups> = runs
+                .iter()
+                .map(|r| build(r, &mut None, "x", opts, None, Ok).unwrap())
+                .collect();
+            let mut slot = None;
+            let cut: Vec<Groups> = runs
+                .iter()
+                .map(|r| build(r, &mut slot, "x", opts, None, Ok).unwrap())
+                .collect();
+            assert_eq!(fresh.len(), cut.len());
+            for (i, (f, c)) in fresh.iter().zip(&cut).enumerate() {
+                let names = |g: &Groups| g.iter().map(|x| x.0.clone()).collect::<Vec<_>>();
+                assert_eq!(names(f), names(c), "run {i}");
+                assert_eq!(f, c, "run {i}");
+            }
+            each_new.push(fresh);
+        }
+        assert_eq!(each_new[0], each_new[1], "batches kept");
+        // The tight budgets did cut: more row groups than with the defaults.
+        let count = |g: &[Groups]| g.iter().map(Vec::len).sum::<usize>();
+        assert!(count(&each_new[0]) > count(&each_new[2]) + 100);
     }
 
     #[test]

@@ -9,7 +9,7 @@
 
 use crate::schema::records_schema;
 use crate::words::{self, Words};
-use arrow_array::builder::StringBuilder;
+use arrow_array::builder::{ArrayBuilder, StringBuilder};
 use arrow_array::types::{
     Float64Type, Int64Type, TimestampNanosecondType, UInt16Type, UInt32Type, UInt64Type, UInt8Type,
 };
@@ -87,6 +87,11 @@ impl<T: ArrowPrimitiveType> Num<T> {
         }
     }
 
+    /// Empty, with room for `rows` values.
+    fn again(&self, rows: usize) -> Self {
+        Self::new(rows)
+    }
+
     #[inline(always)]
     fn push(&mut self, v: Option<T::Native>) {
         self.valid.push(v.is_some());
@@ -115,6 +120,14 @@ impl Bytes {
             ends,
             valid: Valid::default(),
         }
+    }
+
+    /// Empty, with room for `rows` values and their bytes in the measure of this one's.
+    fn again(&self, rows: usize) -> Self {
+        let held = self.ends.len() - 1;
+        let mut b = Bytes::new(rows, 0);
+        b.data.reserve(scale(self.data.len(), rows, held));
+        b
     }
 
     #[inline(always)]
@@ -178,6 +191,17 @@ impl WordCol {
         }
     }
 
+    /// Empty, with room for `rows` words (and their text in the measure of this one's).
+    fn again(&self, rows: usize) -> Self {
+        match self {
+            WordCol::Keys(_) => WordCol::Keys(Box::new(Words::new(rows))),
+            WordCol::Text(b) => WordCol::Text(StringBuilder::with_capacity(
+                rows,
+                scale(b.values_slice().len(), rows, b.len()),
+            )),
+        }
+    }
+
     #[inline(always)]
     fn push(&mut self, w: Option<&'static str>) {
         match self {
@@ -200,6 +224,11 @@ impl WordCol {
             WordCol::Text(b) => Ok(Arc::new(b.finish())),
         }
     }
+}
+
+/// `n` things of `held` rows scaled to `rows` rows (the bytes of text to make room for).
+pub(crate) fn scale(n: usize, rows: usize, held: usize) -> usize {
+    n.saturating_mul(rows) / held.max(1)
 }
 
 /// The `records` table's columns of words (message, kind and diagnostic names, directions…).
@@ -261,6 +290,8 @@ pub struct RecordsBuf {
     text: bool,
     file: Arc<str>,
     rows: usize,
+    /// Rows it was made with room for.
+    room: usize,
     stream: Num<UInt32Type>,
     n: Num<UInt64Type>,
     ts_ns: Num<UInt64Type>,
@@ -304,6 +335,7 @@ impl RecordsBuf {
             text: words_as_text,
             file,
             rows: 0,
+            room: cap,
             stream: Num::new(cap),
             n: Num::new(cap),
             ts_ns: Num::new(cap),
@@ -337,6 +369,11 @@ impl RecordsBuf {
     /// Rows buffered.
     pub fn rows(&self) -> usize {
         self.rows
+    }
+
+    /// Rows it was made with room for.
+    pub fn room(&self) -> usize {
+        self.room
     }
 
     /// Bytes of the columns of unbounded length buffered: raw bytes, diagnostics' messages,
@@ -395,11 +432,58 @@ impl RecordsBuf {
         self.rows += 1;
     }
 
-    /// The buffered rows as a batch; the buffer is empty afterwards, with room for as many rows
-    /// again up to 8192 (as [`crate::buf::TableBuf::take`], which says why).
-    pub fn take(&mut self) -> Result<RecordBatch, ArrowError> {
+    /// Empty, with room for `rows` rows, and for their text and diagnostics in the measure of
+    /// what this one holds (see [`Self::take`]); as [`Self::new`] when it holds none.
+    pub(crate) fn again(&self, rows: usize) -> Self {
+        let held = self.rows;
+        if held == 0 {
+            return RecordsBuf::new(self.file.clone(), rows, self.text);
+        }
+        let diags = scale(self.diag_offset.vals.len(), rows, held);
+        let mut diag_ends = Vec::with_capacity(rows + 1);
+        diag_ends.push(0);
+        RecordsBuf {
+            schema: self.schema.clone(),
+            text: self.text,
+            file: self.file.clone(),
+            rows: 0,
+            room: rows,
+            stream: self.stream.again(rows),
+            n: self.n.again(rows),
+            ts_ns: self.ts_ns.again(rows),
+            time: self.time.again(rows),
+            rel_s: self.rel_s.again(rows),
+            dir: self.dir.again(rows),
+            proto: self.proto.again(rows),
+            ty: self.ty.again(rows),
+            offset: self.offset.again(rows),
+            msgid: self.msgid.again(rows),
+            name: self.name.again(rows),
+            sub: self.sub.again(rows),
+            code: self.code.again(rows),
+            kind: self.kind.again(rows),
+            src: self.src.again(rows),
+            dst: self.dst.again(rows),
+            channel: self.channel.again(rows),
+            len: self.len.again(rows),
+            raw: self.raw.again(rows),
+            diag_ends,
+            diag_kind: self.diag_kind.again(diags),
+            diag_offset: self.diag_offset.again(diags),
+            diag_msg: self.diag_msg.again(diags),
+            pair: self.pair.again(rows),
+            latency_ms: self.latency_ms.again(rows),
+            refn: self.refn.again(rows),
+            detail: self.detail.again(rows),
+        }
+    }
+
+    /// The buffered rows as a batch; the buffer is empty afterwards, with room for `room` rows
+    /// and their text in the measure of these ([`crate::Options::batches_kept`] says how many
+    /// and why).
+    pub fn take(&mut self, room: usize) -> Result<RecordBatch, ArrowError> {
         let rows = self.rows;
-        let mut b = RecordsBuf::new(self.file.clone(), rows.min(8192), self.text);
+        let mut b = self.again(room);
         std::mem::swap(self, &mut b);
         let s = b.schema.clone();
         // By name: the vector below is in schema order, the types are the schema's.
@@ -518,7 +602,7 @@ mod tests {
             detail: Some("x"),
             ..Row::default()
         });
-        let t = b.take().expect("batch");
+        let t = b.take(0).expect("batch");
         assert_eq!(t.schema(), batch_schema(false));
         assert_eq!(words::declared_schema(&t.schema()), *records_schema());
         // Read as the table's text (its columns of words are dictionaries).
@@ -557,7 +641,7 @@ mod tests {
             ty: "units",
             ..Row::default()
         });
-        let t = words::declared(&b.take().expect("batch")).expect("declared");
+        let t = words::declared(&b.take(1).expect("batch")).expect("declared");
         assert_eq!(t.num_rows(), 1);
         assert_eq!(t.column(0).as_string::<i32>().value(0), "cap.bin");
         assert_eq!(

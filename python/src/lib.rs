@@ -399,9 +399,11 @@ impl Batches {
         let (input, label) = Input::open(source_obj, proto)?;
         let label = name.unwrap_or(label);
         let queue = BatchQueue::default();
-        // Text columns built as text: Python gets the tables' declared types.
+        // Text columns built as text: Python gets the tables' declared types, and keeps the
+        // batches.
         let opts = Options {
             words_as_text: true,
+            batches_kept: true,
             ..Options::default()
         };
         // Only these are built: the others cost nothing.

@@ -134,8 +134,10 @@ pub fn fuzz(data: &[u8]) {
         kind_rows: 2 + usize::from(budget % 16),
         groups_per_file: 1 + usize::from(flags / 3 % 4),
         open_chunks: 8 * usize::from(budget),
-        // Python's batches: the words built as text.
+        // Python's batches: the words built as text, and kept (buffers taken back when a
+        // table opens again).
         words_as_text: flags >= 128,
+        batches_kept: flags & 64 != 0,
     };
     let check = Check {
         rows_per_group: opts.rows_per_group,
