@@ -87,16 +87,21 @@ def to_arrow(
     default: all): the others are not built at all, which makes decoding faster (about twice
     for ``records`` alone on a stream of status updates). A name that is neither ``records``
     nor a message kind raises :class:`AptscopeError`; a kind absent from the capture is absent
-    from the result.
+    from the result, ``records`` never is (a capture with no record, an empty file, gives it
+    with no rows).
 
     ``threads``: the threads that build the rows (default: one per core; ``1``: all on the
     calling thread). The tables are the same whatever it is.
     """
     import pyarrow as pa
 
+    wanted = None if tables is None else list(tables)
     parts: Dict[str, list] = {"records": []}
-    for table, batch in batches(source, proto, name, tables, threads):
+    for table, batch in batches(source, proto, name, wanted, threads):
         parts.setdefault(table, []).append(batch)
+    if not parts["records"] and (wanted is None or "records" in wanted):
+        # A capture with no record (an empty file) still has its records table, empty.
+        parts["records"].append(pa.record_batch(_aptscope.empty_records()))
     return {t: pa.Table.from_batches(b) for t, b in parts.items() if b}
 
 

@@ -16,7 +16,7 @@ use aptscope_dissector::record::{Ctx, Decoder, Record};
 use aptscope_dissector::table::Dir;
 use aptscope_dissector::Table;
 use aptscope_parquet::pool::{RowPool, Wanted};
-use aptscope_parquet::schema::{Kinds, RECORDS};
+use aptscope_parquet::schema::{records_schema, Kinds, RECORDS};
 use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, DirSink, Options, Sink};
 use arrow_array::{Array, RecordBatch, StructArray};
 use arrow_data::ffi::FFI_ArrowArray;
@@ -542,6 +542,13 @@ impl ArrowBatch {
     }
 }
 
+/// The `records` table without rows: what `to_arrow()` gives for a capture with no record (an
+/// empty file), rather than no `records` table at all.
+#[pyfunction]
+fn empty_records() -> ArrowBatch {
+    ArrowBatch(RecordBatch::new_empty(records_schema()))
+}
+
 /// Decode capture `path` into dataset directory `out` as input number `index` (its part files
 /// are `TABLE/part-INDEX-*.parquet`), as `aptscope decode --to parquet` does. Returns counts.
 #[pyfunction]
@@ -658,6 +665,7 @@ fn _aptscope(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Batches>()?;
     m.add_class::<ArrowBatch>()?;
     m.add_function(wrap_pyfunction!(write_dataset, m)?)?;
+    m.add_function(wrap_pyfunction!(empty_records, m)?)?;
     m.add_function(wrap_pyfunction!(prepare_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(encode, m)?)?;
     m.add("AptscopeError", m.py().get_type::<AptscopeError>())?;

@@ -200,6 +200,19 @@ def test_only_the_tables_asked_for(samples):
         aptscope.to_arrow(path, tables=["MOT_NO_SUCH"])
 
 
+def test_an_empty_capture_has_an_empty_records_table(samples, tmp_path):
+    empty = tmp_path / "empty.bin"
+    empty.write_bytes(b"")
+    full = aptscope.to_arrow(samples / "kdc101-session.pcapng", tables=["records"])["records"]
+    for threads in (1, 2):
+        got = aptscope.to_arrow(empty, threads=threads)
+        assert sorted(got) == ["records"]
+        assert got["records"].num_rows == 0
+        assert got["records"].schema.equals(full.schema, check_metadata=True)
+    assert list(aptscope.batches(empty)) == []
+    assert aptscope.to_arrow(empty, tables=["MOT_GET_DCSTATUSUPDATE"]) == {}
+
+
 def test_batches_stream_into_duckdb(samples):
     # Imported here, not skipped when missing: python/run-tests installs it, and a test that
     # passes by skipping would hide a broken environment.
