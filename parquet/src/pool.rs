@@ -89,7 +89,14 @@ pub struct RowPool {
     run_records: usize,
     /// Records of a run once the first runs have grown to it (see [`FIRST_RUN`]).
     full_run: usize,
-    /// How a run's rows are built, for those built on the caller's thread, and in what.
+    /// Rows built on the caller's thread.
+    here_rows: Rows,
+    opts: Options,
+}
+
+/// How one thread builds runs' rows, and the writer it builds them in (made on the first run
+/// and kept, [`CaptureWriter::cut`] after each).
+struct Rows {
     writer: Option<CaptureWriter<Keep>>,
     file: Arc<str>,
     opts: Options,
@@ -113,14 +120,19 @@ impl RowPool {
         let (work, rx) = channel::<(u64, Batch)>();
         let rx = Arc::new(Mutex::new(rx));
         let (tx, done) = channel::<Done>();
-        let file: Arc<str> = Arc::from(file);
+        let rows = Rows {
+            writer: None,
+            file: Arc::from(file),
+            opts,
+            wanted,
+            finish,
+        };
         let mut threads = Vec::with_capacity(others);
         for _ in 0..others {
-            let (rx, tx, file, wanted) = (rx.clone(), tx.clone(), file.clone(), wanted.clone());
+            let (rx, tx, mut rows) = (rx.clone(), tx.clone(), rows.another());
             let h = std::thread::Builder::new()
                 .name("rows".into())
                 .spawn(move || {
-                    let mut w = None;
                     loop {
                         // The lock is held only to take a run; a closed queue ends the thread.
                         let Ok((seq, mut batch)) =
@@ -128,9 +140,9 @@ impl RowPool {
                         else {
                             return;
                         };
-                        let rows = build(&batch, &mut w, &file, opts, wanted.as_ref(), finish);
+                        let built = rows.build(&batch);
                         batch.clear();
-                        if tx.send((seq, rows, batch)).is_err() {
+                        if tx.send((seq, built, batch)).is_err() {
                             return;
                         }
                     }
@@ -156,11 +168,8 @@ impl RowPool {
             // after a few smaller runs.
             run_records: opts.rows_per_group.div_ceil(FIRST_RUN).max(1),
             full_run: opts.rows_per_group,
-            writer: None,
-            file,
+            here_rows: rows,
             opts,
-            wanted,
-            finish,
         })
     }
 
@@ -220,8 +229,7 @@ impl RowPool {
                 return Ok(());
             }
             if !self.here_waits() {
-                let (f, o, w) = (&self.file, self.opts, self.wanted.as_ref());
-                let rows = build(&self.run, &mut self.writer, f, o, w, self.finish);
+                let rows = self.here_rows.build(&self.run);
                 self.run.clear();
                 self.early.insert(self.sent, rows);
                 self.here = Some(self.sent);
@@ -283,8 +291,7 @@ impl RowPool {
     /// thread is taking one now).
     fn steal(&mut self) -> Option<Done> {
         let (seq, mut run) = self.queue.try_lock().ok()?.try_recv().ok()?;
-        let (f, o, w) = (&self.file, self.opts, self.wanted.as_ref());
-        let rows = build(&run, &mut self.writer, f, o, w, self.finish);
+        let rows = self.here_rows.build(&run);
         run.clear();
         Some((seq, rows, run))
     }
@@ -300,58 +307,61 @@ impl Drop for RowPool {
     }
 }
 
-/// The rows of one run, in the writer in `slot` (made on the first run), cut at the run's end:
-/// the tables one writer of the run alone would make, in the buffers the last run's grew to. A
-/// panic is this run's error, not a run that never comes back (the caller would wait for it
-/// for ever while the other threads live), nor a panic of the caller's thread.
-fn build(
-    batch: &Batch,
-    slot: &mut Option<CaptureWriter<Keep>>,
-    file: &str,
-    opts: Options,
-    wanted: Option<&Wanted>,
-    finish: Finish,
-) -> io::Result<Groups> {
-    std::panic::catch_unwind(AssertUnwindSafe(|| {
-        build_in(batch, slot, file, opts, wanted, finish)
-    }))
-    .unwrap_or_else(|_| {
-        // The writer may be half way through a row: a new one for the next.
-        *slot = None;
-        Err(io::Error::other("building rows panicked"))
-    })
-}
-
-/// [`build`], unguarded.
-fn build_in(
-    batch: &Batch,
-    slot: &mut Option<CaptureWriter<Keep>>,
-    file: &str,
-    opts: Options,
-    wanted: Option<&Wanted>,
-    finish: Finish,
-) -> io::Result<Groups> {
-    let w = slot.get_or_insert_with(|| {
-        let keep = Keep {
-            groups: Vec::new(),
-            finish,
-        };
-        let mut w = CaptureWriter::new(keep, file, opts);
-        if let Some(f) = wanted {
-            let f = f.clone();
-            w.only_tables(move |t| f(t));
+impl Rows {
+    /// The same building, for another thread (with a writer of its own).
+    fn another(&self) -> Rows {
+        Rows {
+            writer: None,
+            file: self.file.clone(),
+            opts: self.opts,
+            wanted: self.wanted.clone(),
+            finish: self.finish,
         }
-        w
-    });
-    // A row of the `records` table for each record.
-    w.reserve_records(batch.len());
-    let built = batch.for_each(&mut |r| w.record(r)).and_then(|()| w.cut());
-    let groups = std::mem::take(&mut w.sink_mut().groups);
-    if built.is_err() {
-        // Rows of the run may be left in it: a new writer for the next.
-        *slot = None;
     }
-    built.map(|()| groups)
+
+    /// The rows of one run, cut at its end: the tables one writer of the run alone would make,
+    /// in the buffers the last run's grew to. A panic is this run's error, not a run that
+    /// never comes back (the caller would wait for it for ever while the other threads live),
+    /// nor a panic of the caller's thread.
+    fn build(&mut self, batch: &Batch) -> io::Result<Groups> {
+        std::panic::catch_unwind(AssertUnwindSafe(|| self.build_in(batch))).unwrap_or_else(|_| {
+            // The writer may be half way through a row: a new one for the next.
+            self.writer = None;
+            Err(io::Error::other("building rows panicked"))
+        })
+    }
+
+    /// [`Rows::build`], unguarded.
+    fn build_in(&mut self, batch: &Batch) -> io::Result<Groups> {
+        let Rows {
+            writer,
+            file,
+            opts,
+            wanted,
+            finish,
+        } = self;
+        let w = writer.get_or_insert_with(|| {
+            let keep = Keep {
+                groups: Vec::new(),
+                finish: *finish,
+            };
+            let mut w = CaptureWriter::new(keep, file, *opts);
+            if let Some(f) = wanted {
+                let f = f.clone();
+                w.only_tables(move |t| f(t));
+            }
+            w
+        });
+        // A row of the `records` table for each record.
+        w.reserve_records(batch.len());
+        let built = batch.for_each(&mut |r| w.record(r)).and_then(|()| w.cut());
+        let groups = std::mem::take(&mut w.sink_mut().groups);
+        if built.is_err() {
+            // Rows of the run may be left in it: a new writer for the next.
+            *writer = None;
+        }
+        built.map(|()| groups)
+    }
 }
 
 #[cfg(test)]
@@ -498,15 +508,16 @@ mod tests {
         assert!(runs.len() > 5, "{} runs", runs.len());
         let mut each_new = Vec::new();
         for opts in [tight(false), tight(true), Options::default()] {
-            let fresh: Vec<Groups> = runs
-                .iter()
-                .map(|r| build(r, &mut None, "x", opts, None, Ok).unwrap())
-                .collect();
-            let mut slot = None;
-            let cut: Vec<Groups> = runs
-                .iter()
-                .map(|r| build(r, &mut slot, "x", opts, None, Ok).unwrap())
-                .collect();
+            let rows = || Rows {
+                writer: None,
+                file: Arc::from("x"),
+                opts,
+                wanted: None,
+                finish: Ok,
+            };
+            let fresh: Vec<Groups> = runs.iter().map(|r| rows().build(r).unwrap()).collect();
+            let mut one = rows();
+            let cut: Vec<Groups> = runs.iter().map(|r| one.build(r).unwrap()).collect();
             assert_eq!(fresh.len(), cut.len());
             for (i, (f, c)) in fresh.iter().zip(&cut).enumerate() {
                 let names = |g: &Groups| g.iter().map(|x| x.0.clone()).collect::<Vec<_>>();
