@@ -481,8 +481,14 @@ impl TableBuf {
     /// says how many and why).
     pub fn take(&mut self, room: usize) -> Result<RecordBatch, ArrowError> {
         let rows = self.rows;
-        for (b, f) in self.bufs.iter_mut().zip(&mut self.filled) {
-            if *f < rows {
+        // A column with no value in these rows is made of zeroed memory never touched (a raw
+        // capture's times), not of nulls written one at a time; a column of words keeps its
+        // own (its dictionary is the writer's).
+        let mut empty = Vec::new();
+        for (i, (b, f)) in self.bufs.iter_mut().zip(&mut self.filled).enumerate() {
+            if *f == 0 && rows > 0 && !matches!(b, Buf::Words(_) | Buf::ListW(_)) {
+                empty.push(i);
+            } else if *f < rows {
                 b.nulls(rows - *f);
             }
             *f = 0;
@@ -498,6 +504,11 @@ impl TableBuf {
             .iter_mut()
             .map(Buf::finish)
             .collect::<Result<Vec<ArrayRef>, _>>()?;
+        for i in empty {
+            if let (Some(c), Some(f)) = (cols.get_mut(i), self.schema.fields().get(i)) {
+                *c = arrow_array::new_null_array(f.data_type(), rows);
+            }
+        }
         for (i, v) in &self.constant {
             if let Some(c) = cols.get_mut(*i) {
                 *c = match self.bufs.get_mut(*i) {
