@@ -2,7 +2,7 @@
 //! Arrow arrays out. No cell per value in between (building, matching and dropping a row of
 //! cells was a third of the writer's instructions).
 
-use crate::records::{scale, Valid};
+use crate::records::{nulls, scale, Valid};
 use crate::words::{self, Words};
 use arrow_array::builder::{
     ArrayBuilder, BinaryBuilder, Float32Builder, Float64Builder, Int16Builder, Int32Builder,
@@ -481,9 +481,9 @@ impl TableBuf {
     /// says how many and why).
     pub fn take(&mut self, room: usize) -> Result<RecordBatch, ArrowError> {
         let rows = self.rows;
-        // A column with no value in these rows is made of zeroed memory never touched (a raw
-        // capture's times), not of nulls written one at a time; a column of words keeps its
-        // own (its dictionary is the writer's).
+        // A column with no value in these rows is `nulls` (no memory of its own: a raw
+        // capture's times), not nulls written one at a time; a column of words keeps its own
+        // (its dictionary is the writer's).
         let mut empty = Vec::new();
         for (i, (b, f)) in self.bufs.iter_mut().zip(&mut self.filled).enumerate() {
             if *f == 0 && rows > 0 && !matches!(b, Buf::Words(_) | Buf::ListW(_)) {
@@ -506,7 +506,7 @@ impl TableBuf {
             .collect::<Result<Vec<ArrayRef>, _>>()?;
         for i in empty {
             if let (Some(c), Some(f)) = (cols.get_mut(i), self.schema.fields().get(i)) {
-                *c = arrow_array::new_null_array(f.data_type(), rows);
+                *c = nulls(f.data_type(), rows)?;
             }
         }
         for (i, v) in &self.constant {

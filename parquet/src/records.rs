@@ -73,10 +73,59 @@ fn pack(bits: &[bool]) -> NullBuffer {
     NullBuffer::new(arrow_buffer::BooleanBuffer::new(buf, 0, bits.len()))
 }
 
+/// `len` bytes of zeros: a slice of one buffer the whole process shares (grown when a longer
+/// one is asked for), so that columns of nulls touch no memory of their own.
+fn zeros(len: usize) -> arrow_buffer::Buffer {
+    static ZEROS: std::sync::Mutex<Option<arrow_buffer::Buffer>> = std::sync::Mutex::new(None);
+    let mut z = ZEROS
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let b = match z.as_ref().filter(|b| b.len() >= len) {
+        Some(b) => b.clone(),
+        // Of u64: aligned for every column's values.
+        None => z
+            .insert(arrow_buffer::Buffer::from_vec(vec![
+                0u64;
+                len.div_ceil(8)
+                    .max(1 << 13)
+            ]))
+            .clone(),
+    };
+    b.slice_with_length(0, len)
+}
+
+/// A column of `rows` nulls of type `dt` whose validity, values and offsets are [`zeros`]:
+/// a raw capture's times, a status log's pairing, a kind table's unused fields cost no pages
+/// (each page of Python's tables is a fault, a third of `to_arrow()`'s time); other types as
+/// Arrow makes them.
+pub(crate) fn nulls(dt: &DataType, rows: usize) -> Result<ArrayRef, ArrowError> {
+    let valid = NullBuffer::new(arrow_buffer::BooleanBuffer::new(
+        zeros(rows.div_ceil(8)),
+        0,
+        rows,
+    ));
+    let b = arrow_data::ArrayDataBuilder::new(dt.clone())
+        .len(rows)
+        .nulls(Some(valid));
+    let b = match dt {
+        DataType::Utf8 | DataType::Binary => b.buffers(vec![
+            zeros((rows + 1) * 4),
+            arrow_buffer::Buffer::from_vec(Vec::<u8>::new()),
+        ]),
+        DataType::List(item) => b
+            .buffers(vec![zeros((rows + 1) * 4)])
+            .child_data(vec![arrow_data::ArrayData::new_empty(item.data_type())]),
+        _ => match dt.primitive_width() {
+            Some(w) => b.buffers(vec![zeros(rows * w)]),
+            None => return Ok(arrow_array::new_null_array(dt, rows)),
+        },
+    };
+    Ok(arrow_array::make_array(b.build()?))
+}
+
 /// A column of numbers. The values of null rows are written only once a value follows them
-/// (or when the column is taken): a column of nulls alone (a raw capture's times, a status
-/// log's pairing) is handed over as zeroed memory never touched, not as pages of zeros written
-/// one row at a time (the page faults of Python's tables were a third of `to_arrow()`'s time).
+/// (or when the column is taken): a column of nulls alone is [`nulls`], not pages of zeros
+/// written one row at a time.
 struct Num<T: ArrowPrimitiveType> {
     vals: Vec<T::Native>,
     valid: Valid,
@@ -117,16 +166,16 @@ impl<T: ArrowPrimitiveType> Num<T> {
         self.vals.resize(self.valid.rows, T::Native::default());
     }
 
-    fn take(&mut self, dt: &DataType) -> ArrayRef {
-        let vals = if self.vals.is_empty() {
-            // Zeroed by the allocator: fresh pages stay untouched.
-            vec![T::Native::default(); self.valid.rows]
-        } else {
-            self.fill();
-            std::mem::take(&mut self.vals)
-        };
-        let vals = ScalarBuffer::from(vals);
-        Arc::new(PrimitiveArray::<T>::new(vals, self.valid.take()).with_data_type(dt.clone()))
+    fn take(&mut self, dt: &DataType) -> Result<ArrayRef, ArrowError> {
+        if self.vals.is_empty() && self.valid.rows > 0 {
+            let rows = self.valid.rows;
+            self.valid.take();
+            return nulls(dt, rows);
+        }
+        self.fill();
+        let vals = ScalarBuffer::from(std::mem::take(&mut self.vals));
+        let a = PrimitiveArray::<T>::new(vals, self.valid.take()).with_data_type(dt.clone());
+        Ok(Arc::new(a))
     }
 }
 
@@ -190,14 +239,8 @@ impl Bytes {
 
     /// The offsets and values, and the validity; empty afterwards.
     fn parts(&mut self) -> (OffsetBuffer<i32>, arrow_buffer::Buffer, Option<NullBuffer>) {
-        let rows = self.valid.rows;
-        let ends = if self.ends.len() == 1 {
-            // Nulls alone: zeroed by the allocator, fresh pages stay untouched.
-            vec![0; rows + 1]
-        } else {
-            self.fill(rows + 1);
-            std::mem::replace(&mut self.ends, vec![0])
-        };
+        self.fill(self.valid.rows + 1);
+        let ends = std::mem::replace(&mut self.ends, vec![0]);
         let data = std::mem::take(&mut self.data);
         (
             OffsetBuffer::new(ScalarBuffer::from(ends)),
@@ -206,12 +249,28 @@ impl Bytes {
         )
     }
 
+    /// Nulls alone, as [`nulls`] of type `dt` (the column is then empty).
+    fn only_nulls(&mut self, dt: &DataType) -> Option<Result<ArrayRef, ArrowError>> {
+        let rows = self.valid.rows;
+        if self.ends.len() > 1 || rows == 0 {
+            return None;
+        }
+        self.valid.take();
+        Some(nulls(dt, rows))
+    }
+
     fn take_text(&mut self) -> Result<ArrayRef, ArrowError> {
+        if let Some(a) = self.only_nulls(&DataType::Utf8) {
+            return a;
+        }
         let (o, d, n) = self.parts();
         Ok(Arc::new(StringArray::try_new(o, d, n)?))
     }
 
     fn take_bytes(&mut self) -> Result<ArrayRef, ArrowError> {
+        if let Some(a) = self.only_nulls(&DataType::Binary) {
+            return a;
+        }
         let (o, d, n) = self.parts();
         Ok(Arc::new(BinaryArray::try_new(o, d, n)?))
     }
@@ -540,29 +599,29 @@ impl RecordsBuf {
             } else {
                 words::repeated(&self.file, rows)
             },
-            b.stream.take(dt("stream")?),
-            b.n.take(dt("n")?),
-            b.ts_ns.take(dt("ts_ns")?),
-            b.time.take(dt("time")?),
-            b.rel_s.take(dt("rel_s")?),
+            b.stream.take(dt("stream")?)?,
+            b.n.take(dt("n")?)?,
+            b.ts_ns.take(dt("ts_ns")?)?,
+            b.time.take(dt("time")?)?,
+            b.rel_s.take(dt("rel_s")?)?,
             b.dir.take()?,
             b.proto.take()?,
             b.ty.take()?,
-            b.offset.take(dt("offset")?),
-            b.msgid.take(dt("msgid")?),
+            b.offset.take(dt("offset")?)?,
+            b.msgid.take(dt("msgid")?)?,
             b.name.take()?,
             b.sub.take()?,
             b.code.take_text()?,
             b.kind.take()?,
-            b.src.take(dt("src")?),
-            b.dst.take(dt("dst")?),
-            b.channel.take(dt("channel")?),
-            b.len.take(dt("len")?),
+            b.src.take(dt("src")?)?,
+            b.dst.take(dt("dst")?)?,
+            b.channel.take(dt("channel")?)?,
+            b.len.take(dt("len")?)?,
             b.raw.take_bytes()?,
             b.take_diags(dt("diagnostics")?)?,
-            b.pair.take(dt("pair")?),
-            b.latency_ms.take(dt("latency_ms")?),
-            b.refn.take(dt("ref")?),
+            b.pair.take(dt("pair")?)?,
+            b.latency_ms.take(dt("latency_ms")?)?,
+            b.refn.take(dt("ref")?)?,
             b.detail.take_text()?,
         ];
         RecordBatch::try_new(s, cols)
@@ -579,7 +638,7 @@ impl RecordsBuf {
         let u64_type = DataType::UInt64;
         let parts = vec![
             self.diag_kind.take()?,
-            self.diag_offset.take(&u64_type),
+            self.diag_offset.take(&u64_type)?,
             self.diag_msg.take_text()?,
         ];
         let elements = StructArray::try_new(fields.clone(), parts, None)?;
@@ -653,7 +712,7 @@ mod tests {
                     n.push(*x);
                     t.text(*w);
                 }
-                let a = n.take(&DataType::UInt64);
+                let a = n.take(&DataType::UInt64).expect("numbers");
                 assert_eq!(
                     a.as_primitive::<UInt64Type>(),
                     &PrimitiveArray::from(nums.clone())
