@@ -2,7 +2,7 @@
 //! Arrow arrays out. No cell per value in between (building, matching and dropping a row of
 //! cells was a third of the writer's instructions).
 
-use crate::records::{nulls, scale, Valid};
+use crate::records::{nulls, repeated_text, scale, Valid};
 use crate::words::{self, Words};
 use arrow_array::builder::{
     ArrayBuilder, BinaryBuilder, Float32Builder, Float64Builder, Int16Builder, Int32Builder,
@@ -511,11 +511,8 @@ impl TableBuf {
         }
         for (i, v) in &self.constant {
             if let Some(c) = cols.get_mut(*i) {
-                *c = match self.bufs.get_mut(*i) {
-                    Some(Buf::Str(b)) => {
-                        b.append_value_n(&**v, rows);
-                        Arc::new(b.finish())
-                    }
+                *c = match self.bufs.get(*i) {
+                    Some(Buf::Str(_)) => repeated_text(v, rows),
                     _ => words::repeated(v, rows),
                 };
             }

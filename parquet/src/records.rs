@@ -123,6 +123,31 @@ pub(crate) fn nulls(dt: &DataType, rows: usize) -> Result<ArrayRef, ArrowError> 
     Ok(arrow_array::make_array(b.build()?))
 }
 
+/// `text` in each of `rows` rows: a slice of one column of it repeated, shared by every table
+/// and row group of the same text (the `file` column of Python's tables, 18 MB of the 10 MB
+/// status log's tables, in pages of their own for every row group before). Grown when more
+/// rows are asked for; another text replaces it.
+pub(crate) fn repeated_text(text: &str, rows: usize) -> ArrayRef {
+    static LAST: std::sync::Mutex<Option<StringArray>> = std::sync::Mutex::new(None);
+    let mut last = LAST
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let fits = |a: &&StringArray| {
+        use arrow_array::Array;
+        a.len() >= rows && !a.is_empty() && a.value(0) == text
+    };
+    let a = match last.as_ref().filter(fits) {
+        Some(a) => a.clone(),
+        None => {
+            let n = rows.max(1 << 13);
+            let mut b = StringBuilder::with_capacity(n, n * text.len());
+            b.append_value_n(text, n);
+            last.insert(b.finish()).clone()
+        }
+    };
+    Arc::new(a.slice(0, rows))
+}
+
 /// A column of numbers. The values of null rows are written only once a value follows them
 /// (or when the column is taken): a column of nulls alone is [`nulls`], not pages of zeros
 /// written one row at a time.
@@ -593,9 +618,7 @@ impl RecordsBuf {
         let dt = |name: &str| s.field_with_name(name).map(|f| f.data_type());
         let cols: Vec<ArrayRef> = vec![
             if self.text {
-                let mut f = StringBuilder::with_capacity(rows, self.file.len() * rows);
-                f.append_value_n(&*self.file, rows);
-                Arc::new(f.finish())
+                repeated_text(&self.file, rows)
             } else {
                 words::repeated(&self.file, rows)
             },
@@ -730,6 +753,44 @@ mod tests {
                     (1..ends.len()).all(|i| p[i - 1] || ends[i] == ends[i - 1]),
                     "{p:?}"
                 );
+            }
+        }
+    }
+
+    /// A repeated text is its text in every row, whatever was asked before it (other texts,
+    /// fewer or more rows), and columns of nulls are nulls of their type.
+    #[test]
+    fn shared_columns_hold_what_was_asked() {
+        for (text, rows) in [
+            ("a.bin", 3),
+            ("a.bin", 20_000),
+            ("b", 5),
+            ("a.bin", 7),
+            ("", 4),
+        ] {
+            let a = repeated_text(text, rows);
+            let a = a.as_string::<i32>();
+            assert_eq!(a.len(), rows);
+            assert!(a.iter().all(|v| v == Some(text)), "{text} {rows}");
+            assert_eq!(a.null_count(), 0);
+        }
+        assert_eq!(repeated_text("x", 0).len(), 0);
+        let list = DataType::List(Arc::new(arrow_schema::Field::new(
+            "item",
+            DataType::Utf8,
+            true,
+        )));
+        for dt in [
+            DataType::UInt8,
+            DataType::Float64,
+            DataType::Utf8,
+            DataType::Binary,
+            list,
+        ] {
+            for rows in [0, 1, 70_000] {
+                let a = nulls(&dt, rows).expect("nulls");
+                assert_eq!((a.len(), a.null_count(), a.data_type()), (rows, rows, &dt));
+                a.to_data().validate_full().expect("valid");
             }
         }
     }
