@@ -693,7 +693,7 @@ fn units_members<S: Sink + ?Sized>(out: &mut S, n: &Notice) {
             key!(out, "counts_per_unit");
             out.float(s.counts_per_unit);
             key!(out, "unit");
-            out.str(&s.unit);
+            out.str(s.unit);
         }
         Resolution::Raw(why) => {
             key!(out, "raw");

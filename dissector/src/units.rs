@@ -25,7 +25,6 @@ use crate::apt::{text_of, AptFrame, Value};
 use crate::msg;
 use crate::table::{Maximum, Quantity};
 use std::fmt::Write;
-use std::sync::Arc;
 
 /// Sampling interval of brushed DC servo controllers (TDC001, KDC101, KVS30), in seconds.
 pub const DC_SERVO_T: f64 = 2048.0 / 6e6;
@@ -498,11 +497,9 @@ pub struct Scale {
     /// Counts (or microsteps) per unit.
     pub counts_per_unit: f64,
     /// `mm`, `deg`, or the unit of a custom scale.
-    pub unit: Arc<str>,
+    pub unit: &'static str,
     /// Per quantity (in [`Quantity::ALL`] order): raw units per physical unit, and the unit.
-    /// (Units shared, not owned: a scale is copied with the frames that keep it, `owned::Batch`,
-    /// and a piezo's status reports make a new one often.)
-    per: [(Option<f64>, Arc<str>); 5],
+    per: [(Option<f64>, &'static str); 5],
     /// The device's maxima that percentages refer to (piezo: output voltage limit in V, travel
     /// in µm), once it has reported them.
     maxima: [Option<f64>; 2],
@@ -528,8 +525,8 @@ impl Scale {
             self.stage,
             self.family,
             self.counts_per_unit.to_bits(),
-            &self.unit,
-            self.per.each_ref().map(|(x, u)| (bits(*x), &**u)),
+            self.unit,
+            self.per.map(|(x, u)| (bits(x), u)),
             self.maxima.map(bits),
         )
     }
@@ -561,6 +558,22 @@ pub fn scale_stage(name: &str) -> Option<&'static str> {
         .find(|n| *n == name)
 }
 
+/// `unit` as text that lives as long as the process: a conversion is copied with the frames
+/// that keep it (`owned::Batch`, on its way to other threads; a piezo's status reports make a
+/// new one whenever a maximum changes), and counted references to shared text were counted up
+/// on one thread and down on another for each copy. Units are few (a stage's, its rates', a
+/// custom scale's), each kept once.
+fn interned(unit: &str) -> &'static str {
+    static UNITS: std::sync::Mutex<Vec<&'static str>> = std::sync::Mutex::new(Vec::new());
+    let mut units = UNITS.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    if let Some(u) = units.iter().find(|u| **u == unit) {
+        return u;
+    }
+    let u: &'static str = Box::leak(unit.into());
+    units.push(u);
+    u
+}
+
 /// A number no other scale value has had in this process.
 fn next_revision() -> u64 {
     static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
@@ -588,11 +601,11 @@ impl Scale {
                 (_, Some(fam)) => fam.factor(q, counts_per_unit),
                 (_, None) => None,
             };
-            let u: Arc<str> = match q {
-                Quantity::Pos => unit.into(),
-                Quantity::PosPerSec | Quantity::Vel => format!("{unit}/s").into(),
-                Quantity::Acc => format!("{unit}/s2").into(),
-                Quantity::Jerk => format!("{unit}/s3").into(),
+            let u = match q {
+                Quantity::Pos => interned(unit),
+                Quantity::PosPerSec | Quantity::Vel => interned(&format!("{unit}/s")),
+                Quantity::Acc => interned(&format!("{unit}/s2")),
+                Quantity::Jerk => interned(&format!("{unit}/s3")),
             };
             (f.filter(|f| f.is_finite() && *f > 0.0), u)
         });
@@ -600,7 +613,7 @@ impl Scale {
             stage,
             family,
             counts_per_unit,
-            unit: unit.into(),
+            unit: interned(unit),
             per,
             maxima: [None; 2],
             revision: next_revision(),
@@ -654,13 +667,13 @@ impl Scale {
 
     /// The physical unit of `q` (`mm/s`).
     pub fn unit_of(&self, q: Quantity) -> &str {
-        &self.per[Self::slot(q)].1
+        self.per[Self::slot(q)].1
     }
 
     /// A raw value of quantity `q` in physical units, with the unit.
     pub fn convert(&self, q: Quantity, raw: f64) -> Option<(f64, &str)> {
-        let (f, u) = &self.per[Self::slot(q)];
-        f.map(|f| (raw / f, &**u))
+        let (f, u) = self.per[Self::slot(q)];
+        f.map(|f| (raw / f, u))
     }
 
     /// One line saying what applies: `MTS25-Z8: 34554.96 counts/mm, brushed DC servo rules`.

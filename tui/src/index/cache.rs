@@ -335,7 +335,7 @@ fn encode_meta(ix: &Index, e: &mut Enc) {
         e.str(s.stage);
         e.opt_str(s.family.map(|f| f.name()));
         e.f64(s.counts_per_unit);
-        e.str(&s.unit);
+        e.str(s.unit);
         e.opt_f64(s.maximum(Maximum::Volts));
         e.opt_f64(s.maximum(Maximum::Travel));
     }
