@@ -638,8 +638,9 @@ pub struct CaptureWriter<S: Sink> {
     kinds: Vec<Option<Open>>,
     /// Kind tables buffering rows now.
     open: usize,
-    /// Buffers of kind tables closed by [`CaptureWriter::cut`], by index, emptied with their
-    /// room: opened again, a table takes its own back rather than growing a new one.
+    /// Buffers of kind tables closed by [`CaptureWriter::cut`] (or written early and closed,
+    /// when [`Options::batches_kept`]), by index, emptied with their room: opened again, a
+    /// table takes its own back rather than growing a new one.
     spare: Vec<Option<TableBuf>>,
     /// Each kind table's part file (by index).
     files: Vec<PartState>,

@@ -1,7 +1,9 @@
 //! Rows built on several threads: the decode chain runs on the caller's thread (it is one
 //! sequential state: framing, pairing, numbering, units) and hands runs of records, owned
-//! ([`Batch`]), to threads that each build a run's rows into its own [`CaptureWriter`]; the row
-//! groups come back in the order the runs were handed over. Building the rows is most of
+//! ([`Batch`]), to threads that each build a run's rows in a [`CaptureWriter`] of their own (cut
+//! at the run's end and kept for the next, [`CaptureWriter::cut`]); the caller's thread builds
+//! runs too rather than wait. The row groups come back in the order the runs were handed
+//! over. Building the rows is most of
 //! `to_arrow()`'s time (about four fifths, docs/performance.md), and each record's rows depend
 //! only on the record, so this is the part that spreads over the cores.
 //!

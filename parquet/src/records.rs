@@ -82,14 +82,11 @@ fn zeros(len: usize) -> arrow_buffer::Buffer {
         .unwrap_or_else(std::sync::PoisonError::into_inner);
     let b = match z.as_ref().filter(|b| b.len() >= len) {
         Some(b) => b.clone(),
-        // Of u64: aligned for every column's values.
-        None => z
-            .insert(arrow_buffer::Buffer::from_vec(vec![
-                0u64;
-                len.div_ceil(8)
-                    .max(1 << 13)
-            ]))
-            .clone(),
+        None => {
+            // Of u64: aligned for every column's values.
+            let words = vec![0u64; len.div_ceil(8).max(1 << 13)];
+            z.insert(arrow_buffer::Buffer::from_vec(words)).clone()
+        }
     };
     b.slice_with_length(0, len)
 }
