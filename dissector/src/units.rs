@@ -565,7 +565,9 @@ pub fn scale_stage(name: &str) -> Option<&'static str> {
 /// custom scale's), each kept once.
 fn interned(unit: &str) -> &'static str {
     static UNITS: std::sync::Mutex<Vec<&'static str>> = std::sync::Mutex::new(Vec::new());
-    let mut units = UNITS.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let mut units = UNITS
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     if let Some(u) = units.iter().find(|u| **u == unit) {
         return u;
     }
