@@ -120,29 +120,37 @@ pub(crate) fn nulls(dt: &DataType, rows: usize) -> Result<ArrayRef, ArrowError> 
     Ok(arrow_array::make_array(b.build()?))
 }
 
+/// The texts [`repeated_text`] keeps at most: a capture's name and a few words (`apt`,
+/// `frame`, `d2h`…) at once; the one asked for least recently goes first.
+const REPEATED_TEXTS: usize = 16;
+
 /// `text` in each of `rows` rows: a slice of one column of it repeated, shared by every table
 /// and row group of the same text (the `file` column of Python's tables, 18 MB of the 10 MB
-/// status log's tables, in pages of their own for every row group before). Grown when more
-/// rows are asked for; another text replaces it.
+/// status log's tables, in pages of their own for every row group before; and columns of one
+/// word, [`TextWords`]). Grown when more rows are asked for; the process keeps
+/// [`REPEATED_TEXTS`] texts' columns at most.
 pub(crate) fn repeated_text(text: &str, rows: usize) -> ArrayRef {
-    static LAST: std::sync::Mutex<Option<StringArray>> = std::sync::Mutex::new(None);
-    let mut last = LAST
+    use arrow_array::Array;
+    static MADE: std::sync::Mutex<Vec<StringArray>> = std::sync::Mutex::new(Vec::new());
+    let mut made = MADE
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner);
-    let fits = |a: &&StringArray| {
-        use arrow_array::Array;
-        a.len() >= rows && !a.is_empty() && a.value(0) == text
-    };
-    let a = match last.as_ref().filter(fits) {
-        Some(a) => a.clone(),
+    let at = made.iter().position(|a| a.value(0) == text);
+    let a = match at.map(|i| made.remove(i)).filter(|a| a.len() >= rows) {
+        Some(a) => a,
         None => {
             let n = rows.max(1 << 13);
             let mut b = StringBuilder::with_capacity(n, n * text.len());
             b.append_value_n(text, n);
-            last.insert(b.finish()).clone()
+            b.finish()
         }
     };
-    Arc::new(a.slice(0, rows))
+    let slice = Arc::new(a.slice(0, rows));
+    if made.len() == REPEATED_TEXTS {
+        made.remove(0);
+    }
+    made.push(a);
+    slice
 }
 
 /// A column of numbers. The values of null rows are written only once a value follows them
@@ -304,13 +312,97 @@ impl Bytes {
 /// building the rows Python gets).
 enum WordCol {
     Keys(Box<Words>),
-    Text(StringBuilder),
+    Text(TextWords),
+}
+
+/// A column of words as text, its rows kept unwritten while they are all one word (or all
+/// null): a capture's `proto`, mostly its `type`, a one-way log's `dir` are such columns, and
+/// taken as [`repeated_text`] or [`nulls`] they cost no pages of their own (each page of
+/// Python's tables is a fault, a third of `to_arrow()`'s time).
+struct TextWords {
+    b: StringBuilder,
+    /// The word of every row so far and their count, none of them in `b`; `None` once two
+    /// rows differed (every row is then in `b`).
+    same: Option<(Option<&'static str>, usize)>,
+}
+
+impl TextWords {
+    fn new(rows: usize, bytes: usize) -> Self {
+        TextWords {
+            b: StringBuilder::with_capacity(rows, bytes),
+            same: Some((None, 0)),
+        }
+    }
+
+    /// Rows put, and bytes of their text.
+    fn held(&self) -> (usize, usize) {
+        match self.same {
+            Some((w, n)) => (n, n * w.map_or(0, str::len)),
+            None => (self.b.len(), self.b.values_slice().len()),
+        }
+    }
+
+    #[inline(always)]
+    fn push(&mut self, w: Option<&'static str>) {
+        match &mut self.same {
+            Some((s, n)) if *s == w || *n == 0 => {
+                *s = w;
+                *n += 1;
+            }
+            Some(_) => {
+                self.spill();
+                self.b.append_option(w);
+            }
+            None => self.b.append_option(w),
+        }
+    }
+
+    /// Write the rows kept unwritten: they are no longer all one word.
+    #[cold]
+    fn spill(&mut self) {
+        if let Some((w, n)) = self.same.take() {
+            match w {
+                Some(w) => self.b.append_value_n(w, n),
+                None => self.b.append_nulls(n),
+            }
+        }
+    }
+
+    /// The first `n` rows of `other` (rows of this one, which has none yet).
+    #[cold]
+    fn copy_rows(&mut self, other: &TextWords, n: usize) {
+        if let Some((w, _)) = other.same {
+            self.same = Some((w, n));
+            return;
+        }
+        self.spill();
+        let b = &other.b;
+        let (ends, data) = (b.offsets_slice(), b.values_slice());
+        for i in 0..n {
+            let valid = b
+                .validity_slice()
+                .is_none_or(|v| v[i / 8] & (1 << (i % 8)) != 0);
+            let (s, e) = (ends[i] as usize, ends[i + 1] as usize);
+            match std::str::from_utf8(&data[s..e]) {
+                Ok(t) if valid => self.b.append_value(t),
+                _ => self.b.append_null(),
+            }
+        }
+    }
+
+    fn take(&mut self) -> Result<ArrayRef, ArrowError> {
+        match self.same.replace((None, 0)) {
+            Some((_, 0)) | None => Ok(Arc::new(self.b.finish())),
+            Some((Some(w), n)) => Ok(repeated_text(w, n)),
+            Some((None, n)) => nulls(&DataType::Utf8, n),
+        }
+    }
 }
 
 impl WordCol {
     fn new(cap: usize, text: bool) -> Self {
         if text {
-            WordCol::Text(StringBuilder::with_capacity(cap, cap * 8))
+            WordCol::Text(TextWords::new(cap, cap * 8))
         } else {
             WordCol::Keys(Box::new(Words::new(cap)))
         }
@@ -320,10 +412,10 @@ impl WordCol {
     fn again(&self, rows: usize) -> Self {
         match self {
             WordCol::Keys(_) => WordCol::Keys(Box::new(Words::new(rows))),
-            WordCol::Text(b) => WordCol::Text(StringBuilder::with_capacity(
-                rows,
-                scale(b.values_slice().len(), rows, b.len()),
-            )),
+            WordCol::Text(t) => {
+                let (held, bytes) = t.held();
+                WordCol::Text(TextWords::new(rows, scale(bytes, rows, held)))
+            }
         }
     }
 
@@ -331,7 +423,7 @@ impl WordCol {
     fn push(&mut self, w: Option<&'static str>) {
         match self {
             WordCol::Keys(k) => k.push(w),
-            WordCol::Text(b) => b.append_option(w),
+            WordCol::Text(t) => t.push(w),
         }
     }
 
@@ -339,14 +431,17 @@ impl WordCol {
     fn push_text(&mut self, w: &str) {
         match self {
             WordCol::Keys(k) => k.push_text(w),
-            WordCol::Text(b) => b.append_value(w),
+            WordCol::Text(t) => {
+                t.spill();
+                t.b.append_value(w)
+            }
         }
     }
 
     fn take(&mut self) -> Result<ArrayRef, ArrowError> {
         match self {
             WordCol::Keys(k) => k.take(),
-            WordCol::Text(b) => Ok(Arc::new(b.finish())),
+            WordCol::Text(t) => t.take(),
         }
     }
 }
@@ -431,6 +526,10 @@ pub struct RecordsBuf {
     sub: WordCol,
     code: Bytes,
     kind: WordCol,
+    /// Rows so far whose kind is their name (all, or `None`), not written in `kind`: the
+    /// column is then the `name` column's array itself (text words only; an APT frame's kind
+    /// table is its message's name).
+    kind_is_name: Option<usize>,
     src: Num<UInt8Type>,
     dst: Num<UInt8Type>,
     channel: Num<Int64Type>,
@@ -475,6 +574,7 @@ impl RecordsBuf {
             sub: words(),
             code: text(),
             kind: words(),
+            kind_is_name: words_as_text.then_some(0),
             src: Num::new(cap),
             dst: Num::new(cap),
             channel: Num::new(cap),
@@ -543,7 +643,11 @@ impl RecordsBuf {
         self.name.push(r.name);
         self.sub.push(r.sub);
         self.code.text(r.code);
-        self.kind.push(r.kind);
+        match &mut self.kind_is_name {
+            Some(n) if r.kind == r.name => *n += 1,
+            Some(_) => self.kind_apart(r.kind),
+            None => self.kind.push(r.kind),
+        }
         self.src.push(r.src);
         self.dst.push(r.dst);
         self.channel.push(r.channel);
@@ -555,6 +659,16 @@ impl RecordsBuf {
         self.refn.push(r.refn);
         self.detail.text(r.detail);
         self.rows += 1;
+    }
+
+    /// The first row whose kind is not its name: the rows before it written in `kind`.
+    #[cold]
+    fn kind_apart(&mut self, kind: Option<&'static str>) {
+        let n = self.kind_is_name.take().unwrap_or(0);
+        if let (WordCol::Text(k), WordCol::Text(name)) = (&mut self.kind, &self.name) {
+            k.copy_rows(name, n);
+        }
+        self.kind.push(kind);
     }
 
     /// Empty, with room for `rows` rows, and for their text and diagnostics in the measure of
@@ -587,6 +701,7 @@ impl RecordsBuf {
             sub: self.sub.again(rows),
             code: self.code.again(rows),
             kind: self.kind.again(rows),
+            kind_is_name: self.text.then_some(0),
             src: self.src.again(rows),
             dst: self.dst.again(rows),
             channel: self.channel.again(rows),
@@ -613,6 +728,11 @@ impl RecordsBuf {
         let s = b.schema.clone();
         // By name: the vector below is in schema order, the types are the schema's.
         let dt = |name: &str| s.field_with_name(name).map(|f| f.data_type());
+        let name = b.name.take()?;
+        let kind = match b.kind_is_name {
+            Some(_) => name.clone(),
+            None => b.kind.take()?,
+        };
         let cols: Vec<ArrayRef> = vec![
             if self.text {
                 repeated_text(&self.file, rows)
@@ -629,10 +749,10 @@ impl RecordsBuf {
             b.ty.take()?,
             b.offset.take(dt("offset")?)?,
             b.msgid.take(dt("msgid")?)?,
-            b.name.take()?,
+            name,
             b.sub.take()?,
             b.code.take_text()?,
-            b.kind.take()?,
+            kind,
             b.src.take(dt("src")?)?,
             b.dst.take(dt("dst")?)?,
             b.channel.take(dt("channel")?)?,
@@ -868,5 +988,88 @@ mod tests {
                 .len(),
             0
         );
+    }
+
+    /// Python's columns of words (text), in every arrangement of one word, nulls and words
+    /// that differ (at the start, the middle, the end; a word not `'static`), row group after
+    /// row group: each is the column a builder of the same words makes, and `kind` is the
+    /// `name` column itself exactly while every row's kind is its name.
+    #[test]
+    fn words_kept_unwritten_are_the_words_put() {
+        let (a, b) = (Some("MOT_MOVE_HOME"), Some("ELL_GS"));
+        let patterns: Vec<Vec<(Option<&'static str>, Option<&'static str>)>> = vec![
+            vec![],
+            vec![(a, a); 3],
+            vec![(None, None); 4],
+            vec![(a, a), (a, a), (b, b), (a, a)],
+            vec![(a, a), (a, a), (a, b)],
+            vec![(a, b), (a, a)],
+            vec![(None, None), (a, a), (a, None)],
+            vec![(b, b), (a, a), (None, None), (b, b), (b, a)],
+            (0..300)
+                .map(|i| {
+                    if i < 250 {
+                        (a, a)
+                    } else {
+                        (b, if i % 3 == 0 { a } else { b })
+                    }
+                })
+                .collect(),
+        ];
+        let mut buf = RecordsBuf::new(Arc::from("x"), 2, true);
+        for (i, p) in patterns.iter().enumerate() {
+            for &(name, kind) in p {
+                buf.push(&Row {
+                    ty: "frame",
+                    dir: kind,
+                    name,
+                    kind,
+                    ..Row::default()
+                });
+            }
+            // One row group in four ends with a diagnostic kind that is not `'static`.
+            let odd = i % 4 == 3;
+            if odd {
+                buf.diag_text(&String::from("late"), 1, &"m");
+                buf.push(&Row {
+                    ty: "frame",
+                    ..Row::default()
+                });
+            }
+            let t = buf.take(i % 3).expect("batch");
+            assert_eq!(t.schema(), records_schema());
+            let col = |n: &str| t.column_by_name(n).expect(n).clone();
+            let text = |n: &str| -> Vec<Option<String>> {
+                let c = col(n);
+                c.to_data().validate_full().expect("valid");
+                c.as_string::<i32>()
+                    .iter()
+                    .map(|v| v.map(String::from))
+                    .collect()
+            };
+            // The names (0) or the kinds (1) put.
+            let want = |k: usize| {
+                let mut w: Vec<Option<String>> =
+                    p.iter().map(|r| [r.0, r.1][k].map(String::from)).collect();
+                if odd {
+                    w.push(None);
+                }
+                w
+            };
+            assert_eq!(text("name"), want(0), "{i}");
+            assert_eq!(text("kind"), want(1), "{i}");
+            assert_eq!(text("dir"), want(1), "{i}");
+            let same = p.iter().all(|r| r.0 == r.1);
+            assert_eq!(Arc::ptr_eq(&col("name"), &col("kind")), same, "{i}");
+            let ty = text("type");
+            assert_eq!(ty.len(), p.len() + usize::from(odd));
+            assert!(ty.iter().all(|t| t.as_deref() == Some("frame")));
+            let d = col("diagnostics");
+            let kinds = d.as_list::<i32>().values().as_struct().column(0).clone();
+            assert_eq!(kinds.len(), usize::from(odd));
+            if odd {
+                assert_eq!(kinds.as_string::<i32>().value(0), "late");
+            }
+        }
     }
 }
