@@ -1213,9 +1213,15 @@ fn records_row(
 /// sub-message form), so each is worked out once (by name, the first field of that name)
 /// rather than searched for in every frame.
 #[derive(Default)]
-struct Layouts(NumMap<(usize, usize, usize, usize), Vec<Option<usize>>>);
+struct Layouts(Vec<Vec<Layout>>);
+
+/// A form's key (its first and last field's table entries, their count) and its columns'
+/// fields.
+type Layout = ((usize, usize, usize), Vec<Option<usize>>);
 
 impl Layouts {
+    /// By kind (its [`KindSchema::index`]), then among the kind's forms (one or two): a few
+    /// comparisons rather than a hash map by all four, looked up in every frame.
     fn get<T, F: 'static>(
         &mut self,
         k: &KindSchema,
@@ -1223,18 +1229,24 @@ impl Layouts {
         name: impl Fn(&F) -> &'static str,
     ) -> &[Option<usize>] {
         let addr = |f: Option<&(&'static F, T)>| f.map_or(0, |(fd, _)| *fd as *const F as usize);
-        let key = (
-            k as *const KindSchema as usize,
-            addr(fields.first()),
-            addr(fields.last()),
-            fields.len(),
-        );
-        self.0.entry(key).or_insert_with(|| {
-            k.cols
-                .iter()
-                .map(|c| fields.iter().position(|(fd, _)| name(fd) == c.field))
-                .collect()
-        })
+        let key = (addr(fields.first()), addr(fields.last()), fields.len());
+        if self.0.len() <= k.index {
+            self.0.resize_with(k.index + 1, Vec::new);
+        }
+        let forms = &mut self.0[k.index];
+        let at = match forms.iter().position(|(f, _)| *f == key) {
+            Some(i) => i,
+            None => {
+                let cols = k
+                    .cols
+                    .iter()
+                    .map(|c| fields.iter().position(|(fd, _)| name(fd) == c.field))
+                    .collect();
+                forms.push((key, cols));
+                forms.len() - 1
+            }
+        };
+        &forms[at].1
     }
 }
 
