@@ -66,6 +66,10 @@ impl Sink for Keep {
 /// that long.
 const FIRST_RUN: usize = 8;
 
+/// Records of each part of the last run at least (see [`RowPool::flush`]): a smaller one is
+/// not worth its copy and its batches.
+const LAST_PART: usize = 4096;
+
 /// Threads building the rows of runs of records, in order (see the module documentation).
 pub struct RowPool {
     work: Option<Sender<(u64, Batch)>>,
@@ -77,6 +81,10 @@ pub struct RowPool {
     /// Runs handed over (or built here), and runs handed back.
     sent: u64,
     taken: u64,
+    /// Runs handed to the threads and not yet back from them (built, or taken back from the
+    /// queue and built here), whether or not earlier ones are: a run built and waiting for an
+    /// earlier one no longer occupies a thread.
+    on_threads: usize,
     /// Runs built before an earlier one, by number.
     early: BTreeMap<u64, io::Result<Groups>>,
     /// Runs out on the threads at most.
@@ -158,6 +166,7 @@ impl RowPool {
             threads,
             sent: 0,
             taken: 0,
+            on_threads: 0,
             early: BTreeMap::new(),
             // One being built on each thread and one waiting: a thread that finishes need not
             // wait for the caller to decode the next run. (Memory grows with the threads: a
@@ -208,41 +217,59 @@ impl RowPool {
         if self.run.is_empty() {
             return Ok(());
         }
+        // The last run in a part for each thread: whole, it was built by one thread while
+        // the others waited (the last tenth of `to_arrow()` of a status log on two cores).
+        let parts = self.limit;
+        let n = self.run.len();
+        if n >= parts * LAST_PART {
+            let last = std::mem::take(&mut self.run);
+            let each = n.div_ceil(parts);
+            let mut i = 0;
+            last.for_each(&mut |r| {
+                self.run.push(r);
+                i += 1;
+                if i % each == 0 && i < n {
+                    self.hand_over(out)?;
+                }
+                Ok::<(), io::Error>(())
+            })?;
+            let mut last = last;
+            last.clear();
+            self.spare.push(last);
+        }
         self.hand_over(out)
     }
 
     /// Hand the run gathered over (it is then empty, with the room of one handed back), and
     /// pass the row groups of the runs built by now, in order, to `out`. When the threads have
     /// as many runs as they may, the caller's thread builds this one itself, rather than
-    /// waiting idle (once; then it waits for theirs).
+    /// waiting idle (once: while that run waits for earlier ones, it hands this one over all
+    /// the same and builds or waits for earlier ones until the threads hold no more than they
+    /// may; waiting with a run unsent, it took the threads' next one from the queue, and a
+    /// thread that finished meanwhile waited idle for this one).
     fn hand_over(&mut self, out: &mut dyn FnMut(Groups)) -> io::Result<()> {
         self.ready(false, out)?;
-        loop {
-            let on_threads = self.out() - usize::from(self.here_waits());
-            if on_threads < self.limit {
-                let next = self.spare.pop().unwrap_or_default();
-                let gone = || io::Error::other("the threads building rows stopped");
-                self.work
-                    .as_ref()
-                    .ok_or_else(gone)?
-                    .send((self.sent, std::mem::replace(&mut self.run, next)))
-                    .map_err(|_| gone())?;
-                self.sent += 1;
-                return Ok(());
-            }
-            if !self.here_waits() {
-                let rows = self.here_rows.build(&self.run);
-                self.run.clear();
-                self.early.insert(self.sent, rows);
-                self.here = Some(self.sent);
-                self.sent += 1;
-                return Ok(());
-            }
-            match self.next(true) {
-                Some(g) => out(g?),
-                None => return Err(io::Error::other("the threads building rows stopped")),
-            }
+        if self.on_threads >= self.limit && !self.here_waits() {
+            let rows = self.here_rows.build(&self.run);
+            self.run.clear();
+            self.early.insert(self.sent, rows);
+            self.here = Some(self.sent);
+            self.sent += 1;
+            return Ok(());
         }
+        let next = self.spare.pop().unwrap_or_default();
+        let gone = || io::Error::other("the threads building rows stopped");
+        self.work
+            .as_ref()
+            .ok_or_else(gone)?
+            .send((self.sent, std::mem::replace(&mut self.run, next)))
+            .map_err(|_| gone())?;
+        self.sent += 1;
+        self.on_threads += 1;
+        while self.on_threads > self.limit {
+            out(self.next(true).ok_or_else(gone)??);
+        }
+        Ok(())
     }
 
     /// Pass the row groups of the runs built by now (`wait`: of every run handed over, waiting
@@ -273,6 +300,7 @@ impl RowPool {
             };
             match got {
                 Some((seq, g, spare)) => {
+                    self.on_threads -= 1;
                     self.early.insert(seq, g);
                     self.spare.push(spare);
                 }
@@ -434,12 +462,17 @@ mod tests {
         let one = one_writer(&bytes, Options::default(), ok);
         assert!(one.len() > 20, "{} tables", one.len());
         // Runs of 97 records on three threads (two and the caller's), taken back as they come;
-        // then runs growing from 100 records to row groups of 800 (the first runs' ramp).
+        // then runs growing from 100 records to row groups of 800 (the first runs' ramp); then
+        // runs of up to a row group of 65,536, the last of them in three parts.
         let ramp = Options {
             rows_per_group: 800,
             ..Options::default()
         };
-        for (opts, run) in [(Options::default(), Some(97)), (ramp, None)] {
+        for (opts, run) in [
+            (Options::default(), Some(97)),
+            (ramp, None),
+            (Options::default(), None),
+        ] {
             let mut pool = RowPool::new(3, "x", opts, None, ok).unwrap();
             if let Some(n) = run {
                 pool.set_run_records(n);
@@ -451,14 +484,23 @@ mod tests {
             dec.finish(&mut each).unwrap();
             pool.flush(&mut |g| got.extend(g)).unwrap();
             pool.ready(true, &mut |g| got.extend(g)).unwrap();
-            if run.is_none() {
-                // The records table's batches: one per run, each twice the last up to 800.
-                let sizes: Vec<usize> = got
-                    .iter()
-                    .filter(|(t, _)| t == "records")
-                    .map(|(_, b)| b.num_rows())
-                    .collect();
+            // The records table's batches: one per run, each twice the last up to a row
+            // group, the last in parts.
+            let sizes: Vec<usize> = got
+                .iter()
+                .filter(|(t, _)| t == "records")
+                .map(|(_, b)| b.num_rows())
+                .collect();
+            if run.is_none() && opts.rows_per_group == 800 {
                 assert_eq!(sizes[..4], [100, 200, 400, 800], "{sizes:?}");
+            } else if run.is_none() {
+                let [a, b, last @ ..] = &sizes[..] else {
+                    panic!("{sizes:?}");
+                };
+                assert_eq!([*a, *b], [8192, 16_384], "{sizes:?}");
+                let n: usize = last.iter().sum();
+                assert!(n >= 3 * LAST_PART && last.len() == 3, "{sizes:?}");
+                assert!(last.iter().all(|p| *p <= n.div_ceil(3)), "{sizes:?}");
             }
             let many = tables(got);
             let names =
