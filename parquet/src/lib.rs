@@ -783,7 +783,8 @@ impl<S: Sink> CaptureWriter<S> {
     /// The kind table of a frame's message (its place in `kind_list`), looked up once per
     /// message rather than by a name made for every frame.
     fn kind_of(&mut self, rec: &Record<'_>) -> Option<usize> {
-        let (key, name): ((usize, usize), &dyn Fn() -> String) = match rec {
+        // `own`: the message's (or command's) name.
+        let (key, own, name): ((usize, usize), &'static str, &dyn Fn() -> String) = match rec {
             Record::Apt(a) => {
                 let m = a.frame.msg?;
                 let sub = a.frame.sub;
@@ -791,11 +792,11 @@ impl<S: Sink> CaptureWriter<S> {
                     m as *const _ as usize,
                     sub.map_or(0, |x| x as *const _ as usize),
                 );
-                (key, &move || schema::apt_kind_name(m, sub))
+                (key, m.name, &move || schema::apt_kind_name(m, sub))
             }
             Record::Ell(e) => {
                 let c = e.frame.cmd?;
-                ((c as *const _ as usize, 1), &move || {
+                ((c as *const _ as usize, 1), c.name, &move || {
                     schema::ell_kind_name(c)
                 })
             }
@@ -806,7 +807,9 @@ impl<S: Sink> CaptureWriter<S> {
         let i = *self.kind_names.entry(key).or_insert_with(|| {
             let n = name();
             let k = Kinds::global().get(&n).map(|k| &**k);
-            let name = k.map(|k| k.name.as_str());
+            // The message's own name where they are the same text: the `records` rows compare
+            // the two, by address first (`records::same`).
+            let name = k.map(|k| if k.name == own { own } else { k.name.as_str() });
             let k = k.filter(|_| keep.as_ref().is_none_or(|f| f(&n)));
             list.push((name, k));
             list.len() - 1
