@@ -2,7 +2,7 @@
 //! Arrow arrays out. No cell per value in between (building, matching and dropping a row of
 //! cells was a third of the writer's instructions).
 
-use crate::records::{nulls, repeated_text, scale, Valid};
+use crate::records::{nulls, repeated_text, scale, TextWords, Valid};
 use crate::words::{self, Words};
 use arrow_array::builder::{
     ArrayBuilder, BinaryBuilder, Float32Builder, Float64Builder, Int16Builder, Int32Builder,
@@ -39,6 +39,8 @@ enum Buf {
     ListF(Box<ListBuilder<Float64Builder>>),
     /// Words ([`crate::words`]), and lists of words.
     Words(Box<Words>),
+    /// Words as text (Python's tables).
+    TextW(Box<TextWords>),
     ListW(Box<ListWords>),
 }
 
@@ -123,6 +125,11 @@ impl Buf {
                 cap,
                 scale(b.values_slice().len()),
             )),
+            Buf::TextW(t) => {
+                // Its nulls are written by now: it holds `rows` rows.
+                let (_, bytes) = t.held();
+                Buf::TextW(Box::new(TextWords::new(cap, scale(bytes))))
+            }
             Buf::ListS(l) => {
                 let v = l.values_ref();
                 let items =
@@ -155,6 +162,7 @@ impl Buf {
             Buf::ListI(b) => b.append_nulls(n),
             Buf::ListF(b) => b.append_nulls(n),
             Buf::Words(w) => (0..n).for_each(|_| w.push(None)),
+            Buf::TextW(t) => t.push_nulls(n),
             Buf::ListW(l) => {
                 let ListWords {
                     ends, valid, words, ..
@@ -236,6 +244,7 @@ impl Buf {
         match self {
             Buf::Str(b) => b.append_value(v),
             Buf::Words(w) => w.push_text(v),
+            Buf::TextW(t) => t.push_text(v),
             _ => self.null(),
         }
     }
@@ -244,6 +253,7 @@ impl Buf {
     fn word(&mut self, v: &'static str) {
         match self {
             Buf::Words(w) => w.push(Some(v)),
+            Buf::TextW(t) => t.push(Some(v)),
             Buf::Str(b) => b.append_value(v),
             _ => self.null(),
         }
@@ -275,6 +285,7 @@ impl Buf {
             Buf::ListI(b) => Arc::new(b.finish()),
             Buf::ListF(b) => Arc::new(b.finish()),
             Buf::Words(w) => w.take()?,
+            Buf::TextW(t) => t.take()?,
             Buf::ListW(l) => {
                 let ListWords {
                     ends,
@@ -332,6 +343,18 @@ impl TableBuf {
             rows: 0,
             bytes: 0,
         }
+    }
+
+    /// The columns of words of `batch` (the table's batch schema, [`crate::words`]) as text
+    /// columns of words ([`TextWords`]) in this one, whose schema has them as text (Python's
+    /// tables).
+    pub fn words_as_text(mut self, batch: &arrow_schema::Schema) -> Self {
+        for (b, f) in self.bufs.iter_mut().zip(batch.fields()) {
+            if matches!(b, Buf::Str(_)) && matches!(f.data_type(), DataType::Dictionary(..)) {
+                *b = Buf::TextW(Box::new(TextWords::new(64, 64 * 8)));
+            }
+        }
+        self
     }
 
     /// Text column `i` holds `v` in every row: written once per batch rather than per row. A
@@ -512,7 +535,7 @@ impl TableBuf {
         for (i, v) in &self.constant {
             if let Some(c) = cols.get_mut(*i) {
                 *c = match self.bufs.get(*i) {
-                    Some(Buf::Str(_)) => repeated_text(v, rows),
+                    Some(Buf::Str(_) | Buf::TextW(_)) => repeated_text(v, rows),
                     _ => words::repeated(v, rows),
                 };
             }

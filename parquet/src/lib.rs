@@ -837,11 +837,11 @@ impl<S: Sink> CaptureWriter<S> {
             }
             let spare = self.spare.get_mut(k.index).and_then(Option::take);
             let buf = spare.unwrap_or_else(|| {
-                let mut buf = TableBuf::new(if self.opts.words_as_text {
-                    k.schema.clone()
+                let mut buf = if self.opts.words_as_text {
+                    TableBuf::new(k.schema.clone()).words_as_text(&k.batch)
                 } else {
-                    k.batch.clone()
-                });
+                    TableBuf::new(k.batch.clone())
+                };
                 buf.constant_text(0, self.file.clone());
                 buf
             });

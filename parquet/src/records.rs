@@ -326,10 +326,11 @@ enum WordCol {
 }
 
 /// A column of words as text, its rows kept unwritten while they are all one word (or all
-/// null): a capture's `proto`, mostly its `type`, a one-way log's `dir` are such columns, and
-/// taken as [`repeated_text`] or [`nulls`] they cost no pages of their own (each page of
-/// Python's tables is a fault, a third of `to_arrow()`'s time).
-struct TextWords {
+/// null): a capture's `proto`, mostly its `type`, a one-way log's `dir`, a device's units and
+/// channel in its kind tables are such columns, and taken as [`repeated_text`] or [`nulls`]
+/// they cost no pages of their own (each page of Python's tables is a fault, a third of
+/// `to_arrow()`'s time).
+pub(crate) struct TextWords {
     b: StringBuilder,
     /// The word of every row so far and their count, none of them in `b`; `None` once two
     /// rows differed (every row is then in `b`).
@@ -337,7 +338,7 @@ struct TextWords {
 }
 
 impl TextWords {
-    fn new(rows: usize, bytes: usize) -> Self {
+    pub(crate) fn new(rows: usize, bytes: usize) -> Self {
         TextWords {
             b: StringBuilder::with_capacity(rows, bytes),
             same: Some((None, 0)),
@@ -345,7 +346,7 @@ impl TextWords {
     }
 
     /// Rows put, and bytes of their text.
-    fn held(&self) -> (usize, usize) {
+    pub(crate) fn held(&self) -> (usize, usize) {
         match self.same {
             Some((w, n)) => (n, n * w.map_or(0, str::len)),
             None => (self.b.len(), self.b.values_slice().len()),
@@ -353,7 +354,7 @@ impl TextWords {
     }
 
     #[inline(always)]
-    fn push(&mut self, w: Option<&'static str>) {
+    pub(crate) fn push(&mut self, w: Option<&'static str>) {
         match &mut self.same {
             Some((s, n)) if same(*s, w) || *n == 0 => {
                 *s = w;
@@ -365,6 +366,25 @@ impl TextWords {
             }
             None => self.b.append_option(w),
         }
+    }
+
+    /// `n` nulls.
+    pub(crate) fn push_nulls(&mut self, n: usize) {
+        match &mut self.same {
+            Some((None, k)) => *k += n,
+            Some((_, 0)) => self.same = Some((None, n)),
+            Some(_) => {
+                self.spill();
+                self.b.append_nulls(n);
+            }
+            None => self.b.append_nulls(n),
+        }
+    }
+
+    /// A word that is not `'static`.
+    pub(crate) fn push_text(&mut self, w: &str) {
+        self.spill();
+        self.b.append_value(w);
     }
 
     /// Write the rows kept unwritten: they are no longer all one word.
@@ -400,7 +420,7 @@ impl TextWords {
         }
     }
 
-    fn take(&mut self) -> Result<ArrayRef, ArrowError> {
+    pub(crate) fn take(&mut self) -> Result<ArrayRef, ArrowError> {
         match self.same.replace((None, 0)) {
             Some((_, 0)) | None => Ok(Arc::new(self.b.finish())),
             Some((Some(w), n)) => Ok(repeated_text(w, n)),
@@ -441,10 +461,7 @@ impl WordCol {
     fn push_text(&mut self, w: &str) {
         match self {
             WordCol::Keys(k) => k.push_text(w),
-            WordCol::Text(t) => {
-                t.spill();
-                t.b.append_value(w)
-            }
+            WordCol::Text(t) => t.push_text(w),
         }
     }
 
