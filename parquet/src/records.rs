@@ -120,15 +120,20 @@ pub(crate) fn nulls(dt: &DataType, rows: usize) -> Result<ArrayRef, ArrowError> 
     Ok(arrow_array::make_array(b.build()?))
 }
 
-/// The texts [`repeated_text`] keeps at most: a capture's name and a few words (`apt`,
-/// `frame`, `d2h`…) at once; the one asked for least recently goes first.
+/// The texts [`repeated_text`] keeps at most, and their columns' bytes at most beside the
+/// last asked for: a capture's name and a few words (`apt`, `frame`, `d2h`…) at once, not the
+/// names of every capture a notebook read (a long path's column of a row group is several
+/// MB); the one asked for least recently goes first.
 const REPEATED_TEXTS: usize = 16;
+/// See [`REPEATED_TEXTS`].
+const REPEATED_BYTES: usize = 16 << 20;
 
 /// `text` in each of `rows` rows: a slice of one column of it repeated, shared by every table
 /// and row group of the same text (the `file` column of Python's tables, 18 MB of the 10 MB
 /// status log's tables, in pages of their own for every row group before; and columns of one
 /// word, [`TextWords`]). Grown when more rows are asked for; the process keeps
-/// [`REPEATED_TEXTS`] texts' columns at most.
+/// [`REPEATED_TEXTS`] texts' columns at most, of [`REPEATED_BYTES`] (the last asked for kept
+/// whatever its size).
 pub(crate) fn repeated_text(text: &str, rows: usize) -> ArrayRef {
     use arrow_array::Array;
     static MADE: std::sync::Mutex<Vec<StringArray>> = std::sync::Mutex::new(Vec::new());
@@ -146,10 +151,11 @@ pub(crate) fn repeated_text(text: &str, rows: usize) -> ArrayRef {
         }
     };
     let slice = Arc::new(a.slice(0, rows));
-    if made.len() == REPEATED_TEXTS {
+    made.push(a);
+    let bytes = |m: &[StringArray]| m.iter().map(|a| a.get_buffer_memory_size()).sum::<usize>();
+    while made.len() > 1 && (made.len() > REPEATED_TEXTS || bytes(&made) > REPEATED_BYTES) {
         made.remove(0);
     }
-    made.push(a);
     slice
 }
 
@@ -407,11 +413,9 @@ impl TextWords {
         }
         self.spill();
         let b = &other.b;
-        let (ends, data) = (b.offsets_slice(), b.values_slice());
+        let (ends, data, nulls) = (b.offsets_slice(), b.values_slice(), b.validity_slice());
         for i in 0..n {
-            let valid = b
-                .validity_slice()
-                .is_none_or(|v| v[i / 8] & (1 << (i % 8)) != 0);
+            let valid = nulls.is_none_or(|v| v[i / 8] & (1 << (i % 8)) != 0);
             let (s, e) = (ends[i] as usize, ends[i + 1] as usize);
             match std::str::from_utf8(&data[s..e]) {
                 Ok(t) if valid => self.b.append_value(t),
@@ -905,12 +909,17 @@ mod tests {
     /// fewer or more rows), and columns of nulls are nulls of their type.
     #[test]
     fn shared_columns_hold_what_was_asked() {
+        let long = "/a/long/path/".repeat(30);
         for (text, rows) in [
             ("a.bin", 3),
             ("a.bin", 20_000),
             ("b", 5),
             ("a.bin", 7),
             ("", 4),
+            // Over the bytes kept: the others go.
+            (long.as_str(), 70_000),
+            ("b", 6),
+            (long.as_str(), 9),
         ] {
             let a = repeated_text(text, rows);
             let a = a.as_string::<i32>();
