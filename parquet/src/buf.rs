@@ -350,8 +350,8 @@ impl TableBuf {
     /// tables).
     pub fn words_as_text(mut self, batch: &arrow_schema::Schema) -> Self {
         for (b, f) in self.bufs.iter_mut().zip(batch.fields()) {
-            if matches!(b, Buf::Str(_)) && matches!(f.data_type(), DataType::Dictionary(..)) {
-                *b = Buf::TextW(Box::new(TextWords::new(64, 64 * 8)));
+            if let (Buf::Str(s), DataType::Dictionary(..)) = (&mut *b, f.data_type()) {
+                *b = Buf::TextW(Box::new(TextWords::over(std::mem::take(s))));
             }
         }
         self

@@ -223,7 +223,7 @@ impl RowPool {
         let parts = self.limit;
         let n = self.run.len();
         if n >= parts * LAST_PART {
-            let last = std::mem::take(&mut self.run);
+            let mut last = std::mem::take(&mut self.run);
             let each = n.div_ceil(parts);
             let mut i = 0;
             last.for_each(&mut |r| {
@@ -234,7 +234,6 @@ impl RowPool {
                 }
                 Ok::<(), io::Error>(())
             })?;
-            let mut last = last;
             last.clear();
             self.spare.push(last);
         }
@@ -316,9 +315,7 @@ impl RowPool {
         }
         None
     }
-}
 
-impl RowPool {
     /// Build here a run handed over that no thread has taken yet, if there is one (and no
     /// thread is taking one now).
     fn steal(&mut self) -> Option<Done> {

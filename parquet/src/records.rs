@@ -345,8 +345,13 @@ pub(crate) struct TextWords {
 
 impl TextWords {
     pub(crate) fn new(rows: usize, bytes: usize) -> Self {
+        Self::over(StringBuilder::with_capacity(rows, bytes))
+    }
+
+    /// Empty, in builder `b` (empty) and its room.
+    pub(crate) fn over(b: StringBuilder) -> Self {
         TextWords {
-            b: StringBuilder::with_capacity(rows, bytes),
+            b,
             same: Some((None, 0)),
         }
     }
