@@ -208,93 +208,115 @@ impl Batch {
 
     /// Pass each record, in order and as it was pushed, to `f`; stops at its first error.
     pub fn for_each<E>(&self, f: &mut impl FnMut(&Record<'_>) -> Result<(), E>) -> Result<(), E> {
-        let bytes = |s: &Span| self.bytes.get(s.at..s.at + s.len).unwrap_or_default();
         for o in &self.recs {
-            match o {
-                Owned::Detect {
-                    proto,
-                    detection,
-                    sample,
-                } => f(&Record::Detect {
-                    proto: *proto,
-                    detection: *detection,
-                    sample: *sample,
-                })?,
-                Owned::Stream { id, name, settings } => f(&Record::Stream {
-                    id: *id,
-                    name,
-                    settings: settings.as_deref(),
-                })?,
-                Owned::Input(d) => f(&Record::Input(*d))?,
-                Owned::FileDiag { offset, kind, msg } => f(&Record::FileDiag {
-                    offset: *offset,
-                    kind,
-                    msg,
-                })?,
-                Owned::Units(n) => f(&Record::Units(n))?,
-                Owned::Apt {
-                    meta,
-                    offset,
-                    span,
-                    truncated,
-                    pair,
-                    scale,
-                } => {
-                    // It decoded when it was pushed, and decoding is pure.
-                    let Some(frame) =
-                        AptFrame::decode(Table::global(), *offset, bytes(span), *truncated)
-                    else {
-                        continue;
-                    };
-                    let pair = pair.and_then(|i| self.pairs.get(i as usize));
-                    f(&Record::Apt(AptRec {
-                        meta: *meta,
-                        frame: &frame,
-                        pair: pair.unwrap_or(&UNPAIRED),
-                        scale: scale.and_then(|i| self.scales.get(i as usize)),
-                    }))?
-                }
-                Owned::Ell {
-                    meta,
-                    offset,
-                    span,
-                    truncated,
-                    obs,
-                } => {
-                    let (Some(mut frame), Some(obs)) = (
-                        EllFrame::decode(*offset, bytes(span), *truncated),
-                        self.obs.get(*obs as usize),
-                    ) else {
-                        continue;
-                    };
-                    // As the decoder adds it (see record.rs, EllSide::frame).
-                    if obs.unsolicited {
-                        frame.push_diag(Diag {
-                            offset: *offset,
-                            kind: DiagKind::Unsolicited,
-                        });
-                    }
-                    f(&Record::Ell(EllRec {
-                        meta: *meta,
-                        frame: &frame,
-                        obs,
-                    }))?
-                }
-                Owned::Garbage {
-                    meta,
-                    proto,
-                    offset,
-                    span,
-                    kind,
-                } => f(&Record::Garbage(GarbageRec {
+            self.pass(o, f)?;
+        }
+        Ok(())
+    }
+
+    /// Pass record `i` (in the order pushed) to `f`; nothing when there is none.
+    pub fn with<E>(
+        &self,
+        i: usize,
+        f: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        match self.recs.get(i) {
+            Some(o) => self.pass(o, f),
+            None => Ok(()),
+        }
+    }
+
+    /// Pass the record `o` keeps to `f`.
+    fn pass<E>(
+        &self,
+        o: &Owned,
+        f: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        let bytes = |s: &Span| self.bytes.get(s.at..s.at + s.len).unwrap_or_default();
+        match o {
+            Owned::Detect {
+                proto,
+                detection,
+                sample,
+            } => f(&Record::Detect {
+                proto: *proto,
+                detection: *detection,
+                sample: *sample,
+            })?,
+            Owned::Stream { id, name, settings } => f(&Record::Stream {
+                id: *id,
+                name,
+                settings: settings.as_deref(),
+            })?,
+            Owned::Input(d) => f(&Record::Input(*d))?,
+            Owned::FileDiag { offset, kind, msg } => f(&Record::FileDiag {
+                offset: *offset,
+                kind,
+                msg,
+            })?,
+            Owned::Units(n) => f(&Record::Units(n))?,
+            Owned::Apt {
+                meta,
+                offset,
+                span,
+                truncated,
+                pair,
+                scale,
+            } => {
+                // It decoded when it was pushed, and decoding is pure.
+                let Some(frame) =
+                    AptFrame::decode(Table::global(), *offset, bytes(span), *truncated)
+                else {
+                    return Ok(());
+                };
+                let pair = pair.and_then(|i| self.pairs.get(i as usize));
+                f(&Record::Apt(AptRec {
                     meta: *meta,
-                    proto: *proto,
-                    offset: *offset,
-                    bytes: bytes(span),
-                    kind: *kind,
-                }))?,
-                Owned::NoReply(n) => f(&Record::NoReply(*n))?,
+                    frame: &frame,
+                    pair: pair.unwrap_or(&UNPAIRED),
+                    scale: scale.and_then(|i| self.scales.get(i as usize)),
+                }))?
             }
+            Owned::Ell {
+                meta,
+                offset,
+                span,
+                truncated,
+                obs,
+            } => {
+                let (Some(mut frame), Some(obs)) = (
+                    EllFrame::decode(*offset, bytes(span), *truncated),
+                    self.obs.get(*obs as usize),
+                ) else {
+                    return Ok(());
+                };
+                // As the decoder adds it (see record.rs, EllSide::frame).
+                if obs.unsolicited {
+                    frame.push_diag(Diag {
+                        offset: *offset,
+                        kind: DiagKind::Unsolicited,
+                    });
+                }
+                f(&Record::Ell(EllRec {
+                    meta: *meta,
+                    frame: &frame,
+                    obs,
+                }))?
+            }
+            Owned::Garbage {
+                meta,
+                proto,
+                offset,
+                span,
+                kind,
+            } => f(&Record::Garbage(GarbageRec {
+                meta: *meta,
+                proto: *proto,
+                offset: *offset,
+                bytes: bytes(span),
+                kind: *kind,
+            }))?,
+            Owned::NoReply(n) => f(&Record::NoReply(*n))?,
         }
         Ok(())
     }

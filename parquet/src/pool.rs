@@ -383,7 +383,7 @@ impl Rows {
         });
         // A row of the `records` table for each record.
         w.reserve_records(batch.len());
-        let built = batch.for_each(&mut |r| w.record(r)).and_then(|()| w.cut());
+        let built = w.run(batch).and_then(|()| w.cut());
         let groups = std::mem::take(&mut w.sink_mut().groups);
         if built.is_err() {
             // Rows of the run may be left in it: a new writer for the next.
@@ -540,6 +540,31 @@ mod tests {
         dec.push(Ctx::default(), bytes, &mut each).unwrap();
         dec.finish(&mut each).unwrap();
         runs
+    }
+
+    /// Kind rows built table by table over stretches of a run ([`CaptureWriter::run`]) are,
+    /// table by table, the rows of a writer given each record in turn: with budgets that
+    /// write kind tables early and close them within a stretch, and runs shorter and longer
+    /// than a stretch.
+    #[test]
+    fn kind_rows_built_table_by_table_are_the_rows_of_each_record() {
+        let bytes = every_form();
+        for opts in [tight(false), tight(true), Options::default()] {
+            let one = one_writer(&bytes, opts, Ok);
+            assert!(one.len() > 20, "{} tables", one.len());
+            for n in [997, 3 * crate::KIND_STRETCH + 5, usize::MAX] {
+                let keep = Keep {
+                    groups: Vec::new(),
+                    finish: Ok,
+                };
+                let mut w = CaptureWriter::new(keep, "x", opts);
+                for run in runs(&bytes, n) {
+                    w.run(&run).unwrap();
+                }
+                let built = tables(w.finish().unwrap().0.groups);
+                assert_eq!(one, built, "runs of {n}");
+            }
+        }
     }
 
     /// One writer cut after each run gives, row group by row group, what a writer made for

@@ -402,6 +402,11 @@ impl Kinds {
         self.by_name.get(name)
     }
 
+    /// The kind of index `i` ([`KindSchema::index`]).
+    pub fn by_index(&self, i: usize) -> Option<&KindSchema> {
+        self.sorted.get(i).map(|k| &**k)
+    }
+
     /// Every kind, sorted by name.
     pub fn all(&self) -> Vec<&Arc<KindSchema>> {
         self.sorted.iter().collect()
