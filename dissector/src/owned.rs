@@ -26,23 +26,36 @@ pub struct Batch {
     recs: Vec<Owned>,
     /// The distinct conversions the frames refer to (by index).
     scales: Vec<Scale>,
-    /// What pairing found about APT frames, those it found anything about (by index), and
+    /// What pairing found about APT frames, those it found more about than [`COMMON`] says, and
     /// what the bus made of Elliptec frames: apart, so a record is 104 bytes, not 216 (a run
     /// of a row group's records and the runs in flight were 14 MiB each, in pages touched).
     pairs: Vec<PairInfo>,
     obs: Vec<Observation>,
 }
 
-/// What pairing found about most frames: nothing.
-static UNPAIRED: PairInfo = PairInfo {
-    pair: None,
-    latency_ns: None,
-    other_address: false,
-    unsolicited: false,
-    duplicate: false,
-    expired: Vec::new(),
-    not_for_model: None,
-};
+/// What pairing found about most frames, kept once rather than per frame: nothing; or that
+/// no request asked for it (what a log of a device's replies is made of: a pairing of each
+/// in a run was 4 MiB of a status log's 17).
+static COMMON: [PairInfo; 2] = [
+    PairInfo {
+        pair: None,
+        latency_ns: None,
+        other_address: false,
+        unsolicited: false,
+        duplicate: false,
+        expired: Vec::new(),
+        not_for_model: None,
+    },
+    PairInfo {
+        pair: None,
+        latency_ns: None,
+        other_address: false,
+        unsolicited: true,
+        duplicate: false,
+        expired: Vec::new(),
+        not_for_model: None,
+    },
+];
 
 /// Where a frame's or garbage run's bytes are in [`Batch::bytes`].
 #[derive(Clone, Copy)]
@@ -74,8 +87,8 @@ enum Owned {
         offset: u64,
         span: Span,
         truncated: bool,
-        /// In [`Batch::pairs`]; `None`: [`UNPAIRED`].
-        pair: Option<u32>,
+        /// One of [`COMMON`], or past them in [`Batch::pairs`].
+        pair: u32,
         scale: Option<u32>,
     },
     Ell {
@@ -163,10 +176,13 @@ impl Batch {
                         }
                     }
                 });
-                let pair = (*a.pair != UNPAIRED).then(|| {
-                    self.pairs.push(a.pair.clone());
-                    index(self.pairs.len() - 1)
-                });
+                let pair = match COMMON.iter().position(|c| c == a.pair) {
+                    Some(i) => index(i),
+                    None => {
+                        self.pairs.push(a.pair.clone());
+                        index(COMMON.len() + self.pairs.len() - 1)
+                    }
+                };
                 let truncated = a.frame.has_diags()
                     && a.frame
                         .diags()
@@ -269,11 +285,12 @@ impl Batch {
                 else {
                     return Ok(());
                 };
-                let pair = pair.and_then(|i| self.pairs.get(i as usize));
+                let i = *pair as usize;
+                let pair = COMMON.get(i).or_else(|| self.pairs.get(i - COMMON.len()));
                 f(&Record::Apt(AptRec {
                     meta: *meta,
                     frame: &frame,
-                    pair: pair.unwrap_or(&UNPAIRED),
+                    pair: pair.unwrap_or(&COMMON[0]),
                     scale: scale.and_then(|i| self.scales.get(i as usize)),
                 }))?
             }
