@@ -42,8 +42,9 @@ pub type Finish = fn(RecordBatch) -> io::Result<RecordBatch>;
 /// Which tables are built, by name (as [`CaptureWriter::only_tables`]).
 pub type Wanted = Arc<dyn Fn(&str) -> bool + Send + Sync>;
 
-/// A run's rows, or why they could not be built; and the run, emptied, to be filled again.
-type Done = (u64, io::Result<Groups>, Batch);
+/// A run's rows, or why they could not be built; the run, emptied, to be filled again; and
+/// the records it held.
+type Done = (u64, io::Result<Groups>, Batch, usize);
 
 /// A [`Sink`] that keeps every row group.
 struct Keep {
@@ -81,14 +82,16 @@ pub struct RowPool {
     /// Runs handed over (or built here), and runs handed back.
     sent: u64,
     taken: u64,
-    /// Runs handed to the threads and not yet back from them (built, or taken back from the
-    /// queue and built here), whether or not earlier ones are: a run built and waiting for an
-    /// earlier one no longer occupies a thread.
+    /// Records of the runs handed to the threads and not yet back from them (built, or taken
+    /// back from the queue and built here), whether or not earlier ones are: a run built and
+    /// waiting for an earlier one no longer occupies a thread. Counted in records, not runs:
+    /// the first runs are small (see [`FIRST_RUN`]), and while the threads held two of them
+    /// the caller built the third, larger, itself, and a thread was left idle meanwhile.
     on_threads: usize,
     /// Runs built before an earlier one, by number.
     early: BTreeMap<u64, io::Result<Groups>>,
-    /// Runs on the threads at most (one more while the caller, its own run built and waiting
-    /// for earlier ones, builds or waits for those).
+    /// Full runs' records on the threads at most (one more while the caller, its own run
+    /// built and waiting for earlier ones, builds or waits for those).
     limit: usize,
     /// The last run built on the caller's thread, by number.
     here: Option<u64>,
@@ -151,9 +154,10 @@ impl RowPool {
                         else {
                             return;
                         };
+                        let n = batch.len();
                         let built = rows.build(&batch);
                         batch.clear();
-                        if tx.send((seq, built, batch)).is_err() {
+                        if tx.send((seq, built, batch, n)).is_err() {
                             return;
                         }
                     }
@@ -250,7 +254,8 @@ impl RowPool {
     /// time on two cores.)
     fn hand_over(&mut self, out: &mut dyn FnMut(Groups)) -> io::Result<()> {
         self.ready(false, out)?;
-        if self.on_threads >= self.limit && !self.here_waits() {
+        let n = self.run.len();
+        if self.on_threads + n > self.limit * self.full_run && !self.here_waits() {
             let rows = self.here_rows.build(&self.run);
             self.run.clear();
             self.early.insert(self.sent, rows);
@@ -266,8 +271,8 @@ impl RowPool {
             .send((self.sent, std::mem::replace(&mut self.run, next)))
             .map_err(|_| gone())?;
         self.sent += 1;
-        self.on_threads += 1;
-        while self.on_threads > self.limit {
+        self.on_threads += n;
+        while self.on_threads > self.limit * self.full_run {
             out(self.next(true).ok_or_else(gone)??);
         }
         Ok(())
@@ -300,8 +305,8 @@ impl RowPool {
                 Err(_) => None,
             };
             match got {
-                Some((seq, g, spare)) => {
-                    self.on_threads -= 1;
+                Some((seq, g, spare, n)) => {
+                    self.on_threads -= n;
                     self.early.insert(seq, g);
                     self.spare.push(spare);
                 }
@@ -320,9 +325,10 @@ impl RowPool {
     /// thread is taking one now).
     fn steal(&mut self) -> Option<Done> {
         let (seq, mut run) = self.queue.try_lock().ok()?.try_recv().ok()?;
+        let n = run.len();
         let rows = self.here_rows.build(&run);
         run.clear();
-        Some((seq, rows, run))
+        Some((seq, rows, run, n))
     }
 }
 
