@@ -498,8 +498,12 @@ pub struct Scale {
     pub counts_per_unit: f64,
     /// `mm`, `deg`, or the unit of a custom scale.
     pub unit: &'static str,
-    /// Per quantity (in [`Quantity::ALL`] order): raw units per physical unit, and the unit.
-    per: [(Option<f64>, &'static str); 5],
+    /// Per quantity (in [`Quantity::ALL`] order): raw units per physical unit (0: none), and
+    /// the units, kept once per unit: a conversion is copied with the frames that use it
+    /// (`owned::Batch`), and at 248 bytes it was a third of a status log's run, read back
+    /// cold on another thread.
+    factors: [f64; 5],
+    units: &'static [&'static str; 5],
     /// The device's maxima that percentages refer to (piezo: output voltage limit in V, travel
     /// in µm), once it has reported them.
     maxima: [Option<f64>; 2],
@@ -514,7 +518,8 @@ type ScaleIdentity<'a> = (
     Option<Family>,
     u64,
     &'a str,
-    [(Option<u64>, &'a str); 5],
+    [u64; 5],
+    [&'a str; 5],
     [Option<u64>; 2],
 );
 
@@ -526,7 +531,8 @@ impl Scale {
             self.family,
             self.counts_per_unit.to_bits(),
             self.unit,
-            self.per.map(|(x, u)| (bits(x), u)),
+            self.factors.map(f64::to_bits),
+            *self.units,
             self.maxima.map(bits),
         )
     }
@@ -576,6 +582,27 @@ fn interned(unit: &str) -> &'static str {
     u
 }
 
+/// The units of each quantity (in [`Quantity::ALL`] order) of a conversion to `unit`, kept
+/// once per unit, as [`interned`] keeps each text.
+fn interned_units(unit: &str) -> &'static [&'static str; 5] {
+    static SETS: std::sync::Mutex<Vec<&'static [&'static str; 5]>> =
+        std::sync::Mutex::new(Vec::new());
+    let mut sets = SETS
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if let Some(s) = sets.iter().find(|s| s[0] == unit) {
+        return s;
+    }
+    let set: &'static [&'static str; 5] = Box::leak(Box::new(Quantity::ALL.map(|q| match q {
+        Quantity::Pos => interned(unit),
+        Quantity::PosPerSec | Quantity::Vel => interned(&format!("{unit}/s")),
+        Quantity::Acc => interned(&format!("{unit}/s2")),
+        Quantity::Jerk => interned(&format!("{unit}/s3")),
+    })));
+    sets.push(set);
+    set
+}
+
 /// A number no other scale value has had in this process.
 fn next_revision() -> u64 {
     static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
@@ -597,26 +624,21 @@ impl Scale {
         counts_per_unit: f64,
         unit: &str,
     ) -> Scale {
-        let per = Quantity::ALL.map(|q| {
+        let factors = Quantity::ALL.map(|q| {
             let f = match (q, family) {
                 (Quantity::Pos | Quantity::PosPerSec, _) => Some(counts_per_unit),
                 (_, Some(fam)) => fam.factor(q, counts_per_unit),
                 (_, None) => None,
             };
-            let u = match q {
-                Quantity::Pos => interned(unit),
-                Quantity::PosPerSec | Quantity::Vel => interned(&format!("{unit}/s")),
-                Quantity::Acc => interned(&format!("{unit}/s2")),
-                Quantity::Jerk => interned(&format!("{unit}/s3")),
-            };
-            (f.filter(|f| f.is_finite() && *f > 0.0), u)
+            f.filter(|f| f.is_finite() && *f > 0.0).unwrap_or(0.0)
         });
         Scale {
             stage,
             family,
             counts_per_unit,
             unit: interned(unit),
-            per,
+            factors,
+            units: interned_units(unit),
             maxima: [None; 2],
             revision: next_revision(),
         }
@@ -664,18 +686,18 @@ impl Scale {
 
     /// Raw units per physical unit of `q`, when known.
     pub fn factor(&self, q: Quantity) -> Option<f64> {
-        self.per[Self::slot(q)].0
+        Some(self.factors[Self::slot(q)]).filter(|f| *f > 0.0)
     }
 
     /// The physical unit of `q` (`mm/s`).
     pub fn unit_of(&self, q: Quantity) -> &str {
-        self.per[Self::slot(q)].1
+        self.units[Self::slot(q)]
     }
 
     /// A raw value of quantity `q` in physical units, with the unit.
     pub fn convert(&self, q: Quantity, raw: f64) -> Option<(f64, &str)> {
-        let (f, u) = self.per[Self::slot(q)];
-        f.map(|f| (raw / f, u))
+        let i = Self::slot(q);
+        self.factor(q).map(|f| (raw / f, self.units[i]))
     }
 
     /// One line saying what applies: `MTS25-Z8: 34554.96 counts/mm, brushed DC servo rules`.
