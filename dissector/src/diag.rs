@@ -162,6 +162,25 @@ impl DiagKind {
         Self::NAMES.iter().copied().find(|n| *n == name)
     }
 
+    /// The message of a kind that has no parameter, as one `'static` text (what
+    /// [`Display`](fmt::Display) writes): columns of messages share it rather than write it
+    /// (a status log's "reply without a pending command", in four rows of five).
+    pub fn fixed_text(&self) -> Option<&'static str> {
+        Some(match self {
+            DiagKind::OddHexDigit => "odd number of hex digits; last digit ignored",
+            DiagKind::UnknownCommand => "command not in the ELLx manual",
+            DiagKind::MissingTerminator => "reply not terminated by CR LF",
+            DiagKind::Separators => "spaces or commas inside the frame (ignored)",
+            DiagKind::LetterO => "letter O used for digit 0",
+            DiagKind::Unsolicited => "reply without a pending command",
+            DiagKind::ZeroAddresses => {
+                "destination and source 0x00: some controllers reply so (TDC001) or send so on \
+                 connect (BSC201 MOVE_COMPLETED)"
+            }
+            _ => return None,
+        })
+    }
+
     /// A stable snake_case name (JSON `diag[].kind`, filters).
     pub fn name(&self) -> &'static str {
         match self {
@@ -205,6 +224,13 @@ pub struct Diag {
 impl fmt::Display for DiagKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
+            DiagKind::OddHexDigit
+            | DiagKind::UnknownCommand
+            | DiagKind::MissingTerminator
+            | DiagKind::Separators
+            | DiagKind::LetterO
+            | DiagKind::Unsolicited
+            | DiagKind::ZeroAddresses => f.write_str(self.fixed_text().unwrap_or_default()),
             DiagKind::Garbage { len } => write!(f, "{len} byte(s) that start no frame"),
             DiagKind::AbsurdLength { msg_id, len } => {
                 write!(f, "header of 0x{msg_id:04X} claims a {len}-byte data packet (max 255); header skipped")
@@ -241,8 +267,6 @@ impl fmt::Display for DiagKind {
             }
             DiagKind::UnknownSubId { sub_id } => write!(f, "unknown sub-message id 0x{sub_id:04X}"),
             DiagKind::BadHex { ch } => write!(f, "not a hex digit: {ch:?}; skipped"),
-            DiagKind::OddHexDigit => write!(f, "odd number of hex digits; last digit ignored"),
-            DiagKind::UnknownCommand => write!(f, "command not in the ELLx manual"),
             DiagKind::BadDataChar { ch } => write!(f, "{ch:?} is not a valid data character"),
             DiagKind::DataLength { expected, got } => {
                 write!(f, "{got} data characters, the command has {expected}")
@@ -253,21 +277,12 @@ impl fmt::Display for DiagKind {
                     "data missing: the command takes {expected} data character(s)"
                 )
             }
-            DiagKind::MissingTerminator => write!(f, "reply not terminated by CR LF"),
-            DiagKind::Separators => write!(f, "spaces or commas inside the frame (ignored)"),
-            DiagKind::LetterO => write!(f, "letter O used for digit 0"),
             DiagKind::NoReply { cmd } => write!(f, "no reply to record {cmd}"),
-            DiagKind::Unsolicited => write!(f, "reply without a pending command"),
             DiagKind::DuplicateReply { request } => write!(f, "second reply to record {request}"),
             DiagKind::MissingDataFlag { len } => write!(
                 f,
                 "{len}-byte data packet sent without the 0x80 flag in the destination byte \
                  (as some example programs do); decoded by the length in its param bytes"
-            ),
-            DiagKind::ZeroAddresses => write!(
-                f,
-                "destination and source 0x00: some controllers reply so (TDC001) or send so on \
-                 connect (BSC201 MOVE_COMPLETED)"
             ),
             DiagKind::NotForModel { model } => {
                 let end = model.iter().position(|&c| c == 0).unwrap_or(model.len());
@@ -373,5 +388,16 @@ mod tests {
             assert_eq!(DiagKind::static_name(n), Some(n));
         }
         assert_eq!(DiagKind::static_name("nonsense"), None);
+        // A kind's fixed text is what it displays, and only a kind without parameters has one
+        // (the Parquet and Arrow columns write the fixed text, the JSON its display).
+        for k in &all {
+            let shown = k.to_string();
+            assert!(!shown.is_empty(), "{k:?}");
+            if let Some(t) = k.fixed_text() {
+                assert_eq!(shown, t);
+                assert!(!format!("{k:?}").contains('{'), "{k:?} has parameters");
+            }
+        }
+        assert_eq!(all.iter().filter(|k| k.fixed_text().is_some()).count(), 7);
     }
 }

@@ -1121,7 +1121,7 @@ fn records_row(
         r.rel_s = m.rel_s;
     }
     let mut diag = |b: &mut RecordsBuf, d: &Diag| {
-        b.diag(d.kind.name(), d.offset, &d.kind);
+        b.diagnostic(d);
         sum.diagnostics += 1;
     };
     match rec {

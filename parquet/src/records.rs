@@ -9,6 +9,7 @@
 
 use crate::schema::records_schema;
 use crate::words::{self, Words};
+use aptscope_dissector::diag::Diag;
 use arrow_array::builder::{ArrayBuilder, StringBuilder};
 use arrow_array::types::{
     Float64Type, Int64Type, TimestampNanosecondType, UInt16Type, UInt32Type, UInt64Type, UInt8Type,
@@ -398,6 +399,20 @@ impl TextWords {
         self.b.append_value(w);
     }
 
+    /// A text that is not a word: `v` displayed.
+    pub(crate) fn push_fmt(&mut self, v: &dyn fmt::Display) {
+        self.spill();
+        let _ = write!(self.b, "{v}");
+        self.b.append_value("");
+    }
+
+    /// Empty, with room for `rows` rows and their text in the measure of what this one wrote
+    /// (rows kept unwritten take none).
+    pub(crate) fn again(&self, rows: usize) -> Self {
+        let held = self.held().0;
+        TextWords::new(rows, scale(self.b.values_slice().len(), rows, held))
+    }
+
     /// Write the rows kept unwritten: they are no longer all one word.
     #[cold]
     fn spill(&mut self) {
@@ -451,10 +466,7 @@ impl WordCol {
     fn again(&self, rows: usize) -> Self {
         match self {
             WordCol::Keys(_) => WordCol::Keys(Box::new(Words::new(rows))),
-            WordCol::Text(t) => {
-                let (held, bytes) = t.held();
-                WordCol::Text(TextWords::new(rows, scale(bytes, rows, held)))
-            }
+            WordCol::Text(t) => WordCol::Text(t.again(rows)),
         }
     }
 
@@ -575,7 +587,9 @@ pub struct RecordsBuf {
     diag_ends: Vec<i32>,
     diag_kind: WordCol,
     diag_offset: Num<UInt64Type>,
-    diag_msg: Bytes,
+    /// As words: most diagnostics' messages are a fixed text
+    /// ([`aptscope_dissector::diag::DiagKind::fixed_text`]).
+    diag_msg: TextWords,
     pair: Num<UInt64Type>,
     latency_ms: Num<Float64Type>,
     refn: Num<UInt64Type>,
@@ -619,7 +633,7 @@ impl RecordsBuf {
             diag_ends,
             diag_kind: words(),
             diag_offset: Num::new(cap),
-            diag_msg: Bytes::new(cap, 32),
+            diag_msg: TextWords::new(cap, cap * 32),
             pair: Num::new(cap),
             latency_ms: Num::new(cap),
             refn: Num::new(cap),
@@ -640,13 +654,27 @@ impl RecordsBuf {
     /// Bytes of the columns of unbounded length buffered: raw bytes, diagnostics' messages,
     /// details (the others are a few names of at most a few dozen bytes a row).
     pub fn bytes(&self) -> usize {
-        self.raw.data.len() + self.diag_msg.data.len() + self.detail.data.len()
+        self.raw.data.len() + self.diag_msg.held().1 + self.detail.data.len()
     }
 
-    /// One diagnostic of the row being made (before its [`Self::push`]).
+    /// One diagnostic of the row being made (before its [`Self::push`]), of any kind and
+    /// message (the tests'; the writer's are [`Self::diagnostic`]).
+    #[cfg(test)]
     pub fn diag(&mut self, kind: &'static str, offset: u64, msg: &dyn fmt::Display) {
         self.diag_kind.push(Some(kind));
         self.diag_rest(offset, msg);
+    }
+
+    /// Diagnostic `d` of the row being made (before its [`Self::push`]): its message as a word
+    /// when it is a fixed text (a status log's "reply without a pending command", in four rows
+    /// of five, was 14 MB of Python's tables written; a shared column of it now).
+    pub fn diagnostic(&mut self, d: &Diag) {
+        self.diag_kind.push(Some(d.kind.name()));
+        self.diag_offset.push(Some(d.offset));
+        match d.kind.fixed_text() {
+            Some(t) => self.diag_msg.push(Some(t)),
+            None => self.diag_msg.push_fmt(&d.kind),
+        }
     }
 
     /// A diagnostic whose kind is not `'static` (a capture file's, held back).
@@ -657,10 +685,7 @@ impl RecordsBuf {
 
     fn diag_rest(&mut self, offset: u64, msg: &dyn fmt::Display) {
         self.diag_offset.push(Some(offset));
-        let m = &mut self.diag_msg;
-        let _ = write!(Text(&mut m.data), "{msg}");
-        m.valid.push(true);
-        m.end();
+        self.diag_msg.push_fmt(msg);
     }
 
     /// Append `r`, and the diagnostics given since the last row.
@@ -815,7 +840,7 @@ impl RecordsBuf {
         let parts = vec![
             self.diag_kind.take()?,
             self.diag_offset.take(&u64_type)?,
-            self.diag_msg.take_text()?,
+            self.diag_msg.take()?,
         ];
         let elements = StructArray::try_new(fields.clone(), parts, None)?;
         let ends = std::mem::replace(&mut self.diag_ends, vec![0]);
@@ -829,20 +854,10 @@ impl RecordsBuf {
     }
 }
 
-/// `fmt::Write` into a column's bytes (text written by `Display` goes in without a `String`
-/// in between).
-struct Text<'a>(&'a mut Vec<u8>);
-
-impl fmt::Write for Text<'_> {
-    fn write_str(&mut self, s: &str) -> fmt::Result {
-        self.0.extend_from_slice(s.as_bytes());
-        Ok(())
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use aptscope_dissector::diag::DiagKind;
     use arrow_array::cast::AsArray;
     use arrow_array::types::UInt64Type;
     use arrow_array::Array;
@@ -1029,6 +1044,71 @@ mod tests {
                 .len(),
             0
         );
+    }
+
+    /// Diagnostics' messages, fixed texts (kept unwritten while every one is the same) and
+    /// displayed ones in every order, row group after row group, as words or as dictionaries:
+    /// each message is its kind's display, and the bytes counted towards a row group are the
+    /// messages' bytes whether written or not.
+    #[test]
+    fn diagnostics_messages_are_their_kinds_display() {
+        let (u, l, g) = (
+            DiagKind::Unsolicited,
+            DiagKind::LetterO,
+            DiagKind::Garbage { len: 3 },
+        );
+        let groups: Vec<Vec<DiagKind>> = vec![
+            vec![u; 3],
+            vec![],
+            vec![u, g, u],
+            vec![g, l],
+            vec![l, u, u],
+            vec![u, u, g],
+            vec![g],
+        ];
+        for text in [false, true] {
+            let mut buf = RecordsBuf::new(Arc::from("x"), 2, text);
+            for (i, kinds) in groups.iter().enumerate() {
+                for (at, k) in kinds.iter().enumerate() {
+                    buf.diagnostic(&Diag {
+                        offset: at as u64,
+                        kind: *k,
+                    });
+                    // Each diagnostic in a row of its own but the last two.
+                    if at + 2 < kinds.len() {
+                        buf.push(&Row::default());
+                    }
+                }
+                buf.push(&Row::default());
+                let shown: Vec<String> = kinds.iter().map(ToString::to_string).collect();
+                let bytes: usize = shown.iter().map(String::len).sum();
+                assert_eq!(buf.bytes(), bytes, "{text} {i}");
+                let t = buf.take(i % 3).expect("batch");
+                let t = if text {
+                    t
+                } else {
+                    words::declared(&t).expect("declared")
+                };
+                let d = t.column_by_name("diagnostics").expect("d");
+                d.to_data().validate_full().expect("valid");
+                let elems = d.as_list::<i32>().values().as_struct().clone();
+                let msgs: Vec<&str> = elems
+                    .column(2)
+                    .as_string::<i32>()
+                    .iter()
+                    .flatten()
+                    .collect();
+                assert_eq!(msgs, shown, "{text} {i}");
+                let names: Vec<&str> = elems
+                    .column(0)
+                    .as_string::<i32>()
+                    .iter()
+                    .flatten()
+                    .collect();
+                let want: Vec<&str> = kinds.iter().map(DiagKind::name).collect();
+                assert_eq!(names, want, "{text} {i}");
+            }
+        }
     }
 
     /// Python's columns of words (text), in every arrangement of one word, nulls and words
