@@ -1092,20 +1092,13 @@ mod tests {
                 let d = t.column_by_name("diagnostics").expect("d");
                 d.to_data().validate_full().expect("valid");
                 let elems = d.as_list::<i32>().values().as_struct().clone();
-                let msgs: Vec<&str> = elems
-                    .column(2)
-                    .as_string::<i32>()
-                    .iter()
-                    .flatten()
-                    .collect();
-                assert_eq!(msgs, shown, "{text} {i}");
-                let names: Vec<&str> = elems
-                    .column(0)
-                    .as_string::<i32>()
-                    .iter()
-                    .flatten()
-                    .collect();
+                let texts = |c: usize| -> Vec<String> {
+                    let col = elems.column(c).as_string::<i32>();
+                    col.iter().flatten().map(String::from).collect()
+                };
+                assert_eq!(texts(2), shown, "{text} {i}");
                 let want: Vec<&str> = kinds.iter().map(DiagKind::name).collect();
+                let names = texts(0);
                 assert_eq!(names, want, "{text} {i}");
             }
         }
