@@ -10,7 +10,8 @@
 # module in target/bench-pyvenv, built here), then every target with its figure.
 # Usage: bench/batch.sh   (env: FILES=50 files of MB=4.2 MB each, ≥ 200 MB; BIG=100 MB;
 # ARROW_MB=10 MB for to_arrow(); RUNS=1 runs of each command, the median's figures (single
-# runs on a busy machine move by a third); the inputs and datasets go under $TMPDIR, default
+# runs on a busy machine move by a third); ARROW_RUNS=5 runs of each to_arrow() call (a
+# second each), their median; the inputs and datasets go under $TMPDIR, default
 # /tmp: a large capture of many kinds writes thousands of part files, so the file system's
 # speed at creating files shows. Needs python3 with venv, and the network for PyPI the first
 # time)
@@ -25,6 +26,7 @@ MB=${MB:-4.2}
 BIG=${BIG:-100}
 ARROW_MB=${ARROW_MB:-10}
 RUNS=${RUNS:-1}
+ARROW_RUNS=${ARROW_RUNS:-5}
 cargo build -q --release --bin aptscope
 cargo build -q --release -p aptscope-dissector --example gen_d2h --example gen_stream
 tmp=$(mktemp -d)
@@ -124,12 +126,12 @@ declare -A arrow
 for input in arrow session; do
   for t in 1 "$(nproc)"; do
     rates=()
-    for _ in $(seq 1 "$RUNS"); do
+    for _ in $(seq 1 "$ARROW_RUNS"); do
       out=$("$venv/bin/python" python/examples/arrow_speed.py "$tmp/$input.bin" to_arrow "$t")
       echo "to_arrow() $input threads=$t: $out"
       rates+=("$(sed -n 's/.*, \([0-9.]*\) M per second.*/\1/p' <<< "$out")")
     done
-    arrow[$input$t]=$(printf '%s\n' "${rates[@]}" | median)
+    arrow[$input$t]=$(printf '%s\n' "${rates[@]}" | RUNS=$ARROW_RUNS median)
   done
 done
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
