@@ -36,7 +36,7 @@ pub trait Sink {
     fn key_static(&mut self, k: &'static str) {
         self.key(k)
     }
-    /// A key written in the code (see [`key!`]): NDJSON copies its prepared spelling.
+    /// A key written in the code (see `key!`): NDJSON copies its prepared spelling.
     fn key_lit(&mut self, k: &Lit) {
         self.key(k.name)
     }

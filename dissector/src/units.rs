@@ -538,7 +538,7 @@ impl Scale {
     }
 }
 
-/// Equal conversions ([`Scale::identity`]).
+/// Equal conversions (`Scale::identity`: numbers by their bits).
 impl PartialEq for Scale {
     fn eq(&self, o: &Self) -> bool {
         self.identity() == o.identity()

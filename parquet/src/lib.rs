@@ -746,7 +746,7 @@ impl<S: Sink> CaptureWriter<S> {
     }
 
     /// Add the records of an owned run, in order: the same rows as [`Self::record`] of each,
-    /// but the kind rows of a stretch of [`KIND_STRETCH`] records built table after table
+    /// but the kind rows of a stretch of `KIND_STRETCH` (2,048) records built table after table
     /// rather than record after record (each table's rows in their order; only when its
     /// batches are cut differs). Built record after record, a status log's kind rows went from
     /// one table's columns to another's at every row, and cost half as much again as when the

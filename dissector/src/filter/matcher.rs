@@ -8,7 +8,7 @@ use std::fmt;
 /// A filter compiled into closures for scans over millions of records: each comparison of a
 /// record-level value with a literal becomes a closure specialised for its operator and
 /// literal, so a record costs a few calls instead of a walk of the expression tree. Gives the
-/// same answers as [`Filter::matches`] (anything it does not specialise, it asks that of).
+/// same answers as [`super::Filter::matches`] (anything it does not specialise, it asks that of).
 pub struct Matcher {
     root: Node,
 }

@@ -128,7 +128,7 @@ struct Unit {
     store: Vec<Stored>,
 }
 
-/// A simulated APT controller (sans-io): see the [module docs](self).
+/// A simulated APT controller (sans-io): see the module documentation of `sim/src/apt/mod.rs`.
 ///
 /// Single units answer at the generic USB address 0x50 and at bay address 0x21 (where
 /// thorlabs-apt-device's TDC001 class sends), each reply from the address the request named;

@@ -42,7 +42,7 @@ pub(super) fn arena_file_pair() -> Option<(std::fs::File, ReadBack)> {
     Some((f, ReadBack::of(back)))
 }
 
-/// A capture file records' bytes are read back from ([`Index::file`]).
+/// A capture file records' bytes are read back from ([`Index::file`](super::Index::file)).
 #[derive(Debug)]
 pub struct ReadBack {
     pub(super) file: std::fs::File,

@@ -27,7 +27,7 @@
 //! - **Stopping**: SIGINT, SIGTERM and SIGHUP are received through a `signalfd` (the signals
 //!   are blocked in the tap's threads while it runs and the previous mask restored after, see
 //!   [`crate::live::signals`]), or [`StopHandle::stop`], or the end of
-//!   [`TapOptions::duration`]. The file is then
+//!   [`LiveOptions::duration`]. The file is then
 //!   finished, and the byte counts per direction are printed and checked against what was
 //!   forwarded.
 //! - **Device gone** (read/write error or end of file on the port): reported with the time, the
