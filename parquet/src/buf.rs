@@ -125,11 +125,7 @@ impl Buf {
                 cap,
                 scale(b.values_slice().len()),
             )),
-            Buf::TextW(t) => {
-                // Its nulls are written by now: it holds `rows` rows.
-                let (_, bytes) = t.held();
-                Buf::TextW(Box::new(TextWords::new(cap, scale(bytes))))
-            }
+            Buf::TextW(t) => Buf::TextW(Box::new(t.again(cap))),
             Buf::ListS(l) => {
                 let v = l.values_ref();
                 let items =

@@ -3,10 +3,11 @@
 //! read.
 //!
 //! The records come from the one decode chain ([`aptscope_dissector::record::Decoder`]): the
-//! indexer keeps of each [`Record`](aptscope_dissector::record::Record) what the timeline, filters and statistics read without
-//! decoding (a [`Rec`]). Its bytes are read back from the capture file by position (a raw
-//! capture) or from an arena the indexer writes to an unlinked scratch file (other formats, live
-//! sources). Nothing rendered is stored: the UI decodes the rows it shows from those bytes.
+//! indexer keeps of each [`Record`](aptscope_dissector::record::Record) what the timeline,
+//! filters and statistics read without decoding (a [`Rec`]). Its bytes are read back from the
+//! capture file by position (a raw capture) or from an arena the indexer writes to an unlinked
+//! scratch file (other formats, live sources). Nothing rendered is stored: the UI decodes the
+//! rows it shows from those bytes.
 
 use aptscope_capture::model::{Event, Reader};
 use aptscope_capture::open::{open_with_progress, OpenOptions};
