@@ -343,11 +343,41 @@ impl Builder {
     }
 }
 
-/// Every kind table's schema, by name, built once from the tables.
+/// Every kind table's name, and its schema built from the tables the first time it is asked
+/// for: building all of them (400-odd) took 10 ms, twice the parsing of the tables, paid by
+/// the first `to_arrow()` of a process and every `decode --to parquet`, when a capture holds
+/// a few dozen kinds.
 pub struct Kinds {
-    by_name: HashMap<String, Arc<KindSchema>>,
+    by_name: HashMap<String, usize>,
     /// Sorted by name ([`KindSchema::index`]).
-    sorted: Vec<Arc<KindSchema>>,
+    sorted: Vec<Lazy>,
+}
+
+/// A kind of [`Kinds`]: where its schema comes from, and the schema once built.
+struct Lazy {
+    name: String,
+    from: Origin,
+    schema: OnceLock<Arc<KindSchema>>,
+}
+
+/// The table entry a kind's schema is built from.
+#[derive(Clone, Copy)]
+enum Origin {
+    Apt(&'static MsgDef, Option<&'static SubDef>),
+    Ell(&'static Cmd),
+}
+
+impl Lazy {
+    fn schema(&self, index: usize) -> &Arc<KindSchema> {
+        self.schema.get_or_init(|| {
+            let mut k = match self.from {
+                Origin::Apt(m, s) => apt_kind(Table::global(), m, s),
+                Origin::Ell(c) => ell_kind(c),
+            };
+            k.index = index;
+            Arc::new(k)
+        })
+    }
 }
 
 impl Kinds {
@@ -357,33 +387,34 @@ impl Kinds {
         K.get_or_init(|| Kinds::build(Table::global()))
     }
 
-    fn build(t: &Table) -> Kinds {
+    fn build(t: &'static Table) -> Kinds {
+        // By name: a later entry of a name replaces an earlier one.
         let mut by_name = HashMap::new();
         for m in t.msgs() {
-            let ks = apt_kind(t, m, None);
-            by_name.insert(ks.name.clone(), ks);
+            by_name.insert(apt_kind_name(m, None), Origin::Apt(m, None));
             if let Some(g) = m.subs {
                 for s in t.subs().iter().filter(|s| s.group == g) {
-                    let ks = apt_kind(t, m, Some(s));
-                    by_name.insert(ks.name.clone(), ks);
+                    by_name.insert(apt_kind_name(m, Some(s)), Origin::Apt(m, Some(s)));
                 }
             }
         }
         for c in COMMANDS {
-            let ks = ell_kind(c);
-            by_name.insert(ks.name.clone(), ks);
+            by_name.insert(ell_kind_name(c), Origin::Ell(c));
         }
-        let mut sorted: Vec<KindSchema> = by_name.into_values().collect();
-        sorted.sort_by(|a, b| a.name.cmp(&b.name));
-        let sorted: Vec<Arc<KindSchema>> = sorted
+        let mut sorted: Vec<Lazy> = by_name
             .into_iter()
-            .enumerate()
-            .map(|(i, mut k)| {
-                k.index = i;
-                Arc::new(k)
+            .map(|(name, from)| Lazy {
+                name,
+                from,
+                schema: OnceLock::new(),
             })
             .collect();
-        let by_name = sorted.iter().map(|k| (k.name.clone(), k.clone())).collect();
+        sorted.sort_by(|a, b| a.name.cmp(&b.name));
+        let by_name = sorted
+            .iter()
+            .enumerate()
+            .map(|(i, k)| (k.name.clone(), i))
+            .collect();
         Kinds { by_name, sorted }
     }
 
@@ -399,17 +430,27 @@ impl Kinds {
 
     /// A kind's schema.
     pub fn get(&self, name: &str) -> Option<&Arc<KindSchema>> {
-        self.by_name.get(name)
+        let i = *self.by_name.get(name)?;
+        Some(self.sorted[i].schema(i))
     }
 
     /// The kind of index `i` ([`KindSchema::index`]).
     pub fn by_index(&self, i: usize) -> Option<&KindSchema> {
-        self.sorted.get(i).map(|k| &**k)
+        self.sorted.get(i).map(|k| &**k.schema(i))
+    }
+
+    /// Whether a kind of this name exists (its schema not built).
+    pub fn contains(&self, name: &str) -> bool {
+        self.by_name.contains_key(name)
     }
 
     /// Every kind, sorted by name.
     pub fn all(&self) -> Vec<&Arc<KindSchema>> {
-        self.sorted.iter().collect()
+        self.sorted
+            .iter()
+            .enumerate()
+            .map(|(i, k)| k.schema(i))
+            .collect()
     }
 }
 
@@ -472,6 +513,34 @@ mod tests {
             sorted.dedup();
             assert_eq!(sorted.len(), names.len(), "{}: {names:?}", ks.name);
             assert_eq!(ks.cols.len() + 4, names.len());
+        }
+    }
+
+    #[test]
+    fn kinds_built_when_asked_are_those_built_all_at_once() {
+        // A fresh set, so that the kinds below are built one by one in an order of their own.
+        let lazy = Kinds::build(Table::global());
+        let some = [
+            "PZ_GET_OUTPUTPOS",
+            "MOT_MOVE_HOMED",
+            "ELL_POSITION",
+            "HW_GET_INFO",
+        ];
+        for name in some {
+            assert!(lazy.contains(name), "{name}");
+            let k = lazy.get(name).expect("kind");
+            assert_eq!(k.name, name);
+            assert!(std::ptr::eq(lazy.by_index(k.index).expect("index"), &**k));
+        }
+        assert!(!lazy.contains("NO_SUCH_KIND") && lazy.get("NO_SUCH_KIND").is_none());
+        let all = Kinds::global().all();
+        assert_eq!(all.len(), lazy.len());
+        for (i, (a, b)) in all.iter().zip(lazy.all()).enumerate() {
+            assert_eq!((a.index, b.index), (i, i));
+            assert_eq!(
+                (&a.name, &a.schema, &a.batch),
+                (&b.name, &b.schema, &b.batch)
+            );
         }
     }
 

@@ -389,7 +389,7 @@ impl Batches {
         if let Some(t) = &tables {
             if let Some(bad) = t
                 .iter()
-                .find(|t| *t != RECORDS && Kinds::global().get(t).is_none())
+                .find(|t| *t != RECORDS && !Kinds::global().contains(t))
             {
                 return Err(AptscopeError::new_err(format!(
                     "table {bad:?}: neither \"records\" nor a message kind"
