@@ -635,10 +635,8 @@ fn apt_value<'v>(
             }
             if let Some(fl) = fd.flags {
                 if rest.is_empty() {
-                    for (m, l) in &t.flags_def(fl).items {
-                        if x & m == *m {
-                            f(str_val(l), Role::Member);
-                        }
+                    for l in t.flags_def(fl).set(*x) {
+                        f(str_val(l), Role::Member);
                     }
                 }
                 return;

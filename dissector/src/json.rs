@@ -417,10 +417,8 @@ pub fn value<S: Sink + ?Sized>(out: &mut S, table: &Table, f: &Field, v: &Value<
             }
             if let Some(fl) = f.flags {
                 out.begin_list();
-                for (m, l) in &table.flags_def(fl).items {
-                    if x & m == *m {
-                        out.str(l);
-                    }
+                for l in table.flags_def(fl).set(*x) {
+                    out.str(l);
                 }
                 return out.end_list();
             }

@@ -1396,8 +1396,7 @@ fn apt_columns<'a>(
             }
             Fill::FlagNames => {
                 if let (Some(fl), Value::U(x)) = (fd.flags, *v) {
-                    let items = t.flags_def(fl).items.iter();
-                    b.list_words(at, items.filter(|(m, _)| x & m == *m).map(|(_, l)| *l));
+                    b.list_words(at, t.flags_def(fl).set(x));
                 }
             }
             Fill::Text => {

@@ -520,6 +520,60 @@ mod tests {
         Table::from_sources(&[("t.apt", text)])
     }
 
+    /// A value's flags are the items whose mask's bits are all set, in the items' order,
+    /// whether [`FlagsDef::set`] walks the items a value's bytes set (distinct one-bit masks:
+    /// every set of the table here, some out of bit order) or tests every item (any other
+    /// set).
+    #[test]
+    fn set_flags_are_the_items_whose_bits_are_all_set() {
+        let slow = |d: &FlagsDef, x: u64| -> Vec<&'static str> {
+            d.items
+                .iter()
+                .filter(|(m, _)| x & m == *m)
+                .map(|(_, l)| *l)
+                .collect()
+        };
+        let mut defs: Vec<FlagsDef> = Table::global().data.flags.clone();
+        assert!(defs.iter().all(|d| d.set(0).walk));
+        // Sets the walk may not take: a mask of two bits, of none, a bit twice, 65 items.
+        let many: Vec<(u64, &'static str)> = (0..65).map(|i| (1 << (i % 64), "M")).collect();
+        defs.push(FlagsDef::new("two", vec![(1, "A"), (6, "BC"), (8, "D")]));
+        defs.push(FlagsDef::new("none", vec![(0, "ZERO"), (2, "B")]));
+        defs.push(FlagsDef::new("same", vec![(4, "C"), (4, "C2")]));
+        defs.push(FlagsDef::new("many", many));
+        for d in &defs[defs.len() - 4..] {
+            assert!(!d.set(0).walk, "{}", d.name);
+        }
+        // And sets it takes: bits out of order, the highest.
+        defs.push(FlagsDef::new(
+            "down",
+            vec![(1 << 40, "C"), (4, "B"), (1, "A")],
+        ));
+        defs.push(FlagsDef::new("top", vec![(1, "LOW"), (1 << 63, "HIGH")]));
+        for d in &defs[defs.len() - 2..] {
+            assert!(d.set(0).walk, "{}", d.name);
+        }
+        let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+        let mut values = vec![0, u64::MAX, 1, 1 << 63, 6, 7, 0xFFFF_FFFF];
+        for _ in 0..200 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            values.push(x);
+            values.push(x & 0xFFFF);
+        }
+        for d in &defs {
+            for &v in &values {
+                assert_eq!(
+                    d.set(v).collect::<Vec<_>>(),
+                    slow(d, v),
+                    "{} {v:#x}",
+                    d.name
+                );
+            }
+        }
+    }
+
     /// The per-message length sets say what the forms say, for every message, both kinds of
     /// frame and every length up to beyond the largest; the
     /// data form that stops the decoder's walk of the forms is found at once; a message of

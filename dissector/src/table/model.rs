@@ -3,6 +3,8 @@
 //! This file depends on `std` only: the build script includes it (with `parse.rs`) to check
 //! the table at compile time.
 
+use std::sync::OnceLock;
+
 /// Who sends a message.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Dir {
@@ -726,15 +728,108 @@ pub struct FlagsDef {
     pub name: &'static str,
     /// Masks and labels.
     pub items: Vec<(u64, &'static str)>,
+    /// When the masks are distinct single bits (64 at most): for each byte of a value and
+    /// each value of that byte, the items its bits set, as bits by item index; so that
+    /// [`FlagsDef::set`] visits the items a value sets, not every item. Worked out on first
+    /// use (the items are read line by line).
+    pub(crate) by_byte: OnceLock<Option<Box<ByByte>>>,
 }
 
+/// See [`FlagsDef::by_byte`].
+pub(crate) type ByByte = [[u64; 256]; 8];
+
 impl FlagsDef {
+    /// Flags named `name` with these items.
+    pub fn new(name: &'static str, items: Vec<(u64, &'static str)>) -> Self {
+        FlagsDef {
+            name,
+            items,
+            by_byte: OnceLock::new(),
+        }
+    }
+
+    /// The labels of the items whose mask's bits are all set in `x`, in the items' order.
+    pub fn set(&self, x: u64) -> SetFlags<'_> {
+        let by_byte = self.by_byte.get_or_init(|| {
+            let mut all = 0u64;
+            let mut t = Box::new([[0u64; 256]; 8]);
+            for (i, (m, _)) in self.items.iter().enumerate() {
+                if !m.is_power_of_two() || all & m != 0 || i >= 64 {
+                    return None;
+                }
+                all |= m;
+                let bit = m.trailing_zeros() as usize;
+                for (v, items) in t[bit / 8].iter_mut().enumerate() {
+                    if v >> (bit % 8) & 1 == 1 {
+                        *items |= 1 << i;
+                    }
+                }
+            }
+            Some(t)
+        });
+        match by_byte {
+            Some(t) => {
+                let mut items = 0;
+                for (k, byte) in x.to_le_bytes().into_iter().enumerate() {
+                    if byte != 0 {
+                        items |= t[k][usize::from(byte)];
+                    }
+                }
+                SetFlags {
+                    def: self,
+                    walk: true,
+                    x: items,
+                    next: 0,
+                }
+            }
+            None => SetFlags {
+                def: self,
+                walk: false,
+                x,
+                next: 0,
+            },
+        }
+    }
+
     /// The mask of a label.
     pub fn mask(&self, label: &str) -> Option<u64> {
         self.items
             .iter()
             .find(|(_, l)| l.eq_ignore_ascii_case(label))
             .map(|(m, _)| *m)
+    }
+}
+
+/// The iterator of [`FlagsDef::set`].
+pub struct SetFlags<'a> {
+    def: &'a FlagsDef,
+    /// Whether `x` is the items set, by index ([`FlagsDef::by_byte`]), not yet visited;
+    /// otherwise the value, its items tested in turn from `next`.
+    pub(crate) walk: bool,
+    x: u64,
+    next: usize,
+}
+
+impl Iterator for SetFlags<'_> {
+    type Item = &'static str;
+
+    #[inline]
+    fn next(&mut self) -> Option<&'static str> {
+        if self.walk {
+            if self.x == 0 {
+                return None;
+            }
+            let i = self.x.trailing_zeros() as usize;
+            self.x &= self.x - 1;
+            return self.def.items.get(i).map(|(_, l)| *l);
+        }
+        loop {
+            let (m, l) = self.def.items.get(self.next)?;
+            self.next += 1;
+            if self.x & m == *m {
+                return Some(l);
+            }
+        }
     }
 }
 

@@ -301,10 +301,7 @@ impl Parser {
             });
             self.data.enums.len() - 1
         } else {
-            self.data.flags.push(FlagsDef {
-                name,
-                items: vec![],
-            });
+            self.data.flags.push(FlagsDef::new(name, vec![]));
             self.data.flags.len() - 1
         };
         self.cur = Cur::Def(is_enum, idx);
