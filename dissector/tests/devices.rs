@@ -3,7 +3,7 @@
 
 mod common;
 
-use aptscope_dissector::table::model_matches;
+use aptscope_dissector::table::{model_matches, DeviceSource};
 use aptscope_dissector::Table;
 use common::kinds;
 
@@ -45,6 +45,20 @@ fn every_device_list_is_in_the_table() {
     assert!(!t.implements(&kdc, volts.id));
     assert!(t.implements(&kdc, home.id));
     assert!(t.device_profile("XYZ999").is_none());
+    // Every listed model has a profile, of any length, with spaces around it; a model one
+    // character longer or shorter than any listed has none.
+    for g in t.devices() {
+        for m in &g.models {
+            let named = format!(" {} ", m.replace('x', "1"));
+            let listed = t.devices().iter().any(|g| {
+                g.source == DeviceSource::List && g.models.iter().any(|p| model_matches(p, &named))
+            });
+            assert_eq!(t.device_profile(&named).is_some(), listed, "{named}");
+        }
+    }
+    assert!(t.device_profile(" KDC101 ").is_some());
+    assert!(t.device_profile("KDC1011").is_none() && t.device_profile("KDC10").is_none());
+    assert!(t.device_profile(&"K".repeat(70)).is_none());
 }
 
 #[test]

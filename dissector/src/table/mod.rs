@@ -42,6 +42,16 @@ pub struct Table {
     /// Per message index: the lengths it exists in, for [`Table::accepts_len`] (the framer asks
     /// it of most header-only frames).
     lens: Vec<LenSet>,
+    /// The lengths of the `devices` blocks' model names, as bits (63: that long or longer):
+    /// a model of no such length is in no block, and [`Table::device_profile`] says so without
+    /// a walk over every block (a capture of damaged or random HW_GET_INFO replies names a new
+    /// model in each).
+    model_lens: u64,
+}
+
+/// The bit of a model name's length in [`Table::model_lens`].
+fn len_bit(model: &str) -> u64 {
+    1 << model.len().min(63)
 }
 
 /// [`MsgDef::data_form`] of a message's forms: for each data packet length up to 255, the
@@ -141,6 +151,9 @@ impl Table {
     /// of it then.
     pub fn device_profile(&self, model: &str) -> Option<DeviceProfile> {
         let model = model.trim();
+        if self.model_lens & len_bit(model) == 0 {
+            return None;
+        }
         let groups: Vec<&DeviceGroup> = self
             .data
             .devices
@@ -251,7 +264,14 @@ impl Table {
             requesters: vec![],
             field_names: vec![],
             lens: vec![],
+            model_lens: 0,
         };
+        t.model_lens = t
+            .data
+            .devices
+            .iter()
+            .flat_map(|g| &g.models)
+            .fold(0, |b, m| b | len_bit(m));
         t.lens = (0..t.data.msgs.len()).map(|i| t.len_set(i)).collect();
         t.field_names = (0..t.data.msgs.len())
             .map(|i| {
