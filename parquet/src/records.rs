@@ -23,19 +23,28 @@ use arrow_schema::{ArrowError, DataType, FieldRef, SchemaRef};
 use std::fmt::{self, Write as _};
 use std::sync::Arc;
 
-/// Validity of a column's rows: kept from the first null on.
+/// Validity of a column's rows: kept from the first null on, as the bitmap Arrow takes (64
+/// rows a word; a vector of `bool` packed when taken was 2.7 % of the rows' instructions).
 #[derive(Default)]
 pub(crate) struct Valid {
     /// `None` while every row has a value.
-    bits: Option<Vec<bool>>,
+    words: Option<Vec<u64>>,
     rows: usize,
 }
 
 impl Valid {
     #[inline(always)]
     pub(crate) fn push(&mut self, valid: bool) {
-        match &mut self.bits {
-            Some(b) => b.push(valid),
+        match &mut self.words {
+            Some(w) => {
+                let bit = self.rows % 64;
+                if bit == 0 {
+                    w.push(0);
+                }
+                if let Some(last) = w.last_mut() {
+                    *last |= u64::from(valid) << bit;
+                }
+            }
             None if valid => {}
             None => self.first_null(),
         }
@@ -45,33 +54,27 @@ impl Valid {
     /// The first null: the rows before it had values.
     #[cold]
     fn first_null(&mut self) {
-        let mut b = Vec::with_capacity(self.rows.max(64) * 2);
-        b.resize(self.rows, true);
-        b.push(false);
-        self.bits = Some(b);
+        let mut w = Vec::with_capacity((self.rows.max(64) * 2).div_ceil(64));
+        w.resize(self.rows / 64, u64::MAX);
+        let bit = self.rows % 64;
+        if bit > 0 {
+            // The rows of this word before the null are valid; the null's bit stays clear.
+            w.push(u64::MAX >> (64 - bit));
+        } else {
+            w.push(0);
+        }
+        self.words = Some(w);
     }
 
     pub(crate) fn take(&mut self) -> Option<NullBuffer> {
-        self.rows = 0;
-        self.bits.take().map(|b| pack(&b))
-    }
-}
-
-/// `bits` as a validity bitmap, 64 at a time (Arrow's `From<&[bool]>` sets them one by one).
-fn pack(bits: &[bool]) -> NullBuffer {
-    let words: Vec<u64> = bits
-        .chunks(64)
-        .map(|c| {
-            let w = c
-                .iter()
-                .enumerate()
-                .fold(0u64, |w, (i, &b)| w | (u64::from(b) << i));
+        let rows = std::mem::take(&mut self.rows);
+        self.words.take().map(|mut w| {
             // Arrow's bitmaps are bytes, least significant bit first.
-            w.to_le()
+            w.iter_mut().for_each(|x| *x = x.to_le());
+            let buf = arrow_buffer::Buffer::from_vec(w);
+            NullBuffer::new(arrow_buffer::BooleanBuffer::new(buf, 0, rows))
         })
-        .collect();
-    let buf = arrow_buffer::Buffer::from_vec(words);
-    NullBuffer::new(arrow_buffer::BooleanBuffer::new(buf, 0, bits.len()))
+    }
 }
 
 /// `len` bytes of zeros: a slice of one buffer the whole process shares (grown when a longer
@@ -884,12 +887,26 @@ mod tests {
     use arrow_array::types::UInt64Type;
     use arrow_array::Array;
 
+    /// Validity is the bitmap Arrow makes of the same rows, whatever row the first null is
+    /// (the first of a word, within one, the last), taken twice in a row.
     #[test]
-    fn validity_packed_as_arrow_packs_it() {
+    fn validity_is_the_bitmap_arrow_makes() {
+        let mut v = Valid::default();
         for n in [1, 63, 64, 65, 130, 1000] {
-            let bits: Vec<bool> = (0..n).map(|i| (i * 7 + i / 3) % 5 != 0).collect();
-            assert_eq!(pack(&bits), NullBuffer::from(bits.clone()), "{n}");
+            for first_null in [0, 1, 63, 64, 65, 127, n - 1] {
+                let bits: Vec<bool> = (0..n)
+                    .map(|i| i > first_null && (i * 7 + i / 3) % 5 != 0 || i < first_null)
+                    .collect();
+                for _ in 0..2 {
+                    bits.iter().for_each(|b| v.push(*b));
+                    let want = NullBuffer::from(bits.clone());
+                    assert_eq!(v.take(), (want.null_count() > 0).then_some(want), "{n}");
+                }
+            }
         }
+        // No null: no bitmap.
+        (0..100).for_each(|_| v.push(true));
+        assert_eq!(v.take(), None);
     }
 
     /// A column of nulls is Arrow's column of nulls of its type and length, whether made anew
