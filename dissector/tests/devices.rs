@@ -45,8 +45,8 @@ fn every_device_list_is_in_the_table() {
     assert!(!t.implements(&kdc, volts.id));
     assert!(t.implements(&kdc, home.id));
     assert!(t.device_profile("XYZ999").is_none());
-    // Every listed model has a profile, of any length, with spaces around it; a model one
-    // character longer or shorter than any listed has none.
+    // Every listed model has a profile whatever its length, with spaces around it; models
+    // listed nowhere have none, of a length some model has or of one none has.
     for g in t.devices() {
         for m in &g.models {
             let named = format!(" {} ", m.replace('x', "1"));

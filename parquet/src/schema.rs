@@ -348,6 +348,7 @@ impl Builder {
 /// the first `to_arrow()` of a process and every `decode --to parquet`, when a capture holds
 /// a few dozen kinds.
 pub struct Kinds {
+    table: &'static Table,
     by_name: HashMap<String, usize>,
     /// Sorted by name ([`KindSchema::index`]).
     sorted: Vec<Lazy>,
@@ -368,10 +369,10 @@ enum Origin {
 }
 
 impl Lazy {
-    fn schema(&self, index: usize) -> &Arc<KindSchema> {
+    fn schema(&self, t: &Table, index: usize) -> &Arc<KindSchema> {
         self.schema.get_or_init(|| {
             let mut k = match self.from {
-                Origin::Apt(m, s) => apt_kind(Table::global(), m, s),
+                Origin::Apt(m, s) => apt_kind(t, m, s),
                 Origin::Ell(c) => ell_kind(c),
             };
             k.index = index;
@@ -415,7 +416,11 @@ impl Kinds {
             .enumerate()
             .map(|(i, k)| (k.name.clone(), i))
             .collect();
-        Kinds { by_name, sorted }
+        Kinds {
+            table: t,
+            by_name,
+            sorted,
+        }
     }
 
     /// How many kinds there are (one more than the largest [`KindSchema::index`]).
@@ -431,12 +436,12 @@ impl Kinds {
     /// A kind's schema.
     pub fn get(&self, name: &str) -> Option<&Arc<KindSchema>> {
         let i = *self.by_name.get(name)?;
-        Some(self.sorted[i].schema(i))
+        Some(self.sorted[i].schema(self.table, i))
     }
 
     /// The kind of index `i` ([`KindSchema::index`]).
     pub fn by_index(&self, i: usize) -> Option<&KindSchema> {
-        self.sorted.get(i).map(|k| &**k.schema(i))
+        self.sorted.get(i).map(|k| &**k.schema(self.table, i))
     }
 
     /// Whether a kind of this name exists (its schema not built).
@@ -449,7 +454,7 @@ impl Kinds {
         self.sorted
             .iter()
             .enumerate()
-            .map(|(i, k)| k.schema(i))
+            .map(|(i, k)| k.schema(self.table, i))
             .collect()
     }
 }
