@@ -635,7 +635,7 @@ fn apt_value<'v>(
             }
             if let Some(fl) = fd.flags {
                 if rest.is_empty() {
-                    for l in t.flags_def(fl).set(*x) {
+                    for (_, l) in t.flags_def(fl).set(*x) {
                         f(str_val(l), Role::Member);
                     }
                 }

@@ -417,7 +417,7 @@ pub fn value<S: Sink + ?Sized>(out: &mut S, table: &Table, f: &Field, v: &Value<
             }
             if let Some(fl) = f.flags {
                 out.begin_list();
-                for l in table.flags_def(fl).set(*x) {
+                for (_, l) in table.flags_def(fl).set(*x) {
                     out.str(l);
                 }
                 return out.end_list();

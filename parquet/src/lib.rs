@@ -1396,7 +1396,7 @@ fn apt_columns<'a>(
             }
             Fill::FlagNames => {
                 if let (Some(fl), Value::U(x)) = (fd.flags, *v) {
-                    b.list_words(at, t.flags_def(fl).set(x));
+                    b.list_words(at, t.flags_def(fl).set(x).map(|(_, l)| *l));
                 }
             }
             Fill::Text => {

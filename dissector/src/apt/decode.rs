@@ -572,15 +572,13 @@ pub fn fmt_value_in(
                 let defs = table.flags_def(fl);
                 let mut first = true;
                 let mut rest = r as u64;
-                for (m, l) in &defs.items {
-                    if (r as u64) & m == *m {
-                        if !first {
-                            out.push('|');
-                        }
-                        out.push_str(l);
-                        first = false;
-                        rest &= !m;
+                for (m, l) in defs.set(r as u64) {
+                    if !first {
+                        out.push('|');
                     }
+                    out.push_str(l);
+                    first = false;
+                    rest &= !m;
                 }
                 if rest != 0 {
                     if !first {

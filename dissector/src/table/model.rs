@@ -748,7 +748,7 @@ impl FlagsDef {
         }
     }
 
-    /// The labels of the items whose mask's bits are all set in `x`, in the items' order.
+    /// The items (mask, label) whose mask's bits are all set in `x`, in the items' order.
     pub fn set(&self, x: u64) -> SetFlags<'_> {
         let by_byte = self.by_byte.get_or_init(|| {
             let mut all = 0u64;
@@ -810,24 +810,24 @@ pub struct SetFlags<'a> {
     next: usize,
 }
 
-impl Iterator for SetFlags<'_> {
-    type Item = &'static str;
+impl<'a> Iterator for SetFlags<'a> {
+    type Item = &'a (u64, &'static str);
 
     #[inline]
-    fn next(&mut self) -> Option<&'static str> {
+    fn next(&mut self) -> Option<Self::Item> {
         if self.walk {
             if self.x == 0 {
                 return None;
             }
             let i = self.x.trailing_zeros() as usize;
             self.x &= self.x - 1;
-            return self.def.items.get(i).map(|(_, l)| *l);
+            return self.def.items.get(i);
         }
         loop {
-            let (m, l) = self.def.items.get(self.next)?;
+            let item = self.def.items.get(self.next)?;
             self.next += 1;
-            if self.x & m == *m {
-                return Some(l);
+            if self.x & item.0 == item.0 {
+                return Some(item);
             }
         }
     }
