@@ -130,6 +130,12 @@ impl Batch {
         self.bytes.len()
     }
 
+    /// Make room for `records` records and `bytes` bytes of frames and garbage in all.
+    pub fn reserve(&mut self, records: usize, bytes: usize) {
+        self.recs.reserve(records.saturating_sub(self.recs.len()));
+        self.bytes.reserve(bytes.saturating_sub(self.bytes.len()));
+    }
+
     fn keep_bytes(&mut self, b: &[u8]) -> Span {
         let at = self.bytes.len();
         self.bytes.extend_from_slice(b);

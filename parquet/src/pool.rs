@@ -17,6 +17,7 @@ use aptscope_dissector::record::Record;
 use arrow_array::RecordBatch;
 use std::collections::BTreeMap;
 use std::io;
+use std::ops::Range;
 use std::panic::AssertUnwindSafe;
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::{Arc, Mutex};
@@ -42,9 +43,34 @@ pub type Finish = fn(RecordBatch) -> io::Result<RecordBatch>;
 /// Which tables are built, by name (as [`CaptureWriter::only_tables`]).
 pub type Wanted = Arc<dyn Fn(&str) -> bool + Send + Sync>;
 
-/// A run's rows, or why they could not be built; the run, emptied, to be filled again; and
-/// the records it held.
-type Done = (u64, io::Result<Groups>, Batch, usize);
+/// A run handed to the threads, or a part of one: its place in the order of runs and parts,
+/// the run (its parts share it: the last run is handed over in parts, and copying them out of
+/// it cost what building it on one thread did), and which of its records.
+struct Part {
+    seq: u64,
+    run: Arc<Batch>,
+    recs: Range<usize>,
+}
+
+/// A part's rows, or why they could not be built; the run, emptied, to be filled again, when
+/// this was its last part built; and the records of the part.
+type Done = (u64, io::Result<Groups>, Option<Batch>, usize);
+
+impl Part {
+    /// Its rows, built by `rows`; and its run, emptied, if no other part holds it now.
+    fn build(self, rows: &mut Rows) -> Done {
+        let built = rows.build(&self.run, self.recs.clone());
+        (self.seq, built, emptied(self.run), self.recs.len())
+    }
+}
+
+/// The run, emptied, if no other part holds it (of the parts of a run, exactly one gets it).
+fn emptied(run: Arc<Batch>) -> Option<Batch> {
+    Arc::into_inner(run).map(|mut b| {
+        b.clear();
+        b
+    })
+}
 
 /// A [`Sink`] that keeps every row group.
 struct Keep {
@@ -73,10 +99,10 @@ const LAST_PART: usize = 4096;
 
 /// Threads building the rows of runs of records, in order (see the module documentation).
 pub struct RowPool {
-    work: Option<Sender<(u64, Batch)>>,
+    work: Option<Sender<Part>>,
     /// The runs handed over and not yet taken by a thread: the caller's thread takes them too
     /// when it would otherwise wait.
-    queue: Arc<Mutex<Receiver<(u64, Batch)>>>,
+    queue: Arc<Mutex<Receiver<Part>>>,
     done: Receiver<Done>,
     threads: Vec<JoinHandle<()>>,
     /// Runs handed over (or built here), and runs handed back.
@@ -131,7 +157,7 @@ impl RowPool {
         finish: Finish,
     ) -> io::Result<Self> {
         let others = n.max(2) - 1;
-        let (work, rx) = channel::<(u64, Batch)>();
+        let (work, rx) = channel::<Part>();
         let rx = Arc::new(Mutex::new(rx));
         let (tx, done) = channel::<Done>();
         let rows = Rows {
@@ -149,15 +175,11 @@ impl RowPool {
                 .spawn(move || {
                     loop {
                         // The lock is held only to take a run; a closed queue ends the thread.
-                        let Ok((seq, mut batch)) =
-                            rx.lock().map_err(drop).and_then(|r| r.recv().map_err(drop))
+                        let Ok(part) = rx.lock().map_err(drop).and_then(|r| r.recv().map_err(drop))
                         else {
                             return;
                         };
-                        let n = batch.len();
-                        let built = rows.build(&batch);
-                        batch.clear();
-                        if tx.send((seq, built, batch, n)).is_err() {
+                        if tx.send(part.build(&mut rows)).is_err() {
                             return;
                         }
                     }
@@ -219,58 +241,80 @@ impl RowPool {
     /// The input has ended: hand the last run over. Its rows, and those of the runs still
     /// being built, come from [`RowPool::next`] or [`RowPool::ready`].
     pub fn flush(&mut self, out: &mut dyn FnMut(Groups)) -> io::Result<()> {
-        if self.run.is_empty() {
+        let n = self.run.len();
+        if n == 0 {
             return Ok(());
         }
         // The last run in a part for each thread: whole, it was built by one thread while
         // the others waited (the last tenth of `to_arrow()` of a status log on two cores).
-        let parts = self.limit;
-        let n = self.run.len();
-        if n >= parts * LAST_PART {
-            let mut last = std::mem::take(&mut self.run);
-            let each = n.div_ceil(parts);
-            let mut i = 0;
-            last.for_each(&mut |r| {
-                self.run.push(r);
-                i += 1;
-                if i % each == 0 && i < n {
-                    self.hand_over(out)?;
-                }
-                Ok::<(), io::Error>(())
-            })?;
-            last.clear();
-            self.spare.push(last);
+        let parts = if n >= self.limit * LAST_PART {
+            self.limit
+        } else {
+            1
+        };
+        let each = n.div_ceil(parts);
+        let mut run = Some(Arc::new(std::mem::take(&mut self.run)));
+        for p in 0..parts {
+            // The last part takes the run itself (so that one of them hands it back).
+            let part = if p + 1 == parts {
+                run.take()
+            } else {
+                run.clone()
+            };
+            if let Some(r) = part {
+                self.give(r, p * each..((p + 1) * each).min(n), out)?;
+            }
         }
-        self.hand_over(out)
+        Ok(())
     }
 
-    /// Hand the run gathered over (it is then empty, with the room of one handed back), and
-    /// pass the row groups of the runs built by now, in order, to `out`. When the threads have
-    /// as many runs as they may, the caller's thread builds this one itself, rather than
-    /// waiting idle. Once: while that run waits for earlier ones, it hands this one over all
-    /// the same, then builds or waits for earlier ones until the threads hold no more than they
-    /// may. (Had it waited with this run unsent, it would take the threads' next run from the
-    /// queue to build, and a thread finishing meanwhile would find nothing: 25–40 ms idle at a
-    /// time on two cores.)
+    /// Hand the run gathered over (it is then empty, with the room of one handed back, made
+    /// for the next run's records), and pass the row groups of the runs built by now, in
+    /// order, to `out`.
     fn hand_over(&mut self, out: &mut dyn FnMut(Groups)) -> io::Result<()> {
+        let mut next = self.spare.pop().unwrap_or_default();
+        // Grown as it fills, a run was copied each time its room doubled (the first runs, of
+        // growing size, have no spare of their size).
+        let (n, bytes) = (self.run.len().max(1), self.run.byte_len());
+        let want = self.run_records;
+        next.reserve(want, (bytes * want / n).min(self.opts.bytes_per_group));
+        let run = Arc::new(std::mem::replace(&mut self.run, next));
+        let n = run.len();
+        self.give(run, 0..n, out)
+    }
+
+    /// Hand records `recs` of `run` over as the next part, and pass the row groups of the
+    /// runs built by now, in order, to `out`. When the threads have as many records as they
+    /// may, the caller's thread builds this part itself, rather than waiting idle. Once: while
+    /// that part waits for earlier ones, it hands this one over all the same, then builds or
+    /// waits for earlier ones until the threads hold no more than they may. (Had it waited
+    /// with this part unsent, it would take the threads' next one from the queue to build,
+    /// and a thread finishing meanwhile would find nothing: 25–40 ms idle at a time on two
+    /// cores.)
+    fn give(
+        &mut self,
+        run: Arc<Batch>,
+        recs: Range<usize>,
+        out: &mut dyn FnMut(Groups),
+    ) -> io::Result<()> {
         self.ready(false, out)?;
-        let n = self.run.len();
+        let n = recs.len();
+        let seq = self.sent;
+        self.sent += 1;
+        let part = Part { seq, run, recs };
         if self.on_threads + n > self.limit * self.full_run && !self.here_waits() {
-            let rows = self.here_rows.build(&self.run);
-            self.run.clear();
-            self.early.insert(self.sent, rows);
-            self.here = Some(self.sent);
-            self.sent += 1;
+            let (_, rows, spare, _) = part.build(&mut self.here_rows);
+            self.spare.extend(spare);
+            self.early.insert(seq, rows);
+            self.here = Some(seq);
             return Ok(());
         }
-        let next = self.spare.pop().unwrap_or_default();
         let gone = || io::Error::other("the threads building rows stopped");
         self.work
             .as_ref()
             .ok_or_else(gone)?
-            .send((self.sent, std::mem::replace(&mut self.run, next)))
+            .send(part)
             .map_err(|_| gone())?;
-        self.sent += 1;
         self.on_threads += n;
         while self.on_threads > self.limit * self.full_run {
             out(self.next(true).ok_or_else(gone)??);
@@ -308,7 +352,7 @@ impl RowPool {
                 Some((seq, g, spare, n)) => {
                     self.on_threads -= n;
                     self.early.insert(seq, g);
-                    self.spare.push(spare);
+                    self.spare.extend(spare);
                 }
                 // Not built yet; or every thread is gone (a panic): say so once.
                 None if wait => {
@@ -324,11 +368,8 @@ impl RowPool {
     /// Build here a run handed over that no thread has taken yet, if there is one (and no
     /// thread is taking one now).
     fn steal(&mut self) -> Option<Done> {
-        let (seq, mut run) = self.queue.try_lock().ok()?.try_recv().ok()?;
-        let n = run.len();
-        let rows = self.here_rows.build(&run);
-        run.clear();
-        Some((seq, rows, run, n))
+        let part = self.queue.try_lock().ok()?.try_recv().ok()?;
+        Some(part.build(&mut self.here_rows))
     }
 }
 
@@ -354,20 +395,22 @@ impl Rows {
         }
     }
 
-    /// The rows of one run, cut at its end: the tables one writer of the run alone would make,
-    /// in the buffers the last run's grew to. A panic is this run's error, not a run that
-    /// never comes back (the caller would wait for it for ever while the other threads live),
-    /// nor a panic of the caller's thread.
-    fn build(&mut self, batch: &Batch) -> io::Result<Groups> {
-        std::panic::catch_unwind(AssertUnwindSafe(|| self.build_in(batch))).unwrap_or_else(|_| {
-            // The writer may be half way through a row: a new one for the next.
-            self.writer = None;
-            Err(io::Error::other("building rows panicked"))
-        })
+    /// The rows of records `recs` of a run, cut at their end: the tables one writer of those
+    /// records alone would make, in the buffers the last part's grew to. A panic is this
+    /// part's error, not a part that never comes back (the caller would wait for it for ever
+    /// while the other threads live), nor a panic of the caller's thread.
+    fn build(&mut self, batch: &Batch, recs: Range<usize>) -> io::Result<Groups> {
+        std::panic::catch_unwind(AssertUnwindSafe(|| self.build_in(batch, recs))).unwrap_or_else(
+            |_| {
+                // The writer may be half way through a row: a new one for the next.
+                self.writer = None;
+                Err(io::Error::other("building rows panicked"))
+            },
+        )
     }
 
     /// [`Rows::build`], unguarded.
-    fn build_in(&mut self, batch: &Batch) -> io::Result<Groups> {
+    fn build_in(&mut self, batch: &Batch, recs: Range<usize>) -> io::Result<Groups> {
         let Rows {
             writer,
             file,
@@ -388,8 +431,8 @@ impl Rows {
             w
         });
         // A row of the `records` table for each record.
-        w.reserve_records(batch.len());
-        let built = w.run(batch).and_then(|()| w.cut());
+        w.reserve_records(recs.len());
+        let built = w.run(batch, recs).and_then(|()| w.cut());
         let groups = std::mem::take(&mut w.sink_mut().groups);
         if built.is_err() {
             // Rows of the run may be left in it: a new writer for the next.
@@ -565,7 +608,7 @@ mod tests {
                 };
                 let mut w = CaptureWriter::new(keep, "x", opts);
                 for run in runs(&bytes, n) {
-                    w.run(&run).unwrap();
+                    w.run(&run, 0..run.len()).unwrap();
                 }
                 let built = tables(w.finish().unwrap().0.groups);
                 assert_eq!(one, built, "runs of {n}");
@@ -589,9 +632,13 @@ mod tests {
                 wanted: None,
                 finish: Ok,
             };
-            let fresh: Vec<Groups> = runs.iter().map(|r| rows().build(r).unwrap()).collect();
+            let all = |r: &Batch| 0..r.len();
+            let fresh: Vec<Groups> = runs
+                .iter()
+                .map(|r| rows().build(r, all(r)).unwrap())
+                .collect();
             let mut one = rows();
-            let cut: Vec<Groups> = runs.iter().map(|r| one.build(r).unwrap()).collect();
+            let cut: Vec<Groups> = runs.iter().map(|r| one.build(r, all(r)).unwrap()).collect();
             assert_eq!(fresh.len(), cut.len());
             for (i, (f, c)) in fresh.iter().zip(&cut).enumerate() {
                 let names = |g: &Groups| g.iter().map(|x| x.0.clone()).collect::<Vec<_>>();
