@@ -96,13 +96,10 @@ def to_arrow(
     import pyarrow as pa
 
     wanted = None if tables is None else list(tables)
-    parts: Dict[str, list] = {"records": []}
-    for table, batch in batches(source, proto, name, wanted, threads):
-        parts.setdefault(table, []).append(batch)
-    if not parts["records"] and (wanted is None or "records" in wanted):
-        # A capture with no record (an empty file) still has its records table, empty.
-        parts["records"].append(pa.record_batch(_aptscope.empty_records()))
-    return {t: pa.Table.from_batches(b) for t, b in parts.items() if b}
+    # Each table's batches cross as one Arrow C stream (its schema once); a capture with no
+    # record (an empty file) still has its records table, empty.
+    got = _aptscope.tables(_src(source), proto, name, wanted, threads)
+    return {t: pa.RecordBatchReader.from_stream(s).read_all() for t, s in got}
 
 
 def batches(

@@ -18,7 +18,8 @@ use aptscope_dissector::Table;
 use aptscope_parquet::pool::{RowPool, Wanted};
 use aptscope_parquet::schema::{records_schema, Kinds, RECORDS};
 use aptscope_parquet::{decode_file, CaptureWriter, DecodeOpts, DirSink, Options, Sink};
-use arrow_array::{Array, RecordBatch, StructArray};
+use arrow_array::ffi_stream::FFI_ArrowArrayStream;
+use arrow_array::{Array, RecordBatch, RecordBatchIterator, StructArray};
 use arrow_data::ffi::FFI_ArrowArray;
 use arrow_schema::ffi::FFI_ArrowSchema;
 use pyo3::create_exception;
@@ -442,9 +443,16 @@ impl Batches {
     }
 
     fn __next__(&mut self, py: Python<'_>) -> PyResult<Option<(String, ArrowBatch)>> {
+        Ok(self.next_batch(py)?.map(|(t, b)| (t, ArrowBatch(b))))
+    }
+}
+
+impl Batches {
+    /// The next `(table, batch)`, decoding as much as it takes; `None` at the end.
+    fn next_batch(&mut self, py: Python<'_>) -> PyResult<Option<(String, RecordBatch)>> {
         loop {
-            if let Some((t, b)) = self.queue.borrow_mut().pop_front() {
-                return Ok(Some((t, ArrowBatch(b))));
+            if let Some(tb) = self.queue.borrow_mut().pop_front() {
+                return Ok(Some(tb));
             }
             match &mut self.rows {
                 None => return Ok(None),
@@ -463,9 +471,7 @@ impl Batches {
             }
         }
     }
-}
 
-impl Batches {
     /// Decode the next event (or all the bytes); at the end, flush what the writer holds.
     fn step(&mut self) -> io::Result<()> {
         let Some(rows) = self.rows.as_mut() else {
@@ -547,6 +553,91 @@ impl ArrowBatch {
 #[pyfunction]
 fn empty_records() -> ArrowBatch {
     ArrowBatch(RecordBatch::new_empty(records_schema()))
+}
+
+/// One table's batches, handed to pyarrow as one stream (the Arrow PyCapsule protocol's
+/// `__arrow_c_stream__`, `pyarrow.table(t)`): its schema crosses once, not with each batch.
+/// Imported batch by batch, with `Table.from_batches` after, a capture of every message form
+/// (6,785 batches of 526 tables) spent 0.5 s in pyarrow, a third of `to_arrow()`'s time.
+#[pyclass]
+struct ArrowTable {
+    schema: arrow_schema::SchemaRef,
+    batches: Vec<RecordBatch>,
+}
+
+#[pymethods]
+impl ArrowTable {
+    /// The batches as an Arrow C stream capsule.
+    #[pyo3(signature = (requested_schema = None))]
+    fn __arrow_c_stream__<'py>(
+        &self,
+        py: Python<'py>,
+        requested_schema: Option<Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyCapsule>> {
+        // The schema is the Parquet output's; a requested one is not cast to.
+        let _ = requested_schema;
+        let reader = RecordBatchIterator::new(
+            self.batches.clone().into_iter().map(Ok),
+            self.schema.clone(),
+        );
+        let stream = FFI_ArrowArrayStream::new(Box::new(reader));
+        PyCapsule::new_with_value(py, stream, c"arrow_array_stream")
+    }
+
+    /// Rows in the table.
+    fn __len__(&self) -> usize {
+        self.batches.iter().map(RecordBatch::num_rows).sum()
+    }
+}
+
+/// Every table of a source (as [`Batches`] gives them, gathered): `[(table, ArrowTable)]`,
+/// `records` first (with no rows when the source has no record and it is wanted), the others
+/// as they first came.
+#[pyfunction]
+#[pyo3(signature = (source_obj, proto = "auto", name = None, tables = None, threads = None))]
+fn tables(
+    py: Python<'_>,
+    source_obj: &Bound<'_, PyAny>,
+    proto: &str,
+    name: Option<String>,
+    tables: Option<Vec<String>>,
+    threads: Option<usize>,
+) -> PyResult<Vec<(String, ArrowTable)>> {
+    let records_wanted = tables.as_ref().is_none_or(|t| t.iter().any(|t| t == RECORDS));
+    let mut b = Batches::new(source_obj, proto, name, tables, threads)?;
+    let mut out: Vec<(String, ArrowTable)> = Vec::new();
+    let mut at: HashMap<String, usize> = HashMap::new();
+    if records_wanted {
+        at.insert(RECORDS.to_string(), 0);
+        out.push((
+            RECORDS.to_string(),
+            ArrowTable {
+                schema: records_schema(),
+                batches: Vec::new(),
+            },
+        ));
+    }
+    while let Some((t, batch)) = b.next_batch(py)? {
+        let i = *at.entry(t).or_insert_with_key(|t| {
+            out.push((
+                t.clone(),
+                ArrowTable {
+                    schema: batch.schema(),
+                    batches: Vec::new(),
+                },
+            ));
+            out.len() - 1
+        });
+        if let Some((_, tb)) = out.get_mut(i) {
+            if tb.batches.is_empty() {
+                // The schema of its batches (the records table's first: the empty one's
+                // otherwise).
+                tb.schema = batch.schema();
+            }
+            tb.batches.push(batch);
+        }
+    }
+    Ok(out)
 }
 
 /// Decode capture `path` into dataset directory `out` as input number `index` (its part files
@@ -664,6 +755,8 @@ fn _aptscope(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Records>()?;
     m.add_class::<Batches>()?;
     m.add_class::<ArrowBatch>()?;
+    m.add_class::<ArrowTable>()?;
+    m.add_function(wrap_pyfunction!(tables, m)?)?;
     m.add_function(wrap_pyfunction!(write_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(empty_records, m)?)?;
     m.add_function(wrap_pyfunction!(prepare_dataset, m)?)?;

@@ -139,8 +139,12 @@ def test_batches_are_the_tables_in_row_groups(samples):
         assert batch.schema.equals(tables[table].schema, check_metadata=True), table
         seen.setdefault(table, []).append(batch)
     assert sorted(seen) == sorted(tables)
+    # The records table first, the others as they first came; their batches are the chunks.
+    assert list(tables) == ["records"] + [t for t in seen if t != "records"]
     for t, bs in seen.items():
         assert pa.Table.from_batches(bs).equals(tables[t]), t
+        chunks = [len(c) for c in tables[t].column(0).chunks]
+        assert chunks == [b.num_rows for b in bs], t
     # Bytes of one stream, and a missing file.
     frame = aptscope.encode("MOT_MOVE_ABSOLUTE", chan_ident=1, absolute_position=4096)
     got = dict(aptscope.batches(frame, proto="apt"))
