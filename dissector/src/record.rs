@@ -330,13 +330,24 @@ impl Decoder {
         emit: &mut impl FnMut(&Record<'_>) -> Result<(), E>,
     ) -> Result<(), E> {
         if self.proto.is_none() {
-            self.sample.push((ctx, chunk.to_vec()));
+            // A first chunk of a whole sample or more (a file read at once) is judged on its
+            // first bytes and then fed as it is: copied whole into the sample (and into the
+            // bytes judged), a 10 MB file was 20 MB copied and 5,000 pages touched before
+            // its first record.
+            let whole = self.sample.is_empty() && chunk.len() >= SAMPLE;
+            let kept = if whole { &chunk[..SAMPLE] } else { chunk };
+            self.sample.push((ctx, kept.to_vec()));
             self.sample_len += chunk.len();
             if self.sample_len < SAMPLE {
                 return Ok(());
             }
             self.choose(emit)?;
-            return self.replay_sample(emit);
+            if !whole {
+                return self.replay_sample(emit);
+            }
+            // The records held come before the chunk, as they would before its replay.
+            self.sample.clear();
+            self.replay_sample(emit)?;
         }
         self.feed(ctx, chunk, emit)
     }
@@ -503,8 +514,10 @@ impl Decoder {
         }
         if let Some((k, _)) = best {
             for (c, b) in &self.sample {
-                if lane_of(c) == k && bytes.len() < SAMPLE {
-                    bytes.extend_from_slice(b);
+                if lane_of(c) == k {
+                    // What `detect` looks at, no more.
+                    let room = SAMPLE.saturating_sub(bytes.len());
+                    bytes.extend_from_slice(b.get(..room).unwrap_or(b));
                 }
             }
         }

@@ -207,3 +207,56 @@ fn long_garbage_runs_are_cut_into_bounded_records() {
     ));
     accounted(&recs, input.len());
 }
+
+/// The records of `input` as JSON lines, decoded with detection, pushed in pieces cut at
+/// `cuts`, after a capture-file diagnostic (held until the protocol is known).
+fn decoded(input: &[u8], cuts: &[usize]) -> Vec<String> {
+    use aptscope_dissector::json;
+    use aptscope_dissector::record::{Ctx, Decoder, Record};
+    let mut out = Vec::new();
+    let mut emit = |r: &Record<'_>| {
+        let mut s = String::new();
+        json::record(&mut s, r, None);
+        out.push(s);
+        Ok::<(), ()>(())
+    };
+    let mut dec = Decoder::new(None);
+    dec.file_diag(0, "truncated_file", "a diagnostic of the file", &mut emit)
+        .unwrap();
+    let mut at = 0;
+    for &c in cuts.iter().chain([&input.len()]) {
+        dec.push(Ctx::default(), &input[at..c], &mut emit).unwrap();
+        at = c;
+    }
+    dec.finish(&mut emit).unwrap();
+    out
+}
+
+/// A first chunk of a whole detection sample or more is judged on its first bytes and fed as
+/// it is: the records (the detection's, the diagnostic held before the first chunk, every
+/// frame) are those of the same bytes in small chunks, or a small chunk and then the rest.
+#[test]
+fn records_do_not_depend_on_the_first_chunks_size() {
+    use aptscope_dissector::detect::SAMPLE;
+    for (seed, garbage) in [(1, false), (2, true), (3, true)] {
+        let input = stream(seed, 3000, garbage);
+        assert!(input.len() > 4 * SAMPLE);
+        let whole = decoded(&input, &[]);
+        assert!(whole.len() > 3000, "{} records", whole.len());
+        assert!(whole[0].contains("\"detect\""), "{}", whole[0]);
+        assert!(
+            whole[1].contains("a diagnostic of the file"),
+            "{}",
+            whole[1]
+        );
+        let small: Vec<usize> = (1..input.len() / 700).map(|i| i * 700).collect();
+        for cuts in [&small[..], &[100], &[SAMPLE], &[SAMPLE + 1, 3 * SAMPLE]] {
+            assert_eq!(
+                whole,
+                decoded(&input, cuts),
+                "seed {seed}, cuts {:?}",
+                &cuts[..1]
+            );
+        }
+    }
+}
