@@ -297,7 +297,15 @@ pub static MODELS: &[Model] = &[
 /// A name as compared: upper case, metric `/M` dropped, letters and digits only (a lower-case
 /// `x` and a `*` of a pattern are kept as wildcards).
 fn norm(s: &str, pattern: bool) -> String {
-    let s = s.trim().replace("/M", "").replace("/m", "");
+    // Without a `/` there is no `/M` to drop (and no two copies of the name to make: a
+    // capture may name models thousands of times).
+    let dropped;
+    let s = if s.contains('/') {
+        dropped = s.trim().replace("/M", "").replace("/m", "");
+        dropped.as_str()
+    } else {
+        s
+    };
     s.chars()
         .filter_map(|c| match c {
             'x' | '*' if pattern => Some(c),
@@ -948,6 +956,39 @@ impl Tracker {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Names without a `/` are normalised as those with one always were: trimmed, `/M` and
+    /// `/m` dropped, then letters and digits kept (wildcards in a pattern).
+    #[test]
+    fn names_are_normalised_alike_with_or_without_a_slash() {
+        let before = |s: &str, pattern: bool| -> String {
+            let s = s.trim().replace("/M", "").replace("/m", "");
+            s.chars()
+                .filter_map(|c| match c {
+                    'x' | '*' if pattern => Some(c),
+                    c if c.is_ascii_alphanumeric() => Some(c.to_ascii_uppercase()),
+                    _ => None,
+                })
+                .collect()
+        };
+        let alphabet: Vec<char> = " /Mmx*kK0\u{e9}\t-".chars().collect();
+        let mut x: u32 = 12345;
+        for len in 0..12 {
+            for _ in 0..400 {
+                let name: String = (0..len)
+                    .map(|_| {
+                        x = x.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+                        alphabet[(x >> 16) as usize % alphabet.len()]
+                    })
+                    .collect();
+                for pattern in [false, true] {
+                    assert_eq!(norm(&name, pattern), before(&name, pattern), "{name:?}");
+                }
+            }
+        }
+        assert_eq!(norm(" K10CR1/M ", false), "K10CR1");
+        assert_eq!(norm("kdc101", false), "KDC101");
+    }
 
     /// Conversions made alike are equal and hash alike whatever their revisions (a viewer's
     /// index keeps one entry for them); a maximum, a unit or a factor tells them apart.
