@@ -548,13 +548,6 @@ impl ArrowBatch {
     }
 }
 
-/// The `records` table without rows: what `to_arrow()` gives for a capture with no record (an
-/// empty file), rather than no `records` table at all.
-#[pyfunction]
-fn empty_records() -> ArrowBatch {
-    ArrowBatch(RecordBatch::new_empty(records_schema()))
-}
-
 /// One table's batches, handed to pyarrow as one stream (the Arrow PyCapsule protocol's
 /// `__arrow_c_stream__`, `pyarrow.table(t)`): its schema crosses once, not with each batch.
 /// Imported batch by batch, with `Table.from_batches` after, a capture of every message form
@@ -603,7 +596,9 @@ fn tables(
     tables: Option<Vec<String>>,
     threads: Option<usize>,
 ) -> PyResult<Vec<(String, ArrowTable)>> {
-    let records_wanted = tables.as_ref().is_none_or(|t| t.iter().any(|t| t == RECORDS));
+    let records_wanted = tables
+        .as_ref()
+        .is_none_or(|t| t.iter().any(|t| t == RECORDS));
     let mut b = Batches::new(source_obj, proto, name, tables, threads)?;
     let mut out: Vec<(String, ArrowTable)> = Vec::new();
     let mut at: HashMap<String, usize> = HashMap::new();
@@ -758,7 +753,6 @@ fn _aptscope(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<ArrowTable>()?;
     m.add_function(wrap_pyfunction!(tables, m)?)?;
     m.add_function(wrap_pyfunction!(write_dataset, m)?)?;
-    m.add_function(wrap_pyfunction!(empty_records, m)?)?;
     m.add_function(wrap_pyfunction!(prepare_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(encode, m)?)?;
     m.add("AptscopeError", m.py().get_type::<AptscopeError>())?;
