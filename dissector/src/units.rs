@@ -299,13 +299,15 @@ pub static MODELS: &[Model] = &[
 fn norm(s: &str, pattern: bool) -> String {
     // Without a `/` there is no `/M` to drop (and no two copies of the name to make: a
     // capture may name models thousands of times).
-    let dropped;
-    let s = if s.contains('/') {
-        dropped = s.trim().replace("/M", "").replace("/m", "");
-        dropped.as_str()
+    if s.contains('/') {
+        kept(&s.trim().replace("/M", "").replace("/m", ""), pattern)
     } else {
-        s
-    };
+        kept(s, pattern)
+    }
+}
+
+/// Letters and digits of `s`, upper case (and a pattern's wildcards).
+fn kept(s: &str, pattern: bool) -> String {
     s.chars()
         .filter_map(|c| match c {
             'x' | '*' if pattern => Some(c),
@@ -961,16 +963,8 @@ mod tests {
     /// `/m` dropped, then letters and digits kept (wildcards in a pattern).
     #[test]
     fn names_are_normalised_alike_with_or_without_a_slash() {
-        let before = |s: &str, pattern: bool| -> String {
-            let s = s.trim().replace("/M", "").replace("/m", "");
-            s.chars()
-                .filter_map(|c| match c {
-                    'x' | '*' if pattern => Some(c),
-                    c if c.is_ascii_alphanumeric() => Some(c.to_ascii_uppercase()),
-                    _ => None,
-                })
-                .collect()
-        };
+        let before =
+            |s: &str, pattern: bool| kept(&s.trim().replace("/M", "").replace("/m", ""), pattern);
         let alphabet: Vec<char> = " /Mmx*kK0\u{e9}\t-".chars().collect();
         let mut x: u32 = 12345;
         for len in 0..12 {
