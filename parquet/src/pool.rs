@@ -94,7 +94,7 @@ impl Sink for Keep {
 const FIRST_RUN: usize = 8;
 
 /// Records of each part of the last run at least (see [`RowPool::flush`]): a smaller one is
-/// not worth its copy and its batches.
+/// not worth its batches.
 const LAST_PART: usize = 4096;
 
 /// Threads building the rows of runs of records, in order (see the module documentation).
