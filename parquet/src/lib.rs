@@ -710,7 +710,7 @@ impl<S: Sink> CaptureWriter<S> {
             kind_list: Vec::new(),
             layouts: Layouts::default(),
             scratch: Scratch::default(),
-            order: ByKind::new(n),
+            order: ByKind::default(),
             kind_rows: 0,
             kind_bytes: 0,
             keep_records: true,
@@ -1346,8 +1346,8 @@ pub(crate) const KIND_STRETCH: usize = 2048;
 /// sorting them was 1.4 % of the instructions of a status log's rows on two threads, this 0.6.
 #[derive(Default)]
 struct ByKind {
-    /// Rows of each table in the stretch, by table index; then where its next row goes. All
-    /// zero between stretches.
+    /// Rows of each table in the stretch, by table index (as far as the largest met); then
+    /// where its next row goes. All zero between stretches.
     count: Vec<u32>,
     /// The tables with rows in the stretch, as met.
     met: Vec<u32>,
@@ -1358,14 +1358,6 @@ struct ByKind {
 }
 
 impl ByKind {
-    /// For the rows of `tables` tables.
-    fn new(tables: usize) -> ByKind {
-        ByKind {
-            count: vec![0; tables],
-            ..ByKind::default()
-        }
-    }
-
     /// Record `i` has a row in table `k`; records come in order.
     #[inline]
     fn push(&mut self, k: usize, i: usize) {
@@ -1547,8 +1539,7 @@ mod tests {
     /// stretch (the counts start again at zero), whatever tables and how many rows each.
     #[test]
     fn rows_counted_by_table_are_the_rows_sorted() {
-        // Made for fewer tables than it is given: it grows.
-        let mut order = ByKind::new(100);
+        let mut order = ByKind::default();
         let mut x: u64 = 0x2545_f491_4f6c_dd1d;
         for stretch in 0..40 {
             // From one table to every one of 600, rows from none to a few thousand.

@@ -275,9 +275,9 @@ impl RowPool {
         let mut next = self.spare.pop().unwrap_or_default();
         // Grown as it fills, a run was copied each time its room doubled (the first runs, of
         // growing size, have no spare of their size).
-        let (n, bytes) = (self.run.len().max(1), self.run.byte_len());
+        let (held, bytes) = (self.run.len().max(1), self.run.byte_len());
         let want = self.run_records;
-        next.reserve(want, (bytes * want / n).min(self.opts.bytes_per_group));
+        next.reserve(want, (bytes * want / held).min(self.opts.bytes_per_group));
         let run = Arc::new(std::mem::replace(&mut self.run, next));
         let n = run.len();
         self.give(run, 0..n, out)
@@ -300,13 +300,13 @@ impl RowPool {
         self.ready(false, out)?;
         let n = recs.len();
         let seq = self.sent;
-        self.sent += 1;
         let part = Part { seq, run, recs };
         if self.on_threads + n > self.limit * self.full_run && !self.here_waits() {
             let (_, rows, spare, _) = part.build(&mut self.here_rows);
             self.spare.extend(spare);
             self.early.insert(seq, rows);
             self.here = Some(seq);
+            self.sent += 1;
             return Ok(());
         }
         let gone = || io::Error::other("the threads building rows stopped");
@@ -315,6 +315,9 @@ impl RowPool {
             .ok_or_else(gone)?
             .send(part)
             .map_err(|_| gone())?;
+        // Counted once handed over, as a part built here: a part the threads never got is
+        // not waited for.
+        self.sent += 1;
         self.on_threads += n;
         while self.on_threads > self.limit * self.full_run {
             out(self.next(true).ok_or_else(gone)??);
