@@ -7,7 +7,8 @@
 # Last, the two targets of #27 that are not `decode` runs: typed decoding (framing + every
 # field, `dissector/examples/decode_file`, best of 10 runs in memory) and Python's `to_arrow()`
 # (`python/examples/arrow_speed.py`, the call alone, threads=1 beside one per core, release
-# module in target/bench-pyvenv, built here), then every target with its figure.
+# module in target/bench-pyvenv, built here; and the call building no table, the decode chain
+# that bounds it), then every target with its figure.
 # Usage: bench/batch.sh   (env: FILES=50 files of MB=4.2 MB each, ≥ 200 MB; BIG=100 MB;
 # ARROW_MB=10 MB for to_arrow(); RUNS=1 runs of each command, the median's figures (single
 # runs on a busy machine move by a third); ARROW_RUNS=5 runs of each to_arrow() call (a
@@ -134,6 +135,15 @@ for input in arrow session; do
     arrow[$input$t]=$(printf '%s\n' "${rates[@]}" | RUNS=$ARROW_RUNS median)
   done
 done
+# The bound of those calls: the decode chain (reading, framing, decoding, pairing, numbering,
+# units) with no row built, on the one thread it runs on in every call.
+rates=()
+for _ in $(seq 1 "$ARROW_RUNS"); do
+  out=$("$venv/bin/python" python/examples/arrow_speed.py "$tmp/arrow.bin" chain 1)
+  echo "to_arrow(tables=[]) arrow threads=1: $out"
+  rates+=("$(sed -n 's/.*, \([0-9.]*\) M per second.*/\1/p' <<< "$out")")
+done
+chain=$(printf '%s\n' "${rates[@]}" | RUNS=$ARROW_RUNS median)
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
 
 # Every target of #27 beside its figure from this run.
@@ -150,4 +160,6 @@ row "Parquet / NDJSON throughput, -j 1, $FILES files" "$files_pq" "≥ 1"
 row "the same, one raw capture of every form" "${big_pqnd[bin]}" "≥ 1"
 row "to_arrow(), M records/s, threads=$(nproc), status log" "${arrow[arrow$(nproc)]}" "≥ 3"
 row "the same, a real session repeated" "${arrow[session$(nproc)]}" "≥ 3"
+printf '%-50s %8.2f  (no target: the decode chain alone, no row built)\n' \
+  "to_arrow(tables=[]), M records/s, status log" "$chain"
 row "typed decode, MB/s" "$typed" "≥ 400"
