@@ -10,7 +10,7 @@ B=tests/bad-input
 C=fuzz/corpus
 rm -f "$C"/*/seed-*
 mkdir -p "$C"/{apt_framer,ell_framer,pcap_reader,mcap_reader,textlog_reader,decode_pipeline,filter_parse,encode_roundtrip}
-mkdir -p "$C"/{ell_encode,units,usb_unwrap,follow_reader,dataset_rows}
+mkdir -p "$C"/{ell_encode,units,usb_unwrap,follow_reader,dataset_rows,arrow_pool}
 
 # seed TARGET NAME PREFIX_HEX FILE
 seed() { { printf '%s' "$3" | xxd -r -p; cat "$4"; } > "$C/$1/seed-$2"; }
@@ -166,6 +166,24 @@ done
 # 6 rows and 144 bytes).
 for f in "$C"/decode_pipeline/seed-*; do
   { head -c 1 "$f"; printf '\x05'; tail -c +2 "$f"; } > "$C/dataset_rows/$(basename "$f")"
+done
+
+# arrow_pool: the same seeds with a budget byte (5) and runs of 3 records, on two threads
+# (flags as given: a protocol byte of 0-2) and, for the samples, three threads keeping their
+# batches in runs growing to a row group.
+for f in "$C"/decode_pipeline/seed-*; do
+  b=$(basename "$f")
+  { head -c 1 "$f"; printf '\x05\x03'; tail -c +2 "$f"; } > "$C/arrow_pool/$b"
+  case "$b" in
+    seed-bad-*) ;;
+    *)
+      p=$(head -c 1 "$f" | od -An -tu1 | tr -d ' ')
+      # The first flags of 64 or more with the seed's protocol and a third thread.
+      t=64
+      while (( t % 3 != p % 3 || t / 3 % 2 == 0 )); do t=$((t + 1)); done
+      { printf "\\x$(printf %02x "$t")\x05\x00"; tail -c +2 "$f"; } > "$C/arrow_pool/$b-3threads"
+      ;;
+  esac
 done
 
 # Inputs that once made a target fail (fuzz/artifacts-found/<target>/) are seeds of it too.

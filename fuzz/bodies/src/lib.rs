@@ -6,6 +6,7 @@
 pub mod util;
 
 pub mod apt_framer;
+pub mod arrow_pool;
 pub mod dataset_rows;
 pub mod decode_pipeline;
 pub mod ell_encode;
@@ -26,6 +27,7 @@ pub type Body = fn(&[u8]);
 /// and its body.
 pub const TARGETS: &[(&str, Body)] = &[
     ("apt_framer", apt_framer::fuzz),
+    ("arrow_pool", arrow_pool::fuzz),
     ("dataset_rows", dataset_rows::fuzz),
     ("decode_pipeline", decode_pipeline::fuzz),
     ("ell_encode", ell_encode::fuzz),

@@ -91,6 +91,7 @@ macro_rules! corpus_tests {
 
 corpus_tests!(
     apt_framer,
+    arrow_pool,
     dataset_rows,
     decode_pipeline,
     ell_encode,
