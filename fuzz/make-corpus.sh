@@ -168,12 +168,12 @@ for f in "$C"/decode_pipeline/seed-*; do
   { head -c 1 "$f"; printf '\x05'; tail -c +2 "$f"; } > "$C/dataset_rows/$(basename "$f")"
 done
 
-# arrow_pool: the same seeds with a budget byte (5) and runs of 3 records, on two threads
-# (flags as given: a protocol byte of 0-2) and, for the samples, three threads keeping their
-# batches in runs growing to a row group.
+# arrow_pool: the same seeds with a budget byte (5), runs of 3 records and the last run in parts
+# of 1 at least, on two threads (flags as given: a protocol byte of 0-2) and, for the samples,
+# three threads keeping their batches in runs growing to a row group.
 for f in "$C"/decode_pipeline/seed-*; do
   b=$(basename "$f")
-  { head -c 1 "$f"; printf '\x05\x03'; tail -c +2 "$f"; } > "$C/arrow_pool/$b"
+  { head -c 1 "$f"; printf '\x05\x03\x01'; tail -c +2 "$f"; } > "$C/arrow_pool/$b"
   case "$b" in
     seed-bad-*) ;;
     *)
@@ -181,7 +181,7 @@ for f in "$C"/decode_pipeline/seed-*; do
       # The first flags of 64 or more with the seed's protocol and a third thread.
       t=64
       while (( t % 3 != p % 3 || t / 3 % 2 == 0 )); do t=$((t + 1)); done
-      { printf "\\x$(printf %02x "$t")\x05\x00"; tail -c +2 "$f"; } > "$C/arrow_pool/$b-3threads"
+      { printf "\\x$(printf %02x "$t")\x05\x00\x01"; tail -c +2 "$f"; } > "$C/arrow_pool/$b-3threads"
       ;;
   esac
 done

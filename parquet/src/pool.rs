@@ -129,6 +129,8 @@ pub struct RowPool {
     run_records: usize,
     /// Records of a run once the first runs have grown to it (see [`FIRST_RUN`]).
     full_run: usize,
+    /// Records of each part of the last run at least ([`LAST_PART`]).
+    last_part: usize,
     /// Rows built on the caller's thread.
     here_rows: Rows,
     opts: Options,
@@ -206,6 +208,7 @@ impl RowPool {
             // after a few smaller runs.
             run_records: opts.rows_per_group.div_ceil(FIRST_RUN).max(1),
             full_run: opts.rows_per_group,
+            last_part: LAST_PART,
             here_rows: rows,
             opts,
         })
@@ -225,6 +228,12 @@ impl RowPool {
     pub fn set_run_records(&mut self, n: usize) {
         self.run_records = n.max(1);
         self.full_run = self.run_records;
+    }
+
+    /// Records of each part of the last run at least, instead of [`LAST_PART`] (the fuzz
+    /// target cuts the last runs of small inputs into parts too).
+    pub fn set_last_part(&mut self, n: usize) {
+        self.last_part = n.max(1);
     }
 
     /// Add one record to the run being gathered; a full run is handed over, and the row groups
@@ -247,12 +256,14 @@ impl RowPool {
         }
         // The last run in a part for each thread: whole, it was built by one thread while
         // the others waited (the last tenth of `to_arrow()` of a status log on two cores).
-        let parts = if n >= self.limit * LAST_PART {
+        let parts = if n >= self.limit * self.last_part {
             self.limit
         } else {
             1
         };
         let each = n.div_ceil(parts);
+        // No part empty (with parts of a few records, the last could be).
+        let parts = n.div_ceil(each);
         let mut run = Some(Arc::new(std::mem::take(&mut self.run)));
         for p in 0..parts {
             // The last part takes the run itself (so that one of them hands it back).

@@ -3,12 +3,14 @@
 //! parts, runs built on the calling thread when the threads hold enough) and to one
 //! [`CaptureWriter`] given each record in turn. The pool's tables must be the writer's.
 //!
-//! Input: `[flags, budget, run, file...]`: `flags % 3` is the protocol (auto, apt, elliptec),
+//! Input: `[flags, budget, run, last, file...]`: `flags % 3` is the protocol (auto, apt, elliptec),
 //! `flags / 3 % 2` adds a third thread, bit 64 keeps the batches (as Python does), bit 128
 //! builds the columns of words as dictionaries (Python builds text), bit 32 builds only the
 //! tables whose name has an even length (Python's `tables=`); `budget` sets the rows
 //! (1 + budget % 32) and bytes (64 + 32 × budget) per row group, which also end runs; `run` is
-//! the records of every run (0: runs growing to a row group, as `to_arrow()` makes them).
+//! the records of every run (0: runs growing to a row group, as `to_arrow()` makes them);
+//! `last` the records of each part of the last run at least (0: as `to_arrow()`, whose parts
+//! are of thousands, so that no input this small has its last run in parts).
 //! Checks: no error and no panic; every array passes Arrow's full validation; the same tables,
 //! each the same rows (its batches one after the other), as the one writer; a `records` row
 //! per record.
@@ -59,7 +61,7 @@ fn tables(groups: &Groups, by: &str) -> BTreeMap<String, RecordBatch> {
 
 /// The target's body: panics when a check fails.
 pub fn fuzz(data: &[u8]) {
-    let ([flags, budget, run], file) = split_ctl::<3>(data);
+    let ([flags, budget, run, last], file) = split_ctl::<4>(data);
     let proto = match flags % 3 {
         0 => None,
         1 => Some(Proto::Apt),
@@ -85,6 +87,9 @@ pub fn fuzz(data: &[u8]) {
     let mut pool = RowPool::new(threads, "fuzz.bin", opts, wanted, Ok).expect("threads");
     if run > 0 {
         pool.set_run_records(usize::from(run));
+    }
+    if last > 0 {
+        pool.set_last_part(usize::from(last));
     }
     let mut got: Groups = Vec::new();
     let mut records = 0u64;
