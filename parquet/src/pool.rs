@@ -230,7 +230,7 @@ impl RowPool {
         self.full_run = self.run_records;
     }
 
-    /// Records of each part of the last run at least, instead of [`LAST_PART`] (the fuzz
+    /// Records of each part of the last run at least, instead of 4,096 (the fuzz
     /// target cuts the last runs of small inputs into parts too).
     pub fn set_last_part(&mut self, n: usize) {
         self.last_part = n.max(1);

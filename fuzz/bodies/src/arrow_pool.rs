@@ -3,10 +3,10 @@
 //! parts, runs built on the calling thread when the threads hold enough) and to one
 //! [`CaptureWriter`] given each record in turn. The pool's tables must be the writer's.
 //!
-//! Input: `[flags, budget, run, last, file...]`: `flags % 3` is the protocol (auto, apt, elliptec),
-//! `flags / 3 % 2` adds a third thread, bit 64 keeps the batches (as Python does), bit 128
-//! builds the columns of words as dictionaries (Python builds text), bit 32 builds only the
-//! tables whose name has an even length (Python's `tables=`); `budget` sets the rows
+//! Input: `[flags, budget, run, last, file...]`: `flags % 3` is the protocol (auto, apt,
+//! elliptec), `flags / 3 % 2` adds a third thread, bit 64 keeps the batches (as Python does),
+//! bit 128 builds the columns of words as dictionaries (Python builds text), bit 32 builds only
+//! the tables whose name has an even length (Python's `tables=`); `budget` sets the rows
 //! (1 + budget % 32) and bytes (64 + 32 × budget) per row group, which also end runs; `run` is
 //! the records of every run (0: runs growing to a row group, as `to_arrow()` makes them);
 //! `last` the records of each part of the last run at least (0: as `to_arrow()`, whose parts
