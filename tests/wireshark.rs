@@ -605,6 +605,31 @@ fn elliptec_fields_equal_aptscopes() {
     }
 }
 
+/// A current curve whose last bytes equal CR and LF keeps them as data in both tools: the
+/// terminator is only what follows the curve's fixed length (the `ell_encode` fuzz target found
+/// aptscope's decoder taking them for it; the Lua dissector did the same).
+#[test]
+fn a_current_curve_ending_in_cr_lf_bytes_is_whole_in_both_tools() {
+    let Some((dir, lua)) = setup("curve") else {
+        return;
+    };
+    let mut curve: Vec<u8> = (0..522u32).map(|i| (i * 7 % 251) as u8).collect();
+    curve[518..].copy_from_slice(b"\n\r\r\n");
+    let reply = [b"0C1".as_slice(), &curve, b"\r\n"].concat();
+    let pcap = dir.join("curve.pcap");
+    write_pcap(&pcap, &[(1, b"0c1\r\n".to_vec()), (2, reply)]);
+    let want = frames(&pcap, &[]);
+    assert_eq!(want.len(), 2, "{want:?}");
+    assert_eq!(want[1]["cmd"], "C1");
+    assert_eq!(want[1]["diag"], serde_json::json!([]), "{}", want[1]);
+    let hex: String = curve.iter().map(|b| format!("{b:02x}")).collect();
+    assert_eq!(want[1]["fields"]["curve"], hex.as_str());
+    let got = tshark_values(&lua, &pcap, &["ell.curve"], Some("ell.cmd == \"C1\""));
+    assert_eq!(got, [hex]);
+    let expert = tshark(&lua, &pcap, &["-z", "expert,note"]);
+    assert!(!expert.contains("shorter"), "{expert}");
+}
+
 /// A little-endian pcap of usbmon records (link type 220).
 fn write_usbmon(path: &Path, records: &[(u64, Vec<u8>)]) {
     let mut b = vec![];

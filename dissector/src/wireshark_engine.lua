@@ -527,6 +527,9 @@ local function dissect_ell(t, pinfo, root, it, ctx)
     if body > 3 + a then tree:add(EF.data, t(3 + a, body - 3 - a)) end
     return code
   end
+  -- Binary data (a current curve) may end in bytes equal to CR or LF: they are data, and only
+  -- what follows its fixed length is the terminator, as ell_step frames it.
+  if c.bin and n >= 3 + a + c.len then body = 3 + a + c.len end
   tree:add(EF.name, t(1 + a, 2), c.name):set_generated()
   tree:append_text(string.format(", %s %s %s", s:sub(1, 1), code, c.name))
   if code:match("^%l") then

@@ -1011,6 +1011,49 @@ fn current_curve_points_are_decoded() {
     );
 }
 
+/// Curve bytes are binary: those equal to CR or LF at the end of the data are data, not part
+/// of the terminator (found by the `ell_encode` fuzz target: a built `C1` decoded as 484 data
+/// bytes of 522, its last 38 bytes 0x0D).
+#[test]
+fn a_curve_ending_in_cr_and_lf_bytes_keeps_them() {
+    let mut data = curve(87);
+    // The last point's current: 0x0A0D0D0A.
+    data[518..].copy_from_slice(&[0x0A, 0x0D, 0x0D, 0x0A]);
+    for term in [&b"\r\n"[..], b"\r", b"\n"] {
+        let input = [b"0C1".as_slice(), &data, term, b"0GS00\r\n"].concat();
+        let (fs, garbage) = frames(&input);
+        assert_eq!((fs.len(), garbage), (2, 0), "{term:?}");
+        assert_eq!(fs[0].1.len(), 3 + 522 + term.len());
+        let f = EllFrame::decode(0, &fs[0].1, false).expect("C1");
+        assert!(f.diags().is_empty(), "{term:?}: {:?}", f.diags());
+        let last = f.curve().last().expect("points");
+        assert_eq!((f.curve().count(), last.current), (87, 0x0A0D_0D0A));
+    }
+    // Without a terminator (the stream ended): every data byte, and the terminator missed.
+    let whole = [b"0C1".as_slice(), &data].concat();
+    let f = EllFrame::decode(0, &whole, false).expect("C1");
+    let kinds: Vec<_> = f.diags().iter().map(|d| d.kind).collect();
+    assert_eq!(kinds, [DiagKind::MissingTerminator]);
+    assert_eq!(f.curve().count(), 87);
+    // The manual's shorter length ending in a CR byte: only the CR LF after it goes.
+    let mut short = data[..519].to_vec();
+    short[518] = b'\r';
+    let short = [b"0C1".as_slice(), &short, b"\r\n"].concat();
+    let f = EllFrame::decode(0, &short, false).expect("C1");
+    let kinds: Vec<_> = f.diags().iter().map(|d| d.kind).collect();
+    assert_eq!(
+        kinds,
+        [DiagKind::DataLength {
+            expected: 522,
+            got: 519
+        }]
+    );
+    // Truncated: the bytes there are all data.
+    let cut = [b"0C1".as_slice(), &data[..517], b"\r\n"].concat();
+    let f = EllFrame::decode(0, &cut, true).expect("C1");
+    assert_eq!(f.curve().count(), 86, "519 bytes: 86 whole points");
+}
+
 // ------------------------------------------------------------------------------------------
 // Group moves.
 

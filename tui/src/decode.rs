@@ -674,8 +674,9 @@ fn ell_tree(ix: &Index, r: &Rec, _n: u64, bytes: &[u8], t: &mut Tree) {
         t.add(0, "fields", "Fields".into(), None, NodeKind::Section);
         let mut at = data_at;
         for (fd, v) in fields {
+            // Binary data runs to the terminator (whose bytes it may share values with).
             let w = if fd.kind == ell::table::Kind::Raw {
-                bytes.len().saturating_sub(at)
+                f.terminator_at().min(bytes.len()).saturating_sub(at)
             } else {
                 fd.width as usize
             };
@@ -696,10 +697,7 @@ fn ell_tree(ix: &Index, r: &Rec, _n: u64, bytes: &[u8], t: &mut Tree) {
         }
     }
     if f.terminated {
-        let end = bytes
-            .iter()
-            .rposition(|b| !matches!(b, b'\r' | b'\n'))
-            .map_or(0, |p| p + 1);
+        let end = f.terminator_at().min(bytes.len());
         t.add(
             0,
             "term",

@@ -549,3 +549,26 @@ fn the_first_screen_says_what_is_wrong_with_the_input() {
         "{title}"
     );
 }
+
+/// The detail tree of a current curve whose last bytes equal CR and LF: the curve is 522 bytes
+/// and the terminator only the CR LF after it (it took the curve's last bytes too).
+#[test]
+fn a_curve_ending_in_cr_lf_bytes_is_data_in_the_detail_tree() {
+    let mut curve: Vec<u8> = (0..522u32).map(|i| (i * 7 % 251) as u8).collect();
+    curve[518..].copy_from_slice(b"\n\r\r\n");
+    let bytes = [
+        b"0gs\r\n0GS00\r\n0c1\r\n0C1".as_slice(),
+        &curve,
+        b"\r\n0gs\r\n0GS00\r\n",
+    ]
+    .concat();
+    let path = std::env::temp_dir().join(format!("aptscope-tui-curve-{}.bin", std::process::id()));
+    std::fs::write(&path, &bytes).expect("write");
+    let shared = load(path.to_str().expect("utf-8"), OpenOptions::default()).expect("opens");
+    let _ = std::fs::remove_file(&path);
+    let ix = shared.index.read().expect("lock");
+    let tree = aptscope_tui::decode::tree(&ix, 4);
+    let node = |id: &str| tree.iter().find(|x| x.id == id).map(|x| x.range);
+    assert_eq!(node("f.curve"), Some(Some((3, 522))), "{tree:?}");
+    assert_eq!(node("term"), Some(Some((525, 2))), "{tree:?}");
+}

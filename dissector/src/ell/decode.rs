@@ -1,7 +1,7 @@
 //! Decoding an Elliptec frame: address, command, typed fields, and what is off about it.
 
 use super::frame::head_of_frame;
-use super::table::{status_name, Cmd, Field, Kind, CURVE_POINT_BYTES};
+use super::table::{status_name, Cmd, Field, Kind, CURVE_POINT_BYTES, CURVE_SHORT_BYTES};
 use crate::diag::{Diag, DiagKind};
 use crate::table::Dir;
 
@@ -53,6 +53,8 @@ pub struct EllFrame<'a> {
     data_raw: &'a [u8],
     /// Whether a CR/LF terminator was present.
     pub terminated: bool,
+    /// Where the terminator starts in `bytes` (their length without one).
+    term_at: usize,
     diags: Vec<Diag>,
 }
 
@@ -72,9 +74,27 @@ impl<'a> EllFrame<'a> {
     pub fn decode(offset: u64, bytes: &'a [u8], truncated: bool) -> Option<Self> {
         let h = head_of_frame(bytes)?;
         let code = [bytes[h.cmd_at], bytes[h.cmd_at + 1]];
+        let raw = h.cmd.filter(|c| c.is_binary());
         let mut end = bytes.len();
-        while end > h.data_at && matches!(bytes[end - 1], b'\r' | b'\n') {
-            end -= 1;
+        match raw {
+            // Binary data may hold CR and LF bytes of its own (a curve's last current ending in
+            // 0x0D lost those bytes to the terminator): only what follows its fixed length is
+            // the terminator, as the framer cuts it, or a CR LF after the manual's shorter
+            // length; a truncated curve has none.
+            Some(c) => {
+                let full = h.data_at + c.data_len();
+                let short = h.data_at + CURVE_SHORT_BYTES;
+                if end > full {
+                    end = full;
+                } else if !truncated && end == short + 2 && bytes[short..].starts_with(b"\r\n") {
+                    end = short;
+                }
+            }
+            None => {
+                while end > h.data_at && matches!(bytes[end - 1], b'\r' | b'\n') {
+                    end -= 1;
+                }
+            }
         }
         let terminated = end < bytes.len();
         let body = &bytes[h.data_at.min(end)..end];
@@ -88,12 +108,13 @@ impl<'a> EllFrame<'a> {
             data_len: 0,
             data_raw: body,
             terminated,
+            term_at: end,
             diags: vec![],
         };
         if h.letter_o {
             f.diag(0, DiagKind::LetterO);
         }
-        let raw = h.cmd.is_some_and(|c| c.is_binary());
+        let raw = raw.is_some();
         let mut separators = h.spaced;
         if !raw {
             for (i, &c) in body.iter().enumerate() {
@@ -193,6 +214,12 @@ impl<'a> EllFrame<'a> {
     /// The data characters (separators removed).
     pub fn data(&self) -> &[u8] {
         &self.data[..self.data_len.min(self.data.len())]
+    }
+
+    /// Where the terminator starts in [`Self::bytes`] (their length when there is none): after
+    /// the last data byte, which in binary data may itself be a CR or LF.
+    pub fn terminator_at(&self) -> usize {
+        self.term_at
     }
 
     /// The command as text (`ma`).
