@@ -15,12 +15,10 @@
 //! each the same rows (its batches one after the other), as the one writer; a `records` row
 //! per record.
 
-use crate::decode_pipeline::reader;
-use crate::util::{expansion_limit, split_ctl};
-use aptscope_capture::open::sniff;
-use aptscope_capture::Event;
+use crate::decode_pipeline::decode_records;
+use crate::util::split_ctl;
 use aptscope_dissector::detect::Proto;
-use aptscope_dissector::record::{Decoder, Record};
+use aptscope_dissector::record::Record;
 use aptscope_parquet::pool::{Groups, RowPool, Wanted};
 use aptscope_parquet::{CaptureWriter, Options, Sink};
 use arrow_array::{Array, RecordBatch};
@@ -99,21 +97,7 @@ pub fn fuzz(data: &[u8]) {
         pool.push(rec, &mut |g| got.extend(g))
     };
 
-    let format = sniff(&file[..file.len().min(aptscope_capture::open::SNIFF_LEN)]);
-    let mut r = reader(file, format);
-    let mut dec = Decoder::new(proto);
-    let mut bytes = 0u64;
-    while let Some(ev) = r.next_event() {
-        if let Event::Chunk(c) = &ev {
-            bytes += c.bytes.len() as u64;
-        }
-        ev.feed(&mut dec, &mut each).expect("rows");
-        // A hexdump `*` can expand a few bytes into gigabytes: end the capture there.
-        if bytes > expansion_limit(file.len()) as u64 {
-            break;
-        }
-    }
-    dec.finish(&mut each).expect("rows");
+    decode_records(file, proto, &mut each);
     pool.flush(&mut |g| got.extend(g)).expect("the last run");
     pool.ready(true, &mut |g| got.extend(g)).expect("every run");
     drop(pool);

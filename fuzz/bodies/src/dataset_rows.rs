@@ -10,12 +10,9 @@
 //! and its `raw` column holds exactly the captured bytes of frames and garbage; every row group
 //! written as Parquet and read back is the same batch (its columns of words as text).
 
-use crate::decode_pipeline::reader;
-use crate::util::{expansion_limit, split_ctl};
-use aptscope_capture::open::sniff;
-use aptscope_capture::Event;
+use crate::decode_pipeline::decode_records;
+use crate::util::split_ctl;
 use aptscope_dissector::detect::Proto;
-use aptscope_dissector::record::Decoder;
 use aptscope_parquet::{CaptureWriter, Options, Sink, TableWriter};
 use arrow_array::cast::AsArray;
 use arrow_array::{Array, RecordBatch};
@@ -147,22 +144,11 @@ pub fn fuzz(data: &[u8]) {
         raw: 0,
     };
     let mut w = CaptureWriter::new(check, "fuzz.bin", opts);
-    let format = sniff(&file[..file.len().min(aptscope_capture::open::SNIFF_LEN)]);
-    let mut r = reader(file, format);
-    let mut dec = Decoder::new(proto);
-    let mut bytes = 0u64;
     let mut emit = |rec: &aptscope_dissector::record::Record<'_>| w.record(rec);
-    while let Some(ev) = r.next_event() {
-        if let Event::Chunk(c) = &ev {
-            bytes += c.bytes.len() as u64;
-        }
-        ev.feed(&mut dec, &mut emit).expect("rows");
-        // A hexdump `*` can expand a few bytes into gigabytes: stop there.
-        if bytes > expansion_limit(file.len()) as u64 {
-            return;
-        }
+    let (bytes, expanded) = decode_records(file, proto, &mut emit);
+    if expanded {
+        return;
     }
-    dec.finish(&mut emit).expect("rows");
     let (check, sum) = w.finish().expect("finish");
     assert_eq!(check.records, sum.records, "a records row per record");
     for (t, p) in &check.parts {

@@ -15,6 +15,7 @@ use aptscope_capture::textlog;
 use aptscope_capture::{mcap, pcap, Event, Reader};
 use aptscope_dissector::detect::Proto;
 use aptscope_dissector::pipeline::{Format as PFormat, Pipeline};
+use aptscope_dissector::record::{Decoder, Record};
 use aptscope_dissector::table::Dir;
 use std::io::{BufReader, Cursor};
 
@@ -28,6 +29,34 @@ pub(crate) fn reader(file: &[u8], format: Format) -> Box<dyn Reader> {
         Format::Hex => Box::new(ByteReader::new(Box::new(stream), true)),
         Format::Raw => Box::new(ByteReader::new(Box::new(stream), false)),
     }
+}
+
+/// Decode `file` as `aptscope decode` reads it (the format sniffed, the reader it picks), each
+/// record to `each` (its errors are failures), the decoder finished at the end. A hexdump `*`
+/// can expand a few bytes into gigabytes: the capture ends once its chunks are over
+/// [`expansion_limit`]. Returns the bytes captured and whether the capture was ended so.
+pub(crate) fn decode_records(
+    file: &[u8],
+    proto: Option<Proto>,
+    each: &mut impl FnMut(&Record<'_>) -> std::io::Result<()>,
+) -> (u64, bool) {
+    let format = sniff(&file[..file.len().min(aptscope_capture::open::SNIFF_LEN)]);
+    let mut r = reader(file, format);
+    let mut dec = Decoder::new(proto);
+    let mut bytes = 0u64;
+    let mut expanded = false;
+    while let Some(ev) = r.next_event() {
+        if let Event::Chunk(c) = &ev {
+            bytes += c.bytes.len() as u64;
+        }
+        ev.feed(&mut dec, each).expect("records");
+        expanded = bytes > expansion_limit(file.len()) as u64;
+        if expanded {
+            break;
+        }
+    }
+    dec.finish(each).expect("records");
+    (bytes, expanded)
 }
 
 /// Run the pipeline; returns the lines, the captured byte count and the lanes seen.
