@@ -676,7 +676,7 @@ fn ell_tree(ix: &Index, r: &Rec, _n: u64, bytes: &[u8], t: &mut Tree) {
         for (fd, v) in fields {
             // Binary data runs to the terminator (whose bytes it may share values with).
             let w = if fd.kind == ell::table::Kind::Raw {
-                f.terminator_at().min(bytes.len()).saturating_sub(at)
+                f.terminator_at().saturating_sub(at)
             } else {
                 fd.width as usize
             };
@@ -697,7 +697,7 @@ fn ell_tree(ix: &Index, r: &Rec, _n: u64, bytes: &[u8], t: &mut Tree) {
         }
     }
     if f.terminated {
-        let end = f.terminator_at().min(bytes.len());
+        let end = f.terminator_at();
         t.add(
             0,
             "term",

@@ -74,9 +74,9 @@ impl<'a> EllFrame<'a> {
     pub fn decode(offset: u64, bytes: &'a [u8], truncated: bool) -> Option<Self> {
         let h = head_of_frame(bytes)?;
         let code = [bytes[h.cmd_at], bytes[h.cmd_at + 1]];
-        let raw = h.cmd.filter(|c| c.is_binary());
+        let binary = h.cmd.filter(|c| c.is_binary());
         let mut end = bytes.len();
-        match raw {
+        match binary {
             // Binary data may hold CR and LF bytes of its own (a curve's last current ending in
             // 0x0D lost those bytes to the terminator): only what follows its fixed length is
             // the terminator, as the framer cuts it, or a CR LF after the manual's shorter
@@ -114,7 +114,7 @@ impl<'a> EllFrame<'a> {
         if h.letter_o {
             f.diag(0, DiagKind::LetterO);
         }
-        let raw = raw.is_some();
+        let raw = binary.is_some();
         let mut separators = h.spaced;
         if !raw {
             for (i, &c) in body.iter().enumerate() {
