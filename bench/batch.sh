@@ -123,27 +123,28 @@ target/release/examples/gen_d2h "$ARROW_MB" > "$tmp/arrow.bin" 2>/dev/null
 python3 -c 'import sys; d = open(sys.argv[1], "rb").read(); sys.stdout.buffer.write(d * (int(float(sys.argv[2]) * 1e6) // len(d) + 1))' \
   samples/kdc101-session.bin "$ARROW_MB" > "$tmp/session.bin"
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
+# ARROW_RUNS runs of `arrow_speed.py MODE` on FILE with THREADS threads, each run's line
+# printed after LABEL; their median rate (M records per second of wall time) left in $rate.
+arrow_rate() {
+  local file=$1 mode=$2 threads=$3 label=$4 rates=() out
+  for _ in $(seq 1 "$ARROW_RUNS"); do
+    out=$("$venv/bin/python" python/examples/arrow_speed.py "$file" "$mode" "$threads")
+    echo "$label: $out"
+    rates+=("$(sed -n 's/.*, \([0-9.]*\) M per second.*/\1/p' <<< "$out")")
+  done
+  rate=$(printf '%s\n' "${rates[@]}" | RUNS=$ARROW_RUNS median)
+}
 declare -A arrow
 for input in arrow session; do
   for t in 1 "$(nproc)"; do
-    rates=()
-    for _ in $(seq 1 "$ARROW_RUNS"); do
-      out=$("$venv/bin/python" python/examples/arrow_speed.py "$tmp/$input.bin" to_arrow "$t")
-      echo "to_arrow() $input threads=$t: $out"
-      rates+=("$(sed -n 's/.*, \([0-9.]*\) M per second.*/\1/p' <<< "$out")")
-    done
-    arrow[$input$t]=$(printf '%s\n' "${rates[@]}" | RUNS=$ARROW_RUNS median)
+    arrow_rate "$tmp/$input.bin" to_arrow "$t" "to_arrow() $input threads=$t"
+    arrow[$input$t]=$rate
   done
 done
 # The bound of those calls: the decode chain (reading, framing, decoding, pairing, numbering,
 # units) with no row built, on the one thread it runs on in every call.
-rates=()
-for _ in $(seq 1 "$ARROW_RUNS"); do
-  out=$("$venv/bin/python" python/examples/arrow_speed.py "$tmp/arrow.bin" chain 1)
-  echo "to_arrow(tables=[]) arrow threads=1: $out"
-  rates+=("$(sed -n 's/.*, \([0-9.]*\) M per second.*/\1/p' <<< "$out")")
-done
-chain=$(printf '%s\n' "${rates[@]}" | RUNS=$ARROW_RUNS median)
+arrow_rate "$tmp/arrow.bin" chain 1 "to_arrow(tables=[]) arrow threads=1"
+chain=$rate
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
 
 # Every target of #27 beside its figure from this run.
