@@ -179,7 +179,9 @@ struct Work {
     /// When the statistics shown were last rebuilt.
     shown: Instant,
     found: Vec<u64>,
-    /// The state was a kept result ([`Scan::kept`]): nothing to scan.
+    /// The state was a kept result ([`Scan::kept`]), or this scan finished: nothing to scan
+    /// (a synchronous scan's every later [`Scan::catch_up`] rebuilt the statistics and kept
+    /// the result again, a few milliseconds a frame in a debug build).
     kept: bool,
 }
 
@@ -409,6 +411,7 @@ impl Scan {
             }
         }
         if finished {
+            w.kept = true;
             Step::Finished
         } else if caught_up {
             Step::CaughtUp
@@ -632,5 +635,25 @@ impl Counts {
             .chain(self.far_bins.iter().map(|(b, c)| (*b, *c)))
             .collect();
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A synchronous scan that reached the end of a complete index is not done again at each
+    /// later [`Scan::catch_up`] (each frame of the viewer without a scan thread).
+    #[test]
+    fn a_finished_synchronous_scan_is_not_redone() {
+        let path = format!("{}/../samples/damaged.bin", env!("CARGO_MANIFEST_DIR"));
+        let shared = crate::index::load(&path, aptscope_capture::open::OpenOptions::default())
+            .expect("sample opens");
+        let scan = Arc::new(Scan::default());
+        scan.start(shared.clone(), None, false);
+        assert!(scan.state.lock().expect("state").done);
+        assert!(scan.work.lock().expect("work").kept);
+        let gen = scan.gen.load(Ordering::SeqCst);
+        assert!(scan.step(gen, &shared, true) == Step::Finished);
     }
 }
