@@ -19,7 +19,8 @@ use error::CliError;
     name = "aptscope",
     // The commit too, from build.rs: `0.1.0 (a94ef7b 2026-12-02)`.
     version = env!("APTSCOPE_VERSION"),
-    about = "Protocol analyser for Thorlabs APT and Elliptec serial traffic"
+    about = "Protocol analyser for Thorlabs APT and Elliptec serial traffic",
+    after_long_help = shell::exit_status_help()
 )]
 struct Cli {
     #[command(subcommand)]

@@ -188,6 +188,16 @@ fn man_renders_a_page_for_aptscope_and_each_command() {
         text.contains(&format!("aptscope {}", env!("CARGO_PKG_VERSION"))),
         "{text}"
     );
+    // The exit statuses in a section of their own (not clap's EXTRA of `--help`'s text), before
+    // VERSION.
+    let status = text.find("EXIT STATUS 0 It did what was asked.");
+    assert!(
+        status.is_some_and(|at| text.find("VERSION").is_some_and(|v| v > at))
+            && !text.contains("EXTRA")
+            && text.contains("1 An error, said on standard error")
+            && text.contains("2 The command line is wrong"),
+        "{text}"
+    );
     let mut pages = vec![vec!["sim".to_owned(), "apt".to_owned()]];
     pages.extend(commands().into_iter().map(|c| vec![c]));
     for path in pages {
@@ -204,8 +214,9 @@ fn man_renders_a_page_for_aptscope_and_each_command() {
         assert!(
             text.contains(&format!("NAME {name} - {about}"))
                 && text.contains(&format!("DESCRIPTION {about}"))
-                && text.contains(&usage),
-            "{name}: no `{about}` or `{usage}` in\n{text}"
+                && text.contains(&usage)
+                && text.contains("EXIT STATUS 0 It did what was asked."),
+            "{name}: no `{about}`, `{usage}` or exit status in\n{text}"
         );
     }
 }
@@ -223,4 +234,65 @@ fn man_names_the_commands_when_one_is_unknown() {
         !ok && err.contains("`aptscope sim apt` has no subcommands"),
         "{err}"
     );
+}
+
+/// The exit statuses `aptscope --help` lists are those it exits with: 0 for a damaged capture
+/// (a truncated one too) decoded to its end, its damage in the output; 1 for input that is not
+/// traffic and for a file that is not there, saying why; 2 for a wrong command line.
+#[test]
+fn the_exit_statuses_help_lists_are_those_it_exits_with() {
+    let (help, err, ok) = aptscope(&["--help"], None);
+    assert!(ok, "{err}");
+    let listed: Vec<&str> = help
+        .lines()
+        .skip_while(|l| *l != "Exit status:")
+        // A status's first line; its text's further lines are indented more.
+        .filter_map(|l| {
+            let rest = l.strip_prefix("  ").filter(|r| !r.starts_with(' '))?;
+            rest.split_whitespace().next()
+        })
+        .collect();
+    assert_eq!(listed, ["0", "1", "2"], "{help}");
+    let dir = Scratch::new("exit-status");
+    let sample = |name: &str| format!("{}/samples/{name}", env!("CARGO_MANIFEST_DIR"));
+    let whole = std::fs::read(sample("kdc101-session.pcapng")).expect("sample");
+    let cut = dir.join("cut.pcapng");
+    std::fs::write(&cut, &whole[..whole.len() - 10]).expect("write");
+    let cut = cut.display().to_string();
+    let random = format!("{}/tests/bad-input/random.bin", env!("CARGO_MANIFEST_DIR"));
+    let cases: [(&[&str], i32, &str); 5] = [
+        (
+            &["decode", "--json", &sample("damaged.bin")],
+            0,
+            "\"garbage\"",
+        ),
+        (&["decode", "--json", &cut], 0, "truncated_record"),
+        (&["decode", &random], 1, "aptscope: not a capture"),
+        (
+            &["decode", "/no/such/capture.bin"],
+            1,
+            "aptscope: /no/such/capture.bin",
+        ),
+        (
+            &["decode", "--no-such-option", &random],
+            2,
+            "--no-such-option",
+        ),
+    ];
+    for (args, code, says) in cases {
+        let o = Command::new(env!("CARGO_BIN_EXE_aptscope"))
+            .args(args)
+            .output()
+            .expect("run aptscope");
+        let both = format!(
+            "{}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(
+            o.status.code() == Some(code) && both.contains(says),
+            "{args:?}: {:?}, expected {code} saying {says}\n{both}",
+            o.status
+        );
+    }
 }
