@@ -10,7 +10,7 @@ B=tests/bad-input
 C=fuzz/corpus
 rm -f "$C"/*/seed-*
 mkdir -p "$C"/{apt_framer,ell_framer,pcap_reader,mcap_reader,textlog_reader,decode_pipeline,filter_parse,encode_roundtrip}
-mkdir -p "$C"/{ell_encode,units,usb_unwrap,follow_reader,dataset_rows,arrow_pool}
+mkdir -p "$C"/{ell_encode,units,usb_unwrap,follow_reader,dataset_rows,arrow_pool,tui_view}
 
 # seed TARGET NAME PREFIX_HEX FILE
 seed() { { printf '%s' "$3" | xxd -r -p; cat "$4"; } > "$C/$1/seed-$2"; }
@@ -184,6 +184,28 @@ for f in "$C"/decode_pipeline/seed-*; do
       { printf "\\x$(printf %02x "$t")\x05\x00\x01"; tail -c +2 "$f"; } > "$C/arrow_pool/$b-3threads"
       ;;
   esac
+done
+
+# tui_view: the decode_pipeline seeds with a screen size byte and 16 key bytes (indexes into
+# the target's KEYS): browsing (j j Tab j Enter space Tab G PgDn ^u s q p q ? Esc) at 80x24;
+# for the samples also a filter, a go-to and the stream keys (/ a p t Enter n : 9 Enter < > 1 2
+# & t Esc); a few browse a 12x4 and a 160x48 screen. (Each seed draws 17 screens: about 80 ms
+# in the debug build of `cargo test`.)
+browse=00002400261b2403212a0a1108111227
+filter=130d080c2606142d2616171819150c27
+tseed() { { head -c 1 "$C/decode_pipeline/seed-$1"; printf '%s' "$3" | xxd -r -p; tail -c +2 "$C/decode_pipeline/seed-$1"; } > "$C/tui_view/seed-$1$2"; }
+for f in "$C"/decode_pipeline/seed-*; do
+  b=$(basename "$f")
+  b=${b#seed-}
+  tseed "$b" "" "00$browse"
+  case "$b" in
+    bad-*) ;;
+    *) tseed "$b" -filter "00$filter" ;;
+  esac
+done
+for b in kdc101-session.pcapng elliptec-bus.txt damaged.bin; do
+  tseed "$b" -tiny "03$browse"
+  tseed "$b" -large "01$browse"
 done
 
 # Inputs that once made a target fail (fuzz/artifacts-found/<target>/) are seeds of it too.

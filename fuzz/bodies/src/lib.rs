@@ -17,6 +17,7 @@ pub mod follow_reader;
 pub mod mcap_reader;
 pub mod pcap_reader;
 pub mod textlog_reader;
+pub mod tui_view;
 pub mod units;
 pub mod usb_unwrap;
 
@@ -38,6 +39,7 @@ pub const TARGETS: &[(&str, Body)] = &[
     ("mcap_reader", mcap_reader::fuzz),
     ("pcap_reader", pcap_reader::fuzz),
     ("textlog_reader", textlog_reader::fuzz),
+    ("tui_view", tui_view::fuzz),
     ("units", units::fuzz),
     ("usb_unwrap", usb_unwrap::fuzz),
 ];

@@ -102,6 +102,7 @@ corpus_tests!(
     mcap_reader,
     pcap_reader,
     textlog_reader,
+    tui_view,
     units,
     usb_unwrap,
 );
