@@ -4,7 +4,7 @@
 //!
 //! Input: `[flags, size, keys…(16), file…]`: `flags % 3` is the protocol (auto, apt,
 //! elliptec); `size % 5` picks the screen (80×24, 160×48, 30×8, 12×4, 1×1: layouts that
-//! leave a pane no room); each key byte names one of [`KEYS`] (the viewer's bindings, and
+//! leave a pane no room); each key byte names one of `KEYS` (the viewer's bindings, and
 //! characters to type into the filter, search and go-to bars). Checks: every record of the
 //! index is the NDJSON object `decode --json` prints for it (the index's late `no_reply`
 //! diagnostics aside, which the NDJSON gives as their own lines: their records are flagged
