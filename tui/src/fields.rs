@@ -30,9 +30,10 @@ pub fn matches(filter: &Filter, ix: &Index, n: u64) -> bool {
     }
 }
 
-/// Latency between a reply and its request.
+/// Latency between a reply and its request. A duplicate reply names the request it repeats
+/// the answer to but has no latency, as the dissector's pairing gives it (`decode` prints none).
 pub fn latency(ix: &Index, r: &Rec) -> Option<u64> {
-    if !r.has(F_IS_REPLY) {
+    if !r.has(F_IS_REPLY) || r.has(F_DUPLICATE) {
         return None;
     }
     let req = ix.rec(r.pair as u64)?;

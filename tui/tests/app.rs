@@ -572,3 +572,40 @@ fn a_curve_ending_in_cr_lf_bytes_is_data_in_the_detail_tree() {
     assert_eq!(node("f.curve"), Some(Some((3, 522))), "{tree:?}");
     assert_eq!(node("term"), Some(Some((525, 2))), "{tree:?}");
 }
+
+/// A duplicate reply names the request it repeats the answer to, and has no latency: as
+/// `decode` prints it (the pairing gives it none), in its JSON, its row and the display filter.
+/// Found by the `tui_view` fuzz target: the viewer worked the latency out from the pair.
+#[test]
+fn a_duplicate_reply_has_its_pair_and_no_latency() {
+    use aptscope_dissector::filter::Filter;
+    use aptscope_tui::fields::matches;
+    let completed = " 64 04 0e 00 81 50 01 00 00 9e 02 00 00 00 00 00\n 00 25 00 80\n--\n";
+    let log = format!(
+        "> 2024/05/01 12:00:00.000000  length=12 from=0 to=11\n \
+         53 04 06 00 d0 01 01 00 00 9e 02 00\n--\n\
+         < 2024/05/01 12:00:00.500000  length=20 from=0 to=19\n{completed}\
+         < 2024/05/01 12:00:00.600000  length=20 from=20 to=39\n{completed}"
+    );
+    let path = std::env::temp_dir().join(format!("aptscope-dup-{}.socat.log", std::process::id()));
+    std::fs::write(&path, log).expect("write");
+    let shared = load(path.to_str().expect("path"), OpenOptions::default()).expect("opens");
+    std::fs::remove_file(&path).expect("remove");
+    let ix = shared.index.read().expect("lock");
+    assert_eq!(ix.recs.len(), 3);
+    let (first, dup) = (
+        json_value(&ix, 2).expect("2"),
+        json_value(&ix, 3).expect("3"),
+    );
+    assert_eq!(
+        (&first["pair"], &first["latency_ms"]),
+        (&1.into(), &500.into())
+    );
+    assert_eq!(dup["pair"], 1);
+    assert_eq!(dup["diag"][0]["kind"], "duplicate_reply");
+    assert!(dup.get("latency_ms").is_none(), "{dup}");
+    let row = aptscope_tui::decode::row(&ix, 3).expect("row");
+    assert_eq!((row.pair, row.latency_ns), (Some(1), None));
+    let f = Filter::parse("latency > 0").expect("filter");
+    assert!(matches(&f, &ix, 2) && !matches(&f, &ix, 3));
+}
